@@ -1,0 +1,1 @@
+"""Warp kernels of pdsim, installed as ``pdsim.kernels``. Only ``@wp.kernel`` / ``@wp.func`` code lives here."""

@@ -1,0 +1,108 @@
+"""Velocity-Verlet integration with boundary conditions and the ground-plane collider.
+
+One step of length dt, with a_n the acceleration from the previous force evaluation:
+    integrate_kick_drift:  v <- v + dt/2 a_n ; x <- x + dt v      (then boundary conditions and colliders)
+    (dilatation and force kernels at the new positions)
+    integrate_kick:        a_{n+1} = f / rho + g - c v ; v <- v + dt/2 a_{n+1}
+Particle kinds: 0 free, 1 fixed (held at its reference position), 2 prescribed velocity.
+"""
+
+import warp as wp
+
+PARTICLE_FREE = wp.constant(0)
+PARTICLE_FIXED = wp.constant(1)
+PARTICLE_PRESCRIBED = wp.constant(2)
+
+
+@wp.kernel
+def integrate_kick_drift(
+    positions: wp.array(dtype=wp.vec3),
+    velocities: wp.array(dtype=wp.vec3),
+    accelerations: wp.array(dtype=wp.vec3),
+    rest_positions: wp.array(dtype=wp.vec3),
+    kind: wp.array(dtype=wp.int32),
+    prescribed_velocity: wp.array(dtype=wp.vec3),
+    dt: float,
+):
+    """First half kick and drift; fixed particles stay at rest, prescribed ones move at their velocity."""
+    i = wp.tid()
+    c = kind[i]
+    if c == PARTICLE_FIXED:
+        positions[i] = rest_positions[i]
+        velocities[i] = wp.vec3(0.0)
+    elif c == PARTICLE_PRESCRIBED:
+        v = prescribed_velocity[i]
+        velocities[i] = v
+        positions[i] = positions[i] + dt * v
+    else:
+        v = velocities[i] + (0.5 * dt) * accelerations[i]
+        velocities[i] = v
+        positions[i] = positions[i] + dt * v
+
+
+@wp.kernel
+def integrate_kick(
+    velocities: wp.array(dtype=wp.vec3),
+    force_density: wp.array(dtype=wp.vec3),
+    inv_density: wp.array(dtype=float),
+    kind: wp.array(dtype=wp.int32),
+    gravity: wp.vec3,
+    damping: wp.array(dtype=float),
+    dt: float,
+    accelerations: wp.array(dtype=wp.vec3),
+):
+    """a = f / rho + g - damping v (v at the half step); second half kick for free particles."""
+    i = wp.tid()
+    v = velocities[i]
+    a = force_density[i] * inv_density[i] + gravity - damping[i] * v
+    accelerations[i] = a
+    if kind[i] == PARTICLE_FREE:
+        velocities[i] = v + (0.5 * dt) * a
+
+
+@wp.kernel
+def collide_ground_plane(
+    positions: wp.array(dtype=wp.vec3),
+    velocities: wp.array(dtype=wp.vec3),
+    kind: wp.array(dtype=wp.int32),
+    radius: wp.array(dtype=float),
+    normal: wp.vec3,
+    offset: float,
+    friction: float,
+):
+    """Keeps free particles (spheres of the given radius) above the plane n . x = offset: a penetrating particle is
+    projected back onto the plane, its approaching normal velocity removed (inelastic) and its tangential velocity
+    reduced by Coulomb friction (friction * removed normal speed, never reversing it)."""
+    i = wp.tid()
+    if kind[i] != PARTICLE_FREE:
+        return
+    x = positions[i]
+    depth = radius[i] + offset - wp.dot(normal, x)
+    if depth > 0.0:
+        positions[i] = x + depth * normal
+        v = velocities[i]
+        vn = wp.dot(v, normal)
+        if vn < 0.0:
+            vt = v - vn * normal
+            vt_len = wp.length(vt)
+            scale = float(0.0)
+            if vt_len > 0.0:
+                scale = wp.max(0.0, 1.0 - friction * (-vn) / vt_len)
+            velocities[i] = vt * scale
+
+
+@wp.kernel
+def max_speed_and_finite(
+    positions: wp.array(dtype=wp.vec3),
+    velocities: wp.array(dtype=wp.vec3),
+    result: wp.array(dtype=float),
+):
+    """result[0] = max |v| over particles; result[1] = 1 when any position or velocity is not finite."""
+    i = wp.tid()
+    x = positions[i]
+    v = velocities[i]
+    s = wp.length(v)
+    if wp.isnan(s) or wp.isinf(s) or wp.isnan(wp.length(x)) or wp.isinf(wp.length(x)):
+        result[1] = 1.0
+    else:
+        wp.atomic_max(result, 0, s)

@@ -1,0 +1,54 @@
+"""Kernels that build peridynamic families (CSR neighbour lists) from a ``wp.HashGrid``.
+
+Bonds are directed: particle k's family lists every j != k of the same body with |X_j - X_k| <= radius. Each list is
+filled in hash-grid order, which is deterministic for a given grid and particle order.
+"""
+
+import warp as wp
+
+
+@wp.kernel
+def count_family(
+    grid: wp.uint64,
+    rest: wp.array(dtype=wp.vec3),
+    body_id: wp.array(dtype=wp.int32),
+    radius: wp.array(dtype=float),
+    counts: wp.array(dtype=wp.int32),
+):
+    """counts[k] = number of particles j != k of the same body within radius[k] of particle k."""
+    k = wp.tid()
+    xk = rest[k]
+    r = radius[k]
+    bk = body_id[k]
+    n = int(0)
+    query = wp.hash_grid_query(grid, xk, r)
+    j = int(0)
+    while wp.hash_grid_query_next(query, j):
+        if j != k and body_id[j] == bk:
+            if wp.length(rest[j] - xk) <= r:
+                n += 1
+    counts[k] = n
+
+
+@wp.kernel
+def fill_family(
+    grid: wp.uint64,
+    rest: wp.array(dtype=wp.vec3),
+    body_id: wp.array(dtype=wp.int32),
+    radius: wp.array(dtype=float),
+    offsets: wp.array(dtype=wp.int32),
+    neighbors: wp.array(dtype=wp.int32),
+):
+    """Writes the family of particle k into neighbors[offsets[k] : offsets[k + 1]] (same rule as count_family)."""
+    k = wp.tid()
+    xk = rest[k]
+    r = radius[k]
+    bk = body_id[k]
+    q = offsets[k]
+    query = wp.hash_grid_query(grid, xk, r)
+    j = int(0)
+    while wp.hash_grid_query_next(query, j):
+        if j != k and body_id[j] == bk:
+            if wp.length(rest[j] - xk) <= r:
+                neighbors[q] = j
+                q += 1

@@ -1,0 +1,215 @@
+"""Bond kernels of the ordinary state-based peridynamic solid (shared/seeds/pd_supplement.txt).
+
+Notation (DESIGN.md section 2): reference bond xi = X_j - X_k, L = |xi|, deformed eta = y_j - y_k, l = |eta|,
+n = eta / l, Lambda = n . xi / L, extension e = l - L, weight w = delta / L, V_j the neighbour's volume and beta its
+partial-volume factor. Per bond we store ``bond_geom = (xi / L, L)`` and ``bond_wv = w V_j beta``.
+
+The supplement's model, with per-particle parameters a_k, b_k, d_k (the supplement's continuum values, or the same
+matching conditions evaluated on each particle's discrete family, see pdsim/peridynamics.py):
+
+    theta_k = d_k sum_j w s (n . xi) V_j          = d_k sum_j w e Lambda V_j
+    e^d_kj  = e - g_k Lambda theta_k,              g_k = (5 mu / 6) d_k / b_k    (= delta / 4 for the continuum values)
+    A_kj    = 4 w (a_k Lambda theta_k + b_k e^d_kj), a_k = kappa d_k / 2         (= 9 kappa / (8 pi delta^4))
+    f_k     = sum_j 1/2 (A_kj + A_jk) n V_j
+
+Since a_k - b_k g_k = d_k (kappa / 2 - 5 mu / 6), A_kj / (4 w) = Lambda P_k + b_k e with P_k = d_k c0 theta_k and
+c0 = kappa / 2 - 5 mu / 6. The dilatation kernel writes (b_k, P_k) per particle so the force kernel gathers one vec2
+per neighbour. Both kernels are gathers over a CSR list (one thread per particle, no atomics): the CPU and the GPU
+produce the same sums in the same order.
+"""
+
+import warp as wp
+
+
+@wp.func
+def bond_extension_lambda(yk: wp.vec3, yj: wp.vec3, geom: wp.vec4):
+    """Returns (e, Lambda, n) for a bond with reference geometry geom = (xi / L, L)."""
+    eta = yj - yk
+    l = wp.length(eta)
+    n = eta / l
+    lam = wp.dot(n, wp.vec3(geom[0], geom[1], geom[2]))
+    return l - geom[3], lam, n
+
+
+@wp.kernel
+def compute_dilatation(
+    positions: wp.array(dtype=wp.vec3),
+    family_offsets: wp.array(dtype=wp.int32),
+    family_neighbors: wp.array(dtype=wp.int32),
+    bond_geom: wp.array(dtype=wp.vec4),
+    bond_wv_dil: wp.array(dtype=float),
+    dil_d: wp.array(dtype=float),
+    dil_coef: wp.array(dtype=float),
+    dev_b: wp.array(dtype=float),
+    theta: wp.array(dtype=float),
+    bp: wp.array(dtype=wp.vec2),
+):
+    """theta_k = d_k sum_j w e Lambda V_j beta G^dil; writes theta and bp[k] = (b_k, P_k = d_k c0 theta_k)."""
+    k = wp.tid()
+    yk = positions[k]
+    acc = float(0.0)
+    for q in range(family_offsets[k], family_offsets[k + 1]):
+        e, lam, n = bond_extension_lambda(yk, positions[family_neighbors[q]], bond_geom[q])
+        acc += bond_wv_dil[q] * e * lam
+    th = dil_d[k] * acc
+    theta[k] = th
+    bp[k] = wp.vec2(dev_b[k], dil_coef[k] * th)
+
+
+@wp.kernel
+def compute_bond_force_density(
+    positions: wp.array(dtype=wp.vec3),
+    family_offsets: wp.array(dtype=wp.int32),
+    family_neighbors: wp.array(dtype=wp.int32),
+    bond_geom: wp.array(dtype=wp.vec4),
+    bond_wv_dil: wp.array(dtype=float),
+    bond_wv_dev: wp.array(dtype=float),
+    bp: wp.array(dtype=wp.vec2),
+    force_density: wp.array(dtype=wp.vec3),
+):
+    """f_k = sum_j 1/2 (A_kj + A_jk) n V_j beta
+           = sum_j 2 (w V_j beta G^dil Lambda (P_k + P_j) + w V_j beta G^dev (b_k + b_j) e) n   [N/m^3]."""
+    k = wp.tid()
+    yk = positions[k]
+    bpk = bp[k]
+    f = wp.vec3(0.0)
+    for q in range(family_offsets[k], family_offsets[k + 1]):
+        j = family_neighbors[q]
+        e, lam, n = bond_extension_lambda(yk, positions[j], bond_geom[q])
+        bpj = bp[j]
+        f += (2.0 * (bond_wv_dil[q] * lam * (bpk[1] + bpj[1]) + bond_wv_dev[q] * (bpk[0] + bpj[0]) * e)) * n
+    force_density[k] = f
+
+
+@wp.kernel
+def compute_strain_energy_density(
+    positions: wp.array(dtype=wp.vec3),
+    family_offsets: wp.array(dtype=wp.int32),
+    family_neighbors: wp.array(dtype=wp.int32),
+    bond_geom: wp.array(dtype=wp.vec4),
+    bond_wv_dev: wp.array(dtype=float),
+    theta: wp.array(dtype=float),
+    dev_b: wp.array(dtype=float),
+    dil_c0: wp.array(dtype=float),
+    energy_density: wp.array(dtype=float),
+):
+    """W_k = c0 theta_k^2 + b_k sum_j w e^2 V_j beta G^dev [J/m^3], the energy whose bond derivatives are the forces above
+    (exactly, when Lambda is held fixed; see pdsim/peridynamics.py). Needs theta from compute_dilatation."""
+    k = wp.tid()
+    yk = positions[k]
+    acc = float(0.0)
+    for q in range(family_offsets[k], family_offsets[k + 1]):
+        e, lam, n = bond_extension_lambda(yk, positions[family_neighbors[q]], bond_geom[q])
+        acc += bond_wv_dev[q] * e * e
+    th = theta[k]
+    energy_density[k] = dil_c0[k] * th * th + dev_b[k] * acc
+
+
+@wp.kernel
+def compute_family_moments(
+    family_offsets: wp.array(dtype=wp.int32),
+    bond_geom: wp.array(dtype=wp.vec4),
+    bond_wv: wp.array(dtype=float),
+    horizon: wp.array(dtype=float),
+    volume_sum: wp.array(dtype=float),
+    weighted_volume: wp.array(dtype=float),
+):
+    """Discrete family integrals used to calibrate d_k and b_k: volume_sum = sum_j V_j beta and
+    weighted_volume m_k = sum_j w L^2 V_j beta (continuum values 4/3 pi delta^3 and pi delta^5)."""
+    k = wp.tid()
+    vs = float(0.0)
+    m = float(0.0)
+    for q in range(family_offsets[k], family_offsets[k + 1]):
+        L = bond_geom[q][3]
+        wv = bond_wv[q]
+        vs += wv * L / horizon[k]
+        m += wv * L * L
+    volume_sum[k] = vs
+    weighted_volume[k] = m
+
+
+@wp.kernel
+def compute_stiffness_row_sum(
+    family_offsets: wp.array(dtype=wp.int32),
+    family_neighbors: wp.array(dtype=wp.int32),
+    bond_wv_dil: wp.array(dtype=float),
+    bond_wv_dev: wp.array(dtype=float),
+    dev_b: wp.array(dtype=float),
+    dil_d: wp.array(dtype=float),
+    dil_c0: wp.array(dtype=float),
+    row_sum: wp.array(dtype=float),
+):
+    """Silling-Askari stiffness sum S_k = sum_j V_j C_kj [N/m^4] with the bond's effective spring constant
+    C_kj = 2 w G^dev (b_k + b_j) for the deviatoric part, plus a Gershgorin bound |c0| d_k^2 (sum_j w V_j G^dil)^2 for the
+    dilatational coupling. The stable step is dt_k = sqrt(2 rho_k / S_k)."""
+    k = wp.tid()
+    dev = float(0.0)
+    sw = float(0.0)
+    bk = dev_b[k]
+    for q in range(family_offsets[k], family_offsets[k + 1]):
+        dev += 2.0 * bond_wv_dev[q] * (bk + dev_b[family_neighbors[q]])
+        sw += bond_wv_dil[q]
+    d = dil_d[k]
+    row_sum[k] = dev + wp.abs(dil_c0[k]) * d * d * sw * sw
+
+
+@wp.kernel
+def compute_bond_geometry(
+    rest_positions: wp.array(dtype=wp.vec3),
+    volumes: wp.array(dtype=float),
+    horizon: wp.array(dtype=float),
+    spacing: wp.array(dtype=float),
+    partial_volumes: wp.array(dtype=wp.int32),
+    family_offsets: wp.array(dtype=wp.int32),
+    family_neighbors: wp.array(dtype=wp.int32),
+    bond_geom: wp.array(dtype=wp.vec4),
+    bond_wv: wp.array(dtype=float),
+):
+    """Per-bond constants: bond_geom = (xi / L, L) and bond_wv = w V_j beta with w = delta / L. With partial volumes
+    the neighbour's volume counts by the fraction of its cell inside the horizon, beta = clamp((delta + h/2 - L) / h,
+    0, 1) (linear approximation); otherwise beta = 1 and the family is cut at delta."""
+    k = wp.tid()
+    xk = rest_positions[k]
+    delta = horizon[k]
+    h = spacing[k]
+    for q in range(family_offsets[k], family_offsets[k + 1]):
+        j = family_neighbors[q]
+        xi = rest_positions[j] - xk
+        L = wp.length(xi)
+        beta = float(1.0)
+        if partial_volumes[k] != 0:
+            beta = wp.clamp((delta + 0.5 * h - L) / h, 0.0, 1.0)
+        bond_geom[q] = wp.vec4(xi[0] / L, xi[1] / L, xi[2] / L, L)
+        bond_wv[q] = delta / L * volumes[j] * beta
+
+
+@wp.kernel
+def compute_directional_bond_factors(
+    family_offsets: wp.array(dtype=wp.int32),
+    family_neighbors: wp.array(dtype=wp.int32),
+    bond_geom: wp.array(dtype=wp.vec4),
+    bond_wv: wp.array(dtype=float),
+    factor_dil: wp.array(dtype=wp.vec3),
+    factor_dev: wp.array(dtype=wp.vec3),
+    bond_wv_dil: wp.array(dtype=float),
+    bond_wv_dev: wp.array(dtype=float),
+):
+    """Madenci-Oterkus surface correction. factor_*[k] holds particle k's correction for a uniaxial stretch along
+    x, y, z (continuum value / discrete value). A bond uses the mean of its two particles' factors along each axis,
+    interpolated over the ellipsoid G = (n_x^2 / Gx^2 + n_y^2 / Gy^2 + n_z^2 / Gz^2)^(-1/2) with n the reference bond
+    direction; G is the same for bond kj and jk, so forces stay pairwise equal and opposite."""
+    k = wp.tid()
+    fdk = factor_dil[k]
+    fbk = factor_dev[k]
+    for q in range(family_offsets[k], family_offsets[k + 1]):
+        j = family_neighbors[q]
+        g = bond_geom[q]
+        gd = 0.5 * (fdk + factor_dil[j])
+        gb = 0.5 * (fbk + factor_dev[j])
+        nx2 = g[0] * g[0]
+        ny2 = g[1] * g[1]
+        nz2 = g[2] * g[2]
+        Gd = 1.0 / wp.sqrt(nx2 / (gd[0] * gd[0]) + ny2 / (gd[1] * gd[1]) + nz2 / (gd[2] * gd[2]))
+        Gb = 1.0 / wp.sqrt(nx2 / (gb[0] * gb[0]) + ny2 / (gb[1] * gb[1]) + nz2 / (gb[2] * gb[2]))
+        bond_wv_dil[q] = bond_wv[q] * Gd
+        bond_wv_dev[q] = bond_wv[q] * Gb

@@ -1,0 +1,19 @@
+"""Kernels that sample solids: exact inside tests against a closed triangle mesh."""
+
+import warp as wp
+
+
+@wp.kernel
+def mark_points_inside_mesh(
+    mesh: wp.uint64,
+    points: wp.array(dtype=wp.vec3),
+    max_dist: float,
+    inside: wp.array(dtype=wp.int32),
+):
+    """inside[i] = 1 when points[i] lies strictly inside the closed mesh (generalised winding number > 0.5)."""
+    i = wp.tid()
+    q = wp.mesh_query_point_sign_winding_number(mesh, points[i], max_dist, 0.5, 2.0)
+    inside[i] = 0
+    if q.result:
+        if q.sign < 0.0:
+            inside[i] = 1

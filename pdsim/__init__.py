@@ -1,0 +1,39 @@
+"""pdsim: fracture-animation simulator on NVIDIA Warp, writing USD animation caches.
+
+Importing pdsim is light: Warp, pxr and trimesh load on first use.
+"""
+
+from __future__ import annotations
+
+__version__ = "0.1.0"
+
+from .errors import FeatureNotAvailableError, GeometryError, InstabilityError, ParameterError, PdsimError
+from .geometry import SolidShape, box, cylinder, load_mesh, shape_from_arrays, sphere
+from .materials import Material
+from .peridynamics import GroundPlane, PeridynamicBody, SolverPeridynamics
+from .regions import BoxRegion, HalfSpace, SphereRegion
+from .scene import RunReport, Scene
+
+__all__ = [
+    "__version__",
+    "Material",
+    "SolidShape",
+    "box",
+    "sphere",
+    "cylinder",
+    "load_mesh",
+    "shape_from_arrays",
+    "Scene",
+    "RunReport",
+    "PeridynamicBody",
+    "SolverPeridynamics",
+    "GroundPlane",
+    "BoxRegion",
+    "SphereRegion",
+    "HalfSpace",
+    "PdsimError",
+    "ParameterError",
+    "GeometryError",
+    "InstabilityError",
+    "FeatureNotAvailableError",
+]

@@ -1,0 +1,24 @@
+"""The shipped default scene: a soft cantilever clamped at one end, sagging and oscillating under gravity.
+
+Sized so that ``pdsim run`` finishes in well under two minutes on two CPU cores, first kernel compile included
+(README.md gives the measured time). ``scenes/cantilever.py`` is the same scene as a runnable script.
+"""
+
+from __future__ import annotations
+
+
+def build_scene():
+    import pdsim
+
+    scene = pdsim.Scene(fps=24, frames=72, up_axis="Z", name="cantilever")
+    material = pdsim.Material(density=1000.0, youngs_modulus=2.0e6, poisson_ratio=0.3, name="soft_solid")
+    length, width, thickness = 1.0, 0.2, 0.2
+    beam = scene.add_peridynamic_body(
+        pdsim.box((length, width, thickness), center=(0.5 * length, 0.0, 1.0), name="beam"),
+        material,
+        spacing=0.025,
+        damping=1.0,
+    )
+    beam.fix(pdsim.BoxRegion(lo=(-1.0, -1.0, 0.0), hi=(0.1, 1.0, 2.0)))  # the clamped end: first 0.1 m
+    scene.add_ground_plane(height=0.0)
+    return scene

@@ -1,0 +1,164 @@
+"""Solid shapes: closed triangle meshes loaded through trimesh, and primitives (box, sphere, cylinder)."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import GeometryError, ParameterError
+from .materials import _check_range
+
+MESH_SUFFIXES = (".obj", ".stl", ".ply", ".glb", ".gltf", ".off")
+
+
+@dataclass(frozen=True)
+class SolidShape:
+    """A closed, consistently oriented triangle mesh bounding a solid.
+
+    Attributes:
+        vertices: vertex positions [m], shape [vertex_count, 3], float64.
+        faces: triangle vertex indices, shape [face_count, 3], int32, outward-facing (counter-clockwise seen from outside).
+        name: label used for the body in output.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    name: str = "shape"
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """Axis-aligned bounds [[xmin, ymin, zmin], [xmax, ymax, zmax]] [m]."""
+        return np.stack([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+
+    @property
+    def extent(self) -> np.ndarray:
+        """Size of the axis-aligned bounding box [m], shape [3]."""
+        b = self.bounds
+        return b[1] - b[0]
+
+    @property
+    def volume(self) -> float:
+        """Enclosed volume [m^3] (signed-tetrahedron sum; positive for outward-facing triangles)."""
+        v = self.vertices[self.faces]
+        return float(np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0)
+
+
+def _shape_from_trimesh(mesh, name: str, source: str) -> SolidShape:
+    """Validates a trimesh.Trimesh as a solid: non-empty, watertight, consistently wound, positive volume."""
+    if mesh is None or len(mesh.faces) == 0 or len(mesh.vertices) == 0:
+        raise GeometryError(f"{source}: the mesh is empty (no triangles)")
+    mesh = mesh.copy()
+    mesh.merge_vertices()
+    mesh.update_faces(mesh.nondegenerate_faces())
+    mesh.remove_unreferenced_vertices()
+    if len(mesh.faces) == 0:
+        raise GeometryError(f"{source}: the mesh is empty (all triangles are degenerate)")
+    if not mesh.is_watertight:
+        raise GeometryError(
+            f"{source}: the mesh is not watertight (it has open or non-manifold edges), so it bounds no solid; "
+            "close its holes first (e.g. trimesh.repair.fill_holes or a mesh editor)"
+        )
+    if not mesh.is_winding_consistent:
+        raise GeometryError(f"{source}: the mesh's triangles are not consistently oriented")
+    if mesh.volume < 0.0:
+        mesh.invert()
+    if not mesh.volume > 0.0:
+        raise GeometryError(f"{source}: the mesh encloses zero volume")
+    return SolidShape(
+        vertices=np.asarray(mesh.vertices, dtype=np.float64),
+        faces=np.asarray(mesh.faces, dtype=np.int32),
+        name=name,
+    )
+
+
+def load_mesh(path: str | os.PathLike, *, scale: float = 1.0, translate=(0.0, 0.0, 0.0), name: str | None = None):
+    """Loads a closed surface mesh (OBJ, STL, PLY, GLB/glTF, OFF) as a :class:`SolidShape`.
+
+    Args:
+        path: mesh file; multi-object files (GLB scenes) are merged into one mesh.
+        scale: uniform scale applied to the vertices [-], > 0.
+        translate: offset added after scaling [m].
+        name: body label; defaults to the file's stem.
+    """
+    import trimesh
+
+    path = os.fspath(path)
+    suffix = os.path.splitext(path)[1].lower()
+    if suffix not in MESH_SUFFIXES:
+        raise GeometryError(f"{path}: unknown mesh file type '{suffix}'; supported: {', '.join(MESH_SUFFIXES)}")
+    if not os.path.isfile(path):
+        raise GeometryError(f"{path}: no such file")
+    scale = _check_range("scale", scale, 0.0, None)
+    try:
+        mesh = trimesh.load(path, force="mesh", process=True)
+    except Exception as exc:  # trimesh raises many exception types for unreadable files
+        raise GeometryError(f"{path}: cannot read mesh ({exc})") from None
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise GeometryError(f"{path}: the file holds no triangle mesh")
+    if len(mesh.faces) > 0:
+        mesh.apply_scale(scale)
+        mesh.apply_translation(np.asarray(translate, dtype=np.float64))
+    return _shape_from_trimesh(mesh, name or os.path.splitext(os.path.basename(path))[0], path)
+
+
+def shape_from_arrays(vertices, faces, *, name: str = "mesh") -> SolidShape:
+    """Builds a :class:`SolidShape` from vertex [n, 3] and triangle [m, 3] arrays (validated like a loaded file)."""
+    import trimesh
+
+    v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    return _shape_from_trimesh(trimesh.Trimesh(vertices=v, faces=f, process=False), name, name)
+
+
+def _vec3(field: str, value) -> np.ndarray:
+    a = np.asarray(value, dtype=np.float64)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ParameterError(field, value, "a sequence of 3 finite numbers")
+    return a
+
+
+def box(size, *, center=(0.0, 0.0, 0.0), name: str = "box") -> SolidShape:
+    """An axis-aligned box with edge lengths ``size`` [m] (each > 0) centred at ``center`` [m]."""
+    import trimesh
+
+    s = _vec3("size", size)
+    if np.any(s <= 0.0):
+        raise ParameterError("size", tuple(size), "three edge lengths > 0")
+    m = trimesh.creation.box(extents=s)
+    m.apply_translation(_vec3("center", center))
+    return _shape_from_trimesh(m, name, name)
+
+
+def sphere(radius: float, *, center=(0.0, 0.0, 0.0), subdivisions: int = 4, name: str = "sphere") -> SolidShape:
+    """A sphere of ``radius`` [m] (> 0), an icosphere with ``subdivisions`` levels (1..7)."""
+    import trimesh
+
+    r = _check_range("radius", radius, 0.0, None)
+    if int(subdivisions) != subdivisions or not 1 <= subdivisions <= 7:
+        raise ParameterError("subdivisions", subdivisions, "an integer in [1, 7]")
+    m = trimesh.creation.icosphere(subdivisions=int(subdivisions), radius=r)
+    m.apply_translation(_vec3("center", center))
+    return _shape_from_trimesh(m, name, name)
+
+
+def cylinder(
+    radius: float, height: float, *, center=(0.0, 0.0, 0.0), axis: str = "z", sections: int = 64, name="cylinder"
+) -> SolidShape:
+    """A cylinder of ``radius`` and ``height`` [m] (both > 0) along ``axis`` ('x', 'y' or 'z')."""
+    import trimesh
+
+    r = _check_range("radius", radius, 0.0, None)
+    h = _check_range("height", height, 0.0, None)
+    if axis not in ("x", "y", "z"):
+        raise ParameterError("axis", axis, "'x', 'y' or 'z'")
+    if int(sections) != sections or sections < 8:
+        raise ParameterError("sections", sections, "an integer >= 8")
+    m = trimesh.creation.cylinder(radius=r, height=h, sections=int(sections))
+    if axis == "x":
+        m.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [0, 1, 0]))
+    elif axis == "y":
+        m.apply_transform(trimesh.transformations.rotation_matrix(-np.pi / 2, [1, 0, 0]))
+    m.apply_translation(_vec3("center", center))
+    return _shape_from_trimesh(m, name, name)

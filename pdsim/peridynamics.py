@@ -1,0 +1,619 @@
+"""State-based peridynamic solid: bodies, the model built from them, and the explicit solver.
+
+The elastic model is the one derived in shared/seeds/pd_supplement.txt (kernels/pd_bonds.py lists the formulas). Its
+three parameters come from matching two reference deformations, an isotropic expansion (theta = 3 zeta,
+W = 9/2 kappa zeta^2) and a shear (W = 1/2 mu zeta^2). The supplement evaluates the family sums as integrals over a
+full sphere, which gives the constants
+
+    d = 9 / (4 pi delta^4),   b = 15 mu / (2 pi delta^5),   a = kappa d / 2,   g = (5 mu / 6) d / b = delta / 4.
+
+``surface_correction="family"`` (the default) applies the same two matching conditions to each particle's own discrete
+family instead of the continuum sphere:
+
+    d_k = 3 / (delta sum_j V_j beta_j)               (expansion gives theta_k = 3 zeta exactly)
+    b_k = 15 mu / (2 m_k),  m_k = sum_j w L^2 V_j beta_j   (shear energy exact on average over shear orientations)
+    a_k = kappa d_k / 2,    g_k = (5 mu / 6) d_k / b_k
+
+For an interior particle of a fine lattice these tend to the supplement's constants; for a particle near a free surface
+(truncated family) they stiffen its bonds so that it is not softer than the bulk (the "surface effect"). The model's
+elastic energy density is W_k = c0 theta_k^2 + b_k sum_j w e^2 V_j beta_j with c0 = kappa/2 - 5 mu/6: its derivative
+with respect to each bond extension (Lambda held fixed) is exactly the supplement's force state, so energy is conserved
+by the integrator up to the (small-strain negligible) dependence of Lambda on rotation.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import InstabilityError, ParameterError
+from .geometry import SolidShape
+from .materials import Material, _check_range
+from .regions import region_mask
+from .sampling import fill_solid, morton_order
+
+SURFACE_CORRECTIONS = ("directional", "family", "none")
+
+
+class PeridynamicBody:
+    """A solid discretised into particles on a simple-cubic lattice, simulated with state-based peridynamics.
+
+    Args:
+        shape: the solid to fill (see pdsim.geometry).
+        material: elastic constants and density.
+        spacing: lattice spacing h [m], > 0 and at most the shape's smallest extent.
+        horizon_factor: horizon delta = horizon_factor * h, in [1.5, 8]; default 3.015 (about 3 spacings, ties avoided).
+        name: label of the body in the USD cache; defaults to the shape's name.
+        surface_correction: "directional" (Madenci-Oterkus per-direction factors, default), "family" (per-particle
+            calibration of d and b on the isotropic reference deformations) or "none" (the supplement's constants).
+        partial_volumes: count neighbours near the horizon by the fraction of their cell inside it (default True).
+        damping: mass-proportional viscous damping coefficient c [1/s], >= 0 (a = f / rho - c v).
+        device: Warp device used to sample the shape ("cpu" by default; sampling is a one-off).
+
+    Particles are sorted along a Morton curve so that neighbours are close in memory.
+    """
+
+    def __init__(
+        self,
+        shape: SolidShape,
+        material: Material,
+        spacing: float,
+        *,
+        horizon_factor: float = 3.015,
+        name: str | None = None,
+        surface_correction: str = "directional",
+        partial_volumes: bool = True,
+        damping: float = 0.0,
+        device: str = "cpu",
+    ):
+        if not isinstance(material, Material):
+            raise ParameterError("material", material, "a pdsim.Material")
+        if not isinstance(shape, SolidShape):
+            raise ParameterError("shape", shape, "a pdsim SolidShape (pdsim.box, pdsim.load_mesh, ...)")
+        if surface_correction not in SURFACE_CORRECTIONS:
+            raise ParameterError("surface_correction", surface_correction, " or ".join(map(repr, SURFACE_CORRECTIONS)))
+        self.shape = shape
+        self.material = material
+        self.spacing = _check_range("spacing", spacing, 0.0, None)
+        self.horizon_factor = _check_range("horizon_factor", horizon_factor, 1.5, 8.0, lo_open=False, hi_open=False)
+        self.name = name or shape.name
+        self.surface_correction = surface_correction
+        self.partial_volumes = bool(partial_volumes)
+        self.damping = _check_range("damping", damping, 0.0, None, lo_open=False)
+        positions, volumes = fill_solid(shape, self.spacing, device=device)
+        order = morton_order(positions, self.spacing)
+        self.rest_positions = positions[order]
+        self.volumes = volumes[order]
+        n = len(self.rest_positions)
+        self.kind = np.zeros(n, dtype=np.int32)
+        self.prescribed_velocity = np.zeros((n, 3), dtype=np.float64)
+        self.initial_velocity = np.zeros((n, 3), dtype=np.float64)
+
+    @property
+    def particle_count(self) -> int:
+        return len(self.rest_positions)
+
+    @property
+    def horizon(self) -> float:
+        """delta = horizon_factor * spacing [m]."""
+        return self.horizon_factor * self.spacing
+
+    def _select(self, region, field_name: str) -> np.ndarray:
+        mask = region_mask(region, self.rest_positions, field=field_name)
+        if not mask.any():
+            raise ParameterError(field_name, region, f"a region containing at least one particle of '{self.name}'")
+        return mask
+
+    def fix(self, region) -> int:
+        """Holds the particles whose reference position lies in ``region`` at rest; returns how many."""
+        mask = self._select(region, "region")
+        self.kind[mask] = 1
+        self.prescribed_velocity[mask] = 0.0
+        return int(mask.sum())
+
+    def set_velocity(self, region, velocity) -> int:
+        """Moves the particles in ``region`` at the constant ``velocity`` [m/s] (a displacement-driven boundary)."""
+        v = np.asarray(velocity, dtype=np.float64)
+        if v.shape != (3,) or not np.all(np.isfinite(v)):
+            raise ParameterError("velocity", velocity, "a sequence of 3 finite numbers [m/s]")
+        mask = self._select(region, "region")
+        self.kind[mask] = 2
+        self.prescribed_velocity[mask] = v
+        return int(mask.sum())
+
+    def set_initial_velocity(self, velocity, region=None) -> int:
+        """Initial velocity [m/s]: a vector for all particles (or those in ``region``), or an array [n, 3]."""
+        v = np.asarray(velocity, dtype=np.float64)
+        if v.shape == (self.particle_count, 3) and region is None:
+            mask = np.ones(self.particle_count, dtype=bool)
+            values = v
+        elif v.shape == (3,):
+            mask = np.ones(self.particle_count, dtype=bool) if region is None else self._select(region, "region")
+            values = np.broadcast_to(v, (int(mask.sum()), 3))
+        else:
+            raise ParameterError("velocity", velocity, f"3 numbers or an array of shape ({self.particle_count}, 3)")
+        if not np.all(np.isfinite(values)):
+            raise ParameterError("velocity", velocity, "finite values")
+        self.initial_velocity[mask] = values
+        return int(mask.sum())
+
+
+@dataclass(frozen=True)
+class GroundPlane:
+    """A static plane n . x = offset that free particles cannot cross (inelastic contact with Coulomb friction)."""
+
+    normal: tuple = (0.0, 0.0, 1.0)
+    offset: float = 0.0
+    friction: float = 0.5
+
+
+@dataclass
+class PeridynamicModel:
+    """Immutable data of all peridynamic bodies of a scene, concatenated (bonds never join two bodies).
+
+    Arrays are Warp arrays on the solver's device; particle_count rows for per-particle data, bond_count for bonds.
+    """
+
+    particle_count: int
+    bond_count: int
+    body_offsets: np.ndarray  # first particle of each body, shape [body_count + 1]
+    rest_positions: object  # [m], vec3
+    volumes: object  # [m^3]
+    inv_density: object  # [m^3/kg]
+    spacing: object  # h per particle [m]
+    horizon: object  # delta per particle [m]
+    radius: object  # collision radius h/2 [m]
+    damping: object  # [1/s]
+    kind: object  # 0 free, 1 fixed, 2 prescribed velocity
+    prescribed_velocity: object  # [m/s]
+    family_offsets: object  # CSR row starts, int32 [particle_count + 1]
+    family_neighbors: object  # int32 [bond_count]
+    bond_geom: object  # (xi / L, L), vec4 [bond_count]
+    bond_wv: object  # w V_j beta [m^3], [bond_count]
+    bond_wv_dil: object  # w V_j beta G^dil: dilatation weight (bond_wv unless the directional correction is on)
+    bond_wv_dev: object  # w V_j beta G^dev: deviatoric weight (bond_wv unless the directional correction is on)
+    dil_d: object  # d_k [1/m^4]
+    dev_b: object  # b_k [Pa/m^5]
+    dil_c0: object  # c0 = kappa/2 - 5 mu/6 [Pa]
+    dil_coef: object  # d_k c0 [Pa/m^4]
+    density_host: np.ndarray = field(repr=False, default=None)
+    volumes_host: np.ndarray = field(repr=False, default=None)
+    rest_host: np.ndarray = field(repr=False, default=None)
+
+
+@dataclass
+class PeridynamicState:
+    """Per-step data: positions [m], velocities [m/s], accelerations [m/s^2], dilatation theta [-],
+    bp = (b_k, P_k) per particle, force density [N/m^3]."""
+
+    positions: object
+    velocities: object
+    accelerations: object
+    theta: object
+    bp: object
+    force_density: object
+
+
+def _build_families(rest, body_id, radius, device):
+    """CSR families via a hash grid: returns (offsets, neighbors) Warp arrays."""
+    import warp as wp
+
+    from .kernels import neighbors as kn
+
+    n = rest.shape[0]
+    cell = float(radius.numpy().max())
+    dim = int(max(8, min(128, round(n ** (1.0 / 3.0)))))
+    grid = wp.HashGrid(dim, dim, dim, device=device)
+    grid.build(rest, cell)
+    counts = wp.zeros(n, dtype=wp.int32, device=device)
+    wp.launch(kn.count_family, dim=n, inputs=[grid.id, rest, body_id, radius, counts], device=device)
+    offsets = wp.zeros(n + 1, dtype=wp.int32, device=device)
+    wp.utils.array_scan(counts, offsets[1:], inclusive=True)
+    bond_count = int(offsets.numpy()[-1])
+    neighbors = wp.zeros(max(bond_count, 1), dtype=wp.int32, device=device)
+    wp.launch(kn.fill_family, dim=n, inputs=[grid.id, rest, body_id, radius, offsets, neighbors], device=device)
+    return offsets, neighbors, bond_count
+
+
+DIRECTIONAL_STRETCH = 1.0e-3
+
+
+def _directional_factors(rest_h, delta_h, offsets, neighbors, bond_geom, bond_wv, device):
+    """Madenci-Oterkus correction factors per particle for uniaxial stretches along x, y and z: the continuum value
+    over the discrete family value, for the dilatation (theta = zeta) and for the deviatoric sum
+    sum_j w e^2 V_j beta (= pi delta^5 zeta^2 / 5). Returns two arrays of shape [n, 3]; 1 where a family is empty."""
+    import warp as wp
+
+    from .kernels import pd_bonds as kb
+
+    n = len(rest_h)
+    zeta = DIRECTIONAL_STRETCH
+    ones = wp.array(np.ones(n, dtype=np.float32), dtype=float, device=device)
+    zeros = wp.zeros(n, dtype=float, device=device)
+    sum_dil = wp.zeros(n, dtype=float, device=device)
+    sum_dev = wp.zeros(n, dtype=float, device=device)
+    bp = wp.zeros(n, dtype=wp.vec2, device=device)
+    f_dil = np.ones((n, 3))
+    f_dev = np.ones((n, 3))
+    d_cont = 9.0 / (4.0 * math.pi * delta_h**4)
+    dev_cont = math.pi * delta_h**5 * zeta**2 / 5.0
+    for axis in range(3):
+        y = rest_h.copy()
+        y[:, axis] *= 1.0 + zeta
+        pos = wp.array(y.astype(np.float32), dtype=wp.vec3, device=device)
+        wp.launch(kb.compute_dilatation, dim=n,
+                  inputs=[pos, offsets, neighbors, bond_geom, bond_wv, ones, zeros, zeros, sum_dil, bp], device=device)
+        wp.launch(kb.compute_strain_energy_density, dim=n,
+                  inputs=[pos, offsets, neighbors, bond_geom, bond_wv, zeros, ones, zeros, sum_dev], device=device)
+        sd = sum_dil.numpy().astype(np.float64)
+        sv = sum_dev.numpy().astype(np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            f_dil[:, axis] = np.where(sd > 0, zeta / (d_cont * sd), 1.0)
+            f_dev[:, axis] = np.where(sv > 0, dev_cont / sv, 1.0)
+    return f_dil, f_dev
+
+
+def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
+    """Concatenates the bodies, builds their families and per-bond / per-particle constants (all in kernels)."""
+    import warp as wp
+
+    from .kernels import pd_bonds as kb
+
+    counts = [b.particle_count for b in bodies]
+    body_offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    n = int(body_offsets[-1])
+
+    def per_particle(values):
+        return np.concatenate([np.full(c, v, dtype=np.float64) for c, v in zip(counts, values)])
+
+    rest_h = np.concatenate([b.rest_positions for b in bodies])
+    vol_h = np.concatenate([b.volumes for b in bodies])
+    rho_h = per_particle([b.material.density for b in bodies])
+    h_h = per_particle([b.spacing for b in bodies])
+    delta_h = per_particle([b.horizon for b in bodies])
+    search_h = delta_h + np.where(per_particle([b.partial_volumes for b in bodies]) > 0, 0.5 * h_h, 0.0)
+    kappa_h = per_particle([b.material.bulk_modulus for b in bodies])
+    mu_h = per_particle([b.material.shear_modulus for b in bodies])
+    body_id_h = np.repeat(np.arange(len(bodies), dtype=np.int32), counts)
+
+    f32 = np.float32
+    arr = lambda a, dtype=float: wp.array(np.asarray(a, dtype=f32 if dtype is float else None), dtype=dtype, device=device)  # noqa: E731
+    rest = wp.array(rest_h.astype(f32), dtype=wp.vec3, device=device)
+    volumes = arr(vol_h)
+    horizon = arr(delta_h)
+    spacing = arr(h_h)
+    body_id = wp.array(body_id_h, dtype=wp.int32, device=device)
+    offsets, neighbors, bond_count = _build_families(rest, body_id, arr(search_h), device)
+
+    bond_geom = wp.zeros(max(bond_count, 1), dtype=wp.vec4, device=device)
+    bond_wv = wp.zeros(max(bond_count, 1), dtype=float, device=device)
+    partial = wp.array(per_particle([b.partial_volumes for b in bodies]).astype(np.int32), dtype=wp.int32, device=device)
+    wp.launch(
+        kb.compute_bond_geometry,
+        dim=n,
+        inputs=[rest, volumes, horizon, spacing, partial, offsets, neighbors, bond_geom, bond_wv],
+        device=device,
+    )
+
+    volume_sum = wp.zeros(n, dtype=float, device=device)
+    weighted_volume = wp.zeros(n, dtype=float, device=device)
+    wp.launch(
+        kb.compute_family_moments,
+        dim=n,
+        inputs=[offsets, bond_geom, bond_wv, horizon, volume_sum, weighted_volume],
+        device=device,
+    )
+    vs = volume_sum.numpy().astype(np.float64)
+    m = weighted_volume.numpy().astype(np.float64)
+    correction = np.concatenate([np.full(c, b.surface_correction) for c, b in zip(counts, bodies)])
+    family = correction == "family"
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d_family = np.where(vs > 0, 3.0 / (delta_h * vs), 0.0)
+        b_family = np.where(m > 0, 15.0 * mu_h / (2.0 * m), 0.0)
+    d_cont = 9.0 / (4.0 * math.pi * delta_h**4)
+    b_cont = 15.0 * mu_h / (2.0 * math.pi * delta_h**5)
+    d_k = np.where(family, d_family, d_cont)
+    b_k = np.where(family, b_family, b_cont)
+    c0 = 0.5 * kappa_h - 5.0 * mu_h / 6.0
+
+    if np.any(correction == "directional"):
+        directional = correction == "directional"
+        f_dil, f_dev = _directional_factors(rest_h, delta_h, offsets, neighbors, bond_geom, bond_wv, device)
+        f_dil[~directional] = 1.0
+        f_dev[~directional] = 1.0
+        bond_wv_dil = wp.zeros_like(bond_wv)
+        bond_wv_dev = wp.zeros_like(bond_wv)
+        wp.launch(
+            kb.compute_directional_bond_factors,
+            dim=n,
+            inputs=[offsets, neighbors, bond_geom, bond_wv, wp.array(f_dil.astype(f32), dtype=wp.vec3, device=device),
+                    wp.array(f_dev.astype(f32), dtype=wp.vec3, device=device), bond_wv_dil, bond_wv_dev],
+            device=device,
+        )
+    else:
+        bond_wv_dil = bond_wv_dev = bond_wv
+
+    kind_h = np.concatenate([b.kind for b in bodies]).astype(np.int32)
+    presc_h = np.concatenate([b.prescribed_velocity for b in bodies])
+    return PeridynamicModel(
+        particle_count=n,
+        bond_count=bond_count,
+        body_offsets=body_offsets,
+        rest_positions=rest,
+        volumes=volumes,
+        inv_density=arr(1.0 / rho_h),
+        spacing=spacing,
+        horizon=horizon,
+        radius=arr(0.5 * h_h),
+        damping=arr(per_particle([b.damping for b in bodies])),
+        kind=wp.array(kind_h, dtype=wp.int32, device=device),
+        prescribed_velocity=wp.array(presc_h.astype(f32), dtype=wp.vec3, device=device),
+        family_offsets=offsets,
+        family_neighbors=neighbors,
+        bond_geom=bond_geom,
+        bond_wv=bond_wv,
+        bond_wv_dil=bond_wv_dil,
+        bond_wv_dev=bond_wv_dev,
+        dil_d=arr(d_k),
+        dev_b=arr(b_k),
+        dil_c0=arr(c0),
+        dil_coef=arr(d_k * c0),
+        density_host=rho_h,
+        volumes_host=vol_h,
+        rest_host=rest_h,
+    )
+
+
+class SolverPeridynamics:
+    """Explicit velocity-Verlet solver for the peridynamic bodies of a scene.
+
+    Args:
+        bodies: the peridynamic bodies (concatenated into one model).
+        device: Warp device ("cpu", "cuda", "cuda:0", ...).
+        gravity: acceleration [m/s^2], 3 numbers.
+        ground: optional ground plane collider.
+
+    The step launches: kick-drift (+ ground plane), dilatation, force density, kick. No allocation happens per step.
+    ``features`` lists the optional parts that are live (and launched) for this scene.
+    """
+
+    def __init__(self, bodies: list[PeridynamicBody], *, device="cpu", gravity=(0.0, 0.0, 0.0), ground=None):
+        import warp as wp
+
+        if not bodies:
+            raise ParameterError("bodies", bodies, "at least one PeridynamicBody")
+        self.bodies = list(bodies)
+        self.device = wp.get_device(device)
+        self.gravity = wp.vec3(*[float(g) for g in gravity])
+        self.ground = ground
+        self.model = build_model(self.bodies, self.device)
+        n = self.model.particle_count
+        d = self.device
+        init_v = np.concatenate([b.initial_velocity for b in self.bodies]).astype(np.float32)
+        self.state = PeridynamicState(
+            positions=wp.clone(self.model.rest_positions),
+            velocities=wp.array(init_v, dtype=wp.vec3, device=d),
+            accelerations=wp.zeros(n, dtype=wp.vec3, device=d),
+            theta=wp.zeros(n, dtype=float, device=d),
+            bp=wp.zeros(n, dtype=wp.vec2, device=d),
+            force_density=wp.zeros(n, dtype=wp.vec3, device=d),
+        )
+        self._energy_density = wp.zeros(n, dtype=float, device=d)
+        self._check = wp.zeros(2, dtype=float, device=d)
+        self.features = {"elastic"}
+        if any(gi != 0.0 for gi in gravity):
+            self.features.add("gravity")
+        if ground is not None:
+            self.features.add("ground_plane")
+        if any(b.damping > 0 for b in self.bodies):
+            self.features.add("damping")
+        self.time = 0.0
+        self.step_count = 0
+        self._update_accelerations(0.0)
+
+    # -- time step -----------------------------------------------------------------------------------------------
+    def stable_time_step(self) -> float:
+        """Silling-Askari critical time step min_k sqrt(2 rho_k / sum_j V_j C_kj) [s] (no safety factor)."""
+        import warp as wp
+
+        from .kernels import pd_bonds as kb
+
+        m = self.model
+        row = wp.zeros(m.particle_count, dtype=float, device=self.device)
+        wp.launch(
+            kb.compute_stiffness_row_sum,
+            dim=m.particle_count,
+            inputs=[m.family_offsets, m.family_neighbors, m.bond_wv_dil, m.bond_wv_dev, m.dev_b, m.dil_d, m.dil_c0,
+                    row],
+            device=self.device,
+        )
+        s = row.numpy().astype(np.float64)
+        ok = s > 0
+        if not ok.any():
+            return math.inf
+        return float(np.sqrt(2.0 * m.density_host[ok] / s[ok]).min())
+
+    # -- stepping ------------------------------------------------------------------------------------------------
+    def _compute_force_density(self, positions):
+        import warp as wp
+
+        from .kernels import pd_bonds as kb
+
+        m, s = self.model, self.state
+        wp.launch(
+            kb.compute_dilatation,
+            dim=m.particle_count,
+            inputs=[positions, m.family_offsets, m.family_neighbors, m.bond_geom, m.bond_wv_dil, m.dil_d, m.dil_coef,
+                    m.dev_b, s.theta, s.bp],
+            device=self.device,
+        )
+        wp.launch(
+            kb.compute_bond_force_density,
+            dim=m.particle_count,
+            inputs=[positions, m.family_offsets, m.family_neighbors, m.bond_geom, m.bond_wv_dil, m.bond_wv_dev, s.bp,
+                    s.force_density],
+            device=self.device,
+        )
+
+    def _update_accelerations(self, dt: float):
+        import warp as wp
+
+        from .kernels import integration as ki
+
+        m, s = self.model, self.state
+        self._compute_force_density(s.positions)
+        wp.launch(
+            ki.integrate_kick,
+            dim=m.particle_count,
+            inputs=[s.velocities, s.force_density, m.inv_density, m.kind, self.gravity, m.damping, dt, s.accelerations],
+            device=self.device,
+        )
+
+    def step(self, dt: float):
+        """Advances all bodies by one velocity-Verlet step of ``dt`` [s]."""
+        import warp as wp
+
+        from .kernels import integration as ki
+
+        m, s = self.model, self.state
+        wp.launch(
+            ki.integrate_kick_drift,
+            dim=m.particle_count,
+            inputs=[s.positions, s.velocities, s.accelerations, m.rest_positions, m.kind, m.prescribed_velocity, dt],
+            device=self.device,
+        )
+        if self.ground is not None:
+            g = self.ground
+            wp.launch(
+                ki.collide_ground_plane,
+                dim=m.particle_count,
+                inputs=[s.positions, s.velocities, m.kind, m.radius, wp.vec3(*g.normal), float(g.offset),
+                        float(g.friction)],
+                device=self.device,
+            )
+        self._update_accelerations(dt)
+        self.time += dt
+        self.step_count += 1
+
+    def simulate(self, dt: float, steps: int):
+        """Runs ``steps`` steps of ``dt`` [s]."""
+        for _ in range(int(steps)):
+            self.step(dt)
+
+    def check_state(self, speed_limit: float):
+        """Raises InstabilityError if a position or velocity is not finite or a speed exceeds ``speed_limit`` [m/s]."""
+        import warp as wp
+
+        from .kernels import integration as ki
+
+        s = self.state
+        self._check.zero_()
+        wp.launch(ki.max_speed_and_finite, dim=self.model.particle_count, inputs=[s.positions, s.velocities, self._check],
+                  device=self.device)
+        vmax, bad = self._check.numpy()
+        if bad > 0 or vmax > speed_limit:
+            what = "non-finite positions or velocities" if bad > 0 else f"a particle speed of {vmax:.3g} m/s"
+            raise InstabilityError(
+                f"the simulation diverged at t={self.time:.6g} s (step {self.step_count}): {what}; the time step is too "
+                f"large for this material and spacing (stable estimate {self.stable_time_step():.3g} s): use a smaller "
+                "--dt or leave it automatic"
+            )
+
+    # -- host-side views and diagnostics (vectorised numpy) ---------------------------------------------------------
+    def positions(self) -> np.ndarray:
+        """Current positions [m], shape [particle_count, 3]."""
+        return self.state.positions.numpy()
+
+    def velocities(self) -> np.ndarray:
+        """Current velocities [m/s], shape [particle_count, 3]."""
+        return self.state.velocities.numpy()
+
+    def set_positions(self, positions: np.ndarray):
+        """Overwrites positions [m] (shape [particle_count, 3]) and recomputes forces and dilatation."""
+        import warp as wp
+
+        p = np.asarray(positions, dtype=np.float32)
+        if p.shape != (self.model.particle_count, 3):
+            raise ParameterError("positions", p.shape, f"shape ({self.model.particle_count}, 3)")
+        wp.copy(self.state.positions, wp.array(p, dtype=wp.vec3, device=self.device))
+        self._update_accelerations(0.0)
+
+    def set_velocities(self, velocities: np.ndarray):
+        """Overwrites velocities [m/s], shape [particle_count, 3]."""
+        import warp as wp
+
+        v = np.asarray(velocities, dtype=np.float32)
+        if v.shape != (self.model.particle_count, 3):
+            raise ParameterError("velocities", v.shape, f"shape ({self.model.particle_count}, 3)")
+        wp.copy(self.state.velocities, wp.array(v, dtype=wp.vec3, device=self.device))
+
+    def dilatation(self) -> np.ndarray:
+        """theta per particle at the current positions [-]."""
+        return self.state.theta.numpy().astype(np.float64)
+
+    def force_density(self) -> np.ndarray:
+        """Internal force density per particle [N/m^3], shape [particle_count, 3]."""
+        return self.state.force_density.numpy().astype(np.float64)
+
+    def strain_energy_density(self) -> np.ndarray:
+        """W_k at the current positions [J/m^3] (needs the dilatation of the same positions: always up to date)."""
+        import warp as wp
+
+        from .kernels import pd_bonds as kb
+
+        m, s = self.model, self.state
+        wp.launch(
+            kb.compute_strain_energy_density,
+            dim=m.particle_count,
+            inputs=[s.positions, m.family_offsets, m.family_neighbors, m.bond_geom, m.bond_wv_dev, s.theta, m.dev_b,
+                    m.dil_c0, self._energy_density],
+            device=self.device,
+        )
+        return self._energy_density.numpy().astype(np.float64)
+
+    def strain_energy(self) -> float:
+        """Total elastic energy sum_k V_k W_k [J]."""
+        return float(np.dot(self.model.volumes_host, self.strain_energy_density()))
+
+    def masses(self) -> np.ndarray:
+        """Particle masses rho V [kg]."""
+        return self.model.density_host * self.model.volumes_host
+
+    def kinetic_energy(self) -> float:
+        """1/2 sum m v^2 [J]."""
+        v = self.velocities().astype(np.float64)
+        return float(0.5 * np.dot(self.masses(), np.einsum("ij,ij->i", v, v)))
+
+    def linear_momentum(self) -> np.ndarray:
+        """sum m v [kg m/s]."""
+        return self.masses() @ self.velocities().astype(np.float64)
+
+    def angular_momentum(self, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """sum m (x - origin) x v [kg m^2/s]."""
+        x = self.positions().astype(np.float64) - np.asarray(origin, dtype=np.float64)
+        return self.masses() @ np.cross(x, self.velocities().astype(np.float64))
+
+    def body_slice(self, index: int) -> slice:
+        """Rows of body ``index`` in the concatenated particle arrays."""
+        return slice(int(self.model.body_offsets[index]), int(self.model.body_offsets[index + 1]))
+
+
+def warn_if_above_estimate(dt: float, dt_crit: float):
+    """Warns when a user time step exceeds the (conservative) stable estimate; divergence is still detected."""
+    if dt > dt_crit:
+        warnings.warn(
+            f"time step {dt:.3g} s exceeds the Silling-Askari stable estimate {dt_crit:.3g} s; the run is checked for "
+            "divergence every frame",
+            stacklevel=3,
+        )
+
+
+def check_time_step(dt: float) -> float:
+    """Validates a user time step [s]."""
+    return _check_range("dt", dt, 0.0, None)
+
+
+__all__ = ["PeridynamicBody", "GroundPlane", "SolverPeridynamics", "PeridynamicModel", "PeridynamicState", "InstabilityError"]

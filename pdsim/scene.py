@@ -1,0 +1,207 @@
+"""Scenes: bodies, colliders and gravity, run frame by frame into a USD animation cache."""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import ParameterError
+from .geometry import SolidShape
+from .materials import Material, _check_range
+from .peridynamics import GroundPlane, PeridynamicBody, SolverPeridynamics, check_time_step, warn_if_above_estimate
+
+UP_AXES = {"Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
+
+
+def check_frames(frames) -> int:
+    """Validates a frame count (an integer >= 1)."""
+    if isinstance(frames, bool) or not isinstance(frames, (int, np.integer)) or frames < 1:
+        raise ParameterError("frames", frames, "an integer >= 1")
+    return int(frames)
+
+
+def default_device() -> str:
+    """'cuda' when a CUDA device is present, else 'cpu'."""
+    import warp as wp
+
+    return "cuda" if wp.get_cuda_device_count() > 0 else "cpu"
+
+
+@dataclass
+class RunReport:
+    """What a run did: frames written, substeps per frame, time step [s], wall time [s], particle count."""
+
+    path: str
+    frames_written: int
+    substeps_per_frame: int
+    dt: float
+    stable_dt: float
+    wall_seconds: float
+    particle_count: int
+    bond_count: int
+
+
+class Scene:
+    """A simulation scene.
+
+    Args:
+        fps: frames per second of the cache, > 0.
+        frames: number of frames to simulate and write after frame 0 (the rest pose), integer >= 1.
+        gravity: gravitational acceleration [m/s^2]; default 9.81 m/s^2 down the up axis.
+        up_axis: "Z" (default) or "Y"; written to the stage and used for the default gravity and ground plane.
+        time_step_safety: automatic dt = safety * Silling-Askari estimate, in (0, 1]; default 0.7.
+        name: scene label.
+    """
+
+    def __init__(self, *, fps: float = 24.0, frames: int = 48, gravity=None, up_axis: str = "Z",
+                 time_step_safety: float = 0.7, name: str = "scene"):
+        if up_axis not in UP_AXES:
+            raise ParameterError("up_axis", up_axis, "'Y' or 'Z'")
+        self.fps = _check_range("fps", fps, 0.0, 1000.0, hi_open=False)
+        self.frames = check_frames(frames)
+        self.up_axis = up_axis
+        up = np.asarray(UP_AXES[up_axis])
+        g = -9.81 * up if gravity is None else np.asarray(gravity, dtype=np.float64)
+        if g.shape != (3,) or not np.all(np.isfinite(g)):
+            raise ParameterError("gravity", gravity, "3 finite numbers [m/s^2]")
+        self.gravity = tuple(float(x) for x in g)
+        self.time_step_safety = _check_range("time_step_safety", time_step_safety, 0.0, 1.0, hi_open=False)
+        self.name = name
+        self.bodies: list[PeridynamicBody] = []
+        self.ground: GroundPlane | None = None
+
+    # -- building -----------------------------------------------------------------------------------------------
+    def add_body(self, body: PeridynamicBody) -> PeridynamicBody:
+        """Adds a body; names must be unique within the scene."""
+        if not isinstance(body, PeridynamicBody):
+            raise ParameterError("body", body, "a PeridynamicBody")
+        if any(b.name == body.name for b in self.bodies):
+            raise ParameterError("name", body.name, "a body name not already used in this scene")
+        self.bodies.append(body)
+        return body
+
+    def add_peridynamic_body(self, shape: SolidShape, material: Material, spacing: float, **kwargs) -> PeridynamicBody:
+        """Fills ``shape`` with particles of ``spacing`` [m] and adds it (keyword options: see PeridynamicBody)."""
+        return self.add_body(PeridynamicBody(shape, material, spacing, **kwargs))
+
+    def add_ground_plane(self, *, height: float = 0.0, friction: float = 0.5) -> GroundPlane:
+        """A ground plane perpendicular to the up axis at ``height`` [m], Coulomb ``friction`` >= 0."""
+        h = _check_range("height", height, None, None)
+        mu = _check_range("friction", friction, 0.0, None, lo_open=False)
+        self.ground = GroundPlane(normal=UP_AXES[self.up_axis], offset=h, friction=mu)
+        return self.ground
+
+    # -- running ------------------------------------------------------------------------------------------------
+    def build_solver(self, *, device: str | None = None) -> SolverPeridynamics:
+        """Builds the solver for the scene's bodies on ``device`` (CUDA when present by default)."""
+        if not self.bodies:
+            raise ParameterError("bodies", [], "a scene with at least one body")
+        return SolverPeridynamics(self.bodies, device=device or default_device(), gravity=self.gravity,
+                                  ground=self.ground)
+
+    def run(self, out: str | os.PathLike, *, frames: int | None = None, device: str | None = None,
+            dt: float | None = None, progress: bool = True, save_interval_s: float = 2.0) -> RunReport:
+        """Simulates the scene and writes a USD animation cache to ``out`` (.usdc, .usda or .usd).
+
+        Frame 0 is the rest pose; frames 1..frames follow at 1/fps. The cache on disk always holds the finished frames,
+        also after an error or Ctrl-C (it is rewritten atomically at least every ``save_interval_s`` seconds and at the
+        end).
+
+        Args:
+            out: output path.
+            frames: overrides the scene's frame count (integer >= 1).
+            device: Warp device; CUDA when present unless given.
+            dt: time step [s]; automatic (safety * stable estimate) when None. Substeps per frame are
+                ceil(frame time / dt), so the step used is at most dt.
+        """
+        from .output import UsdCache
+
+        out = os.fspath(out)
+        if os.path.splitext(out)[1].lower() not in (".usdc", ".usda", ".usd"):
+            raise ParameterError("out", out, "a path ending in .usdc, .usda or .usd")
+        frame_count = self.frames if frames is None else check_frames(frames)
+        if dt is not None:
+            dt = check_time_step(dt)
+        wall0 = time.perf_counter()
+        solver = self.build_solver(device=device)
+        stable_dt = solver.stable_time_step()
+        frame_dt = 1.0 / self.fps
+        if dt is None:
+            dt = self.time_step_safety * stable_dt
+        else:
+            warn_if_above_estimate(dt, stable_dt)
+        substeps = max(1, math.ceil(frame_dt / dt - 1.0e-9))
+        dt = frame_dt / substeps
+        speed_limit = self._speed_limit(solver)
+
+        with UsdCache(out, fps=self.fps, start_frame=0, up_axis=self.up_axis,
+                      save_interval_s=save_interval_s) as cache:
+            handles = [self._add_points(cache, b) for b in self.bodies]
+            self._write_frame(cache, handles, solver, 0)
+            cache.end_frame(0)
+            bar = _progress(frame_count, enabled=progress, desc=f"pdsim {self.name}")
+            try:
+                for frame in range(1, frame_count + 1):
+                    solver.simulate(dt, substeps)
+                    solver.check_state(speed_limit)
+                    self._write_frame(cache, handles, solver, frame)
+                    cache.end_frame(frame)
+                    bar.update(1)
+            finally:
+                bar.close()
+            written = cache.frames_written
+        return RunReport(
+            path=out,
+            frames_written=written,
+            substeps_per_frame=substeps,
+            dt=dt,
+            stable_dt=stable_dt,
+            wall_seconds=time.perf_counter() - wall0,
+            particle_count=solver.model.particle_count,
+            bond_count=solver.model.bond_count,
+        )
+
+    def _speed_limit(self, solver: SolverPeridynamics) -> float:
+        """A speed no particle of a sane run reaches: 20 times the largest of the P-wave speeds, the initial speeds
+        and the prescribed speeds (an explicit run past its stable step grows exponentially and exceeds it fast)."""
+        c = max(b.material.p_wave_speed for b in self.bodies)
+        v0 = max(float(np.abs(b.initial_velocity).max(initial=0.0)) for b in self.bodies)
+        vp = max(float(np.abs(b.prescribed_velocity).max(initial=0.0)) for b in self.bodies)
+        fall = math.sqrt(2.0 * float(np.linalg.norm(self.gravity)) * 1.0e3)  # free fall through 1 km
+        return 20.0 * max(c, v0, vp, fall)
+
+    @staticmethod
+    def _add_points(cache, body: PeridynamicBody):
+        widths = np.full(body.particle_count, body.spacing, dtype=np.float32)
+        return cache.add_points(body.name, widths=widths, primvars={"displacement": "float", "dilatation": "float"})
+
+    def _write_frame(self, cache, handles, solver: SolverPeridynamics, frame: int):
+        x = solver.positions()
+        v = solver.velocities()
+        theta = solver.state.theta.numpy()
+        for i, (body, handle) in enumerate(zip(self.bodies, handles)):
+            sl = solver.body_slice(i)
+            xb = x[sl]
+            disp = np.linalg.norm(xb.astype(np.float64) - body.rest_positions, axis=1).astype(np.float32)
+            cache.write_points(handle, frame, xb, velocities=v[sl],
+                               primvars={"displacement": disp, "dilatation": theta[sl]})
+
+
+class _NoProgress:
+    def update(self, n):
+        pass
+
+    def close(self):
+        pass
+
+
+def _progress(total: int, *, enabled: bool, desc: str):
+    if not enabled:
+        return _NoProgress()
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="frame", dynamic_ncols=True)
