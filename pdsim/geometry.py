@@ -91,6 +91,7 @@ def load_mesh(path: str | os.PathLike, *, scale: float = 1.0, translate=(0.0, 0.
     if not os.path.isfile(path):
         raise GeometryError(f"{path}: no such file")
     scale = _check_range("scale", scale, 0.0, None)
+    translate = _vec3("translate", translate)
     try:
         mesh = trimesh.load(path, force="mesh", process=True)
     except Exception as exc:  # trimesh raises many exception types for unreadable files
@@ -99,7 +100,7 @@ def load_mesh(path: str | os.PathLike, *, scale: float = 1.0, translate=(0.0, 0.
         raise GeometryError(f"{path}: the file holds no triangle mesh")
     if len(mesh.faces) > 0:
         mesh.apply_scale(scale)
-        mesh.apply_translation(np.asarray(translate, dtype=np.float64))
+        mesh.apply_translation(translate)
     return _shape_from_trimesh(mesh, name or os.path.splitext(os.path.basename(path))[0], path)
 
 
@@ -107,8 +108,17 @@ def shape_from_arrays(vertices, faces, *, name: str = "mesh") -> SolidShape:
     """Builds a :class:`SolidShape` from vertex [n, 3] and triangle [m, 3] arrays (validated like a loaded file)."""
     import trimesh
 
-    v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
-    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    try:
+        v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+        f_raw = np.asarray(faces, dtype=np.float64).reshape(-1, 3)
+        f = f_raw.astype(np.int64)
+    except (TypeError, ValueError):
+        raise GeometryError(f"{name}: vertices must be an [n, 3] array of numbers and faces an [m, 3] array of "
+                            "vertex indices") from None
+    if not np.all(np.isfinite(v)):
+        raise GeometryError(f"{name}: the vertices contain non-finite values (NaN or inf)")
+    if f.size and (not np.array_equal(f, f_raw) or f.min() < 0 or f.max() >= len(v)):
+        raise GeometryError(f"{name}: faces must hold integer vertex indices in [0, {len(v)})")
     return _shape_from_trimesh(trimesh.Trimesh(vertices=v, faces=f, process=False), name, name)
 
 

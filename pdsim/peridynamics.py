@@ -187,7 +187,8 @@ class PeridynamicModel:
 @dataclass
 class PeridynamicState:
     """Per-step data: positions [m], velocities [m/s], accelerations [m/s^2], dilatation theta [-],
-    bp = (b_k, P_k) per particle, force density [N/m^3]."""
+    bp = (b_k, P_k) per particle, force density [N/m^3]; per bond the deformed (n, e) and Lambda cached by the
+    dilatation pass for the force pass."""
 
     positions: object
     velocities: object
@@ -195,6 +196,8 @@ class PeridynamicState:
     theta: object
     bp: object
     force_density: object
+    bond_ne: object
+    bond_lambda: object
 
 
 def _build_families(rest, body_id, radius, device):
@@ -236,6 +239,8 @@ def _directional_factors(rest_h, delta_h, offsets, neighbors, bond_geom, bond_wv
     sum_dil = wp.zeros(n, dtype=float, device=device)
     sum_dev = wp.zeros(n, dtype=float, device=device)
     bp = wp.zeros(n, dtype=wp.vec2, device=device)
+    scratch_ne = wp.zeros(bond_wv.shape[0], dtype=wp.vec4, device=device)
+    scratch_lambda = wp.zeros(bond_wv.shape[0], dtype=float, device=device)
     f_dil = np.ones((n, 3))
     f_dev = np.ones((n, 3))
     d_cont = 9.0 / (4.0 * math.pi * delta_h**4)
@@ -245,7 +250,8 @@ def _directional_factors(rest_h, delta_h, offsets, neighbors, bond_geom, bond_wv
         y[:, axis] *= 1.0 + zeta
         pos = wp.array(y.astype(np.float32), dtype=wp.vec3, device=device)
         wp.launch(kb.compute_dilatation, dim=n,
-                  inputs=[pos, offsets, neighbors, bond_geom, bond_wv, ones, zeros, zeros, sum_dil, bp], device=device)
+                  inputs=[pos, offsets, neighbors, bond_geom, bond_wv, ones, zeros, zeros, sum_dil, bp, scratch_ne,
+                          scratch_lambda], device=device)
         wp.launch(kb.compute_strain_energy_density, dim=n,
                   inputs=[pos, offsets, neighbors, bond_geom, bond_wv, zeros, ones, zeros, sum_dev], device=device)
         sd = sum_dil.numpy().astype(np.float64)
@@ -400,6 +406,8 @@ class SolverPeridynamics:
             theta=wp.zeros(n, dtype=float, device=d),
             bp=wp.zeros(n, dtype=wp.vec2, device=d),
             force_density=wp.zeros(n, dtype=wp.vec3, device=d),
+            bond_ne=wp.zeros(max(self.model.bond_count, 1), dtype=wp.vec4, device=d),
+            bond_lambda=wp.zeros(max(self.model.bond_count, 1), dtype=float, device=d),
         )
         self._energy_density = wp.zeros(n, dtype=float, device=d)
         self._check = wp.zeros(2, dtype=float, device=d)
@@ -447,13 +455,13 @@ class SolverPeridynamics:
             kb.compute_dilatation,
             dim=m.particle_count,
             inputs=[positions, m.family_offsets, m.family_neighbors, m.bond_geom, m.bond_wv_dil, m.dil_d, m.dil_coef,
-                    m.dev_b, s.theta, s.bp],
+                    m.dev_b, s.theta, s.bp, s.bond_ne, s.bond_lambda],
             device=self.device,
         )
         wp.launch(
             kb.compute_bond_force_density,
             dim=m.particle_count,
-            inputs=[positions, m.family_offsets, m.family_neighbors, m.bond_geom, m.bond_wv_dil, m.bond_wv_dev, s.bp,
+            inputs=[m.family_offsets, m.family_neighbors, s.bond_ne, s.bond_lambda, m.bond_wv_dil, m.bond_wv_dev, s.bp,
                     s.force_density],
             device=self.device,
         )

@@ -16,7 +16,9 @@ def simple_cubic_lattice(shape: SolidShape, spacing: float) -> np.ndarray:
     (a box of edge n h gets exactly n points along that edge, h/2 from its faces)."""
     lo, hi = shape.bounds
     extent = hi - lo
-    counts = np.maximum(np.ceil(extent / spacing - 1.0e-9).astype(np.int64), 1)
+    # Tolerance of 1e-3 cells: a box of edge n h stored in float32 (STL, PLY, GLB) measures n h (1 +- 1e-7) and must
+    # still get n points, not n + 1 with the outer layer on its faces (where the inside test is ambiguous).
+    counts = np.maximum(np.ceil(extent / spacing - 1.0e-3).astype(np.int64), 1)
     if int(np.prod(counts)) > MAX_LATTICE_POINTS:
         raise ParameterError(
             "spacing", spacing, f"a value giving at most {MAX_LATTICE_POINTS:.0e} lattice points (this gives {counts})"

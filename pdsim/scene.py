@@ -123,6 +123,8 @@ class Scene:
         out = os.fspath(out)
         if os.path.splitext(out)[1].lower() not in (".usdc", ".usda", ".usd"):
             raise ParameterError("out", out, "a path ending in .usdc, .usda or .usd")
+        if not os.path.isdir(os.path.dirname(os.path.abspath(out))):
+            raise ParameterError("out", out, "a path in an existing folder")
         frame_count = self.frames if frames is None else check_frames(frames)
         if dt is not None:
             dt = check_time_step(dt)

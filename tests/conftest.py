@@ -1,6 +1,13 @@
-"""Shared test set-up: Warp on the CPU backend, quiet."""
+"""Shared test set-up: Warp quiet; tests that take the ``device`` fixture run on the CPU always and on CUDA when
+present (CI has no GPU, so there they run on the CPU backend only)."""
 
 import pytest
+
+
+def _devices():
+    import warp as wp
+
+    return ["cpu"] + (["cuda"] if wp.get_cuda_device_count() > 0 else [])
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -12,7 +19,6 @@ def _warp_quiet():
     wp.init()
 
 
-@pytest.fixture
-def device():
-    """Tests run on the CPU backend (CI has no GPU)."""
-    return "cpu"
+def pytest_generate_tests(metafunc):
+    if "device" in metafunc.fixturenames:
+        metafunc.parametrize("device", _devices())

@@ -83,6 +83,18 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
+def kernel_source_digest() -> str:
+    """Short SHA-1 of the step's kernel sources (pd_bonds.py, integration.py): identifies the code that was timed."""
+    import hashlib
+
+    from pdsim.kernels import integration, pd_bonds
+
+    digest = hashlib.sha1()
+    for module in (pd_bonds, integration):
+        digest.update(Path(module.__file__).read_bytes())
+    return digest.hexdigest()[:12]
+
+
 def machine_info(device) -> dict:
     """CPU model, core count, load average, Warp version, device name, Python version and the date (UTC)."""
     import warp as wp
@@ -202,6 +214,8 @@ def run_benchmark(
         "horizon_factor": horizon_factor,
         "setup_seconds": setup_seconds,
         "finite": bool(np.all(np.isfinite(x))),
+        "surface_correction": solver.bodies[0].surface_correction,
+        "kernel_source_sha1": kernel_source_digest(),
         **machine_info(dev),
     }
     if breakdown:
@@ -253,6 +267,9 @@ def format_text(r: dict) -> str:
         f"pdsim     : {r['steps']} steps in {r['seconds']:.3f} s = {r['ms_per_step']:.3f} ms/step, "
         + f"{r['bond_visits_per_s'] / 1e6:.1f} M bond visits/s (dt {r['dt']:.3g} s, setup {r['setup_seconds']:.2f} s)",
     ]
+    if len(r["seconds_all_runs"]) > 1:
+        runs = ", ".join(f"{t:.3f}" for t in r["seconds_all_runs"])
+        lines.append(f"            fastest of {len(r['seconds_all_runs'])} timings: {runs} s")
     if "kernel_ms_per_step" in r:
         total = sum(r["kernel_ms_per_step"].values())
         for key, ms in sorted(r["kernel_ms_per_step"].items(), key=lambda kv: -kv[1]):
