@@ -25,10 +25,10 @@ import warp as wp
 def bond_extension_lambda(yk: wp.vec3, yj: wp.vec3, geom: wp.vec4):
     """Returns (e, Lambda, n) for a bond with reference geometry geom = (xi / L, L)."""
     eta = yj - yk
-    l = wp.length(eta)
-    n = eta / l
+    length = wp.length(eta)
+    n = eta / length
     lam = wp.dot(n, wp.vec3(geom[0], geom[1], geom[2]))
-    return l - geom[3], lam, n
+    return length - geom[3], lam, n
 
 
 @wp.kernel
@@ -99,8 +99,8 @@ def compute_strain_energy_density(
     dil_c0: wp.array(dtype=float),
     energy_density: wp.array(dtype=float),
 ):
-    """W_k = c0 theta_k^2 + b_k sum_j w e^2 V_j beta G^dev [J/m^3], the energy whose bond derivatives are the forces above
-    (exactly, when Lambda is held fixed; see pdsim/peridynamics.py). Needs theta from compute_dilatation."""
+    """W_k = c0 theta_k^2 + b_k sum_j w e^2 V_j beta G^dev [J/m^3], the energy whose bond derivatives are the forces
+    above (exactly, when Lambda is held fixed; see pdsim/peridynamics.py). Needs theta from compute_dilatation."""
     k = wp.tid()
     yk = positions[k]
     acc = float(0.0)
@@ -146,8 +146,8 @@ def compute_stiffness_row_sum(
     row_sum: wp.array(dtype=float),
 ):
     """Silling-Askari stiffness sum S_k = sum_j V_j C_kj [N/m^4] with the bond's effective spring constant
-    C_kj = 2 w G^dev (b_k + b_j) for the deviatoric part, plus a Gershgorin bound |c0| d_k^2 (sum_j w V_j G^dil)^2 for the
-    dilatational coupling. The stable step is dt_k = sqrt(2 rho_k / S_k)."""
+    C_kj = 2 w G^dev (b_k + b_j) for the deviatoric part, plus a Gershgorin bound |c0| d_k^2 (sum_j w V_j G^dil)^2
+    for the dilatational coupling. The stable step is dt_k = sqrt(2 rho_k / S_k)."""
     k = wp.tid()
     dev = float(0.0)
     sw = float(0.0)

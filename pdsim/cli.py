@@ -72,8 +72,9 @@ def _execute(build_scene, args) -> int:
         raise ParameterError("build_scene()", type(scene).__name__, "a function returning a pdsim.Scene")
     out = args.out or f"{scene.name}.usdc"
     try:
-        report = scene.run(out, frames=args.frames, device=_resolve_device(args.device), dt=args.dt,
-                           progress=not args.quiet)
+        report = scene.run(
+            out, frames=args.frames, device=_resolve_device(args.device), dt=args.dt, progress=not args.quiet
+        )
     except KeyboardInterrupt:
         print(f"pdsim: interrupted; {out} holds the frames finished so far", file=sys.stderr)
         return 130
@@ -104,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run_script(build_scene, argv: list[str] | None = None) -> int:
-    """For scene scripts: ``if __name__ == "__main__": run_script(build_scene)`` accepts the options of ``pdsim run``."""
+    """For scene scripts: ``if __name__ == "__main__": run_script(build_scene)``; takes the options of ``pdsim run``."""
     parser = argparse.ArgumentParser(prog=os.path.basename(sys.argv[0]), description="run this pdsim scene")
     _add_run_options(parser)
     args = parser.parse_args(argv)

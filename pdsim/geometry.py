@@ -19,7 +19,7 @@ class SolidShape:
 
     Attributes:
         vertices: vertex positions [m], shape [vertex_count, 3], float64.
-        faces: triangle vertex indices, shape [face_count, 3], int32, outward-facing (counter-clockwise seen from outside).
+        faces: triangle vertex indices, shape [face_count, 3], int32, outward-facing (counter-clockwise from outside).
         name: label used for the body in output.
     """
 
@@ -94,7 +94,7 @@ def load_mesh(path: str | os.PathLike, *, scale: float = 1.0, translate=(0.0, 0.
     translate = _vec3("translate", translate)
     try:
         mesh = trimesh.load(path, force="mesh", process=True)
-    except Exception as exc:  # trimesh raises many exception types for unreadable files
+    except Exception as exc:  # noqa: BLE001 (trimesh raises many exception types for unreadable files)
         raise GeometryError(f"{path}: cannot read mesh ({exc})") from None
     if not isinstance(mesh, trimesh.Trimesh):
         raise GeometryError(f"{path}: the file holds no triangle mesh")
@@ -113,8 +113,9 @@ def shape_from_arrays(vertices, faces, *, name: str = "mesh") -> SolidShape:
         f_raw = np.asarray(faces, dtype=np.float64).reshape(-1, 3)
         f = f_raw.astype(np.int64)
     except (TypeError, ValueError):
-        raise GeometryError(f"{name}: vertices must be an [n, 3] array of numbers and faces an [m, 3] array of "
-                            "vertex indices") from None
+        raise GeometryError(
+            f"{name}: vertices must be an [n, 3] array of numbers and faces an [m, 3] array of vertex indices"
+        ) from None
     if not np.all(np.isfinite(v)):
         raise GeometryError(f"{name}: the vertices contain non-finite values (NaN or inf)")
     if f.size and (not np.array_equal(f, f_raw) or f.min() < 0 or f.max() >= len(v)):

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+import contextlib
 
 if TYPE_CHECKING:
     from typing import Self
@@ -90,7 +91,7 @@ def _check_array(name: str, array, *, shape: tuple[int, ...], shape_text: str, k
         ValueError: Wrong shape, wrong dtype kind, or non-finite values.
     """
     a = np.asarray(array)
-    if a.ndim != len(shape) or any(e != -1 and e != s for e, s in zip(shape, a.shape)):
+    if a.ndim != len(shape) or any(e != -1 and e != s for e, s in zip(shape, a.shape, strict=False)):
         raise ValueError(f"{name} has shape {list(a.shape)}; expected {shape_text}")
     if kind == "int":
         if not (np.issubdtype(a.dtype, np.integer) or a.dtype == np.bool_):
@@ -421,10 +422,8 @@ class UsdCache:
                 raise OSError(f"USD could not export the cache to {tmp!r}")
             os.replace(tmp, self.path)
         except BaseException:
-            try:
+            with contextlib.suppress(OSError):
                 os.remove(tmp)
-            except OSError:
-                pass
             raise
         self._dirty = False
         self._last_save_end = time.monotonic()

@@ -96,6 +96,11 @@ class PeridynamicBody:
     def particle_count(self) -> int:
         return len(self.rest_positions)
 
+    @classmethod
+    def build_solver(cls, bodies, *, device, gravity, ground):
+        """The scene's solver for all its peridynamic bodies."""
+        return SolverPeridynamics(bodies, device=device, gravity=gravity, ground=ground)
+
     @property
     def horizon(self) -> float:
         """delta = horizon_factor * spacing [m]."""
@@ -249,11 +254,31 @@ def _directional_factors(rest_h, delta_h, offsets, neighbors, bond_geom, bond_wv
         y = rest_h.copy()
         y[:, axis] *= 1.0 + zeta
         pos = wp.array(y.astype(np.float32), dtype=wp.vec3, device=device)
-        wp.launch(kb.compute_dilatation, dim=n,
-                  inputs=[pos, offsets, neighbors, bond_geom, bond_wv, ones, zeros, zeros, sum_dil, bp, scratch_ne,
-                          scratch_lambda], device=device)
-        wp.launch(kb.compute_strain_energy_density, dim=n,
-                  inputs=[pos, offsets, neighbors, bond_geom, bond_wv, zeros, ones, zeros, sum_dev], device=device)
+        wp.launch(
+            kb.compute_dilatation,
+            dim=n,
+            inputs=[
+                pos,
+                offsets,
+                neighbors,
+                bond_geom,
+                bond_wv,
+                ones,
+                zeros,
+                zeros,
+                sum_dil,
+                bp,
+                scratch_ne,
+                scratch_lambda,
+            ],
+            device=device,
+        )
+        wp.launch(
+            kb.compute_strain_energy_density,
+            dim=n,
+            inputs=[pos, offsets, neighbors, bond_geom, bond_wv, zeros, ones, zeros, sum_dev],
+            device=device,
+        )
         sd = sum_dil.numpy().astype(np.float64)
         sv = sum_dev.numpy().astype(np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -273,7 +298,7 @@ def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
     n = int(body_offsets[-1])
 
     def per_particle(values):
-        return np.concatenate([np.full(c, v, dtype=np.float64) for c, v in zip(counts, values)])
+        return np.concatenate([np.full(c, v, dtype=np.float64) for c, v in zip(counts, values, strict=False)])
 
     rest_h = np.concatenate([b.rest_positions for b in bodies])
     vol_h = np.concatenate([b.volumes for b in bodies])
@@ -286,7 +311,11 @@ def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
     body_id_h = np.repeat(np.arange(len(bodies), dtype=np.int32), counts)
 
     f32 = np.float32
-    arr = lambda a, dtype=float: wp.array(np.asarray(a, dtype=f32 if dtype is float else None), dtype=dtype, device=device)  # noqa: E731
+
+    def arr(a):
+        """A float32 Warp array on the model's device."""
+        return wp.array(np.asarray(a, dtype=f32), dtype=float, device=device)
+
     rest = wp.array(rest_h.astype(f32), dtype=wp.vec3, device=device)
     volumes = arr(vol_h)
     horizon = arr(delta_h)
@@ -296,7 +325,9 @@ def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
 
     bond_geom = wp.zeros(max(bond_count, 1), dtype=wp.vec4, device=device)
     bond_wv = wp.zeros(max(bond_count, 1), dtype=float, device=device)
-    partial = wp.array(per_particle([b.partial_volumes for b in bodies]).astype(np.int32), dtype=wp.int32, device=device)
+    partial = wp.array(
+        per_particle([b.partial_volumes for b in bodies]).astype(np.int32), dtype=wp.int32, device=device
+    )
     wp.launch(
         kb.compute_bond_geometry,
         dim=n,
@@ -314,7 +345,7 @@ def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
     )
     vs = volume_sum.numpy().astype(np.float64)
     m = weighted_volume.numpy().astype(np.float64)
-    correction = np.concatenate([np.full(c, b.surface_correction) for c, b in zip(counts, bodies)])
+    correction = np.concatenate([np.full(c, b.surface_correction) for c, b in zip(counts, bodies, strict=False)])
     family = correction == "family"
     with np.errstate(divide="ignore", invalid="ignore"):
         d_family = np.where(vs > 0, 3.0 / (delta_h * vs), 0.0)
@@ -335,8 +366,16 @@ def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
         wp.launch(
             kb.compute_directional_bond_factors,
             dim=n,
-            inputs=[offsets, neighbors, bond_geom, bond_wv, wp.array(f_dil.astype(f32), dtype=wp.vec3, device=device),
-                    wp.array(f_dev.astype(f32), dtype=wp.vec3, device=device), bond_wv_dil, bond_wv_dev],
+            inputs=[
+                offsets,
+                neighbors,
+                bond_geom,
+                bond_wv,
+                wp.array(f_dil.astype(f32), dtype=wp.vec3, device=device),
+                wp.array(f_dev.astype(f32), dtype=wp.vec3, device=device),
+                bond_wv_dil,
+                bond_wv_dev,
+            ],
             device=device,
         )
     else:
@@ -411,6 +450,7 @@ class SolverPeridynamics:
         )
         self._energy_density = wp.zeros(n, dtype=float, device=d)
         self._check = wp.zeros(2, dtype=float, device=d)
+        self._handles = []  # USD prims of the bodies, set by add_outputs
         self.features = {"elastic"}
         if any(gi != 0.0 for gi in gravity):
             self.features.add("gravity")
@@ -434,8 +474,16 @@ class SolverPeridynamics:
         wp.launch(
             kb.compute_stiffness_row_sum,
             dim=m.particle_count,
-            inputs=[m.family_offsets, m.family_neighbors, m.bond_wv_dil, m.bond_wv_dev, m.dev_b, m.dil_d, m.dil_c0,
-                    row],
+            inputs=[
+                m.family_offsets,
+                m.family_neighbors,
+                m.bond_wv_dil,
+                m.bond_wv_dev,
+                m.dev_b,
+                m.dil_d,
+                m.dil_c0,
+                row,
+            ],
             device=self.device,
         )
         s = row.numpy().astype(np.float64)
@@ -454,15 +502,35 @@ class SolverPeridynamics:
         wp.launch(
             kb.compute_dilatation,
             dim=m.particle_count,
-            inputs=[positions, m.family_offsets, m.family_neighbors, m.bond_geom, m.bond_wv_dil, m.dil_d, m.dil_coef,
-                    m.dev_b, s.theta, s.bp, s.bond_ne, s.bond_lambda],
+            inputs=[
+                positions,
+                m.family_offsets,
+                m.family_neighbors,
+                m.bond_geom,
+                m.bond_wv_dil,
+                m.dil_d,
+                m.dil_coef,
+                m.dev_b,
+                s.theta,
+                s.bp,
+                s.bond_ne,
+                s.bond_lambda,
+            ],
             device=self.device,
         )
         wp.launch(
             kb.compute_bond_force_density,
             dim=m.particle_count,
-            inputs=[m.family_offsets, m.family_neighbors, s.bond_ne, s.bond_lambda, m.bond_wv_dil, m.bond_wv_dev, s.bp,
-                    s.force_density],
+            inputs=[
+                m.family_offsets,
+                m.family_neighbors,
+                s.bond_ne,
+                s.bond_lambda,
+                m.bond_wv_dil,
+                m.bond_wv_dev,
+                s.bp,
+                s.force_density,
+            ],
             device=self.device,
         )
 
@@ -498,8 +566,15 @@ class SolverPeridynamics:
             wp.launch(
                 ki.collide_ground_plane,
                 dim=m.particle_count,
-                inputs=[s.positions, s.velocities, m.kind, m.radius, wp.vec3(*g.normal), float(g.offset),
-                        float(g.friction)],
+                inputs=[
+                    s.positions,
+                    s.velocities,
+                    m.kind,
+                    m.radius,
+                    wp.vec3(*g.normal),
+                    float(g.offset),
+                    float(g.friction),
+                ],
                 device=self.device,
             )
         self._update_accelerations(dt)
@@ -519,15 +594,62 @@ class SolverPeridynamics:
 
         s = self.state
         self._check.zero_()
-        wp.launch(ki.max_speed_and_finite, dim=self.model.particle_count, inputs=[s.positions, s.velocities, self._check],
-                  device=self.device)
+        wp.launch(
+            ki.max_speed_and_finite,
+            dim=self.model.particle_count,
+            inputs=[s.positions, s.velocities, self._check],
+            device=self.device,
+        )
         vmax, bad = self._check.numpy()
         if bad > 0 or vmax > speed_limit:
             what = "non-finite positions or velocities" if bad > 0 else f"a particle speed of {vmax:.3g} m/s"
             raise InstabilityError(
-                f"the simulation diverged at t={self.time:.6g} s (step {self.step_count}): {what}; the time step is too "
-                f"large for this material and spacing (stable estimate {self.stable_time_step():.3g} s): use a smaller "
-                "--dt or leave it automatic"
+                f"the simulation diverged at t={self.time:.6g} s (step {self.step_count}): {what}; the time step is "
+                f"too large for this material and spacing (stable estimate {self.stable_time_step():.3g} s): use a "
+                "smaller --dt or leave it automatic"
+            )
+
+    # -- scene integration --------------------------------------------------------------------------------------------
+    @property
+    def particle_count(self) -> int:
+        return self.model.particle_count
+
+    @property
+    def bond_count(self) -> int:
+        return self.model.bond_count
+
+    def speed_scale(self) -> float:
+        """Largest of the bodies' P-wave speeds, initial speeds and prescribed speeds [m/s]."""
+        return max(
+            max(
+                b.material.p_wave_speed,
+                float(np.abs(b.initial_velocity).max(initial=0.0)),
+                float(np.abs(b.prescribed_velocity).max(initial=0.0)),
+            )
+            for b in self.bodies
+        )
+
+    def add_outputs(self, cache):
+        """Declares one UsdGeom.Points per body, with widths = spacing and the primvars written per frame."""
+        self._handles = [
+            cache.add_points(
+                b.name,
+                widths=np.full(b.particle_count, b.spacing, dtype=np.float32),
+                primvars={"displacement": "float", "dilatation": "float"},
+            )
+            for b in self.bodies
+        ]
+
+    def write_outputs(self, cache, frame: int):
+        """Writes positions, velocities, |displacement| [m] and dilatation of every body at ``frame``."""
+        x = self.positions()
+        v = self.velocities()
+        theta = self.state.theta.numpy()
+        disp = np.linalg.norm(x.astype(np.float64) - self.model.rest_host, axis=1).astype(np.float32)
+        for i, handle in enumerate(self._handles):
+            sl = self.body_slice(i)
+            cache.write_points(
+                handle, frame, x[sl], velocities=v[sl], primvars={"displacement": disp[sl], "dilatation": theta[sl]}
             )
 
     # -- host-side views and diagnostics (vectorised numpy) ---------------------------------------------------------
@@ -576,8 +698,17 @@ class SolverPeridynamics:
         wp.launch(
             kb.compute_strain_energy_density,
             dim=m.particle_count,
-            inputs=[s.positions, m.family_offsets, m.family_neighbors, m.bond_geom, m.bond_wv_dev, s.theta, m.dev_b,
-                    m.dil_c0, self._energy_density],
+            inputs=[
+                s.positions,
+                m.family_offsets,
+                m.family_neighbors,
+                m.bond_geom,
+                m.bond_wv_dev,
+                s.theta,
+                m.dev_b,
+                m.dil_c0,
+                self._energy_density,
+            ],
             device=self.device,
         )
         return self._energy_density.numpy().astype(np.float64)
@@ -624,4 +755,11 @@ def check_time_step(dt: float) -> float:
     return _check_range("dt", dt, 0.0, None)
 
 
-__all__ = ["PeridynamicBody", "GroundPlane", "SolverPeridynamics", "PeridynamicModel", "PeridynamicState", "InstabilityError"]
+__all__ = [
+    "GroundPlane",
+    "InstabilityError",
+    "PeridynamicBody",
+    "PeridynamicModel",
+    "PeridynamicState",
+    "SolverPeridynamics",
+]

@@ -53,7 +53,9 @@ def region_mask(region, points: np.ndarray, *, field: str = "region") -> np.ndar
     """Evaluates a region (object with ``contains`` or a callable) on points [n, 3]; returns a bool mask [n]."""
     fn = getattr(region, "contains", region)
     if not callable(fn):
-        raise ParameterError(field, region, "a region (BoxRegion, SphereRegion, HalfSpace) or a callable points -> mask")
+        raise ParameterError(
+            field, region, "a region (BoxRegion, SphereRegion, HalfSpace) or a callable points -> mask"
+        )
     mask = np.asarray(fn(points))
     if mask.shape != (len(points),) or mask.dtype != np.bool_:
         raise ParameterError(field, region, f"a region whose mask is a bool array of shape ({len(points)},)")

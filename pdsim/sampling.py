@@ -61,7 +61,9 @@ def fill_solid(shape: SolidShape, spacing: float, *, device: str = "cpu") -> tup
     candidates = simple_cubic_lattice(shape, h)
     positions = candidates[points_inside(shape, candidates, device=device)]
     if len(positions) == 0:
-        raise GeometryError(f"'{shape.name}': no lattice point of spacing {h:g} lies inside the shape; use a smaller spacing")
+        raise GeometryError(
+            f"'{shape.name}': no lattice point of spacing {h:g} lies inside the shape; use a smaller spacing"
+        )
     return positions, np.full(len(positions), h**3)
 
 

@@ -12,7 +12,7 @@ import numpy as np
 from .errors import ParameterError
 from .geometry import SolidShape
 from .materials import Material, _check_range
-from .peridynamics import GroundPlane, PeridynamicBody, SolverPeridynamics, check_time_step, warn_if_above_estimate
+from .peridynamics import GroundPlane, PeridynamicBody, check_time_step, warn_if_above_estimate
 
 UP_AXES = {"Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
 
@@ -57,8 +57,16 @@ class Scene:
         name: scene label.
     """
 
-    def __init__(self, *, fps: float = 24.0, frames: int = 48, gravity=None, up_axis: str = "Z",
-                 time_step_safety: float = 0.7, name: str = "scene"):
+    def __init__(
+        self,
+        *,
+        fps: float = 24.0,
+        frames: int = 48,
+        gravity=None,
+        up_axis: str = "Z",
+        time_step_safety: float = 0.7,
+        name: str = "scene",
+    ):
         if up_axis not in UP_AXES:
             raise ParameterError("up_axis", up_axis, "'Y' or 'Z'")
         self.fps = _check_range("fps", fps, 0.0, 1000.0, hi_open=False)
@@ -71,14 +79,14 @@ class Scene:
         self.gravity = tuple(float(x) for x in g)
         self.time_step_safety = _check_range("time_step_safety", time_step_safety, 0.0, 1.0, hi_open=False)
         self.name = name
-        self.bodies: list[PeridynamicBody] = []
+        self.bodies: list = []
         self.ground: GroundPlane | None = None
 
     # -- building -----------------------------------------------------------------------------------------------
-    def add_body(self, body: PeridynamicBody) -> PeridynamicBody:
-        """Adds a body; names must be unique within the scene."""
-        if not isinstance(body, PeridynamicBody):
-            raise ParameterError("body", body, "a PeridynamicBody")
+    def add_body(self, body):
+        """Adds a body (any pdsim body type: it names its solver through ``build_solver``); names must be unique."""
+        if not callable(getattr(type(body), "build_solver", None)):
+            raise ParameterError("body", body, "a pdsim body (e.g. PeridynamicBody)")
         if any(b.name == body.name for b in self.bodies):
             raise ParameterError("name", body.name, "a body name not already used in this scene")
         self.bodies.append(body)
@@ -96,15 +104,39 @@ class Scene:
         return self.ground
 
     # -- running ------------------------------------------------------------------------------------------------
-    def build_solver(self, *, device: str | None = None) -> SolverPeridynamics:
-        """Builds the solver for the scene's bodies on ``device`` (CUDA when present by default)."""
+    def build_solvers(self, *, device: str | None = None) -> list:
+        """One solver per body type, each over all bodies of that type (CUDA when present unless ``device`` given).
+
+        A solver provides: stable_time_step() [s], simulate(dt, steps), check_state(speed_limit), speed_scale() [m/s],
+        add_outputs(cache), write_outputs(cache, frame), particle_count and bond_count."""
         if not self.bodies:
             raise ParameterError("bodies", [], "a scene with at least one body")
-        return SolverPeridynamics(self.bodies, device=device or default_device(), gravity=self.gravity,
-                                  ground=self.ground)
+        groups: dict[type, list] = {}
+        for b in self.bodies:
+            groups.setdefault(type(b), []).append(b)
+        dev = device or default_device()
+        return [
+            kind.build_solver(bodies, device=dev, gravity=self.gravity, ground=self.ground)
+            for kind, bodies in groups.items()
+        ]
 
-    def run(self, out: str | os.PathLike, *, frames: int | None = None, device: str | None = None,
-            dt: float | None = None, progress: bool = True, save_interval_s: float = 2.0) -> RunReport:
+    def build_solver(self, *, device: str | None = None):
+        """The solver of a scene whose bodies are all of one type."""
+        solvers = self.build_solvers(device=device)
+        if len(solvers) != 1:
+            raise ParameterError("bodies", [type(b).__name__ for b in self.bodies], "bodies of a single type")
+        return solvers[0]
+
+    def run(
+        self,
+        out: str | os.PathLike,
+        *,
+        frames: int | None = None,
+        device: str | None = None,
+        dt: float | None = None,
+        progress: bool = True,
+        save_interval_s: float = 2.0,
+    ) -> RunReport:
         """Simulates the scene and writes a USD animation cache to ``out`` (.usdc, .usda or .usd).
 
         Frame 0 is the rest pose; frames 1..frames follow at 1/fps. The cache on disk always holds the finished frames,
@@ -129,28 +161,30 @@ class Scene:
         if dt is not None:
             dt = check_time_step(dt)
         wall0 = time.perf_counter()
-        solver = self.build_solver(device=device)
-        stable_dt = solver.stable_time_step()
+        solvers = self.build_solvers(device=device)
+        stable_dt = min(s.stable_time_step() for s in solvers)
         frame_dt = 1.0 / self.fps
         if dt is None:
-            dt = self.time_step_safety * stable_dt
+            dt = min(self.time_step_safety * stable_dt, frame_dt)
         else:
             warn_if_above_estimate(dt, stable_dt)
         substeps = max(1, math.ceil(frame_dt / dt - 1.0e-9))
         dt = frame_dt / substeps
-        speed_limit = self._speed_limit(solver)
+        speed_limit = self._speed_limit(solvers)
 
-        with UsdCache(out, fps=self.fps, start_frame=0, up_axis=self.up_axis,
-                      save_interval_s=save_interval_s) as cache:
-            handles = [self._add_points(cache, b) for b in self.bodies]
-            self._write_frame(cache, handles, solver, 0)
+        with UsdCache(out, fps=self.fps, start_frame=0, up_axis=self.up_axis, save_interval_s=save_interval_s) as cache:
+            for s in solvers:
+                s.add_outputs(cache)
+                s.write_outputs(cache, 0)
             cache.end_frame(0)
             bar = _progress(frame_count, enabled=progress, desc=f"pdsim {self.name}")
             try:
                 for frame in range(1, frame_count + 1):
-                    solver.simulate(dt, substeps)
-                    solver.check_state(speed_limit)
-                    self._write_frame(cache, handles, solver, frame)
+                    for s in solvers:
+                        s.simulate(dt, substeps)
+                        s.check_state(speed_limit)
+                    for s in solvers:
+                        s.write_outputs(cache, frame)
                     cache.end_frame(frame)
                     bar.update(1)
             finally:
@@ -163,34 +197,16 @@ class Scene:
             dt=dt,
             stable_dt=stable_dt,
             wall_seconds=time.perf_counter() - wall0,
-            particle_count=solver.model.particle_count,
-            bond_count=solver.model.bond_count,
+            particle_count=sum(s.particle_count for s in solvers),
+            bond_count=sum(s.bond_count for s in solvers),
         )
 
-    def _speed_limit(self, solver: SolverPeridynamics) -> float:
-        """A speed no particle of a sane run reaches: 20 times the largest of the P-wave speeds, the initial speeds
-        and the prescribed speeds (an explicit run past its stable step grows exponentially and exceeds it fast)."""
-        c = max(b.material.p_wave_speed for b in self.bodies)
-        v0 = max(float(np.abs(b.initial_velocity).max(initial=0.0)) for b in self.bodies)
-        vp = max(float(np.abs(b.prescribed_velocity).max(initial=0.0)) for b in self.bodies)
-        fall = math.sqrt(2.0 * float(np.linalg.norm(self.gravity)) * 1.0e3)  # free fall through 1 km
-        return 20.0 * max(c, v0, vp, fall)
-
-    @staticmethod
-    def _add_points(cache, body: PeridynamicBody):
-        widths = np.full(body.particle_count, body.spacing, dtype=np.float32)
-        return cache.add_points(body.name, widths=widths, primvars={"displacement": "float", "dilatation": "float"})
-
-    def _write_frame(self, cache, handles, solver: SolverPeridynamics, frame: int):
-        x = solver.positions()
-        v = solver.velocities()
-        theta = solver.state.theta.numpy()
-        for i, (body, handle) in enumerate(zip(self.bodies, handles)):
-            sl = solver.body_slice(i)
-            xb = x[sl]
-            disp = np.linalg.norm(xb.astype(np.float64) - body.rest_positions, axis=1).astype(np.float32)
-            cache.write_points(handle, frame, xb, velocities=v[sl],
-                               primvars={"displacement": disp, "dilatation": theta[sl]})
+    def _speed_limit(self, solvers) -> float:
+        """A speed no particle of a sane run reaches: 20 times the largest of the solvers' speed scales (wave,
+        initial and prescribed speeds) and a free fall through 1 km. An explicit run past its stable step grows
+        exponentially and exceeds it within a few steps."""
+        fall = math.sqrt(2.0 * float(np.linalg.norm(self.gravity)) * 1.0e3)
+        return 20.0 * max([fall] + [s.speed_scale() for s in solvers])
 
 
 class _NoProgress:

@@ -1,6 +1,6 @@
 """A soft cantilever clamped at one end, sagging and oscillating under gravity (the default scene of `pdsim run`).
 
-Run:  python scenes/cantilever.py --out cantilever.usdc      or      pdsim run scenes/cantilever.py --out cantilever.usdc
+Run:  python scenes/cantilever.py --out cantilever.usdc   or   pdsim run scenes/cantilever.py --out cantilever.usdc
 """
 
 from pdsim.cli import run_script

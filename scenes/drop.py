@@ -12,8 +12,9 @@ def build_scene() -> pdsim.Scene:
     ball = pdsim.sphere(0.15, center=(0.0, 0.0, 0.6), name="ball")  # or pdsim.load_mesh("model.obj", scale=0.5)
     body = scene.add_peridynamic_body(ball, rubber, spacing=0.03, damping=0.5)
     body.set_initial_velocity((1.0, 0.0, 0.0))
-    post = scene.add_peridynamic_body(pdsim.cylinder(0.08, 0.4, center=(0.6, 0.0, 0.2), name="post"), rubber,
-                                      spacing=0.03)
+    post = scene.add_peridynamic_body(
+        pdsim.cylinder(0.08, 0.4, center=(0.6, 0.0, 0.2), name="post"), rubber, spacing=0.03
+    )
     post.fix(pdsim.BoxRegion(lo=(-9, -9, -1), hi=(9, 9, 0.05)))  # hold its base
     scene.add_ground_plane(height=0.0, friction=0.5)
     return scene

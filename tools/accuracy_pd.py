@@ -71,8 +71,9 @@ def bar_tension_modulus_ratio(n: int, correction: str, nu: float = 0.3, m: float
     width = n * h
     length = max(0.3, 4.0 * width)
     omega = math.pi * mat.bar_wave_speed / length  # fundamental axial mode of the held bar
-    body = pdsim.PeridynamicBody(pdsim.box((length, width, width)), mat, h, horizon_factor=m,
-                                 surface_correction=correction, damping=omega)
+    body = pdsim.PeridynamicBody(
+        pdsim.box((length, width, width)), mat, h, horizon_factor=m, surface_correction=correction, damping=omega
+    )
     X = body.rest_positions
     grip = 0.5 * length - 3.0 * h
     body.set_velocity(lambda p: np.abs(p[:, 0]) > grip, (0.0, 0.0, 0.0))  # held where they are placed
@@ -102,8 +103,9 @@ def bar_tension_modulus_ratio(n: int, correction: str, nu: float = 0.3, m: float
 def pulse_speed_ratio(n: int, correction: str) -> float:
     mat = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.0)
     h, length = 0.02, 3.0
-    body = pdsim.PeridynamicBody(pdsim.box((length, n * h, n * h), center=(0.5 * length, 0.0, 0.0)), mat, h,
-                                 surface_correction=correction)
+    body = pdsim.PeridynamicBody(
+        pdsim.box((length, n * h, n * h), center=(0.5 * length, 0.0, 0.0)), mat, h, surface_correction=correction
+    )
     s = pdsim.SolverPeridynamics([body], device="cpu")
     c = mat.bar_wave_speed
     X = body.rest_positions[:, 0]
@@ -125,7 +127,7 @@ def pulse_speed_ratio(n: int, correction: str) -> float:
 
     dt = 0.7 * s.stable_time_step()
     p0, t0 = peak(), s.time
-    s.simulate(dt, int(round(1.2 / c / dt)))
+    s.simulate(dt, round(1.2 / c / dt))
     return float((peak() - p0) / (s.time - t0) / c)
 
 
@@ -194,7 +196,7 @@ def main(argv=None):
     table = {c: [] for c in CORRECTIONS}
     for n in sizes:
         row = [bar_tension_modulus_ratio(n, c) for c in CORRECTIONS]
-        for c, r in zip(CORRECTIONS, row):
+        for c, r in zip(CORRECTIONS, row, strict=False):
             table[c].append(r)
         lines.append(f"| {n} | " + " | ".join(f"{r:.4f}" for r in row) + " |")
         print(lines[-1], flush=True)
