@@ -18,8 +18,14 @@ def _block_solver(spacing, horizon_factor, *, correction, partial=True, device="
     delta = horizon_factor * spacing
     reach = (2.0 if correction == "directional" else 1.0) * (delta + spacing)
     cells = 2 * math.ceil(reach / spacing) + 1
-    body = pdsim.PeridynamicBody(pdsim.box((cells * spacing,) * 3), MAT, spacing, horizon_factor=horizon_factor,
-                                 surface_correction=correction, partial_volumes=partial)
+    body = pdsim.PeridynamicBody(
+        pdsim.box((cells * spacing,) * 3),
+        MAT,
+        spacing,
+        horizon_factor=horizon_factor,
+        surface_correction=correction,
+        partial_volumes=partial,
+    )
     solver = pdsim.SolverPeridynamics([body], device=device)
     interior = np.all(np.abs(body.rest_positions) < 0.5 * cells * spacing - reach, axis=1)
     assert interior.sum() >= 1
@@ -154,7 +160,7 @@ def test_longitudinal_pulse_travels_at_bar_wave_speed(device):
         return xs[i] + 0.5 * h * (a - c_) / (a - 2 * b_ + c_)
 
     p0, t0 = pulse_position(), solver.time
-    steps = int(round(1.2 / c / dt))
+    steps = round(1.2 / c / dt)
     solver.simulate(dt, steps)
     speed = (pulse_position() - p0) / (solver.time - t0)
     assert speed == pytest.approx(c, rel=0.05)

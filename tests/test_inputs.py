@@ -1,0 +1,402 @@
+"""Bad input is rejected with pdsim.ParameterError / pdsim.GeometryError whose message names the field, the value and
+the allowed range (or the problem); good input of every supported kind loads and samples correctly."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import pdsim
+from pdsim.sampling import fill_solid
+
+SOFT = {"density": 1000.0, "youngs_modulus": 1.0e5, "poisson_ratio": 0.3}
+
+
+def _material(**overrides):
+    args = dict(SOFT)
+    args.update(overrides)
+    return pdsim.Material(**args)
+
+
+def _closed_box(extents=(0.3, 0.2, 0.1), center=(0.0, 0.0, 0.0)):
+    import trimesh
+
+    m = trimesh.creation.box(extents=extents)
+    m.apply_translation(center)
+    return m
+
+
+def _open_box():
+    """A box with two of its twelve triangles removed: a hole, so no enclosed solid."""
+    import trimesh
+
+    m = _closed_box()
+    return trimesh.Trimesh(vertices=m.vertices, faces=m.faces[:-2], process=False)
+
+
+def _assert_error(excinfo, cls, *fragments):
+    """The exception is ``cls`` (a PdsimError and ValueError) and its message contains every fragment."""
+    exc = excinfo.value
+    assert isinstance(exc, cls)
+    assert isinstance(exc, pdsim.PdsimError)
+    assert isinstance(exc, ValueError)
+    msg = str(exc)
+    assert "\n" not in msg
+    for frag in fragments:
+        assert frag in msg, f"{frag!r} not in {msg!r}"
+
+
+def _tiny_scene(**kwargs) -> pdsim.Scene:
+    scene = pdsim.Scene(fps=100.0, frames=2, **kwargs)
+    scene.add_peridynamic_body(pdsim.box((0.3, 0.1, 0.1), center=(0.15, 0.0, 0.5)), _material(), spacing=0.05)
+    return scene
+
+
+# ----------------------------------------------------------------------------------------------------------- meshes
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".stl"])
+def test_open_mesh_file_is_not_watertight(tmp_path, suffix):
+    """load_mesh of an open box (two triangles missing) raises GeometryError naming the file and 'not watertight'."""
+    path = tmp_path / f"open{suffix}"
+    _open_box().export(path)
+    with pytest.raises(pdsim.GeometryError) as ei:
+        pdsim.load_mesh(path)
+    _assert_error(ei, pdsim.GeometryError, str(path), "not watertight")
+
+
+def test_open_mesh_arrays_are_not_watertight():
+    """shape_from_arrays of an open box raises GeometryError naming the shape and 'not watertight'."""
+    m = _open_box()
+    with pytest.raises(pdsim.GeometryError) as ei:
+        pdsim.shape_from_arrays(m.vertices, m.faces, name="lid_missing")
+    _assert_error(ei, pdsim.GeometryError, "lid_missing", "not watertight")
+
+
+@pytest.mark.parametrize(
+    "text", ["# no geometry at all\n", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n"], ids=["blank", "vertices_only"]
+)
+def test_empty_obj_file(tmp_path, text):
+    """An OBJ file without faces (blank, or vertices only) raises GeometryError saying the mesh is empty."""
+    path = tmp_path / "empty.obj"
+    path.write_text(text)
+    with pytest.raises(pdsim.GeometryError) as ei:
+        pdsim.load_mesh(path)
+    _assert_error(ei, pdsim.GeometryError, str(path), "empty")
+
+
+@pytest.mark.parametrize("vertices,faces", [([], []), (np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int32))])
+def test_empty_arrays(vertices, faces):
+    """shape_from_arrays with no vertices and no triangles raises GeometryError saying the mesh is empty."""
+    with pytest.raises(pdsim.GeometryError) as ei:
+        pdsim.shape_from_arrays(vertices, faces, name="nothing")
+    _assert_error(ei, pdsim.GeometryError, "nothing", "empty")
+
+
+def test_bad_arrays():
+    """shape_from_arrays rejects out-of-range or fractional face indices, non-finite vertices and wrong shapes with
+    GeometryError (not IndexError/ValueError from numpy or trimesh)."""
+    m = _closed_box()
+    bad_faces = m.faces.copy()
+    bad_faces[0, 0] = len(m.vertices)
+    with pytest.raises(pdsim.GeometryError) as ei:
+        pdsim.shape_from_arrays(m.vertices, bad_faces, name="idx")
+    _assert_error(ei, pdsim.GeometryError, "idx", "vertex indices", f"[0, {len(m.vertices)})")
+    with pytest.raises(pdsim.GeometryError) as ei:
+        pdsim.shape_from_arrays(m.vertices, m.faces - 1, name="neg")
+    _assert_error(ei, pdsim.GeometryError, "neg", "vertex indices")
+    with pytest.raises(pdsim.GeometryError) as ei:
+        pdsim.shape_from_arrays(m.vertices, m.faces + 0.5, name="frac")
+    _assert_error(ei, pdsim.GeometryError, "frac", "integer vertex indices")
+    v = np.array(m.vertices)
+    v[3, 1] = np.nan
+    with pytest.raises(pdsim.GeometryError) as ei:
+        pdsim.shape_from_arrays(v, m.faces, name="nan")
+    _assert_error(ei, pdsim.GeometryError, "nan", "non-finite")
+    with pytest.raises(pdsim.GeometryError) as ei:
+        pdsim.shape_from_arrays([[0.0, 1.0]], [[0, 1, 2]], name="shape2")
+    _assert_error(ei, pdsim.GeometryError, "shape2", "[n, 3]")
+    # Float arrays holding whole numbers are fine (as before).
+    assert pdsim.shape_from_arrays(m.vertices, m.faces.astype(np.float64)).volume == pytest.approx(0.006, rel=1e-12)
+
+
+def test_unknown_file_type(tmp_path):
+    """load_mesh('model.xyz') raises GeometryError naming the suffix and listing the supported types."""
+    path = tmp_path / "model.xyz"
+    path.write_text("0 0 0\n1 0 0\n")
+    with pytest.raises(pdsim.GeometryError) as ei:
+        pdsim.load_mesh(path)
+    _assert_error(ei, pdsim.GeometryError, "model.xyz", "'.xyz'", ".obj", ".stl", ".ply", ".glb")
+
+
+def test_missing_file(tmp_path):
+    """load_mesh of a file that does not exist raises GeometryError naming the path and 'no such file'."""
+    path = tmp_path / "missing.obj"
+    with pytest.raises(pdsim.GeometryError) as ei:
+        pdsim.load_mesh(path)
+    _assert_error(ei, pdsim.GeometryError, str(path), "no such file")
+
+
+def test_load_mesh_bad_scale_and_translate(tmp_path):
+    """load_mesh rejects scale <= 0 and a translate that is not 3 finite numbers with ParameterError."""
+    path = tmp_path / "box.obj"
+    _closed_box().export(path)
+    with pytest.raises(pdsim.ParameterError) as ei:
+        pdsim.load_mesh(path, scale=0.0)
+    _assert_error(ei, pdsim.ParameterError, "scale=0.0", "(0, inf)")
+    with pytest.raises(pdsim.ParameterError) as ei:
+        pdsim.load_mesh(path, translate=(1.0, 2.0))
+    _assert_error(ei, pdsim.ParameterError, "translate=(1.0, 2.0)", "3 finite numbers")
+    with pytest.raises(pdsim.ParameterError) as ei:
+        pdsim.load_mesh(path, translate=(0.0, 0.0, float("nan")))
+    _assert_error(ei, pdsim.ParameterError, "translate=", "3 finite numbers")
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".stl", ".ply", ".glb"])
+def test_load_each_type_volume_and_fill(tmp_path, suffix, device):
+    """A closed box written as OBJ/STL/PLY/GLB loads with its exact volume (1e-6 relative; STL/PLY/GLB store float32),
+    its bounds and the file stem as name; a loaded 0.2 m cube filled at spacing 0.02 gives exactly 10^3 = 1000
+    particles of volume 8e-6 m^3 each (also for the float32 formats, whose edge is 0.2 (1 + ~1e-8))."""
+    box = _closed_box()
+    path = tmp_path / f"part{suffix}"
+    box.export(path)
+    shape = pdsim.load_mesh(path)
+    assert shape.name == "part"
+    assert shape.volume == pytest.approx(0.3 * 0.2 * 0.1, rel=1e-6)
+    np.testing.assert_allclose(shape.bounds, [[-0.15, -0.1, -0.05], [0.15, 0.1, 0.05]], atol=1e-7)
+    assert shape.faces.shape == (12, 3)
+
+    cube_path = tmp_path / f"cube{suffix}"
+    _closed_box(extents=(0.2, 0.2, 0.2)).export(cube_path)
+    cube = pdsim.load_mesh(cube_path)
+    assert cube.volume == pytest.approx(0.008, rel=1e-6)
+    positions, volumes = fill_solid(cube, 0.02, device=device)
+    assert len(positions) == 1000
+    np.testing.assert_allclose(volumes, 8.0e-6, rtol=1e-12)
+    # a lattice h/2 inside the faces
+    np.testing.assert_allclose(positions.min(axis=0), -0.09, atol=1e-6)
+    np.testing.assert_allclose(positions.max(axis=0), 0.09, atol=1e-6)
+
+
+def test_cube_body_particles(device):
+    """PeridynamicBody on pdsim.box((0.2, 0.2, 0.2)) at spacing 0.02: exactly 1000 particles, each of volume 8e-6 m^3,
+    total volume equal to the cube's 0.008 m^3."""
+    body = pdsim.PeridynamicBody(pdsim.box((0.2, 0.2, 0.2)), _material(), spacing=0.02, device=device)
+    assert body.particle_count == 1000
+    np.testing.assert_allclose(body.volumes, 8.0e-6, rtol=1e-12)
+    assert body.volumes.sum() == pytest.approx(0.008, rel=1e-9)
+
+
+def test_sphere_fill_volume(device):
+    """A sphere of radius r = 10 h (icosphere, 4 subdivisions) filled at spacing h by the exact inside test (winding
+    number against the mesh): total particle volume within 5 % of 4/3 pi r^3. Measured: 4224 particles, i.e.
+    4224 h^3 against 4188.79 h^3, +0.84 %. The inside test also agrees with the analytic ball test on every lattice
+    point farther than 0.5 % of r from the sphere (the icosphere's facets lie within about 0.07 % of r)."""
+    h = 0.01
+    r = 10.0 * h
+    shape = pdsim.sphere(r, center=(0.3, -0.2, 0.1))
+    positions, volumes = fill_solid(shape, h, device=device)
+    exact = 4.0 / 3.0 * math.pi * r**3
+    assert abs(volumes.sum() / exact - 1.0) < 0.05
+    assert len(positions) == 4224
+    from pdsim.sampling import points_inside, simple_cubic_lattice
+
+    candidates = simple_cubic_lattice(shape, h)
+    inside = points_inside(shape, candidates, device=device)
+    dist = np.linalg.norm(candidates - np.array([0.3, -0.2, 0.1]), axis=1)
+    clear = np.abs(dist - r) > 0.005 * r  # away from the thin band between the facets and the true sphere
+    assert clear.sum() > 0.9 * len(candidates)
+    np.testing.assert_array_equal(inside[clear], dist[clear] < r)
+
+
+# ---------------------------------------------------------------------------------------------------------- material
+
+
+@pytest.mark.parametrize("nu", [0.5, -1.0, 0.7, -1.5])
+def test_poisson_ratio_out_of_range(nu):
+    """Poisson's ratio outside the open interval (-1, 0.5) raises ParameterError naming field, value and range."""
+    with pytest.raises(pdsim.ParameterError) as ei:
+        _material(poisson_ratio=nu)
+    _assert_error(ei, pdsim.ParameterError, f"poisson_ratio={nu!r}", "(-1, 0.5)")
+    assert ei.value.field == "poisson_ratio"
+    assert ei.value.value == nu
+
+
+def test_poisson_ratio_049_accepted():
+    """Poisson's ratio 0.49 (nearly incompressible) is accepted and gives finite, positive moduli."""
+    m = _material(poisson_ratio=0.49)
+    assert m.poisson_ratio == 0.49
+    assert m.bulk_modulus == pytest.approx(1.0e5 / (3.0 * 0.02))
+    assert math.isfinite(m.p_wave_speed) and m.p_wave_speed > 0.0
+
+
+@pytest.mark.parametrize(
+    "field,value,allowed",
+    [
+        ("density", -1.0, "(0, inf)"),
+        ("density", 0.0, "(0, inf)"),
+        ("youngs_modulus", 0.0, "(0, inf)"),
+        ("youngs_modulus", -2.0e6, "(0, inf)"),
+        ("density", float("nan"), "finite"),
+        ("youngs_modulus", float("nan"), "finite"),
+        ("poisson_ratio", float("nan"), "finite"),
+        ("youngs_modulus", float("inf"), "finite"),
+        ("density", "heavy", "a real number"),
+    ],
+)
+def test_material_bad_values(field, value, allowed):
+    """Negative/zero density, zero/negative Young's modulus, NaN/inf and non-numbers raise ParameterError whose message
+    names the field, the value and what is allowed."""
+    with pytest.raises(pdsim.ParameterError) as ei:
+        _material(**{field: value})
+    _assert_error(ei, pdsim.ParameterError, f"{field}={value!r}", allowed)
+    assert ei.value.field == field
+
+
+# ----------------------------------------------------------------------------------------------------------- spacing
+
+
+def test_spacing_larger_than_object(device):
+    """A 0.1 m box at spacing 0.2 raises ParameterError naming spacing, 0.2 and the allowed (0, 0.1]."""
+    with pytest.raises(pdsim.ParameterError) as ei:
+        pdsim.PeridynamicBody(pdsim.box((0.1, 0.1, 0.1), name="pebble"), _material(), spacing=0.2, device=device)
+    _assert_error(ei, pdsim.ParameterError, "spacing=0.2", "(0, 0.1]", "pebble")
+
+
+@pytest.mark.parametrize("spacing", [0.0, -0.05, float("nan")])
+def test_spacing_not_positive(spacing, device):
+    """Spacing <= 0 (or NaN) raises ParameterError naming spacing and its value."""
+    with pytest.raises(pdsim.ParameterError) as ei:
+        pdsim.PeridynamicBody(pdsim.box((0.1, 0.1, 0.1)), _material(), spacing=spacing, device=device)
+    _assert_error(ei, pdsim.ParameterError, f"spacing={spacing!r}")
+    assert ei.value.field == "spacing"
+
+
+# ------------------------------------------------------------------------------------------------------------ frames
+
+
+@pytest.mark.parametrize("frames", [0, -3, 2.5, True])
+def test_scene_frames_invalid(frames):
+    """Scene(frames=0) (and negative, fractional, bool) raises ParameterError naming frames and 'an integer >= 1'."""
+    with pytest.raises(pdsim.ParameterError) as ei:
+        pdsim.Scene(frames=frames)
+    _assert_error(ei, pdsim.ParameterError, f"frames={frames!r}", "an integer >= 1")
+
+
+def test_run_frames_zero(tmp_path, device):
+    """scene.run(frames=0) raises ParameterError naming frames before any file is written."""
+    scene = _tiny_scene()
+    out = tmp_path / "zero.usdc"
+    with pytest.raises(pdsim.ParameterError) as ei:
+        scene.run(out, frames=0, device=device, progress=False)
+    _assert_error(ei, pdsim.ParameterError, "frames=0", "an integer >= 1")
+    assert not out.exists()
+
+
+def _pdsim_stderr_lines(stderr: str) -> list[str]:
+    """stderr lines of the pdsim CLI, without the line that Warp's native library prints itself (unconditionally, from
+    C++) when it finds no CUDA driver; pdsim cannot silence it."""
+    return [ln for ln in stderr.splitlines() if ln.strip() and not ln.startswith("Warp CUDA warning:")]
+
+
+SCENE_SCRIPT = """
+import pdsim
+
+def build_scene():
+    scene = pdsim.Scene(fps=100.0, frames=2, name="tiny")
+    body = scene.add_peridynamic_body(pdsim.box((0.3, 0.1, 0.1), center=(0.15, 0.0, 0.5)),
+                                      pdsim.Material(density=1000.0, youngs_modulus=1.0e5, poisson_ratio=0.3),
+                                      spacing=0.05, name="beam")
+    body.fix(pdsim.BoxRegion(lo=(-1.0, -1.0, -1.0), hi=(0.05, 1.0, 2.0)))
+    return scene
+"""
+
+
+def test_cli_frames_zero(tmp_path):
+    """`pdsim run SCENE.py --frames 0`: non-zero exit, one line 'pdsim: error: frames=0 ...' on stderr, no traceback,
+    no cache written."""
+    script = tmp_path / "scene.py"
+    script.write_text(SCENE_SCRIPT)
+    out = tmp_path / "x.usdc"
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pdsim.cli",
+            "run",
+            str(script),
+            "--out",
+            str(out),
+            "--frames",
+            "0",
+            "--device",
+            "cpu",
+            "--quiet",
+        ],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+    )
+    assert proc.returncode != 0
+    assert "Traceback" not in proc.stdout + proc.stderr
+    lines = _pdsim_stderr_lines(proc.stderr)
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith("pdsim: error:")
+    assert "frames=0" in lines[0] and "an integer >= 1" in lines[0]
+    assert not out.exists()
+
+
+# ------------------------------------------------------------------------------------------- regions, axis, output
+
+
+def test_fix_region_selects_nothing():
+    """body.fix with a region that holds no particle raises ParameterError saying so and naming the body."""
+    scene = _tiny_scene()
+    body = scene.bodies[0]
+    with pytest.raises(pdsim.ParameterError) as ei:
+        body.fix(pdsim.BoxRegion(lo=(5.0, 5.0, 5.0), hi=(6.0, 6.0, 6.0)))
+    _assert_error(ei, pdsim.ParameterError, "region=", "at least one particle", f"'{body.name}'")
+    assert not body.kind.any()
+
+
+def test_bad_region_object():
+    """body.fix with something that is not a region raises ParameterError naming the allowed kinds."""
+    body = _tiny_scene().bodies[0]
+    with pytest.raises(pdsim.ParameterError) as ei:
+        body.fix("left end")
+    _assert_error(ei, pdsim.ParameterError, "region='left end'", "BoxRegion")
+
+
+@pytest.mark.parametrize("axis", ["X", "y", "", None])
+def test_bad_up_axis(axis):
+    """Scene(up_axis=...) other than 'Y' or 'Z' raises ParameterError naming up_axis, the value and 'Y' or 'Z'."""
+    with pytest.raises(pdsim.ParameterError) as ei:
+        pdsim.Scene(up_axis=axis)
+    _assert_error(ei, pdsim.ParameterError, f"up_axis={axis!r}", "'Y' or 'Z'")
+
+
+def test_bad_output_extension(tmp_path, device):
+    """scene.run('cache.abc') raises ParameterError naming out and the allowed .usdc/.usda/.usd; nothing written."""
+    scene = _tiny_scene()
+    out = tmp_path / "cache.abc"
+    with pytest.raises(pdsim.ParameterError) as ei:
+        scene.run(out, device=device, progress=False)
+    _assert_error(ei, pdsim.ParameterError, "cache.abc", ".usdc", ".usda", ".usd")
+    assert os.listdir(tmp_path) == []
+
+
+def test_output_folder_missing(tmp_path, device):
+    """scene.run into a folder that does not exist raises ParameterError naming out (not a bare ValueError, which the
+    CLI would print as a traceback)."""
+    scene = _tiny_scene()
+    out = tmp_path / "no_such_dir" / "cache.usdc"
+    with pytest.raises(pdsim.ParameterError) as ei:
+        scene.run(out, device=device, progress=False)
+    _assert_error(ei, pdsim.ParameterError, "no_such_dir", "existing folder")
