@@ -21,96 +21,6 @@ produce the same sums in the same order.
 import warp as wp
 
 
-@wp.func
-def bond_extension_lambda(yk: wp.vec3, yj: wp.vec3, geom: wp.vec4):
-    """Returns (e, Lambda, n) for a bond with reference geometry geom = (xi / L, L)."""
-    eta = yj - yk
-    length = wp.length(eta)
-    n = eta / length
-    lam = wp.dot(n, wp.vec3(geom[0], geom[1], geom[2]))
-    return length - geom[3], lam, n
-
-
-@wp.kernel
-def compute_dilatation(
-    positions: wp.array(dtype=wp.vec3),
-    family_offsets: wp.array(dtype=wp.int32),
-    family_neighbors: wp.array(dtype=wp.int32),
-    bond_geom: wp.array(dtype=wp.vec4),
-    bond_wv_dil: wp.array(dtype=float),
-    dil_d: wp.array(dtype=float),
-    dil_coef: wp.array(dtype=float),
-    dev_b: wp.array(dtype=float),
-    theta: wp.array(dtype=float),
-    bp: wp.array(dtype=wp.vec2),
-    bond_ne: wp.array(dtype=wp.vec4),
-    bond_lambda: wp.array(dtype=float),
-):
-    """theta_k = d_k sum_j w e Lambda V_j beta G^dil; writes theta and bp[k] = (b_k, P_k = d_k c0 theta_k), and caches
-    each bond's deformed geometry bond_ne = (n, e) and Lambda for the force pass (which then reads instead of
-    recomputing them: measured 1.28x faster per step on the CPU, docs/benchmarks.md)."""
-    k = wp.tid()
-    yk = positions[k]
-    acc = float(0.0)
-    for q in range(family_offsets[k], family_offsets[k + 1]):
-        e, lam, n = bond_extension_lambda(yk, positions[family_neighbors[q]], bond_geom[q])
-        bond_ne[q] = wp.vec4(n[0], n[1], n[2], e)
-        bond_lambda[q] = lam
-        acc += bond_wv_dil[q] * e * lam
-    th = dil_d[k] * acc
-    theta[k] = th
-    bp[k] = wp.vec2(dev_b[k], dil_coef[k] * th)
-
-
-@wp.kernel
-def compute_bond_force_density(
-    family_offsets: wp.array(dtype=wp.int32),
-    family_neighbors: wp.array(dtype=wp.int32),
-    bond_ne: wp.array(dtype=wp.vec4),
-    bond_lambda: wp.array(dtype=float),
-    bond_wv_dil: wp.array(dtype=float),
-    bond_wv_dev: wp.array(dtype=float),
-    bp: wp.array(dtype=wp.vec2),
-    force_density: wp.array(dtype=wp.vec3),
-):
-    """f_k = sum_j 1/2 (A_kj + A_jk) n V_j beta
-           = sum_j 2 (w V_j beta G^dil Lambda (P_k + P_j) + w V_j beta G^dev (b_k + b_j) e) n   [N/m^3],
-    with (n, e) and Lambda from the dilatation pass of the same positions."""
-    k = wp.tid()
-    bpk = bp[k]
-    f = wp.vec3(0.0)
-    for q in range(family_offsets[k], family_offsets[k + 1]):
-        c = bond_ne[q]
-        bpj = bp[family_neighbors[q]]
-        s = bond_wv_dil[q] * bond_lambda[q] * (bpk[1] + bpj[1]) + bond_wv_dev[q] * (bpk[0] + bpj[0]) * c[3]
-        f += (2.0 * s) * wp.vec3(c[0], c[1], c[2])
-    force_density[k] = f
-
-
-@wp.kernel
-def compute_strain_energy_density(
-    positions: wp.array(dtype=wp.vec3),
-    family_offsets: wp.array(dtype=wp.int32),
-    family_neighbors: wp.array(dtype=wp.int32),
-    bond_geom: wp.array(dtype=wp.vec4),
-    bond_wv_dev: wp.array(dtype=float),
-    theta: wp.array(dtype=float),
-    dev_b: wp.array(dtype=float),
-    dil_c0: wp.array(dtype=float),
-    energy_density: wp.array(dtype=float),
-):
-    """W_k = c0 theta_k^2 + b_k sum_j w e^2 V_j beta G^dev [J/m^3], the energy whose bond derivatives are the forces
-    above (exactly, when Lambda is held fixed; see pdsim/peridynamics.py). Needs theta from compute_dilatation."""
-    k = wp.tid()
-    yk = positions[k]
-    acc = float(0.0)
-    for q in range(family_offsets[k], family_offsets[k + 1]):
-        e, lam, n = bond_extension_lambda(yk, positions[family_neighbors[q]], bond_geom[q])
-        acc += bond_wv_dev[q] * e * e
-    th = theta[k]
-    energy_density[k] = dil_c0[k] * th * th + dev_b[k] * acc
-
-
 @wp.kernel
 def compute_family_moments(
     family_offsets: wp.array(dtype=wp.int32),
@@ -219,3 +129,73 @@ def compute_directional_bond_factors(
         Gb = 1.0 / wp.sqrt(nx2 / (gb[0] * gb[0]) + ny2 / (gb[1] * gb[1]) + nz2 / (gb[2] * gb[2]))
         bond_wv_dil[q] = bond_wv[q] * Gd
         bond_wv_dev[q] = bond_wv[q] * Gb
+
+
+@wp.kernel
+def init_bond_fracture(
+    family_offsets: wp.array(dtype=wp.int32),
+    family_neighbors: wp.array(dtype=wp.int32),
+    bond_geom: wp.array(dtype=wp.vec4),
+    critical_stretch: wp.array(dtype=float),
+    unbreakable: wp.array(dtype=wp.int32),
+    axis: wp.array(dtype=wp.vec3),
+    strength_ratio: wp.array(dtype=float),
+    bond_critical_stretch: wp.array(dtype=float),
+):
+    """Per-bond critical stretch: s_c of the particle scaled by 1 - (1 - strength_ratio) (n . a)^2 about the world
+    material axis a; infinite when either particle lies in an unbreakable region. Symmetric in k and j."""
+    k = wp.tid()
+    a = axis[k]
+    for q in range(family_offsets[k], family_offsets[k + 1]):
+        j = family_neighbors[q]
+        g = bond_geom[q]
+        c = wp.dot(wp.vec3(g[0], g[1], g[2]), a)
+        sc = critical_stretch[k] * (1.0 - (1.0 - strength_ratio[k]) * c * c)
+        if unbreakable[k] != 0 or unbreakable[j] != 0:
+            sc = 1.0e30
+        bond_critical_stretch[q] = sc
+
+
+@wp.kernel
+def scale_anisotropic_stiffness(
+    family_offsets: wp.array(dtype=wp.int32),
+    bond_geom: wp.array(dtype=wp.vec4),
+    axis: wp.array(dtype=wp.vec3),
+    stiffness_ratio: wp.array(dtype=float),
+    bond_wv_dil: wp.array(dtype=float),
+    bond_wv_dev: wp.array(dtype=float),
+):
+    """Scales both bond weights by 1 - (1 - stiffness_ratio) (n . a)^2 (the same for bond kj and jk, so the forces
+    stay pairwise balanced and derivable from the energy)."""
+    k = wp.tid()
+    a = axis[k]
+    r = stiffness_ratio[k]
+    for q in range(family_offsets[k], family_offsets[k + 1]):
+        g = bond_geom[q]
+        c = wp.dot(wp.vec3(g[0], g[1], g[2]), a)
+        f = 1.0 - (1.0 - r) * c * c
+        bond_wv_dil[q] = bond_wv_dil[q] * f
+        bond_wv_dev[q] = bond_wv_dev[q] * f
+
+
+@wp.kernel
+def compute_plastic_norm_scale(
+    family_offsets: wp.array(dtype=wp.int32),
+    bond_geom: wp.array(dtype=wp.vec4),
+    bond_wv: wp.array(dtype=float),
+    bond_wv_dev: wp.array(dtype=float),
+    horizon: wp.array(dtype=float),
+    b_ratio: wp.array(dtype=float),
+    psi_scale: wp.array(dtype=float),
+):
+    """The family's share of the continuum deviatoric-force norm, s_k = (b_k / b)^2 sum_j G^2 V_j beta_j /
+    (4/3 pi delta^3), so that a particle with a truncated family yields at the same stress as one in the bulk."""
+    k = wp.tid()
+    delta = horizon[k]
+    acc = float(0.0)
+    for q in range(family_offsets[k], family_offsets[k + 1]):
+        wv = bond_wv[q]
+        G = bond_wv_dev[q] / wv
+        acc += G * G * wv * bond_geom[q][3] / delta
+    r = b_ratio[k]
+    psi_scale[k] = r * r * acc / (4.0 / 3.0 * wp.pi * delta * delta * delta)

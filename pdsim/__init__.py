@@ -9,12 +9,13 @@ __version__ = "0.1.0"
 
 from .errors import FeatureNotAvailableError, GeometryError, InstabilityError, ParameterError, PdsimError
 from .geometry import SolidShape, box, cylinder, load_mesh, shape_from_arrays, sphere
-from .materials import Material
+from .materials import Anisotropy, Material
 from .peridynamics import GroundPlane, PeridynamicBody, SolverPeridynamics
 from .regions import BoxRegion, HalfSpace, SphereRegion
 from .scene import RunReport, Scene
 
 __all__ = [
+    "Anisotropy",
     "BoxRegion",
     "FeatureNotAvailableError",
     "GeometryError",

@@ -28,28 +28,134 @@ def _check_range(field: str, value: float, lo: float | None, hi: float | None, *
 
 
 @dataclass(frozen=True)
+class Anisotropy:
+    """Direction-dependent stiffness and strength about one material axis (grain of wood, normal of rock layers).
+
+    A bond whose reference direction n makes cos^2 = (n . a)^2 with the axis a (in the body's material frame, turned
+    into world space by the body's ``material_rotation``) has its stiffness scaled by 1 - (1 - stiffness_ratio) cos^2
+    and its critical stretch by 1 - (1 - strength_ratio) cos^2. strength_ratio < 1 makes planes normal to the axis
+    weak (cracks run along them); both ratios in (0, 1] (weaker along the axis) or > 1 (stronger). The cos^2 law
+    also weakens oblique bonds: a bond 40 degrees off the axis keeps only 1 - 0.59 (1 - ratio) of its strength, so
+    for cracks that follow the layers under oblique load use a small strength_ratio (about 0.1).
+
+    Args:
+        axis: material axis a, 3 numbers (normalised here).
+        stiffness_ratio: bond stiffness along a over across it, > 0.
+        strength_ratio: critical stretch along a over across it, > 0.
+    """
+
+    axis: tuple = (0.0, 0.0, 1.0)
+    stiffness_ratio: float = 1.0
+    strength_ratio: float = 1.0
+
+    def __post_init__(self):
+        a = tuple(float(x) for x in self.axis) if hasattr(self.axis, "__len__") else ()
+        norm = math.sqrt(sum(x * x for x in a)) if len(a) == 3 else 0.0
+        if len(a) != 3 or not math.isfinite(norm) or norm == 0.0:
+            raise ParameterError("axis", self.axis, "3 finite numbers, not all zero")
+        object.__setattr__(self, "axis", tuple(x / norm for x in a))
+        object.__setattr__(self, "stiffness_ratio", _check_range("stiffness_ratio", self.stiffness_ratio, 0.0, None))
+        object.__setattr__(self, "strength_ratio", _check_range("strength_ratio", self.strength_ratio, 0.0, None))
+
+
+@dataclass(frozen=True)
 class Material:
-    """An isotropic linear-elastic solid.
+    """An isotropic (optionally anisotropic) elastic solid that may yield and break.
 
     Args:
         density: mass density rho [kg/m^3], > 0.
         youngs_modulus: Young's modulus E [Pa], > 0.
         poisson_ratio: Poisson's ratio nu [-], in (-1, 0.5).
         name: optional label used in output.
+        yield_stress: uniaxial yield stress sigma_Y [Pa], > 0; None (default) for a purely elastic material.
+        hardening_modulus: linear hardening H [Pa], >= 0: sigma_Y grows by H times the equivalent plastic strain.
+        fracture_energy: G0 [J/m^2], > 0; the critical stretch follows from it and the horizon. Give this or
+            ``critical_stretch``, not both; neither means the material never breaks.
+        critical_stretch: s_c [-], > 0, used as given (independent of the horizon).
+        compressive_bonus: alpha >= 0 of the Silling-Askari rule s0 = s_c - alpha s_min (compression strengthens).
+        failure_plastic_strain: ductile failure: a stretched bond also breaks once the equivalent plastic strain of
+            one of its particles passes this value (> 0; needs yield_stress).
+        anisotropy: optional :class:`Anisotropy`.
 
-    Yield and fracture parameters are added by the plasticity and fracture features; a material without them is purely
-    elastic and the solver allocates and launches nothing for those features.
+    Features a material does not use cost nothing: the solver allocates and launches plasticity only for materials
+    with a yield stress and fracture only for materials that can break.
     """
 
     density: float
     youngs_modulus: float
     poisson_ratio: float
     name: str = "material"
+    yield_stress: float | None = None
+    hardening_modulus: float = 0.0
+    fracture_energy: float | None = None
+    critical_stretch: float | None = None
+    compressive_bonus: float = 0.0
+    failure_plastic_strain: float | None = None
+    anisotropy: Anisotropy | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "density", _check_range("density", self.density, 0.0, None))
         object.__setattr__(self, "youngs_modulus", _check_range("youngs_modulus", self.youngs_modulus, 0.0, None))
         object.__setattr__(self, "poisson_ratio", _check_range("poisson_ratio", self.poisson_ratio, -1.0, 0.5))
+        if self.yield_stress is not None:
+            object.__setattr__(self, "yield_stress", _check_range("yield_stress", self.yield_stress, 0.0, None))
+        object.__setattr__(
+            self,
+            "hardening_modulus",
+            _check_range("hardening_modulus", self.hardening_modulus, 0.0, None, lo_open=False),
+        )
+        if self.fracture_energy is not None and self.critical_stretch is not None:
+            raise ParameterError("critical_stretch", self.critical_stretch, "None when fracture_energy is given")
+        if self.fracture_energy is not None:
+            object.__setattr__(
+                self, "fracture_energy", _check_range("fracture_energy", self.fracture_energy, 0.0, None)
+            )
+        if self.critical_stretch is not None:
+            object.__setattr__(
+                self, "critical_stretch", _check_range("critical_stretch", self.critical_stretch, 0.0, None)
+            )
+        object.__setattr__(
+            self,
+            "compressive_bonus",
+            _check_range("compressive_bonus", self.compressive_bonus, 0.0, None, lo_open=False),
+        )
+        if self.failure_plastic_strain is not None:
+            if self.yield_stress is None:
+                raise ParameterError(
+                    "failure_plastic_strain", self.failure_plastic_strain, "None unless yield_stress is set"
+                )
+            object.__setattr__(
+                self,
+                "failure_plastic_strain",
+                _check_range("failure_plastic_strain", self.failure_plastic_strain, 0.0, None),
+            )
+        if self.anisotropy is not None and not isinstance(self.anisotropy, Anisotropy):
+            raise ParameterError("anisotropy", self.anisotropy, "a pdsim.Anisotropy or None")
+
+    @property
+    def yields(self) -> bool:
+        """True when the material has a yield stress (plasticity is simulated)."""
+        return self.yield_stress is not None
+
+    @property
+    def breaks(self) -> bool:
+        """True when bonds of this material can break (a fracture energy, a critical stretch or a failure strain)."""
+        return (
+            self.fracture_energy is not None
+            or self.critical_stretch is not None
+            or (self.failure_plastic_strain is not None)
+        )
+
+    def critical_stretch_for(self, horizon: float) -> float:
+        """Critical stretch s_c [-] for a horizon delta [m]: given directly, or from G0 as
+        s_c = sqrt(G0 / ((3 mu + (3/4)^4 (kappa - 5 mu / 3)) delta)); inf for a material that never breaks by
+        stretch (tests/test_pd_fracture.py checks this calibration against the discrete energy of a cut)."""
+        if self.critical_stretch is not None:
+            return self.critical_stretch
+        if self.fracture_energy is None:
+            return math.inf
+        mu, kappa = self.shear_modulus, self.bulk_modulus
+        return math.sqrt(self.fracture_energy / ((3.0 * mu + (0.75**4) * (kappa - 5.0 * mu / 3.0)) * horizon))
 
     @property
     def bulk_modulus(self) -> float:

@@ -51,6 +51,8 @@ class PeridynamicBody:
             calibration of d and b on the isotropic reference deformations) or "none" (the supplement's constants).
         partial_volumes: count neighbours near the horizon by the fraction of their cell inside it (default True).
         damping: mass-proportional viscous damping coefficient c [1/s], >= 0 (a = f / rho - c v).
+        material_rotation: 3x3 rotation from the material frame (where ``material.anisotropy.axis`` is given) to world
+            space; identity by default. Turning a body and its material_rotation together gives the same result.
         device: Warp device used to sample the shape ("cpu" by default; sampling is a one-off).
 
     Particles are sorted along a Morton curve so that neighbours are close in memory.
@@ -67,6 +69,7 @@ class PeridynamicBody:
         surface_correction: str = "directional",
         partial_volumes: bool = True,
         damping: float = 0.0,
+        material_rotation=None,
         device: str = "cpu",
     ):
         if not isinstance(material, Material):
@@ -83,6 +86,8 @@ class PeridynamicBody:
         self.surface_correction = surface_correction
         self.partial_volumes = bool(partial_volumes)
         self.damping = _check_range("damping", damping, 0.0, None, lo_open=False)
+        self.material_rotation = _rotation_matrix(material_rotation)
+        self.notches: list = []  # BoxRegion or SolidShape: bonds crossing them start broken
         positions, volumes = fill_solid(shape, self.spacing, device=device)
         order = morton_order(positions, self.spacing)
         self.rest_positions = positions[order]
@@ -90,7 +95,9 @@ class PeridynamicBody:
         n = len(self.rest_positions)
         self.kind = np.zeros(n, dtype=np.int32)
         self.prescribed_velocity = np.zeros((n, 3), dtype=np.float64)
+        self.prescribed_axes = np.ones((n, 3), dtype=np.float64)
         self.initial_velocity = np.zeros((n, 3), dtype=np.float64)
+        self.unbreakable = np.zeros(n, dtype=bool)
 
     @property
     def particle_count(self) -> int:
@@ -119,15 +126,48 @@ class PeridynamicBody:
         self.prescribed_velocity[mask] = 0.0
         return int(mask.sum())
 
-    def set_velocity(self, region, velocity) -> int:
-        """Moves the particles in ``region`` at the constant ``velocity`` [m/s] (a displacement-driven boundary)."""
+    def set_velocity(self, region, velocity, *, axes: str = "xyz") -> int:
+        """Moves the particles in ``region`` at the constant ``velocity`` [m/s] (a displacement-driven boundary).
+        ``axes`` names the prescribed components ("xyz" by default; "x" makes a roller grip that pulls along x and
+        leaves y and z free)."""
         v = np.asarray(velocity, dtype=np.float64)
         if v.shape != (3,) or not np.all(np.isfinite(v)):
             raise ParameterError("velocity", velocity, "a sequence of 3 finite numbers [m/s]")
+        if not axes or any(a not in "xyz" for a in axes) or len(set(axes)) != len(axes):
+            raise ParameterError("axes", axes, "a non-empty combination of 'x', 'y', 'z'")
         mask = self._select(region, "region")
         self.kind[mask] = 2
         self.prescribed_velocity[mask] = v
+        self.prescribed_axes[mask] = [float(c in axes) for c in "xyz"]
         return int(mask.sum())
+
+    def add_notch(self, cut) -> None:
+        """Pre-cut: every bond whose reference segment crosses ``cut`` (a BoxRegion, e.g. a thin slab; a SolidShape's
+        surface; or an open triangle surface given as (vertices, faces)) starts broken. Needs a material that breaks
+        or a scene that tracks damage; any body with a notch is simulated with fracture on."""
+        from .geometry import SolidShape as _Shape
+        from .regions import BoxRegion
+
+        if isinstance(cut, tuple) and len(cut) == 2:  # an open surface: (vertices [n, 3], triangles [m, 3])
+            v = np.asarray(cut[0], dtype=np.float64)
+            f = np.asarray(cut[1], dtype=np.int64)
+            if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or f.size == 0:
+                raise ParameterError("cut", "(vertices, faces)", "arrays of shape [n, 3] and [m, 3], m >= 1")
+            cut = _Shape(vertices=v, faces=f.astype(np.int32), name="notch")
+        if not isinstance(cut, BoxRegion | _Shape):
+            raise ParameterError("cut", cut, "a BoxRegion, a SolidShape or a (vertices, faces) surface")
+        self.notches.append(cut)
+
+    def set_unbreakable(self, region) -> int:
+        """Bonds touching a particle in ``region`` never break (e.g. grips, supports); returns the particle count."""
+        mask = self._select(region, "region")
+        self.unbreakable[mask] = True
+        return int(mask.sum())
+
+    @property
+    def fractures(self) -> bool:
+        """True when this body's bonds can break or start broken."""
+        return self.material.breaks or bool(self.notches)
 
     def set_initial_velocity(self, velocity, region=None) -> int:
         """Initial velocity [m/s]: a vector for all particles (or those in ``region``), or an array [n, 3]."""
@@ -144,6 +184,18 @@ class PeridynamicBody:
             raise ParameterError("velocity", velocity, "finite values")
         self.initial_velocity[mask] = values
         return int(mask.sum())
+
+
+def _rotation_matrix(value) -> np.ndarray:
+    """Validates a 3x3 rotation matrix (orthonormal, det +1); None gives the identity."""
+    if value is None:
+        return np.eye(3)
+    R = np.asarray(value, dtype=np.float64)
+    if R.shape != (3, 3) or not np.all(np.isfinite(R)) or not np.allclose(R @ R.T, np.eye(3), atol=1.0e-6):
+        raise ParameterError("material_rotation", value, "a 3x3 rotation matrix (orthonormal)")
+    if np.linalg.det(R) < 0.0:
+        raise ParameterError("material_rotation", value, "a proper rotation (determinant +1)")
+    return R
 
 
 @dataclass(frozen=True)
@@ -174,6 +226,7 @@ class PeridynamicModel:
     damping: object  # [1/s]
     kind: object  # 0 free, 1 fixed, 2 prescribed velocity
     prescribed_velocity: object  # [m/s]
+    prescribed_axes: object  # 1 for each prescribed velocity component, 0 for a free one
     family_offsets: object  # CSR row starts, int32 [particle_count + 1]
     family_neighbors: object  # int32 [bond_count]
     bond_geom: object  # (xi / L, L), vec4 [bond_count]
@@ -184,6 +237,19 @@ class PeridynamicModel:
     dev_b: object  # b_k [Pa/m^5]
     dil_c0: object  # c0 = kappa/2 - 5 mu/6 [Pa]
     dil_coef: object  # d_k c0 [Pa/m^4]
+    weighted_volume: object  # m_k = sum_j w L^2 V_j beta [m^5]
+    fracture: bool = False  # some body can break: bond_alive and the fracture branches are live
+    plastic: bool = False  # some body yields: plastic arrays exist for the first plastic_bond_count bonds
+    plastic_particle_count: int = 0  # yielding bodies come first in the particle order
+    plastic_bond_count: int = 0
+    bond_critical_stretch: object = None  # s_c per bond (anisotropy and unbreakable regions applied) [-]
+    bond_alive_initial: object = None  # uint8 per bond: 0 for bonds cut by notches
+    bonus_alpha: object = None  # compressive bonus alpha per particle [-]
+    failure_eqps: object = None  # ductile failure plastic strain per particle [-]
+    yield_stress: object = None  # sigma_Y0 per plastic particle [Pa]
+    hardening: object = None  # H per plastic particle [Pa]
+    psi_scale: object = None  # family share of the continuum deviatoric norm per plastic particle [-]
+    bond_reverse: object = None  # index of bond j -> k for each plastic bond k -> j
     density_host: np.ndarray = field(repr=False, default=None)
     volumes_host: np.ndarray = field(repr=False, default=None)
     rest_host: np.ndarray = field(repr=False, default=None)
@@ -203,6 +269,11 @@ class PeridynamicState:
     force_density: object
     bond_ne: object
     bond_lambda: object
+    bond_alive: object = None  # uint8 per bond (fracture)
+    stretch_min: object = None  # most compressive stretch per particle, this step (fracture)
+    stretch_min_prev: object = None  # the same, previous step (read by the compressive bonus)
+    bond_plastic: object = None  # plastic extension per plastic bond [m]
+    eqps: object = None  # equivalent plastic strain per particle [-]
 
 
 def _build_families(rest, body_id, radius, device):
@@ -227,36 +298,66 @@ def _build_families(rest, body_id, radius, device):
 
 
 DIRECTIONAL_STRETCH = 1.0e-3
+DIRECTIONAL_CALIBRATION = "uniaxial_stress"  # or "uniaxial_stretch" (Madenci-Oterkus); docs/accuracy.md compares
 
 
-def _directional_factors(rest_h, delta_h, offsets, neighbors, bond_geom, bond_wv, device):
-    """Madenci-Oterkus correction factors per particle for uniaxial stretches along x, y and z: the continuum value
-    over the discrete family value, for the dilatation (theta = zeta) and for the deviatoric sum
-    sum_j w e^2 V_j beta (= pi delta^5 zeta^2 / 5). Returns two arrays of shape [n, 3]; 1 where a family is empty."""
+def _placeholders(device):
+    """Length-1 arrays passed for the arguments of features a kernel variant compiles out."""
     import warp as wp
 
-    from .kernels import pd_bonds as kb
+    return (
+        wp.zeros(1, dtype=wp.uint8, device=device),
+        wp.zeros(1, dtype=float, device=device),
+        wp.zeros(1, dtype=wp.int32, device=device),
+    )
+
+
+def make_step_kernels(*, fracture: bool, plastic: bool):
+    from .kernels import pd_step
+
+    return pd_step.make_step_kernels(fracture, plastic)
+
+
+def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, bond_wv, device):
+    """Correction factors per particle and axis (Madenci-Oterkus): the continuum value over the discrete family value
+    of the dilatation under a uniaxial stretch zeta along the axis (theta = zeta), and of the deviatoric sum
+    sum_j w e^2 V_j beta under uniaxial stress along the axis: stretch zeta with lateral contraction -nu zeta
+    (continuum pi delta^5 zeta^2 ((1 + nu)^2 / 5 - 2 nu (1 + nu) / 3 + nu^2)). Madenci and Oterkus use the uniaxial
+    stretch for both; calibrating the deviatoric sum on uniaxial stress also corrects the Poisson coupling that thin
+    parts feel in tension and bending (about halves the bar-stiffness error, docs/accuracy.md), while the dilatation
+    keeps the well-conditioned stretch target (theta under uniaxial stress, (1 - 2 nu) zeta, vanishes as nu -> 1/2).
+    Returns two arrays of shape [n, 3]; 1 where a family is empty."""
+    import warp as wp
 
     n = len(rest_h)
     zeta = DIRECTIONAL_STRETCH
+    ks = make_step_kernels(fracture=False, plastic=False)
     ones = wp.array(np.ones(n, dtype=np.float32), dtype=float, device=device)
     zeros = wp.zeros(n, dtype=float, device=device)
     sum_dil = wp.zeros(n, dtype=float, device=device)
     sum_dev = wp.zeros(n, dtype=float, device=device)
+    zeros_out = wp.zeros(n, dtype=float, device=device)  # dilatation of the stress state: only its bond cache is used
     bp = wp.zeros(n, dtype=wp.vec2, device=device)
-    scratch_ne = wp.zeros(bond_wv.shape[0], dtype=wp.vec4, device=device)
-    scratch_lambda = wp.zeros(bond_wv.shape[0], dtype=float, device=device)
+    nb = bond_wv.shape[0]
+    bond_ne = wp.zeros(nb, dtype=wp.vec4, device=device)
+    bond_lambda = wp.zeros(nb, dtype=float, device=device)
+    u8, f1, i1 = _placeholders(device)
     f_dil = np.ones((n, 3))
     f_dev = np.ones((n, 3))
     d_cont = 9.0 / (4.0 * math.pi * delta_h**4)
-    dev_cont = math.pi * delta_h**5 * zeta**2 / 5.0
+    nu = nu_h if DIRECTIONAL_CALIBRATION == "uniaxial_stress" else np.zeros_like(nu_h)
+    dev_cont = math.pi * delta_h**5 * zeta**2 * ((1.0 + nu) ** 2 / 5.0 - 2.0 * nu * (1.0 + nu) / 3.0 + nu**2)
     for axis in range(3):
-        y = rest_h.copy()
-        y[:, axis] *= 1.0 + zeta
-        pos = wp.array(y.astype(np.float32), dtype=wp.vec3, device=device)
+        stretch = np.ones((len(rest_h), 3))
+        stretch[:, axis] = 1.0 + zeta
+        stress = np.repeat((1.0 - nu * zeta)[:, None], 3, axis=1)
+        stress[:, axis] = 1.0 + zeta
+        # with d = 1, c0 = 0 and b = 1: theta = sum w e Lambda V beta and W = sum w e^2 V beta
+        pos = wp.array((rest_h * stretch).astype(np.float32), dtype=wp.vec3, device=device)
         wp.launch(
-            kb.compute_dilatation,
+            ks.dilatation,
             dim=n,
+            device=device,
             inputs=[
                 pos,
                 offsets,
@@ -266,18 +367,54 @@ def _directional_factors(rest_h, delta_h, offsets, neighbors, bond_geom, bond_wv
                 ones,
                 zeros,
                 zeros,
+                u8,
+                f1,
+                f1,
+                f1,
+                f1,
+                f1,
+                0,
+                f1,
+                i1,
                 sum_dil,
                 bp,
-                scratch_ne,
-                scratch_lambda,
+                bond_ne,
+                bond_lambda,
+                f1,
             ],
+        )
+        pos = wp.array((rest_h * stress).astype(np.float32), dtype=wp.vec3, device=device)
+        wp.launch(
+            ks.dilatation,
+            dim=n,
             device=device,
+            inputs=[
+                pos,
+                offsets,
+                neighbors,
+                bond_geom,
+                bond_wv,
+                ones,
+                zeros,
+                zeros,
+                u8,
+                f1,
+                f1,
+                f1,
+                f1,
+                f1,
+                0,
+                f1,
+                i1,
+                zeros_out,
+                bp,
+                bond_ne,
+                bond_lambda,
+                f1,
+            ],
         )
         wp.launch(
-            kb.compute_strain_energy_density,
-            dim=n,
-            inputs=[pos, offsets, neighbors, bond_geom, bond_wv, zeros, ones, zeros, sum_dev],
-            device=device,
+            ks.energy, dim=n, device=device, inputs=[offsets, bond_ne, bond_wv, u8, 0, f1, zeros, ones, zeros, sum_dev]
         )
         sd = sum_dil.numpy().astype(np.float64)
         sv = sum_dev.numpy().astype(np.float64)
@@ -358,7 +495,8 @@ def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
 
     if np.any(correction == "directional"):
         directional = correction == "directional"
-        f_dil, f_dev = _directional_factors(rest_h, delta_h, offsets, neighbors, bond_geom, bond_wv, device)
+        nu_h = per_particle([b.material.poisson_ratio for b in bodies])
+        f_dil, f_dev = _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, bond_wv, device)
         f_dil[~directional] = 1.0
         f_dev[~directional] = 1.0
         bond_wv_dil = wp.zeros_like(bond_wv)
@@ -381,6 +519,90 @@ def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
     else:
         bond_wv_dil = bond_wv_dev = bond_wv
 
+    anisotropic = np.concatenate([np.full(c, b.material.anisotropy is not None) for c, b in zip(counts, bodies)])
+    axis_h = np.zeros((n, 3))
+    stiff_h = np.ones(n)
+    strength_h = np.ones(n)
+    for c, b, lo in zip(counts, bodies, body_offsets[:-1]):  # per body (a handful), not per particle
+        an = b.material.anisotropy
+        if an is not None:
+            axis_h[lo : lo + c] = b.material_rotation @ np.asarray(an.axis)
+            stiff_h[lo : lo + c] = an.stiffness_ratio
+            strength_h[lo : lo + c] = an.strength_ratio
+    axis = wp.array(axis_h.astype(f32), dtype=wp.vec3, device=device)
+    if np.any(anisotropic & (stiff_h != 1.0)):
+        if bond_wv_dil is bond_wv:
+            bond_wv_dil, bond_wv_dev = wp.clone(bond_wv), wp.clone(bond_wv)
+        wp.launch(
+            kb.scale_anisotropic_stiffness,
+            dim=n,
+            inputs=[offsets, bond_geom, axis, arr(stiff_h), bond_wv_dil, bond_wv_dev],
+            device=device,
+        )
+
+    extra = {}
+    fracture = any(b.fractures for b in bodies)
+    if fracture:
+        from .kernels import pd_step as ks
+
+        sc_h = np.concatenate([np.full(c, b.material.critical_stretch_for(b.horizon)) for c, b in zip(counts, bodies)])
+        sc_h = np.minimum(sc_h, 1.0e30)
+        unbreak = np.concatenate([b.unbreakable for b in bodies]).astype(np.int32)
+        bond_sc = wp.zeros(max(bond_count, 1), dtype=float, device=device)
+        wp.launch(
+            kb.init_bond_fracture,
+            dim=n,
+            inputs=[
+                offsets,
+                neighbors,
+                bond_geom,
+                arr(sc_h),
+                wp.array(unbreak, dtype=wp.int32, device=device),
+                axis,
+                arr(strength_h),
+                bond_sc,
+            ],
+            device=device,
+        )
+        alive = wp.array(np.ones(max(bond_count, 1), dtype=np.uint8), dtype=wp.uint8, device=device)
+        for c, b, lo in zip(counts, bodies, body_offsets[:-1]):
+            for cut in b.notches:
+                _cut_bonds(cut, int(lo), c, rest, offsets, neighbors, alive, device)
+        fail_h = np.concatenate(
+            [np.full(c, b.material.failure_plastic_strain or 1.0e30) for c, b in zip(counts, bodies)]
+        )
+        extra.update(
+            fracture=True,
+            bond_critical_stretch=bond_sc,
+            bond_alive_initial=alive,
+            bonus_alpha=arr(per_particle([b.material.compressive_bonus for b in bodies])),
+            failure_eqps=arr(fail_h),
+        )
+    plastic_bodies = [b for b in bodies if b.material.yields]
+    if plastic_bodies:
+        from .kernels import pd_step as ks
+
+        n_p = int(sum(b.particle_count for b in plastic_bodies))  # yielding bodies come first (see SolverPeridynamics)
+        nb_p = int(offsets.numpy()[n_p])
+        reverse = wp.zeros(max(nb_p, 1), dtype=wp.int32, device=device)
+        wp.launch(ks.find_reverse_bonds, dim=n_p, inputs=[offsets, neighbors, reverse], device=device)
+        psi = wp.zeros(n, dtype=float, device=device)
+        wp.launch(
+            kb.compute_plastic_norm_scale,
+            dim=n,
+            inputs=[offsets, bond_geom, bond_wv, bond_wv_dev, horizon, arr(b_k / b_cont), psi],
+            device=device,
+        )
+        extra.update(
+            plastic=True,
+            plastic_particle_count=n_p,
+            plastic_bond_count=nb_p,
+            yield_stress=arr(per_particle([b.material.yield_stress or 0.0 for b in bodies])),
+            hardening=arr(per_particle([b.material.hardening_modulus for b in bodies])),
+            psi_scale=psi,
+            bond_reverse=reverse,
+        )
+
     kind_h = np.concatenate([b.kind for b in bodies]).astype(np.int32)
     presc_h = np.concatenate([b.prescribed_velocity for b in bodies])
     return PeridynamicModel(
@@ -396,6 +618,9 @@ def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
         damping=arr(per_particle([b.damping for b in bodies])),
         kind=wp.array(kind_h, dtype=wp.int32, device=device),
         prescribed_velocity=wp.array(presc_h.astype(f32), dtype=wp.vec3, device=device),
+        prescribed_axes=wp.array(
+            np.concatenate([b.prescribed_axes for b in bodies]).astype(f32), dtype=wp.vec3, device=device
+        ),
         family_offsets=offsets,
         family_neighbors=neighbors,
         bond_geom=bond_geom,
@@ -406,10 +631,39 @@ def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
         dev_b=arr(b_k),
         dil_c0=arr(c0),
         dil_coef=arr(d_k * c0),
+        weighted_volume=weighted_volume,
         density_host=rho_h,
         volumes_host=vol_h,
         rest_host=rest_h,
+        **extra,
     )
+
+
+def _cut_bonds(cut, first: int, count: int, rest, offsets, neighbors, alive, device):
+    """Breaks the bonds of particles [first, first + count) whose reference segment crosses ``cut``."""
+    import warp as wp
+
+    from .kernels import pd_step as ks
+    from .regions import BoxRegion
+
+    if isinstance(cut, BoxRegion):
+        wp.launch(
+            ks.break_bonds_crossing_box,
+            dim=count,
+            inputs=[first, rest, offsets, neighbors, wp.vec3(*cut.lo), wp.vec3(*cut.hi), alive],
+            device=device,
+        )
+    else:
+        mesh = wp.Mesh(
+            points=wp.array(cut.vertices.astype(np.float32), dtype=wp.vec3, device=device),
+            indices=wp.array(cut.faces.astype(np.int32).ravel(), dtype=wp.int32, device=device),
+        )
+        wp.launch(
+            ks.break_bonds_crossing_mesh,
+            dim=count,
+            inputs=[first, mesh.id, rest, offsets, neighbors, alive],
+            device=device,
+        )
 
 
 class SolverPeridynamics:
@@ -430,7 +684,8 @@ class SolverPeridynamics:
 
         if not bodies:
             raise ParameterError("bodies", bodies, "at least one PeridynamicBody")
-        self.bodies = list(bodies)
+        # yielding bodies first, so plastic state is a prefix of the particle and bond arrays (allocated only there)
+        self.bodies = sorted(bodies, key=lambda b: not b.material.yields)
         self.device = wp.get_device(device)
         self.gravity = wp.vec3(*[float(g) for g in gravity])
         self.ground = ground
@@ -448,6 +703,17 @@ class SolverPeridynamics:
             bond_ne=wp.zeros(max(self.model.bond_count, 1), dtype=wp.vec4, device=d),
             bond_lambda=wp.zeros(max(self.model.bond_count, 1), dtype=float, device=d),
         )
+        m = self.model
+        if m.fracture:
+            self.state.bond_alive = wp.clone(m.bond_alive_initial)
+            self.state.stretch_min = wp.zeros(n, dtype=float, device=d)
+            self.state.stretch_min_prev = wp.zeros(n, dtype=float, device=d)
+            self._damage = wp.zeros(n, dtype=float, device=d)
+        if m.plastic:
+            self.state.bond_plastic = wp.zeros(max(m.plastic_bond_count, 1), dtype=float, device=d)
+            self.state.eqps = wp.zeros(n, dtype=float, device=d)
+        self._kernels = make_step_kernels(fracture=m.fracture, plastic=m.plastic)
+        self._dummy_u8, self._dummy_f, self._dummy_i = _placeholders(d)
         self._energy_density = wp.zeros(n, dtype=float, device=d)
         self._check = wp.zeros(2, dtype=float, device=d)
         self._handles = []  # USD prims of the bodies, set by add_outputs
@@ -458,6 +724,12 @@ class SolverPeridynamics:
             self.features.add("ground_plane")
         if any(b.damping > 0 for b in self.bodies):
             self.features.add("damping")
+        if m.fracture:
+            self.features.add("fracture")
+        if m.plastic:
+            self.features.add("plasticity")
+        if any(b.material.anisotropy is not None for b in self.bodies):
+            self.features.add("anisotropy")
         self.time = 0.0
         self.step_count = 0
         self._update_accelerations(0.0)
@@ -493,14 +765,24 @@ class SolverPeridynamics:
         return float(np.sqrt(2.0 * m.density_host[ok] / s[ok]).min())
 
     # -- stepping ------------------------------------------------------------------------------------------------
+    def _feature_arrays(self):
+        """Arguments shared by the step kernels: live feature arrays or length-1 placeholders."""
+        m, s = self.model, self.state
+        u8, f1, i1 = self._dummy_u8, self._dummy_f, self._dummy_i
+        alive = s.bond_alive if m.fracture else u8
+        plastic = s.bond_plastic if m.plastic else f1
+        reverse = m.bond_reverse if m.plastic else i1
+        return alive, plastic, reverse
+
     def _compute_force_density(self, positions):
         import warp as wp
 
-        from .kernels import pd_bonds as kb
-
-        m, s = self.model, self.state
+        m, s, ks = self.model, self.state, self._kernels
+        f1 = self._dummy_f
+        alive, plastic, reverse = self._feature_arrays()
+        frac = m.fracture
         wp.launch(
-            kb.compute_dilatation,
+            ks.dilatation,
             dim=m.particle_count,
             inputs=[
                 positions,
@@ -511,15 +793,51 @@ class SolverPeridynamics:
                 m.dil_d,
                 m.dil_coef,
                 m.dev_b,
+                alive,
+                m.bond_critical_stretch if frac else f1,
+                m.bonus_alpha if frac else f1,
+                s.stretch_min_prev if frac else f1,
+                s.eqps if m.plastic else f1,
+                m.failure_eqps if frac else f1,
+                m.plastic_bond_count,
+                plastic,
+                reverse,
                 s.theta,
                 s.bp,
                 s.bond_ne,
                 s.bond_lambda,
+                s.stretch_min if frac else f1,
             ],
             device=self.device,
         )
+        if frac:
+            s.stretch_min, s.stretch_min_prev = s.stretch_min_prev, s.stretch_min
+        if m.plastic_particle_count > 0:
+            wp.launch(
+                ks.plastic_update,
+                dim=m.plastic_particle_count,
+                inputs=[
+                    m.family_offsets,
+                    m.bond_geom,
+                    m.bond_wv,
+                    m.bond_wv_dev,
+                    alive,
+                    s.bond_ne,
+                    s.bond_lambda,
+                    s.theta,
+                    m.dev_b,
+                    m.horizon,
+                    m.weighted_volume,
+                    m.yield_stress,
+                    m.hardening,
+                    m.psi_scale,
+                    plastic,
+                    s.eqps,
+                ],
+                device=self.device,
+            )
         wp.launch(
-            kb.compute_bond_force_density,
+            ks.force,
             dim=m.particle_count,
             inputs=[
                 m.family_offsets,
@@ -529,6 +847,10 @@ class SolverPeridynamics:
                 m.bond_wv_dil,
                 m.bond_wv_dev,
                 s.bp,
+                alive,
+                m.plastic_bond_count,
+                plastic,
+                reverse,
                 s.force_density,
             ],
             device=self.device,
@@ -544,7 +866,17 @@ class SolverPeridynamics:
         wp.launch(
             ki.integrate_kick,
             dim=m.particle_count,
-            inputs=[s.velocities, s.force_density, m.inv_density, m.kind, self.gravity, m.damping, dt, s.accelerations],
+            inputs=[
+                s.velocities,
+                s.force_density,
+                m.inv_density,
+                m.kind,
+                m.prescribed_axes,
+                self.gravity,
+                m.damping,
+                dt,
+                s.accelerations,
+            ],
             device=self.device,
         )
 
@@ -558,7 +890,16 @@ class SolverPeridynamics:
         wp.launch(
             ki.integrate_kick_drift,
             dim=m.particle_count,
-            inputs=[s.positions, s.velocities, s.accelerations, m.rest_positions, m.kind, m.prescribed_velocity, dt],
+            inputs=[
+                s.positions,
+                s.velocities,
+                s.accelerations,
+                m.rest_positions,
+                m.kind,
+                m.prescribed_velocity,
+                m.prescribed_axes,
+                dt,
+            ],
             device=self.device,
         )
         if self.ground is not None:
@@ -629,28 +970,39 @@ class SolverPeridynamics:
             for b in self.bodies
         )
 
+    def _primvar_kinds(self) -> dict:
+        kinds = {"displacement": "float", "dilatation": "float"}
+        if self.model.fracture:
+            kinds["damage"] = "float"
+        if self.model.plastic:
+            kinds["plastic_strain"] = "float"
+        return kinds
+
     def add_outputs(self, cache):
-        """Declares one UsdGeom.Points per body, with widths = spacing and the primvars written per frame."""
+        """Declares one UsdGeom.Points per body, with widths = spacing and the primvars written per frame
+        (displacement [m], dilatation, and damage / plastic_strain when those features are live)."""
         self._handles = [
             cache.add_points(
-                b.name,
-                widths=np.full(b.particle_count, b.spacing, dtype=np.float32),
-                primvars={"displacement": "float", "dilatation": "float"},
+                b.name, widths=np.full(b.particle_count, b.spacing, dtype=np.float32), primvars=self._primvar_kinds()
             )
             for b in self.bodies
         ]
 
     def write_outputs(self, cache, frame: int):
-        """Writes positions, velocities, |displacement| [m] and dilatation of every body at ``frame``."""
+        """Writes positions, velocities and the primvars of every body at ``frame``."""
         x = self.positions()
         v = self.velocities()
-        theta = self.state.theta.numpy()
-        disp = np.linalg.norm(x.astype(np.float64) - self.model.rest_host, axis=1).astype(np.float32)
+        values = {
+            "displacement": np.linalg.norm(x.astype(np.float64) - self.model.rest_host, axis=1).astype(np.float32),
+            "dilatation": self.state.theta.numpy(),
+        }
+        if self.model.fracture:
+            values["damage"] = self.damage().astype(np.float32)
+        if self.model.plastic:
+            values["plastic_strain"] = self.plastic_strain().astype(np.float32)
         for i, handle in enumerate(self._handles):
             sl = self.body_slice(i)
-            cache.write_points(
-                handle, frame, x[sl], velocities=v[sl], primvars={"displacement": disp[sl], "dilatation": theta[sl]}
-            )
+            cache.write_points(handle, frame, x[sl], velocities=v[sl], primvars={k: a[sl] for k, a in values.items()})
 
     # -- host-side views and diagnostics (vectorised numpy) ---------------------------------------------------------
     def positions(self) -> np.ndarray:
@@ -689,21 +1041,22 @@ class SolverPeridynamics:
         return self.state.force_density.numpy().astype(np.float64)
 
     def strain_energy_density(self) -> np.ndarray:
-        """W_k at the current positions [J/m^3] (needs the dilatation of the same positions: always up to date)."""
+        """Elastic W_k at the current positions [J/m^3] (uses the bond geometry cached by the last force pass, which
+        is always that of the current positions)."""
         import warp as wp
 
-        from .kernels import pd_bonds as kb
-
         m, s = self.model, self.state
+        alive, plastic, _ = self._feature_arrays()
         wp.launch(
-            kb.compute_strain_energy_density,
+            self._kernels.energy,
             dim=m.particle_count,
             inputs=[
-                s.positions,
                 m.family_offsets,
-                m.family_neighbors,
-                m.bond_geom,
+                s.bond_ne,
                 m.bond_wv_dev,
+                alive,
+                m.plastic_bond_count,
+                plastic,
                 s.theta,
                 m.dev_b,
                 m.dil_c0,
@@ -712,6 +1065,35 @@ class SolverPeridynamics:
             device=self.device,
         )
         return self._energy_density.numpy().astype(np.float64)
+
+    def damage(self) -> np.ndarray:
+        """Damage phi_k = 1 - live / all bond weight per particle [-] (zeros when no body can break)."""
+        import warp as wp
+
+        from .kernels import pd_step
+
+        m = self.model
+        if not m.fracture:
+            return np.zeros(m.particle_count)
+        wp.launch(
+            pd_step.compute_damage,
+            dim=m.particle_count,
+            inputs=[m.family_offsets, m.bond_wv, self.state.bond_alive, self._damage],
+            device=self.device,
+        )
+        return self._damage.numpy().astype(np.float64)
+
+    def plastic_strain(self) -> np.ndarray:
+        """Equivalent plastic strain per particle [-] (zeros when no body yields)."""
+        if not self.model.plastic:
+            return np.zeros(self.model.particle_count)
+        return self.state.eqps.numpy().astype(np.float64)
+
+    def bond_alive(self) -> np.ndarray:
+        """Live flag per bond (bool [bond_count]); all True when no body can break."""
+        if not self.model.fracture:
+            return np.ones(self.model.bond_count, dtype=bool)
+        return self.state.bond_alive.numpy()[: self.model.bond_count] != 0
 
     def strain_energy(self) -> float:
         """Total elastic energy sum_k V_k W_k [J]."""
@@ -735,8 +1117,12 @@ class SolverPeridynamics:
         x = self.positions().astype(np.float64) - np.asarray(origin, dtype=np.float64)
         return self.masses() @ np.cross(x, self.velocities().astype(np.float64))
 
+    def slice_of(self, body: PeridynamicBody) -> slice:
+        """Rows of ``body`` in the concatenated particle arrays (yielding bodies are stored first)."""
+        return self.body_slice(next(i for i, b in enumerate(self.bodies) if b is body))
+
     def body_slice(self, index: int) -> slice:
-        """Rows of body ``index`` in the concatenated particle arrays."""
+        """Rows of the solver's body ``index`` (in ``self.bodies`` order) in the concatenated particle arrays."""
         return slice(int(self.model.body_offsets[index]), int(self.model.body_offsets[index + 1]))
 
 
