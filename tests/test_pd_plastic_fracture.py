@@ -61,8 +61,8 @@ def _load_path(measure, pull, increments):
 def test_uniaxial_tension_elastic_slope_yield_plateau_and_unloading():
     """Bar in quasi-static tension, sigma_Y = 10 kPa, E = 1 MPa, nu = 0.25, no hardening: the elastic slope is E
     within 5 % (the directional surface correction is on; 10 particles across, measured +4 %), the stress levels off
-    at sigma_Y within 10 % and stays flat (< 5 % rise over 2 % strain past yield), and unloading follows the elastic slope and
-    leaves a permanent set (plastic strain > 1 %)."""
+    at sigma_Y within 10 % and stays flat (< 5 % rise over 1.2 % strain past yield), and unloading follows the
+    elastic slope and leaves a permanent set (plastic strain > 1 %)."""
     sy, E = 1.0e4, 1.0e6
     mat = pdsim.Material(density=1000.0, youngs_modulus=E, poisson_ratio=0.25, yield_stress=sy)
     solver, measure, pull = _tension_bar(mat)
