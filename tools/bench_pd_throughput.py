@@ -12,6 +12,11 @@ When LAMMPS (``lmp``) is present it runs ``peri/lps`` on the same block in the s
 pdsim / LAMMPS is reported; both run on one core (Warp runs CPU kernels on one thread; LAMMPS with one process and
 ``OMP_NUM_THREADS=1``).
 
+``--plastic`` gives the material a yield stress (YIELD_STRESS; the return mapping runs every step and LAMMPS runs
+``peri/eps`` with the same yield stress instead of ``peri/lps``); ``--fracture`` gives it a critical stretch of 1
+(no bond breaks, but every bond is tested every step, as LAMMPS does with its s00 = 1), so the cost of each feature
+shows beside the elastic step.
+
 ``--breakdown`` also times each kernel of the step on its own (every launch followed by a device synchronisation, so
 the shares add up to slightly more than the plain step).
 
@@ -46,6 +51,9 @@ POISSON_RATIO = 0.25
 
 DENSITY = 1000.0
 """[kg/m^3], the LAMMPS runner's default."""
+
+YIELD_STRESS = 1.0e6
+"""[Pa] for --plastic (and LAMMPS peri/eps)."""
 
 VELOCITY_AMPLITUDE = 0.1
 """Half-width of the uniform random initial velocity per component [m/s] (as the LAMMPS runner)."""
@@ -115,11 +123,17 @@ def machine_info(device) -> dict:
     }
 
 
-def build_solver(n: int, *, horizon_factor: float, device: str, seed: int = 0):
+def build_solver(n: int, *, horizon_factor: float, device: str, seed: int = 0, plastic=False, fracture=False):
     """The benchmark block: n^3 particles, families cut at delta (no partial volumes), random velocities."""
     import pdsim
 
-    material = pdsim.Material(density=DENSITY, youngs_modulus=YOUNGS_MODULUS, poisson_ratio=POISSON_RATIO)
+    material = pdsim.Material(
+        density=DENSITY,
+        youngs_modulus=YOUNGS_MODULUS,
+        poisson_ratio=POISSON_RATIO,
+        yield_stress=YIELD_STRESS if plastic else None,
+        critical_stretch=1.0 if fracture else None,
+    )
     shape = pdsim.box((n * SPACING,) * 3)
     body = pdsim.PeridynamicBody(shape, material, SPACING, horizon_factor=horizon_factor, partial_volumes=False)
     solver = pdsim.SolverPeridynamics([body], device=device)
@@ -179,6 +193,8 @@ def run_benchmark(
     lammps: bool = True,
     breakdown: bool = False,
     seed: int = 0,
+    plastic: bool = False,
+    fracture: bool = False,
 ) -> dict:
     """Times pdsim (and LAMMPS peri/lps when present and ``lammps``) on an n^3 block; returns the figures as a dict."""
     import warp as wp
@@ -190,7 +206,9 @@ def run_benchmark(
     wp.init()
     dev = wp.get_device(device)
     start = time.perf_counter()
-    solver = build_solver(n, horizon_factor=horizon_factor, device=device, seed=seed)
+    solver = build_solver(
+        n, horizon_factor=horizon_factor, device=device, seed=seed, plastic=plastic, fracture=fracture
+    )
     wp.synchronize_device(dev)
     setup_seconds = time.perf_counter() - start  # includes module loads (compile on a cold kernel cache)
     dt = TIME_STEP_SAFETY * solver.stable_time_step()
@@ -215,6 +233,7 @@ def run_benchmark(
         "setup_seconds": setup_seconds,
         "finite": bool(np.all(np.isfinite(x))),
         "surface_correction": solver.bodies[0].surface_correction,
+        "features": sorted(solver.features),
         "kernel_source_sha1": kernel_source_digest(),
         **machine_info(dev),
     }
@@ -230,7 +249,8 @@ def run_benchmark(
         ref = runner.run_lammps_peri(
             n,
             steps,
-            style="lps",
+            style="eps" if plastic else "lps",
+            yield_stress=YIELD_STRESS if plastic else None,
             horizon_factor=horizon_factor,
             spacing=SPACING,
             youngs_modulus=YOUNGS_MODULUS,
@@ -264,6 +284,7 @@ def format_text(r: dict) -> str:
         + f"({r['device_name']}); warp {r['warp_version']}; python {r['python_version']}; {r['date']}",
         f"block     : {n_edge}^3 = {r['particles']} particles, delta = {r['horizon_factor']} h, "
         + f"{r['bonds']} directed bonds ({r['bonds_per_particle']:.1f} per particle)",
+        f"features  : {', '.join(r['features'])}",
         f"pdsim     : {r['steps']} steps in {r['seconds']:.3f} s = {r['ms_per_step']:.3f} ms/step, "
         + f"{r['bond_visits_per_s'] / 1e6:.1f} M bond visits/s (dt {r['dt']:.3g} s, setup {r['setup_seconds']:.2f} s)",
     ]
@@ -303,6 +324,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-lammps", action="store_true", help="skip the LAMMPS peri/lps reference run")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random initial velocities")
     parser.add_argument("--json", action="store_true", help="print one JSON line instead of text")
+    parser.add_argument("--plastic", action="store_true", help="yielding material (LAMMPS runs peri/eps)")
+    parser.add_argument("--fracture", action="store_true", help="breakable bonds (critical stretch 1: none breaks)")
     args = parser.parse_args(argv)
     if args.n < 1 or args.steps < 1:
         parser.error("--n and --steps must be >= 1")
@@ -316,6 +339,8 @@ def main(argv: list[str] | None = None) -> int:
         lammps=not args.no_lammps,
         breakdown=args.breakdown,
         seed=args.seed,
+        plastic=args.plastic,
+        fracture=args.fracture,
     )
     print(json.dumps(result) if args.json else format_text(result))
     if result.get("bonds_match") is False:

@@ -1,0 +1,48 @@
+"""A ductile dog-bone bar pulled apart: it yields, necks at its waist and tears in two.
+
+Run:  python scenes/ductile_bar.py --out ductile_bar.usdc   or   pdsim run scenes/ductile_bar.py --out ductile_bar.usdc
+"""
+
+import numpy as np
+
+import pdsim
+
+
+def dogbone(length=0.4, grip_radius=0.045, gauge_radius=0.038, samples=48):
+    """A turned tensile specimen along x: wide grips, a gauge section and a 3 % waist at the centre where the neck
+    forms (a revolved profile, trimesh.creation.revolve)."""
+    import trimesh
+
+    x = np.linspace(-0.5 * length, 0.5 * length, samples)
+    r = gauge_radius + (grip_radius - gauge_radius) * np.clip((np.abs(x) - 0.08) / 0.06, 0.0, 1.0) ** 2
+    r *= 1.0 - 0.03 * np.exp(-((x / 0.02) ** 2))
+    profile = np.column_stack([np.r_[0.0, r, 0.0], np.r_[x[0], x, x[-1]]])
+    mesh = trimesh.creation.revolve(profile, sections=48)  # about z
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [0.0, 1.0, 0.0]))  # along x
+    return pdsim.shape_from_arrays(mesh.vertices, mesh.faces, name="bar")
+
+
+def build_scene() -> pdsim.Scene:
+    scene = pdsim.Scene(fps=24, frames=14, gravity=(0.0, 0.0, 0.0), name="ductile_bar")
+    metal = pdsim.Material(
+        density=1000.0,
+        youngs_modulus=2.0e6,
+        poisson_ratio=0.3,
+        yield_stress=2.0e4,  # yields at 1 % strain, flows without hardening, so the neck localises
+        failure_plastic_strain=0.6,
+        name="ductile_metal",
+    )
+    bar = scene.add_peridynamic_body(dogbone(), metal, spacing=0.01, damping=5.0)
+    grip = 0.2 - 0.03
+    right = pdsim.HalfSpace((grip, 0.0, 0.0), (1.0, 0.0, 0.0))
+    left = pdsim.HalfSpace((-grip, 0.0, 0.0), (-1.0, 0.0, 0.0))
+    for region, v in ((right, 0.1), (left, -0.1)):
+        bar.set_velocity(region, (v, 0.0, 0.0))
+        bar.set_unbreakable(region)
+    return scene
+
+
+if __name__ == "__main__":
+    from pdsim.cli import run_script
+
+    run_script(build_scene)
