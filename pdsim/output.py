@@ -73,8 +73,27 @@ class MeshHandle:
 
     path: str
     vertex_count: int = 0
+    face_primvar_kinds: dict[str, str] = field(default_factory=dict)
     _cache: UsdCache | None = field(default=None, repr=False)
     _has_topology: bool = field(default=False, repr=False)
+
+
+def _value_type(kind: str):
+    """The Sdf array value type of a primvar kind ("float", "int", "vector3f")."""
+    from pxr import Sdf
+
+    return {
+        "float": Sdf.ValueTypeNames.FloatArray,
+        "int": Sdf.ValueTypeNames.IntArray,
+        "vector3f": Sdf.ValueTypeNames.Vector3fArray,
+    }[kind]
+
+
+def _vt_array(kind: str, values: np.ndarray):
+    """A Vt array of a primvar kind from a checked numpy array."""
+    from pxr import Vt
+
+    return {"float": Vt.FloatArray, "int": Vt.IntArray, "vector3f": Vt.Vec3fArray}[kind].FromNumpy(values)
 
 
 def _check_array(name: str, array, *, shape: tuple[int, ...], shape_text: str, kind: str = "float") -> np.ndarray:
@@ -256,13 +275,8 @@ class UsdCache:
         points.CreateWidthsAttr(Vt.FloatArray.FromNumpy(w))
         points.SetWidthsInterpolation(UsdGeom.Tokens.vertex)
         api = UsdGeom.PrimvarsAPI(points)
-        type_names = {
-            "float": Sdf.ValueTypeNames.FloatArray,
-            "int": Sdf.ValueTypeNames.IntArray,
-            "vector3f": Sdf.ValueTypeNames.Vector3fArray,
-        }
         for pv_name, kind in primvars.items():
-            api.CreatePrimvar(pv_name, type_names[kind], UsdGeom.Tokens.vertex)
+            api.CreatePrimvar(pv_name, _value_type(kind), UsdGeom.Tokens.vertex)
         return PointsHandle(path=path, point_count=int(w.shape[0]), primvar_kinds=primvars, _cache=self, _widths=w)
 
     def write_points(
@@ -310,24 +324,21 @@ class UsdCache:
             label = f"primvar {pv_name!r}"
             if kind == "vector3f":
                 a = _check_array(label, values, shape=(n, 3), shape_text=shape3)
-                value = Vt.Vec3fArray.FromNumpy(a)
-            elif kind == "int":
-                a = _check_array(label, values, shape=(n,), shape_text=f"[point_count] = [{n}]", kind="int")
-                value = Vt.IntArray.FromNumpy(a)
             else:
-                a = _check_array(label, values, shape=(n,), shape_text=f"[point_count] = [{n}]")
-                value = Vt.FloatArray.FromNumpy(a)
-            samples.append((api.GetPrimvar(pv_name).GetAttr(), value))
+                a = _check_array(label, values, shape=(n,), shape_text=f"[point_count] = [{n}]", kind=kind)
+            samples.append((api.GetPrimvar(pv_name).GetAttr(), _vt_array(kind, a)))
         if n:
             r = 0.5 * handle._widths[:, None]
             samples.append((points.GetExtentAttr(), _extent((x - r).min(axis=0), (x + r).max(axis=0))))
         self._pending.setdefault(frame, []).extend(samples)
 
-    def add_mesh(self, name: str) -> MeshHandle:
+    def add_mesh(self, name: str, *, face_primvars: dict[str, str] | None = None) -> MeshHandle:
         """Define a triangle ``UsdGeom.Mesh`` (``subdivisionScheme = none``) at ``/World/<name>``.
 
         Args:
             name: Prim name; made into a valid USD identifier.
+            face_primvars: Per-face (uniform) primvars, ``{name: kind}`` with kind in ``{"float", "int", "vector3f"}``;
+                written with the topology.
 
         Returns:
             Handle for :meth:`write_mesh`.
@@ -335,12 +346,27 @@ class UsdCache:
         self._check_open()
         from pxr import UsdGeom
 
+        kinds = dict(face_primvars or {})
+        for pv, kind in kinds.items():
+            if kind not in _PRIMVAR_KINDS:
+                raise ValueError(f"face primvar {pv!r} has kind {kind!r}; allowed: {', '.join(_PRIMVAR_KINDS)}")
         path = self._define_path(name)
         mesh = UsdGeom.Mesh.Define(self._stage, path)
         mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
-        return MeshHandle(path=path, _cache=self)
+        api = UsdGeom.PrimvarsAPI(mesh)
+        for pv, kind in kinds.items():
+            api.CreatePrimvar(pv, _value_type(kind), UsdGeom.Tokens.uniform)
+        return MeshHandle(path=path, face_primvar_kinds=kinds, _cache=self)
 
-    def write_mesh(self, handle: MeshHandle, frame: int, points: np.ndarray, faces: np.ndarray | None = None) -> None:
+    def write_mesh(
+        self,
+        handle: MeshHandle,
+        frame: int,
+        points: np.ndarray,
+        faces: np.ndarray | None = None,
+        *,
+        face_primvars: dict[str, np.ndarray] | None = None,
+    ) -> None:
         """Time-sample mesh vertex positions and extent at ``frame``, and the topology when ``faces`` is given.
 
         Pass ``faces`` on the first call and on every frame where the topology (or the vertex count) changes; the
@@ -351,6 +377,8 @@ class UsdCache:
             frame: Frame number (time code); must be after the last finished frame.
             points: Vertex positions [stage units], shape [vertex_count, 3].
             faces: Triangles as vertex indices, int shape [triangle_count, 3], values in [0, vertex_count).
+            face_primvars: Values of declared per-face primvars, shape [triangle_count] (or [triangle_count, 3] for
+                vector3f); only together with ``faces``.
 
         Raises:
             ValueError: Wrong shape or values, a vertex count that changes without new faces, or missing faces on the
@@ -372,6 +400,8 @@ class UsdCache:
                     f"points has shape [{nv}, 3] but the current topology has {handle.vertex_count} vertices; "
                     "pass faces when the vertex count changes"
                 )
+            if face_primvars:
+                raise ValueError("face_primvars are written with the topology: pass faces too")
         else:
             f = _check_array("faces", faces, shape=(-1, 3), shape_text="[triangle_count, 3]", kind="int")
             if f.size and (f.min() < 0 or f.max() >= nv):
@@ -380,6 +410,14 @@ class UsdCache:
             samples.append((mesh.GetFaceVertexIndicesAttr(), Vt.IntArray.FromNumpy(f.reshape(-1))))
             handle._has_topology = True
             handle.vertex_count = nv
+            api = UsdGeom.PrimvarsAPI(mesh)
+            for pv, values in (face_primvars or {}).items():
+                kind = handle.face_primvar_kinds.get(pv)
+                if kind is None:
+                    raise ValueError(f"face primvar {pv!r} was not declared in add_mesh({handle.path!r})")
+                shape = (f.shape[0], 3) if kind == "vector3f" else (f.shape[0],)
+                a = _check_array(f"face primvar {pv!r}", values, shape=shape, shape_text="[triangle_count]", kind=kind)
+                samples.append((api.GetPrimvar(pv).GetAttr(), _vt_array(kind, a)))
         lo, hi = (x.min(axis=0), x.max(axis=0)) if nv else (np.zeros(3), np.zeros(3))
         samples.append((mesh.GetExtentAttr(), _extent(lo, hi)))
         self._pending.setdefault(frame, []).extend(samples)

@@ -717,6 +717,8 @@ class SolverPeridynamics:
         self._energy_density = wp.zeros(n, dtype=float, device=d)
         self._check = wp.zeros(2, dtype=float, device=d)
         self._handles = []  # USD prims of the bodies, set by add_outputs
+        self._surfaces = []  # FragmentSurfaces per body, set by add_outputs
+        self._fragments = None  # FragmentTracker, created on first use when some body can break
         self.features = {"elastic"}
         if any(gi != 0.0 for gi in gravity):
             self.features.add("gravity")
@@ -974,22 +976,49 @@ class SolverPeridynamics:
         kinds = {"displacement": "float", "dilatation": "float"}
         if self.model.fracture:
             kinds["damage"] = "float"
+            kinds["fragment"] = "int"
         if self.model.plastic:
             kinds["plastic_strain"] = "float"
         return kinds
 
-    def add_outputs(self, cache):
+    def add_outputs(self, cache, *, surfaces: bool = True):
         """Declares one UsdGeom.Points per body, with widths = spacing and the primvars written per frame
-        (displacement [m], dilatation, and damage / plastic_strain when those features are live)."""
+        (displacement [m], dilatation, and damage / fragment / plastic_strain when those features are live), and,
+        with ``surfaces``, the body's renderable surface ``/World/<body>_surface``: a closed triangle shell per
+        fragment (pdsim/surfaces.py), its topology rewritten only on frames where the fragments changed."""
+        from .surfaces import FragmentSurfaces
+
         self._handles = [
             cache.add_points(
                 b.name, widths=np.full(b.particle_count, b.spacing, dtype=np.float32), primvars=self._primvar_kinds()
             )
             for b in self.bodies
         ]
+        self._surfaces = []
+        if surfaces:
+            self._surfaces = [
+                FragmentSurfaces(b.shape, b.rest_positions, b.spacing, b.name, device=str(self.device))
+                for b in self.bodies
+            ]
+            for surf in self._surfaces:
+                surf.add_outputs(cache)
+
+    def fragment_ids(self) -> np.ndarray:
+        """Fragment id per particle (connected components of live bonds, numbered per body by the body-local index
+        of the fragment's first particle, so ids stay stable over an animation); recomputed only when bonds broke
+        since the last call. Zeros when no body can break."""
+        from .fragments import FragmentTracker
+
+        m = self.model
+        if not m.fracture:
+            return np.zeros(m.particle_count, dtype=np.int32)
+        if self._fragments is None:
+            self._fragments = FragmentTracker(m.family_offsets, m.family_neighbors, m.body_offsets, compact=False)
+        self._fragments.update(self.state.bond_alive)
+        return self._fragments.labels
 
     def write_outputs(self, cache, frame: int):
-        """Writes positions, velocities and the primvars of every body at ``frame``."""
+        """Writes positions, velocities and the primvars of every body at ``frame``, and the surfaces."""
         x = self.positions()
         v = self.velocities()
         values = {
@@ -998,11 +1027,17 @@ class SolverPeridynamics:
         }
         if self.model.fracture:
             values["damage"] = self.damage().astype(np.float32)
+            values["fragment"] = self.fragment_ids()
         if self.model.plastic:
             values["plastic_strain"] = self.plastic_strain().astype(np.float32)
         for i, handle in enumerate(self._handles):
             sl = self.body_slice(i)
             cache.write_points(handle, frame, x[sl], velocities=v[sl], primvars={k: a[sl] for k, a in values.items()})
+        for i, surf in enumerate(self._surfaces):
+            sl = self.body_slice(i)
+            if self.model.fracture:
+                surf.update_topology(values["fragment"][sl])
+            surf.write(cache, frame, x[sl])
 
     # -- host-side views and diagnostics (vectorised numpy) ---------------------------------------------------------
     def positions(self) -> np.ndarray:

@@ -1,0 +1,167 @@
+"""Fragments of a peridynamic body: connected components of its live bonds.
+
+A fragment is a set of particles joined by paths of live (unbroken) bonds. Bonds only ever break, so fragments only
+ever split; :class:`FragmentTracker` recomputes the labels only on frames where the number of live bonds dropped, and
+reports whether the partition actually changed (bonds can break inside a fragment without splitting it).
+
+Labels are numbered **per body**: within each body (a range ``body_offsets[b] : body_offsets[b + 1]`` of the
+concatenated particles) the fragments are numbered in the order of their smallest particle index, so the fragment
+holding the body's first particle is 0. With ``compact=False`` the label of a fragment is instead the body-local index
+of its smallest particle; that number never changes over an animation (the piece keeping a fragment's smallest
+particle keeps its label when the fragment splits), which keeps per-fragment colours stable in a render.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["FragmentTracker", "fragment_labels"]
+
+
+def _as_numpy(array) -> np.ndarray:
+    """A numpy view of a numpy array, a Warp array (``.numpy()``) or a sequence."""
+    return np.asarray(array.numpy() if hasattr(array, "numpy") else array)
+
+
+def fragment_labels(family_offsets, family_neighbors, bond_alive, body_offsets=None, *, compact: bool = True):
+    """Fragment id of every particle: connected components of the graph of live bonds, numbered per body.
+
+    Args:
+        family_offsets: CSR row starts, int shape [particle_count + 1]; the bonds of particle k are
+            ``family_offsets[k]:family_offsets[k + 1]``.
+        family_neighbors: neighbour particle of each bond, int shape [>= bond_count] (entries past
+            ``family_offsets[-1]`` are ignored).
+        bond_alive: per-bond flag, bool or int shape [>= bond_count]; nonzero means alive. A pair of particles is
+            joined when a bond between them is alive in either direction.
+        body_offsets: first particle of each body, int shape [body_count + 1] (``[0, particle_count]`` when None).
+        compact: True numbers each body's fragments 0, 1, ... in the order of their smallest particle index; False
+            labels each fragment by the body-local index of its smallest particle (stable over an animation).
+
+    Returns:
+        Fragment id per particle, int32 shape [particle_count].
+
+    Raises:
+        ValueError: inconsistent array shapes, or a live bond joining two bodies.
+    """
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    offsets = _as_numpy(family_offsets).astype(np.int64, copy=False).ravel()
+    n = offsets.shape[0] - 1
+    if n < 0:
+        raise ValueError("family_offsets must have particle_count + 1 entries")
+    bond_count = int(offsets[-1]) if n > 0 else 0
+    neighbors = _as_numpy(family_neighbors).astype(np.int64, copy=False).ravel()
+    alive = _as_numpy(bond_alive).ravel()
+    if neighbors.shape[0] < bond_count or alive.shape[0] < bond_count:
+        raise ValueError(
+            f"family_neighbors ({neighbors.shape[0]}) and bond_alive ({alive.shape[0]}) need at least "
+            f"family_offsets[-1] = {bond_count} entries"
+        )
+    if body_offsets is None:
+        body_offsets = np.array([0, n], dtype=np.int64)
+    body_offsets = _as_numpy(body_offsets).astype(np.int64, copy=False).ravel()
+    if body_offsets.shape[0] < 2 or body_offsets[0] != 0 or body_offsets[-1] != n or np.any(np.diff(body_offsets) < 0):
+        raise ValueError(f"body_offsets must rise from 0 to particle_count = {n}, got {body_offsets.tolist()}")
+    if n == 0:
+        return np.zeros(0, dtype=np.int32)
+
+    # The families are already a CSR adjacency matrix: keep the live bonds (a prefix count gives the new row starts).
+    live = alive[:bond_count] != 0
+    live_before = np.zeros(bond_count + 1, dtype=np.int64)
+    np.cumsum(live, out=live_before[1:])
+    graph = csr_matrix(
+        (np.ones(int(live_before[-1]), dtype=np.int8), neighbors[:bond_count][live], live_before[offsets]),
+        shape=(n, n),
+    )
+    _, component = connected_components(graph, directed=True, connection="weak")
+    # Smallest particle index of each component (np.unique's first occurrence), and the components ranked by it.
+    _, first = np.unique(component, return_index=True)
+    root = first[component]  # smallest particle index of each particle's component, shape [n]
+    body_of = np.searchsorted(body_offsets, np.arange(n), side="right") - 1
+    if np.any(body_of[root] != body_of):
+        raise ValueError("a live bond joins particles of two different bodies")
+    if not compact:
+        return (root - body_offsets[body_of]).astype(np.int32)
+    # Global rank of each component by its root; a body's components hold consecutive ranks starting at the rank
+    # of the component of its first particle, so subtracting that rank numbers fragments per body.
+    order = np.argsort(first, kind="stable")
+    rank_of_component = np.empty_like(order)
+    rank_of_component[order] = np.arange(order.shape[0])
+    rank = rank_of_component[component]
+    nonempty = np.diff(body_offsets) > 0
+    base = np.zeros(body_offsets.shape[0] - 1, dtype=np.int64)
+    base[nonempty] = rank[body_offsets[:-1][nonempty]]
+    return (rank - base[body_of]).astype(np.int32)
+
+
+class FragmentTracker:
+    """Keeps the fragment labels of all peridynamic bodies of a solver up to date, cheaply.
+
+    :meth:`update` counts the live bonds (one vectorised pass); only when that number dropped since the previous
+    call does it recompute the connected components. It returns True when the labels changed.
+
+    Args:
+        family_offsets: CSR row starts, int shape [particle_count + 1] (numpy or Warp array).
+        family_neighbors: neighbour of each bond, int shape [>= bond_count].
+        body_offsets: first particle of each body, int shape [body_count + 1] (None: one body).
+        compact: numbering of the labels (see :func:`fragment_labels`).
+
+    Attributes:
+        labels: fragment id per particle, int32 shape [particle_count]; all zeros before the first update
+            (one fragment per body: the intact state).
+        version: number of times the labels changed (0 for the intact state).
+    """
+
+    def __init__(self, family_offsets, family_neighbors, body_offsets=None, *, compact: bool = True):
+        self.family_offsets = _as_numpy(family_offsets).astype(np.int64).ravel()
+        n = self.family_offsets.shape[0] - 1
+        self.bond_count = int(self.family_offsets[-1]) if n > 0 else 0
+        self.family_neighbors = _as_numpy(family_neighbors).astype(np.int64).ravel()[: self.bond_count]
+        self.body_offsets = (
+            np.array([0, n], dtype=np.int64)
+            if body_offsets is None
+            else _as_numpy(body_offsets).astype(np.int64).ravel()
+        )
+        self.compact = bool(compact)
+        self.live_bond_count: int | None = None
+        # Intact: one fragment per body, label 0 in both numberings (each body's first particle has local index 0).
+        self.labels = np.zeros(n, dtype=np.int32)
+        self.version = 0
+
+    @property
+    def body_count(self) -> int:
+        return self.body_offsets.shape[0] - 1
+
+    def body_labels(self, body: int) -> np.ndarray:
+        """Labels of the particles of ``body``, int32 shape [body particle_count] (a view)."""
+        return self.labels[self.body_offsets[body] : self.body_offsets[body + 1]]
+
+    def fragment_count(self, body: int) -> int:
+        """Number of fragments of ``body`` (1 while it is intact)."""
+        return int(np.unique(self.body_labels(body)).shape[0])
+
+    def update(self, bond_alive, *, live_bond_count: int | None = None) -> bool:
+        """Recomputes the labels if bonds broke since the previous call.
+
+        Args:
+            bond_alive: per-bond flag, bool or int shape [>= bond_count] (numpy or Warp array); nonzero is alive.
+            live_bond_count: number of live bonds if the caller already knows it (e.g. reduced on the device);
+                counted here otherwise.
+
+        Returns:
+            True when the labels differ from those returned by the previous call.
+        """
+        alive = _as_numpy(bond_alive).ravel()[: self.bond_count]
+        count = int(np.count_nonzero(alive)) if live_bond_count is None else int(live_bond_count)
+        if count == self.live_bond_count:
+            return False
+        self.live_bond_count = count
+        labels = fragment_labels(
+            self.family_offsets, self.family_neighbors, alive, self.body_offsets, compact=self.compact
+        )
+        if np.array_equal(labels, self.labels):
+            return False
+        self.labels = labels
+        self.version += 1
+        return True
