@@ -9,6 +9,7 @@ __version__ = "0.1.0"
 
 from .errors import FeatureNotAvailableError, GeometryError, InstabilityError, ParameterError, PdsimError
 from .geometry import SolidShape, box, cylinder, load_mesh, shape_from_arrays, sphere
+from .contact import BoxProjectile, MeshCollider, MeshProjectile, SphereProjectile
 from .materials import Anisotropy, Material
 from .peridynamics import GroundPlane, PeridynamicBody, SolverPeridynamics
 from .regions import BoxRegion, HalfSpace, SphereRegion
@@ -16,6 +17,7 @@ from .scene import RunReport, Scene
 
 __all__ = [
     "Anisotropy",
+    "BoxProjectile",
     "BoxRegion",
     "FeatureNotAvailableError",
     "GeometryError",
@@ -23,6 +25,8 @@ __all__ = [
     "HalfSpace",
     "InstabilityError",
     "Material",
+    "MeshCollider",
+    "MeshProjectile",
     "ParameterError",
     "PdsimError",
     "PeridynamicBody",
@@ -30,6 +34,7 @@ __all__ = [
     "Scene",
     "SolidShape",
     "SolverPeridynamics",
+    "SphereProjectile",
     "SphereRegion",
     "__version__",
     "box",

@@ -104,9 +104,11 @@ class PeridynamicBody:
         return len(self.rest_positions)
 
     @classmethod
-    def build_solver(cls, bodies, *, device, gravity, ground):
+    def build_solver(cls, bodies, *, device, gravity, ground, contact=None, colliders=()):
         """The scene's solver for all its peridynamic bodies."""
-        return SolverPeridynamics(bodies, device=device, gravity=gravity, ground=ground)
+        return SolverPeridynamics(
+            bodies, device=device, gravity=gravity, ground=ground, contact=contact, colliders=colliders
+        )
 
     @property
     def horizon(self) -> float:
@@ -674,12 +676,24 @@ class SolverPeridynamics:
         device: Warp device ("cpu", "cuda", "cuda:0", ...).
         gravity: acceleration [m/s^2], 3 numbers.
         ground: optional ground plane collider.
+        contact: short-range repulsion between particles that share no live bond (separate bodies, fragments):
+            None or False (off), True (defaults) or a dict of ParticleContact options (pdsim/contact.py).
+        colliders: static mesh colliders and kinematic projectiles (pdsim/contact.py).
 
     The step launches: kick-drift (+ ground plane), dilatation, force density, kick. No allocation happens per step.
     ``features`` lists the optional parts that are live (and launched) for this scene.
     """
 
-    def __init__(self, bodies: list[PeridynamicBody], *, device="cpu", gravity=(0.0, 0.0, 0.0), ground=None):
+    def __init__(
+        self,
+        bodies: list[PeridynamicBody],
+        *,
+        device="cpu",
+        gravity=(0.0, 0.0, 0.0),
+        ground=None,
+        contact=None,
+        colliders=(),
+    ):
         import warp as wp
 
         if not bodies:
@@ -713,6 +727,13 @@ class SolverPeridynamics:
             self.state.bond_plastic = wp.zeros(max(m.plastic_bond_count, 1), dtype=float, device=d)
             self.state.eqps = wp.zeros(n, dtype=float, device=d)
         self._kernels = make_step_kernels(fracture=m.fracture, plastic=m.plastic)
+        self.colliders = list(colliders)
+        self.contact = None
+        if contact is not None and contact is not False:
+            from .contact import ParticleContact
+
+            options = {} if contact is True else dict(contact)
+            self.contact = ParticleContact.from_bodies(self.bodies, device=self.device, **options)
         self._dummy_u8, self._dummy_f, self._dummy_i = _placeholders(d)
         self._energy_density = wp.zeros(n, dtype=float, device=d)
         self._check = wp.zeros(2, dtype=float, device=d)
@@ -732,6 +753,10 @@ class SolverPeridynamics:
             self.features.add("plasticity")
         if any(b.material.anisotropy is not None for b in self.bodies):
             self.features.add("anisotropy")
+        if self.contact is not None:
+            self.features.add("contact")
+        if self.colliders:
+            self.features.add("colliders")
         self.time = 0.0
         self.step_count = 0
         self._update_accelerations(0.0)
@@ -764,7 +789,8 @@ class SolverPeridynamics:
         ok = s > 0
         if not ok.any():
             return math.inf
-        return float(np.sqrt(2.0 * m.density_host[ok] / s[ok]).min())
+        dt_bonds = float(np.sqrt(2.0 * m.density_host[ok] / s[ok]).min())
+        return dt_bonds if self.contact is None else min(dt_bonds, self.contact.stable_time_step())
 
     # -- stepping ------------------------------------------------------------------------------------------------
     def _feature_arrays(self):
@@ -857,6 +883,8 @@ class SolverPeridynamics:
             ],
             device=self.device,
         )
+        if self.contact is not None:
+            self.contact.apply(positions, s.velocities, s.force_density, m.kind)
 
     def _update_accelerations(self, dt: float):
         import warp as wp
@@ -920,6 +948,8 @@ class SolverPeridynamics:
                 ],
                 device=self.device,
             )
+        for collider in self.colliders:
+            collider.apply(s.positions, s.velocities, m.radius, m.kind, self.time + dt, dt)
         self._update_accelerations(dt)
         self.time += dt
         self.step_count += 1
@@ -961,16 +991,20 @@ class SolverPeridynamics:
     def bond_count(self) -> int:
         return self.model.bond_count
 
+    def contact_energy(self) -> float:
+        """Contact penalty energy [J] (0 without contact)."""
+        return 0.0 if self.contact is None else self.contact.potential_energy(self.state.positions)
+
     def speed_scale(self) -> float:
-        """Largest of the bodies' P-wave speeds, initial speeds and prescribed speeds [m/s]."""
-        return max(
-            max(
+        """Largest of the bodies' P-wave speeds, initial speeds, prescribed speeds and projectile speeds [m/s]."""
+        speeds = [float(np.linalg.norm(getattr(c, "velocity", np.zeros(3)))) for c in self.colliders]
+        for b in self.bodies:
+            speeds += [
                 b.material.p_wave_speed,
                 float(np.abs(b.initial_velocity).max(initial=0.0)),
                 float(np.abs(b.prescribed_velocity).max(initial=0.0)),
-            )
-            for b in self.bodies
-        )
+            ]
+        return max(speeds)
 
     def _primvar_kinds(self) -> dict:
         kinds = {"displacement": "float", "dilatation": "float"}

@@ -81,6 +81,8 @@ class Scene:
         self.name = name
         self.bodies: list = []
         self.ground: GroundPlane | None = None
+        self.contact: bool | dict | None = None  # None: automatic (on with several bodies or breakable ones)
+        self.colliders: list = []
 
     # -- building -----------------------------------------------------------------------------------------------
     def add_body(self, body):
@@ -103,6 +105,25 @@ class Scene:
         self.ground = GroundPlane(normal=UP_AXES[self.up_axis], offset=h, friction=mu)
         return self.ground
 
+    def enable_contact(self, enabled: bool = True, **options) -> None:
+        """Short-range repulsion between particles that share no live bond (separate bodies, fragments). Automatic
+        by default: on when the scene has several bodies or a body that can break. ``options`` go to
+        pdsim.contact.ParticleContact (e.g. friction=0.3, distance_factor=1.35)."""
+        self.contact = (options or True) if enabled else False
+
+    def add_collider(self, collider):
+        """Adds a static MeshCollider or a kinematic projectile (SphereProjectile, BoxProjectile, MeshProjectile)."""
+        if not callable(getattr(collider, "apply", None)):
+            raise ParameterError("collider", collider, "a pdsim collider (MeshCollider, SphereProjectile, ...)")
+        self.colliders.append(collider)
+        return collider
+
+    def _contact_setting(self, bodies):
+        if self.contact is not None:
+            return self.contact
+        breakable = any(getattr(b, "fractures", False) for b in bodies)
+        return True if (len(bodies) > 1 or breakable) else None
+
     # -- running ------------------------------------------------------------------------------------------------
     def build_solvers(self, *, device: str | None = None) -> list:
         """One solver per body type, each over all bodies of that type (CUDA when present unless ``device`` given).
@@ -116,7 +137,14 @@ class Scene:
             groups.setdefault(type(b), []).append(b)
         dev = device or default_device()
         return [
-            kind.build_solver(bodies, device=dev, gravity=self.gravity, ground=self.ground)
+            kind.build_solver(
+                bodies,
+                device=dev,
+                gravity=self.gravity,
+                ground=self.ground,
+                contact=self._contact_setting(bodies),
+                colliders=self.colliders,
+            )
             for kind, bodies in groups.items()
         ]
 
