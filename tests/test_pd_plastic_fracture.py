@@ -253,3 +253,43 @@ def test_anisotropic_crack_follows_weak_plane(tilt_deg):
     layer_normal = R @ np.array([0.0, 0.0, 1.0])
     angle = math.degrees(math.acos(min(1.0, abs(float(orientation @ layer_normal)))))
     assert angle < 15.0
+
+
+def test_brittle_wall_shatters_ductile_wall_bends_then_tears():
+    """The teaser's first and third walls (scenes/four_walls.py) hit by the same 6 m/s ball: the brittle wall (its
+    yield stress 2 MPa is never reached) breaks into at least 5 fragments of 3 or more particles with no plastic
+    strain (< 1e-3); the ductile wall yields and bends permanently (plastic strain > 0.1 and a deflection of more
+    than 2 spacings) before it tears, and it does tear (2 or more fragments)."""
+    import importlib.util
+    import pathlib
+
+    path = pathlib.Path(__file__).parents[1] / "scenes" / "four_walls.py"
+    spec = importlib.util.spec_from_file_location("four_walls", path)
+    four_walls = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(four_walls)
+    brittle, _, ductile, _ = four_walls.wall_materials()
+    brittle = pdsim.Material(density=brittle.density, youngs_modulus=brittle.youngs_modulus,
+                             poisson_ratio=brittle.poisson_ratio, critical_stretch=brittle.critical_stretch,
+                             yield_stress=2.0e6, name="brittle")
+    scene = four_walls.build_scene(materials=[brittle, ductile])
+    solver = scene.build_solver(device="cpu")
+    assert {"fracture", "plasticity", "contact", "colliders"} <= solver.features
+    dt = 0.7 * solver.stable_time_step()
+    steps = round(1.0 / 240.0 / dt)
+    walls = {b.name: solver.slice_of(b) for b in solver.bodies}
+    X = solver.model.rest_host
+    most_brittle_fragments, ductile_before_tear, ductile_torn = 0, None, False
+    for _ in range(32):
+        solver.simulate(dt, steps)
+        labels, eqps, x = solver.fragment_ids(), solver.plastic_strain(), solver.positions()
+        counts = {name: int((np.bincount(labels[sl]) >= 3).sum()) for name, sl in walls.items()}
+        most_brittle_fragments = max(most_brittle_fragments, counts["brittle"])
+        assert eqps[walls["brittle"]].max() < 1.0e-3
+        sl = walls["ductile"]
+        if counts["ductile"] >= 2:
+            ductile_torn = True
+            break
+        ductile_before_tear = (eqps[sl].max(), np.abs(x[sl, 0] - X[sl, 0]).max())
+    assert most_brittle_fragments >= 5
+    assert ductile_torn
+    assert ductile_before_tear[0] > 0.1 and ductile_before_tear[1] > 2.0 * 0.01
