@@ -10,9 +10,10 @@ def mark_points_inside_mesh(
     max_dist: float,
     inside: wp.array(dtype=wp.int32),
 ):
-    """inside[i] = 1 when points[i] lies strictly inside the closed mesh (generalised winding number > 0.5)."""
+    """inside[i] = 1 when points[i] lies strictly inside the closed mesh (generalised winding number > 0.5; the mesh
+    must be built with support_winding_number=True)."""
     i = wp.tid()
-    q = wp.mesh_query_point_sign_winding_number(mesh, points[i], max_dist, 0.5, 2.0)
+    q = wp.mesh_query_point_sign_winding_number(mesh, points[i], max_dist, 2.0, 0.5)  # accuracy 2, threshold 0.5
     inside[i] = 0
     if q.result:
         if q.sign < 0.0:

@@ -10,6 +10,19 @@ __version__ = "0.1.0"
 from .errors import FeatureNotAvailableError, GeometryError, InstabilityError, ParameterError, PdsimError
 from .geometry import SolidShape, box, cylinder, load_mesh, shape_from_arrays, sphere
 from .contact import BoxProjectile, MeshCollider, MeshProjectile, SphereProjectile
+from .lattice import (
+    Lattice,
+    LatticeBody,
+    LatticeFracture,
+    LatticeKind,
+    LatticeNeighbourhood,
+    LatticeRule,
+    LatticeRuleCentroid,
+    LatticeRuleDistanceWeighted,
+    LatticeRuleMixedCoordinate,
+    LatticeType,
+)
+from .lattice_solver import SolverLattice
 from .materials import Anisotropy, Material
 from .peridynamics import GroundPlane, PeridynamicBody, SolverPeridynamics
 from .regions import BoxRegion, HalfSpace, SphereRegion
@@ -24,6 +37,16 @@ __all__ = [
     "GroundPlane",
     "HalfSpace",
     "InstabilityError",
+    "Lattice",
+    "LatticeBody",
+    "LatticeFracture",
+    "LatticeKind",
+    "LatticeNeighbourhood",
+    "LatticeRule",
+    "LatticeRuleCentroid",
+    "LatticeRuleDistanceWeighted",
+    "LatticeRuleMixedCoordinate",
+    "LatticeType",
     "Material",
     "MeshCollider",
     "MeshProjectile",
@@ -33,6 +56,7 @@ __all__ = [
     "RunReport",
     "Scene",
     "SolidShape",
+    "SolverLattice",
     "SolverPeridynamics",
     "SphereProjectile",
     "SphereRegion",

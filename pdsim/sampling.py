@@ -39,6 +39,7 @@ def points_inside(shape: SolidShape, points: np.ndarray, *, device: str = "cpu")
         mesh = wp.Mesh(
             points=wp.array(shape.vertices.astype(np.float32), dtype=wp.vec3),
             indices=wp.array(shape.faces.astype(np.int32).ravel(), dtype=wp.int32),
+            support_winding_number=True,
         )
         pts = wp.array(points.astype(np.float32), dtype=wp.vec3)
         inside = wp.zeros(len(points), dtype=wp.int32)

@@ -1,0 +1,550 @@
+"""The solver of the position-based particle lattice: steps, diagnostics (PE1, PE2, trajectories, fragments) and USD
+output for the lattice bodies of a scene (pdsim/lattice.py describes the model, kernels/lattice.py the step).
+
+Scene protocol: a lattice is step-based and has no time step of its own, so ``stable_time_step()`` is ``math.inf``
+(it never limits the other bodies of a scene) and every ``simulate(dt, steps)`` call, which ``Scene.run`` makes once
+per frame, advances each body by its ``steps_per_frame`` lattice steps whatever ``dt`` and ``steps`` are.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .errors import InstabilityError, ParameterError
+from .lattice import LatticeBody, LatticeKind
+
+__all__ = ["SolverLattice"]
+
+_TRACK_CHUNK = 256
+
+
+class _LatticeRuntime:
+    """Device arrays and the step sequence of one lattice body (all launches are per body)."""
+
+    def __init__(self, body: LatticeBody, device):
+        import warp as wp
+
+        from .kernels import lattice as kl
+
+        self.body = body
+        self.device = device
+        n = body.particle_count
+        self.n = n
+        f32 = np.float32
+
+        def vec3(a):
+            return wp.array(np.asarray(a, dtype=f32).reshape(-1, 3), dtype=wp.vec3, device=device)
+
+        def i32(a):
+            return wp.array(np.asarray(a, dtype=np.int32), dtype=wp.int32, device=device)
+
+        def flt(a):
+            return wp.array(np.asarray(a, dtype=f32), dtype=float, device=device)
+
+        self.rest_host = body.rest_positions
+        self.rest = vec3(body.rest_positions)
+        self.kind = i32(body.kind)
+        self.group = i32(body.leader_group)
+        paths = body.leader_paths
+        if paths:
+            self.key_offsets = i32(np.concatenate([[0], np.cumsum([len(p.steps) for p in paths])]))
+            self.key_step = i32(np.concatenate([p.steps for p in paths]))
+            self.key_disp = vec3(np.concatenate([p.displacements for p in paths]))
+            self.group_velocity = vec3(np.stack([p.velocity_after for p in paths]))
+        else:
+            self.key_offsets, self.key_step = i32([0, 1]), i32([0])
+            self.key_disp, self.group_velocity = vec3(np.zeros(3)), vec3(np.zeros(3))
+        self.kind_host = body.kind.copy()  # mirror of ``kind`` (changes only at category-change events)
+        self.events: dict[int, list] = {}
+        for c in body.kind_changes:
+            self.events.setdefault(c.step, []).append((i32(c.indices), c.kind, c.group, c.indices))
+        self._update_leader_ids()
+
+        self.row_offsets = i32(body.row_offsets)
+        self.link_neighbor = i32(body.link_neighbor if body.link_count else [0])
+        self.link_offset = wp.array(
+            body.link_offset if body.link_count else np.zeros(1, np.uint8), dtype=wp.uint8, device=device
+        )
+        self.fracture = body.fracture is not None
+        self.link_alive = wp.array(
+            np.ones(max(body.link_count, 1) if self.fracture else 1, dtype=np.uint8), dtype=wp.uint8, device=device
+        )
+        self.offset_delta = vec3(body.offset_delta)
+        self.offset_weight = flt(body.offset_weight)
+        self.offset_shell = i32(body.offset_shell)
+        self.offset_length = flt(body.offset_length)
+        if self.fracture:
+            d1, d2 = body.fracture.thresholds()
+            self.offset_threshold = flt(np.where(body.offset_shell == 0, d1, d2))
+            s = body.fracture.fictitious_distance
+            self.fictitious_scale = 1.0 if s is None else float(s)
+            ghosts = s is not None
+        else:
+            self.offset_threshold = flt(np.zeros(len(body.offset_delta)))
+            self.fictitious_scale = 1.0
+            ghosts = False
+        self.frame_offsets = i32(body.frame_offsets)
+        self.frame_sources = i32(body.frame_sources if len(body.frame_sources) else [0])
+        self.has_frame = body.frame_count > 0
+        self.frame_lag = body.frame_update == "previous"
+
+        weight_fn, update_fn = body.rule.warp_functions()
+        self.follow_kernel = kl.make_follow_kernel(weight_fn, update_fn, self.fracture, ghosts)
+        scalars, axis, origin = body.rule.parameters(body)
+        p = kl.LatticeRuleParams()
+        p.scalars = wp.vec4(*[float(v) for v in scalars])
+        p.axis = wp.vec3(*[float(v) for v in axis])
+        p.origin = wp.vec3(*[float(v) for v in origin])
+        self.params = p
+
+        self.u_cur = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.u_next = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.u_prev = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.broken_total = wp.zeros(1, dtype=wp.int32, device=device)
+        self.pe1 = wp.zeros(n, dtype=float, device=device)
+        self.pe1_intact = wp.zeros(n, dtype=float, device=device)
+        self.broken = wp.zeros(n, dtype=wp.int32, device=device)
+        self.label = wp.zeros(n, dtype=wp.int32, device=device)
+        self.changed = wp.zeros(1, dtype=wp.int32, device=device)
+        self._check = wp.zeros(2, dtype=float, device=device)
+        self._fragments = None  # (key, labels) of the last fragment labelling
+
+        self.tracked = np.asarray(body.tracked, dtype=np.int64)
+        t = len(self.tracked)
+        self.track_ids = i32(self.tracked if t else [0])
+        self.track_u = wp.zeros((_TRACK_CHUNK, max(t, 1)), dtype=wp.vec3, device=device)
+        self.track_pe1 = wp.zeros((_TRACK_CHUNK, max(t, 1)), dtype=float, device=device)
+        self.track_slot = 0
+        self.track_host_u: list[np.ndarray] = []
+        self.track_host_pe1: list[np.ndarray] = []
+        self.step_count = 0
+        self._record_tracks()
+
+    # -- stepping --------------------------------------------------------------------------------------------------
+    def step(self):
+        import warp as wp
+
+        from .kernels import lattice as kl
+
+        t = self.step_count + 1
+        d = self.device
+        events = self.events.get(t, ())
+        for ids, kind, group, host_ids in events:
+            wp.launch(
+                kl.lattice_set_kind, dim=len(host_ids), inputs=[ids, kind, group, self.kind, self.group], device=d
+            )
+            self.kind_host[host_ids] = kind
+        if events:
+            self._update_leader_ids()
+        if self.leader_count:
+            wp.launch(
+                kl.lattice_move_leaders,
+                dim=self.leader_count,
+                inputs=[
+                    t,
+                    self.leader_ids,
+                    self.group,
+                    self.key_offsets,
+                    self.key_step,
+                    self.key_disp,
+                    self.group_velocity,
+                    self.u_cur,
+                    self.u_next,
+                ],
+                device=d,
+            )
+        wp.launch(
+            self.follow_kernel,
+            dim=self.n,
+            inputs=[
+                self.rest,
+                self.kind,
+                self.row_offsets,
+                self.link_neighbor,
+                self.link_offset,
+                self.link_alive,
+                self.offset_delta,
+                self.offset_weight,
+                self.offset_shell,
+                self.fictitious_scale,
+                self.params,
+                self.u_cur,
+                self.u_next,
+            ],
+            device=d,
+        )
+        if self.has_frame:
+            wp.launch(
+                kl.lattice_copy_frame,
+                dim=self.body.frame_count,
+                inputs=[
+                    self.body.body_count,
+                    self.frame_offsets,
+                    self.frame_sources,
+                    self.u_cur if self.frame_lag else self.u_next,
+                    self.u_next,
+                ],
+                device=d,
+            )
+        if self.fracture:
+            wp.launch(
+                kl.lattice_break_links,
+                dim=self.n,
+                inputs=[
+                    self.row_offsets,
+                    self.link_neighbor,
+                    self.link_offset,
+                    self.offset_delta,
+                    self.offset_threshold,
+                    self.u_next,
+                    self.link_alive,
+                    self.broken_total,
+                ],
+                device=d,
+            )
+        self.u_cur, self.u_next = self.u_next, self.u_cur
+        self.step_count = t
+        self._record_tracks()
+
+    def _update_leader_ids(self):
+        import warp as wp
+
+        ids = np.nonzero(self.kind_host == int(LatticeKind.LEADER))[0].astype(np.int32)
+        self.leader_count = len(ids)
+        self.leader_ids = wp.array(ids if len(ids) else np.zeros(1, np.int32), dtype=wp.int32, device=self.device)
+
+    def run(self, steps: int):
+        import warp as wp
+
+        for i in range(steps):
+            if i == steps - 1:
+                wp.copy(self.u_prev, self.u_cur)
+            self.step()
+
+    def _record_tracks(self):
+        import warp as wp
+
+        from .kernels import lattice as kl
+
+        if len(self.tracked) == 0:
+            return
+        if self.track_slot == _TRACK_CHUNK:
+            self._flush_tracks()
+        wp.launch(
+            kl.lattice_record_tracks,
+            dim=len(self.tracked),
+            inputs=[
+                self.track_ids,
+                self.row_offsets,
+                self.link_neighbor,
+                self.link_offset,
+                self.offset_delta,
+                self.offset_length,
+                self.u_cur,
+                self.track_slot,
+                self.track_u,
+                self.track_pe1,
+            ],
+            device=self.device,
+        )
+        self.track_slot += 1
+
+    def _flush_tracks(self):
+        k = self.track_slot
+        if k:
+            self.track_host_u.append(self.track_u.numpy()[:k].astype(np.float64))
+            self.track_host_pe1.append(self.track_pe1.numpy()[:k].astype(np.float64))
+        self.track_slot = 0
+
+    # -- diagnostics -----------------------------------------------------------------------------------------------
+    def displacements(self) -> np.ndarray:
+        return self.u_cur.numpy().astype(np.float64)
+
+    def pseudo_energy(self):
+        import warp as wp
+
+        from .kernels import lattice as kl
+
+        wp.launch(
+            kl.lattice_pseudo_energy,
+            dim=self.n,
+            inputs=[
+                self.row_offsets,
+                self.link_neighbor,
+                self.link_offset,
+                self.link_alive,
+                int(self.fracture),
+                self.offset_delta,
+                self.offset_length,
+                self.u_cur,
+                self.pe1,
+                self.pe1_intact,
+                self.broken,
+            ],
+            device=self.device,
+        )
+        return (
+            self.pe1.numpy().astype(np.float64),
+            self.pe1_intact.numpy().astype(np.float64),
+            self.broken.numpy().astype(np.int64),
+        )
+
+    def fragments(self) -> np.ndarray:
+        import warp as wp
+
+        from .kernels import lattice as kl
+
+        key = (int(self.broken_total.numpy()[0]), self.kind_host.tobytes())
+        if self._fragments is not None and self._fragments[0] == key:
+            return self._fragments[1].copy()  # nothing broke and no category changed since the last labelling
+        d = self.device
+        wp.launch(kl.lattice_label_init, dim=self.n, inputs=[self.kind, self.label], device=d)
+        for _ in range(self.n + 1):
+            self.changed.zero_()
+            wp.launch(
+                kl.lattice_label_propagate,
+                dim=self.n,
+                inputs=[
+                    self.kind,
+                    self.row_offsets,
+                    self.link_neighbor,
+                    self.link_alive,
+                    int(self.fracture),
+                    self.label,
+                    self.changed,
+                ],
+                device=d,
+            )
+            if int(self.changed.numpy()[0]) == 0:
+                break
+        lab = self.label.numpy().astype(np.int64)
+        out = np.full(self.n, -1, dtype=np.int64)
+        ok = lab >= 0
+        out[ok] = np.unique(lab[ok], return_inverse=True)[1]
+        self._fragments = (key, out)
+        return out.copy()
+
+    def check(self) -> tuple[float, bool]:
+        import warp as wp
+
+        from .kernels import lattice as kl
+
+        self._check.zero_()
+        wp.launch(kl.lattice_check_finite, dim=self.n, inputs=[self.u_cur, self._check], device=self.device)
+        umax, bad = self._check.numpy()
+        return float(umax), bool(bad > 0)
+
+
+class SolverLattice:
+    """Steps the lattice bodies of a scene and writes them to a USD cache.
+
+    Args:
+        bodies: the LatticeBody objects (each keeps its own arrays; they never interact).
+        device: Warp device ("cpu", "cuda", ...).
+
+    All bodies of one solver must have the same ``steps_per_frame``.
+    """
+
+    def __init__(self, bodies: list[LatticeBody], *, device="cpu"):
+        import warp as wp
+
+        if not bodies or not all(isinstance(b, LatticeBody) for b in bodies):
+            raise ParameterError("bodies", bodies, "at least one LatticeBody")
+        spf = {b.steps_per_frame for b in bodies}
+        if len(spf) != 1:
+            raise ParameterError("steps_per_frame", sorted(spf), "the same value for every lattice body of a scene")
+        self.bodies = list(bodies)
+        self.steps_per_frame = spf.pop()
+        self.device = wp.get_device(device)
+        self._runtimes = [_LatticeRuntime(b, self.device) for b in self.bodies]
+        self._handles = []
+        self.features = {"lattice"}
+        if any(b.fracture is not None for b in self.bodies):
+            self.features.add("fracture")
+        if any(b.frame_count for b in self.bodies):
+            self.features.add("frame")
+
+    # -- stepping --------------------------------------------------------------------------------------------------
+    @property
+    def step_count(self) -> int:
+        """Lattice steps done so far."""
+        return self._runtimes[0].step_count
+
+    def step(self):
+        """One lattice step of every body."""
+        for r in self._runtimes:
+            r.step()
+
+    def run_steps(self, steps: int):
+        """``steps`` lattice steps of every body (PE2 then compares the last two configurations)."""
+        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
+            raise ParameterError("steps", steps, "an integer >= 0")
+        for r in self._runtimes:
+            r.run(int(steps))
+
+    def simulate(self, dt: float, steps: int):
+        """One frame of a scene: ``steps_per_frame`` lattice steps (``dt`` and ``steps`` are not used: a lattice is
+        step-based)."""
+        self.run_steps(self.steps_per_frame)
+
+    def stable_time_step(self) -> float:
+        """math.inf: a lattice step has no stability limit and does not constrain the scene's time step."""
+        return math.inf
+
+    def speed_scale(self) -> float:
+        """0 m/s: lattice particles have no velocity (see check_state)."""
+        return 0.0
+
+    def check_state(self, speed_limit: float):
+        """Raises InstabilityError when a displacement is not finite or exceeds 1000 times the body's size (possible
+        with a large mixed-coordinate K or relaxation near 2)."""
+        for r in self._runtimes:
+            umax, bad = r.check()
+            ext = r.rest_host.max(axis=0) - r.rest_host.min(axis=0)
+            size = float(np.linalg.norm(ext)) + r.body.spacing
+            if bad or umax > 1.0e3 * size:
+                what = "non-finite displacements" if bad else f"a displacement of {umax:.3g} m"
+                raise InstabilityError(
+                    f"lattice body '{r.body.name}' diverged at step {r.step_count}: {what}; lower the rule's k or "
+                    "relaxation"
+                )
+
+    # -- scene integration -----------------------------------------------------------------------------------------
+    @property
+    def particle_count(self) -> int:
+        """All points of all bodies (frame points included)."""
+        return sum(b.particle_count for b in self.bodies)
+
+    @property
+    def bond_count(self) -> int:
+        """Directed neighbour links of all bodies."""
+        return sum(b.link_count for b in self.bodies)
+
+    def add_outputs(self, cache):
+        """One UsdGeom.Points per body with primvars kind (0 follower, 1 leader, 2 frame), pe1, pe1_intact [m^2],
+        pe2, displacement [m], broken_links and, for bodies with fracture, fragment (-1 for frame points)."""
+        self._handles = []
+        for b in self.bodies:
+            primvars = {
+                "kind": "int",
+                "pe1": "float",
+                "pe1_intact": "float",
+                "pe2": "float",
+                "displacement": "float",
+                "broken_links": "int",
+            }
+            if b.fracture is not None:
+                primvars["fragment"] = "int"
+            self._handles.append(
+                cache.add_points(b.name, widths=np.full(b.particle_count, b.point_width, np.float32), primvars=primvars)
+            )
+
+    def write_outputs(self, cache, frame: int):
+        """Writes positions and primvars of every body at ``frame``."""
+        for i, (r, handle) in enumerate(zip(self._runtimes, self._handles, strict=True)):
+            u = r.displacements()
+            pe1, pe1_intact, broken = r.pseudo_energy()
+            primvars = {
+                "kind": self.kinds(i),
+                "pe1": pe1,
+                "pe1_intact": pe1_intact,
+                "pe2": self.pe2(i),
+                "displacement": np.linalg.norm(u, axis=1),
+                "broken_links": broken,
+            }
+            if r.fracture:
+                primvars["fragment"] = r.fragments()
+            cache.write_points(handle, frame, r.rest_host + u, primvars=primvars)
+
+    # -- host views ------------------------------------------------------------------------------------------------
+    def _rt(self, body) -> _LatticeRuntime:
+        if isinstance(body, LatticeBody):
+            for r in self._runtimes:
+                if r.body is body:
+                    return r
+            raise ParameterError("body", body.name, "a body of this solver")
+        if isinstance(body, bool) or not isinstance(body, (int, np.integer)) or not 0 <= body < len(self._runtimes):
+            raise ParameterError("body", body, f"a LatticeBody of this solver or an index in [0, {len(self.bodies)})")
+        return self._runtimes[int(body)]
+
+    def positions(self, body=0) -> np.ndarray:
+        """Current positions X + u [m], shape [particle_count, 3], float64."""
+        r = self._rt(body)
+        return r.rest_host + r.displacements()
+
+    def displacements(self, body=0) -> np.ndarray:
+        """Current displacements u [m], shape [particle_count, 3]."""
+        return self._rt(body).displacements()
+
+    def set_displacements(self, displacements, body=0):
+        """Overwrites the current displacements u [m] of a body (shape [particle_count, 3]); the previous
+        configuration (PE2) becomes the old current one. For diagnostics and tests: the rules apply from the next
+        step."""
+        import warp as wp
+
+        r = self._rt(body)
+        u = np.asarray(displacements, dtype=np.float64)
+        if u.shape != (r.n, 3) or not np.all(np.isfinite(u)):
+            raise ParameterError("displacements", u.shape, f"finite values of shape ({r.n}, 3) [m]")
+        wp.copy(r.u_prev, r.u_cur)
+        r.u_cur.assign(wp.array(u.astype(np.float32), dtype=wp.vec3, device=self.device))
+
+    def kinds(self, body=0) -> np.ndarray:
+        """Current category of every particle (LatticeKind values), shape [particle_count]."""
+        return self._rt(body).kind.numpy().astype(np.int32)
+
+    def pe1(self, body=0, *, intact_only: bool = False) -> np.ndarray:
+        """PE1 per particle [m^2] at the current step: sum over the Lagrangian neighbours of (dis - dis0)^2; with
+        ``intact_only`` only over links not lost to fracture."""
+        pe1, pe1_intact, _ = self._rt(body).pseudo_energy()
+        return pe1_intact if intact_only else pe1
+
+    def pe2(self, body=0) -> np.ndarray:
+        """PE2 per particle [m]: |C_t - C_{t-1}|, the distance moved in the last step of the last run_steps/simulate
+        call."""
+        r = self._rt(body)
+        return np.linalg.norm(r.displacements() - r.u_prev.numpy().astype(np.float64), axis=1)
+
+    def broken_links(self, body=0) -> np.ndarray:
+        """Links lost per particle, shape [particle_count] (directed: a lost pair counts at both ends)."""
+        return self._rt(body).pseudo_energy()[2]
+
+    def link_alive(self, body=0) -> np.ndarray:
+        """Alive flag per directed link (the body's CSR order), bool [link_count]."""
+        r = self._rt(body)
+        if not r.fracture:
+            return np.ones(r.body.link_count, dtype=bool)
+        return r.link_alive.numpy()[: r.body.link_count].astype(bool)
+
+    def fragments(self, body=0) -> np.ndarray:
+        """Connected pieces of leaders and followers over intact links: an id per particle (0, 1, ... in order of
+        their smallest particle index), -1 for frame points."""
+        return self._rt(body).fragments()
+
+    def fictitious_points(self, body=0) -> tuple[np.ndarray, np.ndarray]:
+        """The fictitious points of the current step: (owner particle index [m], position [m, 3] [m]), one for each
+        link its owner has lost: x_j + s (X_k - X_j). Empty without fracture or fictitious points."""
+        r = self._rt(body)
+        b = r.body
+        if not r.fracture or b.fracture.fictitious_distance is None:
+            return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+        dead = ~self.link_alive(body)
+        owner = np.repeat(np.arange(b.particle_count), np.diff(b.row_offsets))[dead]
+        x = self.positions(body)
+        return owner, x[owner] + b.fracture.fictitious_distance * b.offset_delta[b.link_offset[dead]]
+
+    def trajectories(self, body=0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """History of the tracked particles (LatticeBody.track) at steps 0..step_count: (indices [T], positions
+        [steps + 1, T, 3] [m], PE1 [steps + 1, T] [m^2])."""
+        r = self._rt(body)
+        if len(r.tracked) == 0:
+            raise ParameterError(
+                "body", r.body.name, "a body with tracked particles (LatticeBody.track before solving)"
+            )
+        r._flush_tracks()
+        u = np.concatenate(r.track_host_u)
+        pe1 = np.concatenate(r.track_host_pe1)
+        r.track_host_u, r.track_host_pe1 = [u], [pe1]
+        return r.tracked.copy(), r.rest_host[r.tracked][None] + u, pe1
