@@ -7,18 +7,23 @@ full sphere, which gives the constants
 
     d = 9 / (4 pi delta^4),   b = 15 mu / (2 pi delta^5),   a = kappa d / 2,   g = (5 mu / 6) d / b = delta / 4.
 
-``surface_correction="family"`` (the default) applies the same two matching conditions to each particle's own discrete
-family instead of the continuum sphere:
+Particles near a free surface have truncated families and would be too soft (the surface effect).
+``surface_correction`` chooses the remedy:
 
-    d_k = 3 / (delta sum_j V_j beta_j)               (expansion gives theta_k = 3 zeta exactly)
-    b_k = 15 mu / (2 m_k),  m_k = sum_j w L^2 V_j beta_j   (shear energy exact on average over shear orientations)
-    a_k = kappa d_k / 2,    g_k = (5 mu / 6) d_k / b_k
+- ``"directional"`` (default): Madenci and Oterkus's per-axis correction. Each particle's response to a reference
+  deformation along x, y and z is compared with the continuum value (dilatation: uniaxial stretch; deviatoric sum:
+  uniaxial stress), and each bond is scaled by an ellipsoidal interpolation of its two particles' factors
+  (kernels/pd_bonds.py, compute_directional_bond_factors).
+- ``"family"``: the supplement's two matching conditions applied to each particle's own discrete family instead of
+  the continuum sphere, d_k = 3 / (delta sum_j V_j beta_j) and b_k = 15 mu / (2 m_k) with
+  m_k = sum_j w L^2 V_j beta_j. This is exact for expansion, but it over-stiffens thin parts.
+- ``"none"``: the supplement's constants.
 
-For an interior particle of a fine lattice these tend to the supplement's constants; for a particle near a free surface
-(truncated family) they stiffen its bonds so that it is not softer than the bulk (the "surface effect"). The model's
-elastic energy density is W_k = c0 theta_k^2 + b_k sum_j w e^2 V_j beta_j with c0 = kappa/2 - 5 mu/6: its derivative
-with respect to each bond extension (Lambda held fixed) is exactly the supplement's force state, so energy is conserved
-by the integrator up to the (small-strain negligible) dependence of Lambda on rotation.
+docs/accuracy.md measures all three.
+
+The model's elastic energy density is W_k = c0 theta_k^2 + b_k sum_j w e^2 V_j beta_j with c0 = kappa/2 - 5 mu/6.
+Its derivative with respect to each bond extension (Lambda held fixed) is exactly the supplement's force state, so
+the integrator conserves energy up to the dependence of Lambda on rotation, which is negligible at small strain.
 """
 
 from __future__ import annotations
@@ -349,72 +354,21 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
     d_cont = 9.0 / (4.0 * math.pi * delta_h**4)
     nu = nu_h if DIRECTIONAL_CALIBRATION == "uniaxial_stress" else np.zeros_like(nu_h)
     dev_cont = math.pi * delta_h**5 * zeta**2 * ((1.0 + nu) ** 2 / 5.0 - 2.0 * nu * (1.0 + nu) / 3.0 + nu**2)
+
+    def elastic_sums(scale, theta_out):
+        """Writes sum_j w e Lambda V beta into theta_out and caches the bonds' (n, e) for positions rest * scale
+        (the elastic kernels with d = 1, c0 = 0, b = 1)."""
+        pos = wp.array((rest_h * scale).astype(np.float32), dtype=wp.vec3, device=device)
+        inputs = [pos, offsets, neighbors, bond_geom, bond_wv, ones, zeros, zeros, u8, f1, f1, f1, f1, f1, 0, f1, i1]
+        wp.launch(ks.dilatation, dim=n, device=device, inputs=[*inputs, theta_out, bp, bond_ne, bond_lambda, f1])
+
     for axis in range(3):
         stretch = np.ones((len(rest_h), 3))
         stretch[:, axis] = 1.0 + zeta
         stress = np.repeat((1.0 - nu * zeta)[:, None], 3, axis=1)
         stress[:, axis] = 1.0 + zeta
-        # with d = 1, c0 = 0 and b = 1: theta = sum w e Lambda V beta and W = sum w e^2 V beta
-        pos = wp.array((rest_h * stretch).astype(np.float32), dtype=wp.vec3, device=device)
-        wp.launch(
-            ks.dilatation,
-            dim=n,
-            device=device,
-            inputs=[
-                pos,
-                offsets,
-                neighbors,
-                bond_geom,
-                bond_wv,
-                ones,
-                zeros,
-                zeros,
-                u8,
-                f1,
-                f1,
-                f1,
-                f1,
-                f1,
-                0,
-                f1,
-                i1,
-                sum_dil,
-                bp,
-                bond_ne,
-                bond_lambda,
-                f1,
-            ],
-        )
-        pos = wp.array((rest_h * stress).astype(np.float32), dtype=wp.vec3, device=device)
-        wp.launch(
-            ks.dilatation,
-            dim=n,
-            device=device,
-            inputs=[
-                pos,
-                offsets,
-                neighbors,
-                bond_geom,
-                bond_wv,
-                ones,
-                zeros,
-                zeros,
-                u8,
-                f1,
-                f1,
-                f1,
-                f1,
-                f1,
-                0,
-                f1,
-                i1,
-                zeros_out,
-                bp,
-                bond_ne,
-                bond_lambda,
-                f1,
-            ],
-        )
+        elastic_sums(stretch, sum_dil)  # dilatation factor: uniaxial stretch
+        elastic_sums(stress, zeros_out)  # deviatoric factor: uniaxial stress (only the bond cache is used)
         wp.launch(
             ks.energy, dim=n, device=device, inputs=[offsets, bond_ne, bond_wv, u8, 0, f1, zeros, ones, zeros, sum_dev]
         )
