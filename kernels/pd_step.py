@@ -20,8 +20,9 @@ Formulas (kernels/pd_bonds.py gives the notation and the elastic model):
   eps_p = sqrt(5 sum_j w (e^p_j)^2 V_j beta_j / m_k) (equal to the uniaxial plastic strain for isochoric flow).
 - Fracture: a live bond breaks for good when its stretch (its elastic stretch, s - (e^p_kj + e^p_jk) / (2 L), for
   a yielding material) exceeds s_c,kj - alpha min(s_min,k, s_min,j) (Silling-Askari compressive bonus, s_min the
-  particle's most compressive stretch of the previous step, <= 0), or, for a ductile material, when the larger
-  equivalent plastic strain of its two particles exceeds the failure plastic strain. Both directed copies of a
+  particle's most compressive live stretch, <= 0, from this step's dilatation pass), or, for a ductile material,
+  when the larger equivalent plastic strain of its two particles exceeds the failure plastic strain. The test runs
+  at the end of the force pass, which already holds both directions' plastic extensions; both directed copies of a
   bond see the same quantities, so they break in the same step without communication.
 """
 
@@ -49,29 +50,21 @@ def make_step_kernels(fracture: bool, plastic: bool):
         dil_coef: wp.array(dtype=float),
         dev_b: wp.array(dtype=float),
         bond_alive: wp.array(dtype=wp.uint8),
-        bond_critical_stretch: wp.array(dtype=float),
-        bonus_alpha: wp.array(dtype=float),
-        stretch_min_prev: wp.array(dtype=float),
-        eqps: wp.array(dtype=float),
-        failure_eqps: wp.array(dtype=float),
-        plastic_bond_count: int,
-        bond_plastic: wp.array(dtype=float),
-        bond_reverse: wp.array(dtype=wp.int32),
         theta: wp.array(dtype=float),
         bp: wp.array(dtype=wp.vec2),
         bond_ne: wp.array(dtype=wp.vec4),
         bond_lambda: wp.array(dtype=float),
         stretch_min: wp.array(dtype=float),
     ):
-        """Breaks bonds (fracture), then theta_k = d_k sum_live w e Lambda V beta G^dil; caches (n, e), Lambda."""
+        """theta_k = d_k sum_live w e Lambda V beta G^dil; caches each bond's (n, e) and Lambda for the later passes
+        and, with fracture, the particle's most compressive live stretch (for the compressive bonus)."""
         k = wp.tid()
         yk = positions[k]
         acc = float(0.0)
         smin = float(0.0)
         for q in range(family_offsets[k], family_offsets[k + 1]):
-            j = family_neighbors[q]
             g = bond_geom[q]
-            eta = positions[j] - yk
+            eta = positions[family_neighbors[q]] - yk
             length = wp.length(eta)
             n = eta / length
             lam = wp.dot(n, wp.vec3(g[0], g[1], g[2]))
@@ -82,22 +75,7 @@ def make_step_kernels(fracture: bool, plastic: bool):
             if wp.static(FRACTURE):
                 live = int(bond_alive[q])
                 if live != 0:
-                    s = e / g[3]
-                    s_el = s
-                    broke = int(0)
-                    if wp.static(PLASTIC):
-                        if q < plastic_bond_count:
-                            s_el = s - 0.5 * (bond_plastic[q] + bond_plastic[bond_reverse[q]]) / g[3]
-                            if s > 0.0 and wp.max(eqps[k], eqps[j]) > failure_eqps[k]:
-                                broke = 1
-                    sc = bond_critical_stretch[q] - bonus_alpha[k] * wp.min(stretch_min_prev[k], stretch_min_prev[j])
-                    if s_el > sc:
-                        broke = 1
-                    if broke != 0:
-                        bond_alive[q] = wp.uint8(0)
-                        live = 0
-                    else:
-                        smin = wp.min(smin, s)
+                    smin = wp.min(smin, e / g[3])
             if live != 0:
                 acc += bond_wv_dil[q] * e * lam
         th = dil_d[k] * acc
@@ -180,18 +158,26 @@ def make_step_kernels(fracture: bool, plastic: bool):
     def force(
         family_offsets: wp.array(dtype=wp.int32),
         family_neighbors: wp.array(dtype=wp.int32),
+        bond_geom: wp.array(dtype=wp.vec4),
         bond_ne: wp.array(dtype=wp.vec4),
         bond_lambda: wp.array(dtype=float),
         bond_wv_dil: wp.array(dtype=float),
         bond_wv_dev: wp.array(dtype=float),
         bp: wp.array(dtype=wp.vec2),
         bond_alive: wp.array(dtype=wp.uint8),
+        bond_critical_stretch: wp.array(dtype=float),
+        bonus_alpha: wp.array(dtype=float),
+        stretch_min: wp.array(dtype=float),
+        eqps: wp.array(dtype=float),
+        failure_eqps: wp.array(dtype=float),
         plastic_bond_count: int,
         bond_plastic: wp.array(dtype=float),
         bond_reverse: wp.array(dtype=wp.int32),
         force_density: wp.array(dtype=wp.vec3),
     ):
-        """Force density [N/m^3] over live bonds, with plastic extensions where the material yields."""
+        """Force density [N/m^3] over live bonds, with plastic extensions where the material yields; then, with
+        fracture, the breaking test of each live bond (it takes effect from the next pass). The test reads only
+        quantities both directed copies of a bond share, so both break in the same step."""
         k = wp.tid()
         bpk = bp[k]
         f = wp.vec3(0.0)
@@ -200,14 +186,32 @@ def make_step_kernels(fracture: bool, plastic: bool):
             if wp.static(FRACTURE):
                 live = int(bond_alive[q])
             if live != 0:
+                j = family_neighbors[q]
                 c = bond_ne[q]
-                bpj = bp[family_neighbors[q]]
+                bpj = bp[j]
                 dev = (bpk[0] + bpj[0]) * c[3]
+                ep_sum = float(0.0)
                 if wp.static(PLASTIC):
                     if q < plastic_bond_count:
-                        dev = dev - bpk[0] * bond_plastic[q] - bpj[0] * bond_plastic[bond_reverse[q]]
+                        ep_k = bond_plastic[q]
+                        ep_j = bond_plastic[bond_reverse[q]]
+                        dev = dev - bpk[0] * ep_k - bpj[0] * ep_j
+                        ep_sum = ep_k + ep_j
                 s = bond_wv_dil[q] * bond_lambda[q] * (bpk[1] + bpj[1]) + bond_wv_dev[q] * dev
                 f += (2.0 * s) * wp.vec3(c[0], c[1], c[2])
+                if wp.static(FRACTURE):
+                    L = bond_geom[q][3]
+                    stretch = c[3] / L
+                    broke = int(0)
+                    if wp.static(PLASTIC):
+                        if q < plastic_bond_count:
+                            if stretch > 0.0 and wp.max(eqps[k], eqps[j]) > failure_eqps[k]:
+                                broke = 1
+                    sc = bond_critical_stretch[q] - bonus_alpha[k] * wp.min(stretch_min[k], stretch_min[j])
+                    if stretch - 0.5 * ep_sum / L > sc:
+                        broke = 1
+                    if broke != 0:
+                        bond_alive[q] = wp.uint8(0)
         force_density[k] = f
 
     @wp.kernel(module="unique")

@@ -277,8 +277,7 @@ class PeridynamicState:
     bond_ne: object
     bond_lambda: object
     bond_alive: object = None  # uint8 per bond (fracture)
-    stretch_min: object = None  # most compressive stretch per particle, this step (fracture)
-    stretch_min_prev: object = None  # the same, previous step (read by the compressive bonus)
+    stretch_min: object = None  # most compressive live stretch per particle, this step (fracture)
     bond_plastic: object = None  # plastic extension per plastic bond [m]
     eqps: object = None  # equivalent plastic strain per particle [-]
 
@@ -348,7 +347,7 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
     nb = bond_wv.shape[0]
     bond_ne = wp.zeros(nb, dtype=wp.vec4, device=device)
     bond_lambda = wp.zeros(nb, dtype=float, device=device)
-    u8, f1, i1 = _placeholders(device)
+    u8, f1, _ = _placeholders(device)
     f_dil = np.ones((n, 3))
     f_dev = np.ones((n, 3))
     d_cont = 9.0 / (4.0 * math.pi * delta_h**4)
@@ -359,7 +358,7 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
         """Writes sum_j w e Lambda V beta into theta_out and caches the bonds' (n, e) for positions rest * scale
         (the elastic kernels with d = 1, c0 = 0, b = 1)."""
         pos = wp.array((rest_h * scale).astype(np.float32), dtype=wp.vec3, device=device)
-        inputs = [pos, offsets, neighbors, bond_geom, bond_wv, ones, zeros, zeros, u8, f1, f1, f1, f1, f1, 0, f1, i1]
+        inputs = [pos, offsets, neighbors, bond_geom, bond_wv, ones, zeros, zeros, u8]
         wp.launch(ks.dilatation, dim=n, device=device, inputs=[*inputs, theta_out, bp, bond_ne, bond_lambda, f1])
 
     for axis in range(3):
@@ -675,7 +674,6 @@ class SolverPeridynamics:
         if m.fracture:
             self.state.bond_alive = wp.clone(m.bond_alive_initial)
             self.state.stretch_min = wp.zeros(n, dtype=float, device=d)
-            self.state.stretch_min_prev = wp.zeros(n, dtype=float, device=d)
             self._damage = wp.zeros(n, dtype=float, device=d)
         if m.plastic:
             self.state.bond_plastic = wp.zeros(max(m.plastic_bond_count, 1), dtype=float, device=d)
@@ -776,14 +774,6 @@ class SolverPeridynamics:
                 m.dil_coef,
                 m.dev_b,
                 alive,
-                m.bond_critical_stretch if frac else f1,
-                m.bonus_alpha if frac else f1,
-                s.stretch_min_prev if frac else f1,
-                s.eqps if m.plastic else f1,
-                m.failure_eqps if frac else f1,
-                m.plastic_bond_count,
-                plastic,
-                reverse,
                 s.theta,
                 s.bp,
                 s.bond_ne,
@@ -792,8 +782,6 @@ class SolverPeridynamics:
             ],
             device=self.device,
         )
-        if frac:
-            s.stretch_min, s.stretch_min_prev = s.stretch_min_prev, s.stretch_min
         if m.plastic_particle_count > 0:
             wp.launch(
                 ks.plastic_update,
@@ -824,12 +812,18 @@ class SolverPeridynamics:
             inputs=[
                 m.family_offsets,
                 m.family_neighbors,
+                m.bond_geom,
                 s.bond_ne,
                 s.bond_lambda,
                 m.bond_wv_dil,
                 m.bond_wv_dev,
                 s.bp,
                 alive,
+                m.bond_critical_stretch if frac else f1,
+                m.bonus_alpha if frac else f1,
+                s.stretch_min if frac else f1,
+                s.eqps if m.plastic else f1,
+                m.failure_eqps if frac else f1,
                 m.plastic_bond_count,
                 plastic,
                 reverse,
