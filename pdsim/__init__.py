@@ -8,6 +8,8 @@ from __future__ import annotations
 __version__ = "0.1.0"
 
 from .errors import FeatureNotAvailableError, GeometryError, InstabilityError, ParameterError, PdsimError
+from .fem import FemBody, FemPlasticity, SolverFem
+from .fem_mesh import TetMesh, box_tet_mesh, load_tet_mesh, tet_mesh_from_arrays, tetrahedralize, write_tet_mesh
 from .geometry import SolidShape, box, cylinder, load_mesh, shape_from_arrays, sphere
 from .contact import BoxProjectile, MeshCollider, MeshProjectile, SphereProjectile
 from .lattice import (
@@ -33,6 +35,8 @@ __all__ = [
     "BoxProjectile",
     "BoxRegion",
     "FeatureNotAvailableError",
+    "FemBody",
+    "FemPlasticity",
     "GeometryError",
     "GroundPlane",
     "HalfSpace",
@@ -56,14 +60,21 @@ __all__ = [
     "RunReport",
     "Scene",
     "SolidShape",
+    "SolverFem",
     "SolverLattice",
     "SolverPeridynamics",
     "SphereProjectile",
     "SphereRegion",
+    "TetMesh",
     "__version__",
     "box",
+    "box_tet_mesh",
     "cylinder",
     "load_mesh",
+    "load_tet_mesh",
     "shape_from_arrays",
     "sphere",
+    "tet_mesh_from_arrays",
+    "tetrahedralize",
+    "write_tet_mesh",
 ]

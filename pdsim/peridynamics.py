@@ -1147,7 +1147,7 @@ def warn_if_above_estimate(dt: float, dt_crit: float):
     """Warns when a user time step exceeds the (conservative) stable estimate; divergence is still detected."""
     if dt > dt_crit:
         warnings.warn(
-            f"time step {dt:.3g} s exceeds the Silling-Askari stable estimate {dt_crit:.3g} s; the run is checked for "
+            f"time step {dt:.3g} s exceeds the stable estimate {dt_crit:.3g} s; the run is checked for "
             "divergence every frame",
             stacklevel=3,
         )

@@ -98,6 +98,12 @@ class Scene:
         """Fills ``shape`` with particles of ``spacing`` [m] and adds it (keyword options: see PeridynamicBody)."""
         return self.add_body(PeridynamicBody(shape, material, spacing, **kwargs))
 
+    def add_fem_body(self, shape, material: Material, **kwargs):
+        """Adds a tetrahedral FEM body (a SolidShape meshed with fTetWild, or a TetMesh; options: see FemBody)."""
+        from .fem import FemBody
+
+        return self.add_body(FemBody(shape, material, **kwargs))
+
     def add_ground_plane(self, *, height: float = 0.0, friction: float = 0.5) -> GroundPlane:
         """A ground plane perpendicular to the up axis at ``height`` [m], Coulomb ``friction`` >= 0."""
         h = _check_range("height", height, None, None)

@@ -53,7 +53,8 @@ def _open(path):
 
 
 def test_stage_metadata(tmp_path):
-    """Stage metadata: time codes per second = frames per second = fps, start/end frames, up axis, units, default prim."""
+    """Stage metadata: time codes per second = frames per second = fps, start/end frames, up axis, units and
+    default prim."""
     from pxr import UsdGeom
 
     path = tmp_path / "cache.usdc"
@@ -246,7 +247,8 @@ def test_save_throttled_by_interval(tmp_path):
 
 
 def test_bad_shapes_raise(tmp_path):
-    """Wrong shapes, non-finite values, undeclared primvars and finished frames raise ValueError with a clear message."""
+    """Wrong shapes, non-finite values, undeclared primvars and finished frames raise ValueError with a clear
+    message."""
     cache = UsdCache(tmp_path / "bad.usdc", fps=24.0)
     pts = cache.add_points("particles", widths=np.ones(N), primvars={"damage": "float", "fragment_id": "int"})
     good = _positions(0)
@@ -258,7 +260,7 @@ def test_bad_shapes_raise(tmp_path):
         cache.write_points(pts, 0, good, velocities=np.zeros(N))
     bad = good.copy()
     bad[3, 1] = np.nan
-    with pytest.raises(ValueError, match="positions .*non-finite"):
+    with pytest.raises(ValueError, match=r"positions .*non-finite"):
         cache.write_points(pts, 0, bad)
     with pytest.raises(ValueError, match=r"primvar 'damage' has shape \[50, 1\]; expected \[point_count\] = \[50\]"):
         cache.write_points(pts, 0, good, primvars={"damage": np.zeros((N, 1))})

@@ -1,0 +1,458 @@
+"""Element kernels of the linear tetrahedral finite element solid (shared/seeds/fem_slides.txt, DESIGN.md section 3).
+
+Notation: a tetrahedron has corners 0..3 with rest positions X_a and current positions x_a; Dm = [X1-X0, X2-X0, X3-X0]
+(positive determinant after loading), rest volume V = det(Dm) / 6, Ds = [x1-x0, x2-x0, x3-x0], deformation gradient
+F = Ds Dm^-1. The shape-function gradients are g_a = row a of Dm^-1 (a = 1..3) and g_0 = -(g_1 + g_2 + g_3), so a
+displacement field u gives grad u = sum_a u_a g_a^T.
+
+Strain measures (the element's strain is constant, slides "Linear Displacement Tetrahedron"):
+
+    linear      eps = sym(F) - I                      stress sigma = lambda tr(eps) I + 2 mu eps, P = sigma
+    corotated   R = polar rotation of F, eps = sym(R^T F) - I,  P = R sigma   (stiffness warping, Mueller & Gross 2004)
+    green       E = (F^T F - I) / 2 (Green-Saint-Venant),  S = lambda tr(E) I + 2 mu E,  P = F S
+
+P is the first Piola-Kirchhoff stress; the nodal forces are f_a = -V P g_a (so f_0 = -(f_1 + f_2 + f_3) and every
+element's forces sum to zero: linear momentum is conserved). For the corotated measure R^T F is symmetric, so P is the
+gradient of the energy V (mu |eps|^2 + lambda/2 tr(eps)^2): all three measures derive from an energy. The linear measure
+is not rotation invariant: a rigid rotation by 90 degrees gives eps = sym(R) - I != 0 and spurious forces.
+
+Element stiffness (slides: K_e = V B^T E B), as 3x3 blocks between corners a and b:
+
+    K_ab = V (lambda g_a g_b^T + mu (g_a . g_b) I + mu g_b g_a^T),   f = -K u;  corotated: R K_ab R^T (R frozen).
+
+Plasticity (slides "Plastic Update Rules", DESIGN.md section 3), on the element's strain tensor in its material frame,
+with |.| the Frobenius norm of the symmetric 3x3 tensor:
+
+    eps_elastic = eps_total - eps_plastic
+    if |eps_elastic| > yield:  eps_plastic += min(creep dt, 1) eps_elastic
+    if |eps_plastic| > max:    eps_plastic *= max / |eps_plastic|
+
+and the stress is computed from eps_total - eps_plastic (equivalent to the slides' plastic forces R V B^T E eps_plastic
+added to the elastic ones).
+
+Fracture (slides "Principal Stresses"): the element's material-frame stress (sigma, or S for Green) is
+eigen-decomposed; its largest eigenvalue and eigenvector (a direction in the rest frame) are written per element, and a
+counter is raised when the largest one exceeds the element's tensile strength.
+
+Kernels are built by factories per scalar type (float32 by default, float64 for verification) and with the features a
+scene does not use compiled out (``wp.static`` branches); each variant lives in its own Warp module.
+"""
+
+import functools
+
+import warp as wp
+
+MEASURE_LINEAR = 0
+MEASURE_COROTATED = 1
+MEASURE_GREEN = 2
+MEASURES = {"linear": MEASURE_LINEAR, "corotated": MEASURE_COROTATED, "green": MEASURE_GREEN}
+
+
+@functools.cache
+def fem_types(dtype):
+    """(vec3, mat33, vec4) Warp types of scalar ``dtype``: Warp's own wp.vec3/wp.mat33/wp.vec4 for wp.float32 (so that
+    the shared collider kernels accept the solver's arrays) and wp.vec3d/wp.mat33d/wp.vec4d for wp.float64."""
+    if dtype == wp.float64:
+        return wp.vec3d, wp.mat33d, wp.vec4d
+    return wp.vec3, wp.mat33, wp.vec4
+
+
+@functools.cache
+def fem_funcs(dtype):
+    """Warp functions shared by the element kernels, for scalar ``dtype``; returned as a namespace dict."""
+    vec3, mat33, vec4 = fem_types(dtype)
+
+    @wp.func
+    def deformation_gradient(x0: vec3, x1: vec3, x2: vec3, x3: vec3, dm_inv: mat33):
+        """F = Ds Dm^-1 [-]."""
+        ds = mat33(x1[0] - x0[0], x2[0] - x0[0], x3[0] - x0[0],
+                   x1[1] - x0[1], x2[1] - x0[1], x3[1] - x0[1],
+                   x1[2] - x0[2], x2[2] - x0[2], x3[2] - x0[2])  # fmt: skip
+        return ds * dm_inv
+
+    @wp.func
+    def polar_rotation(f: mat33):
+        """Rotation R of the polar decomposition F = R S (from the SVD; a proper rotation also for inverted F)."""
+        u = mat33()
+        s = vec3()
+        v = mat33()
+        wp.svd3(f, u, s, v)
+        r = u * wp.transpose(v)
+        if wp.determinant(r) < dtype(0.0):
+            # Warp's svd3 already returns rotations with a signed smallest singular value; guard for round-off
+            u[0, 2] = -u[0, 2]
+            u[1, 2] = -u[1, 2]
+            u[2, 2] = -u[2, 2]
+            r = u * wp.transpose(v)
+        return r
+
+    quat = wp.types.quaternion(dtype)
+    polar_tolerance = dtype(1.0e-12) if dtype == wp.float64 else dtype(1.0e-6)
+
+    @wp.func
+    def rotation_iterative(a: mat33, q0: quat):
+        """Rotation R maximising tr(R^T A) (the polar rotation of A, sign-fixed for inverted A), warm-started from q0.
+        Each iteration rotates R by omega: the gradient g = sum_i r_i x a_i (r_i, a_i the columns) as in Mueller et al.
+        2016 ("A Robust Method to Extract the Rotational Part of Deformations"), scaled by the inverse Hessian
+        (tr(B) I - B)^-1 with B = sym(A R^T) when that is positive definite (a Newton step, an ascent direction, at
+        most 1 rad long; quadratic convergence: 1-3 iterations from the previous step's rotation), else the paper's
+        damped step g / |sum_i r_i . a_i|. Stops when |omega| is below 1e-6 rad (float32) or 1e-12 rad (float64); after
+        16 iterations without converging (cold starts near a half turn) it takes the SVD's rotation. Returns (R, q)."""
+        q = q0
+        converged = int(0)
+        for _it in range(16):
+            r = wp.quat_to_matrix(q)
+            r0 = vec3(r[0, 0], r[1, 0], r[2, 0])
+            r1 = vec3(r[0, 1], r[1, 1], r[2, 1])
+            r2 = vec3(r[0, 2], r[1, 2], r[2, 2])
+            a0 = vec3(a[0, 0], a[1, 0], a[2, 0])
+            a1 = vec3(a[0, 1], a[1, 1], a[2, 1])
+            a2 = vec3(a[0, 2], a[1, 2], a[2, 2])
+            g = wp.cross(r0, a0) + wp.cross(r1, a1) + wp.cross(r2, a2)
+            b = a * wp.transpose(r)
+            bs = dtype(0.5) * (b + wp.transpose(b))
+            h = wp.trace(bs) * wp.identity(3, dtype) - bs
+            omega = g / (wp.abs(wp.trace(b)) + dtype(1.0e-20))
+            if h[0, 0] > dtype(0.0) and wp.determinant(h) > dtype(0.0):
+                if h[0, 0] * h[1, 1] - h[0, 1] * h[1, 0] > dtype(0.0):
+                    # H positive definite: the Newton step is an ascent direction; at most 1 rad
+                    omega = wp.inverse(h) * g
+                    step = wp.length(omega)
+                    if step > dtype(1.0):
+                        omega = omega / step
+            w = wp.length(omega)
+            if w < polar_tolerance:
+                converged = 1
+                break
+            q = wp.normalize(wp.quat_from_axis_angle(omega / w, w) * q)
+        if converged == 0:
+            # far from the previous rotation (a cold start near a half turn): the SVD
+            rs = polar_rotation(a)
+            return rs, wp.quat_from_matrix(rs)
+        return wp.quat_to_matrix(q), q
+
+    @wp.func
+    def hooke(eps: mat33, lam: dtype, mu: dtype):
+        """Isotropic Hooke's law sigma = lambda tr(eps) I + 2 mu eps [Pa]."""
+        return (lam * wp.trace(eps)) * wp.identity(3, dtype) + (dtype(2.0) * mu) * eps
+
+    @wp.func
+    def sym(a: mat33):
+        return dtype(0.5) * (a + wp.transpose(a))
+
+    @wp.func
+    def frobenius(a: mat33):
+        return wp.sqrt(wp.ddot(a, a))
+
+    @wp.func
+    def plastic_update(eps_total: mat33, eps_plastic: mat33, yield_strain: dtype, creep_dt: dtype, max_strain: dtype):
+        """The slides' plastic update rule; returns the new plastic strain. creep_dt = min(creep dt, 1)."""
+        ep = eps_plastic
+        eel = eps_total - ep
+        if frobenius(eel) > yield_strain:
+            ep = ep + creep_dt * eel
+        n = frobenius(ep)
+        if n > max_strain:
+            ep = ep * (max_strain / n)
+        return ep
+
+    @wp.func
+    def shape_gradient(dm_inv: mat33, corner: int):
+        """g_a [1/m]: row a-1 of Dm^-1 for a = 1..3, minus their sum for a = 0."""
+        g1 = vec3(dm_inv[0, 0], dm_inv[0, 1], dm_inv[0, 2])
+        g2 = vec3(dm_inv[1, 0], dm_inv[1, 1], dm_inv[1, 2])
+        g3 = vec3(dm_inv[2, 0], dm_inv[2, 1], dm_inv[2, 2])
+        if corner == 1:
+            return g1
+        if corner == 2:
+            return g2
+        if corner == 3:
+            return g3
+        return -(g1 + g2 + g3)
+
+    @wp.func
+    def stiffness_block(ga: vec3, gb: vec3, vol: dtype, lam: dtype, mu: dtype):
+        """K_ab = V (lambda g_a g_b^T + mu (g_a . g_b) I + mu g_b g_a^T) [N/m]."""
+        return vol * (lam * wp.outer(ga, gb) + (mu * wp.dot(ga, gb)) * wp.identity(3, dtype) + mu * wp.outer(gb, ga))
+
+    @wp.func
+    def largest_eigen(s: mat33):
+        """(largest eigenvalue, its unit eigenvector) of a symmetric 3x3 matrix."""
+        q = mat33()
+        d = vec3()
+        q, d = wp.eig3(s)
+        k = int(0)
+        if d[1] > d[k]:
+            k = 1
+        if d[2] > d[k]:
+            k = 2
+        return d[k], vec3(q[0, k], q[1, k], q[2, k])
+
+    return {
+        "deformation_gradient": deformation_gradient,
+        "polar_rotation": polar_rotation,
+        "rotation_iterative": rotation_iterative,
+        "hooke": hooke,
+        "sym": sym,
+        "frobenius": frobenius,
+        "plastic_update": plastic_update,
+        "shape_gradient": shape_gradient,
+        "stiffness_block": stiffness_block,
+        "largest_eigen": largest_eigen,
+    }
+
+
+@functools.cache
+def element_force_kernel(dtype, measure: int, plastic: bool, fracture: bool, store_rotation: bool):
+    """Kernel over elements: corner forces f_a = -V P g_a [N] into ``corner_forces[4 e + a]``.
+
+    Inputs per element: ``tets`` (vec4i), ``dm_inv`` (Dm^-1 [1/m]), ``volume`` [m^3], ``lame`` = (lambda, mu) [Pa].
+    With ``plastic``: ``plastic_params`` = (yield [-], creep [1/s], max [-]) and ``plastic_strain`` (updated in place,
+    once per call, with factor min(creep dt, 1); dt = 0 leaves it unchanged). With ``fracture``: ``strength`` [Pa],
+    writes ``principal`` = (rest-frame unit direction, largest principal stress [Pa]; an upper bound and a zero
+    direction where it cannot exceed the strength) and adds 1 to ``over_count[0]`` per element whose largest
+    principal stress exceeds its strength. Corotated: the rotation is found iteratively from the element's previous
+    one (``rotation_q``, updated in place); with ``store_rotation`` the matrix R is written to ``rotation`` for the
+    implicit solver.
+    """
+    vec3, mat33, vec4 = fem_types(dtype)
+    quat = wp.types.quaternion(dtype)
+    fn = fem_funcs(dtype)
+    deformation_gradient = fn["deformation_gradient"]
+    rotation_iterative = fn["rotation_iterative"]
+    hooke = fn["hooke"]
+    sym = fn["sym"]
+    frobenius = fn["frobenius"]
+    plastic_update = fn["plastic_update"]
+    largest_eigen = fn["largest_eigen"]
+    sqrt_two_thirds = dtype(0.816496580927726)
+
+    @wp.kernel(module="unique")
+    def element_forces(
+        positions: wp.array(dtype=vec3),
+        tets: wp.array(dtype=wp.vec4i),
+        dm_inv: wp.array(dtype=mat33),
+        volume: wp.array(dtype=dtype),
+        lame: wp.array(dtype=wp.types.vector(2, dtype)),
+        plastic_params: wp.array(dtype=vec3),
+        plastic_strain: wp.array(dtype=mat33),
+        dt: dtype,
+        strength: wp.array(dtype=dtype),
+        principal: wp.array(dtype=vec4),
+        over_count: wp.array(dtype=wp.int32),
+        rotation_q: wp.array(dtype=quat),
+        rotation: wp.array(dtype=mat33),
+        corner_forces: wp.array(dtype=vec3),
+    ):
+        e = wp.tid()
+        t = tets[e]
+        dmi = dm_inv[e]
+        f = deformation_gradient(positions[t[0]], positions[t[1]], positions[t[2]], positions[t[3]], dmi)
+        lam = lame[e][0]
+        mu = lame[e][1]
+        r = wp.identity(3, dtype)
+        if wp.static(measure == MEASURE_COROTATED):
+            r, q = rotation_iterative(f, rotation_q[e])
+            rotation_q[e] = q
+            eps = sym(wp.transpose(r) * f) - wp.identity(3, dtype)
+        elif wp.static(measure == MEASURE_GREEN):
+            eps = dtype(0.5) * (wp.transpose(f) * f - wp.identity(3, dtype))
+        else:
+            eps = sym(f) - wp.identity(3, dtype)
+        if wp.static(plastic):
+            pp = plastic_params[e]
+            ep = plastic_update(eps, plastic_strain[e], pp[0], wp.min(pp[1] * dt, dtype(1.0)), pp[2])
+            plastic_strain[e] = ep
+            eps = eps - ep
+        sigma = hooke(eps, lam, mu)
+        if wp.static(fracture):
+            # Samuelson's bound max eig <= mean + sqrt(2/3) |deviator| spares the eigen-decomposition when no
+            # principal stress can exceed the strength
+            mean = wp.trace(sigma) / dtype(3.0)
+            bound = mean + sqrt_two_thirds * frobenius(sigma - mean * wp.identity(3, dtype))
+            if bound > strength[e]:
+                smax, n = largest_eigen(sigma)
+                principal[e] = vec4(n[0], n[1], n[2], smax)
+                if smax > strength[e]:
+                    wp.atomic_add(over_count, 0, 1)
+            else:
+                principal[e] = vec4(dtype(0.0), dtype(0.0), dtype(0.0), bound)
+        if wp.static(measure == MEASURE_COROTATED):
+            p = r * sigma
+            if wp.static(store_rotation):
+                rotation[e] = r
+        elif wp.static(measure == MEASURE_GREEN):
+            p = f * sigma
+        else:
+            p = sigma
+        h = (-volume[e]) * (p * wp.transpose(dmi))  # columns are f_1, f_2, f_3
+        f1 = vec3(h[0, 0], h[1, 0], h[2, 0])
+        f2 = vec3(h[0, 1], h[1, 1], h[2, 1])
+        f3 = vec3(h[0, 2], h[1, 2], h[2, 2])
+        base = 4 * e
+        corner_forces[base] = -(f1 + f2 + f3)
+        corner_forces[base + 1] = f1
+        corner_forces[base + 2] = f2
+        corner_forces[base + 3] = f3
+
+    return element_forces
+
+
+@functools.cache
+def element_energy_kernel(dtype, measure: int, plastic: bool):
+    """Kernel over elements: elastic energy V (mu |eps_el|^2 + lambda/2 tr(eps_el)^2) [J] into ``energy[e]``, with
+    eps_el = eps - eps_plastic in the element's strain measure (plastic strain read, not updated)."""
+    vec3, mat33, _ = fem_types(dtype)
+    fn = fem_funcs(dtype)
+    deformation_gradient = fn["deformation_gradient"]
+    polar_rotation = fn["polar_rotation"]
+    sym = fn["sym"]
+
+    @wp.kernel(module="unique")
+    def element_energy(
+        positions: wp.array(dtype=vec3),
+        tets: wp.array(dtype=wp.vec4i),
+        dm_inv: wp.array(dtype=mat33),
+        volume: wp.array(dtype=dtype),
+        lame: wp.array(dtype=wp.types.vector(2, dtype)),
+        plastic_strain: wp.array(dtype=mat33),
+        energy: wp.array(dtype=dtype),
+    ):
+        e = wp.tid()
+        t = tets[e]
+        f = deformation_gradient(positions[t[0]], positions[t[1]], positions[t[2]], positions[t[3]], dm_inv[e])
+        if wp.static(measure == MEASURE_COROTATED):
+            eps = sym(wp.transpose(polar_rotation(f)) * f) - wp.identity(3, dtype)
+        elif wp.static(measure == MEASURE_GREEN):
+            eps = dtype(0.5) * (wp.transpose(f) * f - wp.identity(3, dtype))
+        else:
+            eps = sym(f) - wp.identity(3, dtype)
+        if wp.static(plastic):
+            eps = eps - plastic_strain[e]
+        tr = wp.trace(eps)
+        energy[e] = volume[e] * (lame[e][1] * wp.ddot(eps, eps) + dtype(0.5) * lame[e][0] * tr * tr)
+
+    return element_energy
+
+
+@functools.cache
+def element_stiffness_product_kernel(dtype, rotated: bool):
+    """Kernel over elements: corner products (K_e u)_a = sum_b R K_ab R^T u_b [N] into ``corner_out[4 e + a]`` for a
+    vector field u [m] (or [m/s]); R is the element's frozen rotation (identity when not ``rotated``). Evaluated without
+    assembling K_e: G = R^T Du Dm^-1, sigma = hooke(sym(G)), (K u)_a = V R sigma g_a."""
+    vec3, mat33, _ = fem_types(dtype)
+    fn = fem_funcs(dtype)
+    deformation_gradient = fn["deformation_gradient"]
+    hooke = fn["hooke"]
+    sym = fn["sym"]
+
+    @wp.kernel(module="unique")
+    def element_stiffness_product(
+        u: wp.array(dtype=vec3),
+        tets: wp.array(dtype=wp.vec4i),
+        dm_inv: wp.array(dtype=mat33),
+        volume: wp.array(dtype=dtype),
+        lame: wp.array(dtype=wp.types.vector(2, dtype)),
+        rotation: wp.array(dtype=mat33),
+        corner_out: wp.array(dtype=vec3),
+    ):
+        e = wp.tid()
+        t = tets[e]
+        dmi = dm_inv[e]
+        g = deformation_gradient(u[t[0]], u[t[1]], u[t[2]], u[t[3]], dmi)
+        if wp.static(rotated):
+            r = rotation[e]
+            sigma = hooke(sym(wp.transpose(r) * g), lame[e][0], lame[e][1])
+            h = volume[e] * ((r * sigma) * wp.transpose(dmi))
+        else:
+            sigma = hooke(sym(g), lame[e][0], lame[e][1])
+            h = volume[e] * (sigma * wp.transpose(dmi))
+        f1 = vec3(h[0, 0], h[1, 0], h[2, 0])
+        f2 = vec3(h[0, 1], h[1, 1], h[2, 1])
+        f3 = vec3(h[0, 2], h[1, 2], h[2, 2])
+        base = 4 * e
+        corner_out[base] = -(f1 + f2 + f3)
+        corner_out[base + 1] = f1
+        corner_out[base + 2] = f2
+        corner_out[base + 3] = f3
+
+    return element_stiffness_product
+
+
+@functools.cache
+def element_stiffness_blocks_kernel(dtype, rotated: bool):
+    """Kernel over elements: the 16 blocks R K_ab R^T [N/m] of the element stiffness into ``blocks[16 e + 4 a + b]``
+    (the assembled path of the implicit solver and the tests' finite-difference check)."""
+    _, mat33, _ = fem_types(dtype)
+    fn = fem_funcs(dtype)
+    shape_gradient = fn["shape_gradient"]
+    stiffness_block = fn["stiffness_block"]
+
+    @wp.kernel(module="unique")
+    def element_stiffness_blocks(
+        dm_inv: wp.array(dtype=mat33),
+        volume: wp.array(dtype=dtype),
+        lame: wp.array(dtype=wp.types.vector(2, dtype)),
+        rotation: wp.array(dtype=mat33),
+        blocks: wp.array(dtype=mat33),
+    ):
+        e = wp.tid()
+        dmi = dm_inv[e]
+        vol = volume[e]
+        lam = lame[e][0]
+        mu = lame[e][1]
+        for a in range(4):
+            ga = shape_gradient(dmi, a)
+            for b in range(4):
+                k = stiffness_block(ga, shape_gradient(dmi, b), vol, lam, mu)
+                if wp.static(rotated):
+                    r = rotation[e]
+                    k = r * k * wp.transpose(r)
+                blocks[16 * e + 4 * a + b] = k
+
+    return element_stiffness_blocks
+
+
+@functools.cache
+def plastic_update_kernel(dtype):
+    """Kernel applying the plastic update rule to arrays (the solver applies the same function inside the element force
+    kernel): ``plastic_strain[i]`` <- rule(``total_strain[i]``, ``plastic_strain[i]``, yield, min(creep dt, 1), max)."""
+    vec3, mat33, _ = fem_types(dtype)
+    plastic_update = fem_funcs(dtype)["plastic_update"]
+
+    @wp.kernel(module="unique")
+    def apply_plastic_update(
+        total_strain: wp.array(dtype=mat33),
+        plastic_params: wp.array(dtype=vec3),
+        dt: dtype,
+        plastic_strain: wp.array(dtype=mat33),
+    ):
+        i = wp.tid()
+        pp = plastic_params[i]
+        plastic_strain[i] = plastic_update(
+            total_strain[i], plastic_strain[i], pp[0], wp.min(pp[1] * dt, dtype(1.0)), pp[2]
+        )
+
+    return apply_plastic_update
+
+
+@functools.cache
+def embed_points_kernel(dtype):
+    """Kernel over embedded points: x_p = sum_a w_pa x[tets[element_p][a]] [m] (barycentric render-mesh embedding)."""
+    vec3, _, vec4 = fem_types(dtype)
+
+    @wp.kernel(module="unique")
+    def embed_points(
+        positions: wp.array(dtype=vec3),
+        tets: wp.array(dtype=wp.vec4i),
+        element: wp.array(dtype=wp.int32),
+        weights: wp.array(dtype=vec4),
+        out: wp.array(dtype=wp.vec3),
+    ):
+        p = wp.tid()
+        t = tets[element[p]]
+        w = weights[p]
+        x = w[0] * positions[t[0]] + w[1] * positions[t[1]] + w[2] * positions[t[2]] + w[3] * positions[t[3]]
+        out[p] = wp.vec3(float(x[0]), float(x[1]), float(x[2]))
+
+    return embed_points

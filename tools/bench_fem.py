@@ -1,0 +1,277 @@
+"""Throughput of the tetrahedral FEM solver: element updates per second of the explicit and the implicit step.
+
+A box (1 m x 0.5 m x 0.25 m) of 4k x 2k x k cells, six tetrahedra per cell (about 1e4 elements for k = 6, 1e5 for
+k = 13), clamped at x = 0 and sagging under gravity (E = 1 MPa, nu = 0.3, rho = 1000 kg/m^3). Timed:
+
+- pdsim explicit (velocity Verlet) at the automatic step 0.5 h_min / c_p, corotated and linear measure;
+- pdsim implicit (backward Euler, corotated stiffness, CG) at 10 x that step, with the assembled and the matrix-free
+  stiffness (CG iterations per step reported);
+- Newton's tetrahedral solvers on the same mesh and step when ``newton`` is installed: SolverSemiImplicit (stable
+  Neo-Hookean, triangle contact off) and SolverXPBD (2 iterations).
+
+Element updates per second = element count x steps / seconds (an implicit step counts once, whatever its CG
+iterations). Warm-up steps (kernel loads included) are never timed.
+
+    python tools/bench_fem.py                      # both sizes, human-readable
+    python tools/bench_fem.py --k 6 --json         # one size, one JSON line
+    python tools/bench_fem.py --cantilever         # also the cantilever convergence table (float64 static solves)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+
+import pdsim
+from pdsim.fem import FemBody, SolverFem
+from pdsim.fem_mesh import box_tet_mesh
+
+MAT = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)
+SIZE = (1.0, 0.5, 0.25)
+GRAVITY = (0.0, 0.0, -9.81)
+
+
+def bench_mesh(k: int):
+    return box_tet_mesh(SIZE, (4 * k, 2 * k, k), center=(0.5 * SIZE[0], 0.0, 0.0))
+
+
+def _clamped(mesh):
+    return mesh.vertices[:, 0] <= 1.0e-9
+
+
+def _time_pdsim(mesh, *, integrator, measure, device, steps, warmup, stiffness="assembled"):
+    body = FemBody(mesh, MAT, measure=measure, integrator=integrator)
+    body.fix(pdsim.BoxRegion(lo=(-1, -1, -1), hi=(1e-9, 1, 1)))
+    solver = SolverFem([body], device=device, gravity=GRAVITY, stiffness=stiffness)
+    dt = solver.explicit_time_step() * (10.0 if integrator == "implicit" else 1.0)
+    solver.simulate(dt, warmup)
+    import warp as wp
+
+    wp.synchronize_device(solver.device)
+    iterations = 0
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        solver.step(dt)
+        if integrator == "implicit":
+            iterations += solver.cg_reports[-1].iterations
+    wp.synchronize_device(solver.device)
+    seconds = time.perf_counter() - t0
+    out = {
+        "seconds": seconds,
+        "steps": steps,
+        "dt": dt,
+        "ms_per_step": 1e3 * seconds / steps,
+        "element_updates_per_s": mesh.element_count * steps / seconds,
+    }
+    if integrator == "implicit":
+        out["cg_iterations_per_step"] = iterations / steps
+        out["ms_per_cg_iteration"] = 1e3 * seconds / max(iterations, 1)
+    return out
+
+
+def _time_newton(mesh, *, solver_name, device, steps, warmup, dt):
+    """Newton's tetrahedral solver on the same mesh; None when newton is not installed."""
+    try:
+        import newton
+        import warp as wp
+    except ImportError:
+        return None
+    builder = newton.ModelBuilder()
+    builder.add_soft_mesh(
+        pos=wp.vec3(0.0, 0.0, 0.0),
+        rot=wp.quat_identity(),
+        scale=1.0,
+        vel=wp.vec3(0.0, 0.0, 0.0),
+        vertices=[wp.vec3(*p) for p in mesh.vertices],
+        indices=mesh.tets.ravel().tolist(),
+        density=MAT.density,
+        k_mu=MAT.shear_modulus,
+        k_lambda=MAT.lame_lambda,
+        k_damp=0.0,
+    )
+    active = int(newton.ParticleFlags.ACTIVE)
+    for i in np.flatnonzero(_clamped(mesh)):
+        builder.particle_mass[i] = 0.0
+        builder.particle_flags[i] = builder.particle_flags[i] & ~active
+    model = builder.finalize(device=device)
+    model.set_gravity(GRAVITY)
+    if solver_name == "SolverSemiImplicit":
+        solver = newton.solvers.SolverSemiImplicit(model, enable_tri_contact=False)
+    else:
+        solver = newton.solvers.SolverXPBD(model, iterations=2)
+    s0, s1 = model.state(), model.state()
+    control = model.control()
+
+    def run(n):
+        nonlocal s0, s1
+        for _ in range(n):
+            s0.clear_forces()
+            solver.step(s0, s1, control, None, dt)
+            s0, s1 = s1, s0
+
+    run(warmup)
+    wp.synchronize_device(device)
+    t0 = time.perf_counter()
+    run(steps)
+    wp.synchronize_device(device)
+    seconds = time.perf_counter() - t0
+    q = s0.particle_q.numpy()
+    return {
+        "seconds": seconds,
+        "steps": steps,
+        "dt": dt,
+        "ms_per_step": 1e3 * seconds / steps,
+        "element_updates_per_s": mesh.element_count * steps / seconds,
+        "finite": bool(np.isfinite(q).all()),
+        "newton_version": getattr(newton, "__version__", "?"),
+    }
+
+
+def cantilever_table(cells=(2, 4, 8)):
+    """Tip deflection of the test cantilever (tests/test_fem_cantilever.py) against beam theory, float64."""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
+    from test_fem_cantilever import BEAM, tip_deflection
+
+    rows = []
+    for n in cells:
+        t0 = time.perf_counter()
+        d = tip_deflection(n, "linear")
+        rows.append(
+            {
+                "cells_across": n,
+                "elements": 60 * n**3,
+                "tip": d,
+                "beam": BEAM,
+                "error": abs(d - BEAM) / BEAM,
+                "seconds": time.perf_counter() - t0,
+            }
+        )
+    return rows
+
+
+def machine_info(device: str) -> dict:
+    import warp as wp
+
+    cpu = platform.processor() or "?"
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return {
+        "cpu_model": cpu,
+        "cpu_cores": os.cpu_count(),
+        "load_average": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
+        "warp_version": wp.__version__,
+        "device_name": wp.get_device(device).name,
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+    }
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--k", type=int, nargs="*", default=[6, 13], help="cells across the thinnest side (6: 1e4, 13: 1e5)")
+    p.add_argument("--device", default="cpu", help="Warp device (cpu or cuda)")
+    p.add_argument("--explicit-steps", type=int, default=None, help="timed explicit steps (default 5e6 / elements)")
+    p.add_argument("--implicit-steps", type=int, default=None, help="timed implicit steps (default 5e5 / elements)")
+    p.add_argument("--warmup", type=int, default=5)
+    p.add_argument("--no-newton", action="store_true", help="skip the Newton peer")
+    p.add_argument("--cantilever", action="store_true", help="also print the cantilever convergence table")
+    p.add_argument("--json", action="store_true", help="one JSON line per size")
+    args = p.parse_args(argv)
+
+    import warp as wp
+
+    wp.config.quiet = True
+    wp.init()
+    results = []
+    for k in args.k:
+        mesh = bench_mesh(k)
+        m = mesh.element_count
+        n_exp = args.explicit_steps or max(10, int(5.0e6 / m))
+        n_imp = args.implicit_steps or max(3, int(5.0e5 / m))
+        row = {"k": k, "elements": m, "vertices": mesh.vertex_count, "device": args.device}
+        row["explicit_corotated"] = _time_pdsim(
+            mesh, integrator="explicit", measure="corotated", device=args.device, steps=n_exp, warmup=args.warmup
+        )
+        row["explicit_linear"] = _time_pdsim(
+            mesh, integrator="explicit", measure="linear", device=args.device, steps=n_exp, warmup=args.warmup
+        )
+        for mode in ("assembled", "matrix_free"):
+            row[f"implicit_{mode}"] = _time_pdsim(
+                mesh,
+                integrator="implicit",
+                measure="corotated",
+                device=args.device,
+                steps=n_imp,
+                warmup=args.warmup,
+                stiffness=mode,
+            )
+        if not args.no_newton:
+            dt = row["explicit_corotated"]["dt"]
+            for name in ("SolverSemiImplicit", "SolverXPBD"):
+                r = _time_newton(mesh, solver_name=name, device=args.device, steps=n_exp, warmup=args.warmup, dt=dt)
+                if r is None:
+                    row["newton"] = "not installed"
+                    break
+                row[f"newton_{name}"] = r
+        row.update(machine_info(args.device))
+        results.append(row)
+        if args.json:
+            print(json.dumps(row))
+        else:
+            _print_row(row)
+    if args.cantilever:
+        rows = cantilever_table()
+        if args.json:
+            print(json.dumps({"cantilever": rows}))
+        else:
+            print("cantilever (linear, float64): cells across, elements, tip [m], beam theory [m], error, seconds")
+            for r in rows:
+                print(
+                    f"  {r['cells_across']:3d} {r['elements']:7d} {r['tip']:.6g} {r['beam']:.6g} "
+                    f"{100 * r['error']:.2f} % {r['seconds']:.2f} s"
+                )
+    return 0
+
+
+def _print_row(row):
+    print(f"k={row['k']}: {row['elements']} elements, {row['vertices']} vertices, device {row['device']}")
+    for key, label in (
+        ("explicit_corotated", "pdsim explicit corotated"),
+        ("explicit_linear", "pdsim explicit linear"),
+        ("implicit_assembled", "pdsim implicit BE, assembled K"),
+        ("implicit_matrix_free", "pdsim implicit BE, matrix-free K"),
+        ("newton_SolverSemiImplicit", "Newton SolverSemiImplicit"),
+        ("newton_SolverXPBD", "Newton SolverXPBD (2 it)"),
+    ):
+        r = row.get(key)
+        if not isinstance(r, dict):
+            continue
+        extra = ""
+        if "cg_iterations_per_step" in r:
+            extra = f", {r['cg_iterations_per_step']:.1f} CG it/step, {r['ms_per_cg_iteration']:.3f} ms/it"
+        if "finite" in r and not r["finite"]:
+            extra += ", NOT FINITE"
+        print(
+            f"  {label:34s} {r['ms_per_step']:9.3f} ms/step {r['element_updates_per_s'] / 1e6:8.2f} M elem/s"
+            f"  (dt {r['dt']:.3g} s, {r['steps']} steps){extra}"
+        )
+    if row.get("newton") == "not installed":
+        print("  Newton: not installed (pip install newton)")
+    print(
+        f"  {row['cpu_model']}, {row['cpu_cores']} cores, load {row['load_average']}, Warp {row['warp_version']}, "
+        f"{row['date']}"
+    )
+
+
+if __name__ == "__main__":
+    sys.exit(main())
