@@ -79,8 +79,8 @@ def _execute(build_scene, args) -> int:
         print(f"pdsim: interrupted; {out} holds the frames finished so far", file=sys.stderr)
         return 130
     print(
-        f"pdsim: wrote {report.path}: {report.frames_written} frames, {report.particle_count} particles, "
-        f"{report.bond_count} bonds, dt={report.dt:.3g} s x {report.substeps_per_frame} substeps/frame, "
+        f"pdsim: wrote {report.path}: {report.frames_written} frames, {report.summary}, "
+        f"dt={report.dt:.3g} s x {report.substeps_per_frame} substeps/frame, "
         f"{report.wall_seconds:.1f} s"
     )
     return 0

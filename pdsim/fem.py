@@ -1140,21 +1140,28 @@ class SolverFem:
     def surfaces(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per body: (vertex ids [k] into the solver's vertices, outward triangles [f, 3] indexing those ids). Each
         connected piece of a body is a closed surface with its own vertices."""
+        return [(ids, faces) for ids, faces, _ in self._surface_data()]
+
+    def _surface_data(self):
+        """Per body: (vertex ids, triangles, piece label per triangle), rebuilt when the topology changed."""
+        from .fem_fracture import element_pieces
+
         if self._surfaces is None:
             faces, elem = boundary_faces(self._tets_h, return_elements=True)
             face_body = self.element_body[elem]
+            piece_of_element = element_pieces(self._tets_h)[1]
             out = []
             for i in range(len(self.bodies)):
-                fb = faces[face_body == i]
-                ids, local = np.unique(fb, return_inverse=True)
-                out.append((ids, local.reshape(-1, 3).astype(np.int32)))
+                mine = face_body == i
+                ids, local = np.unique(faces[mine], return_inverse=True)
+                out.append((ids, local.reshape(-1, 3).astype(np.int32), piece_of_element[elem[mine]].astype(np.int32)))
             self._surfaces = out
         return self._surfaces
 
     def add_outputs(self, cache):
-        """Declares one UsdGeom.Mesh per body (its boundary surface: one closed shell per piece) and one per render
-        mesh ("<name>_render")."""
-        self._handles = [cache.add_mesh(b.name) for b in self.bodies]
+        """Declares one UsdGeom.Mesh per body (its boundary surface: one closed shell per piece, with the per-face
+        int primvar ``piece``) and one per render mesh ("<name>_render")."""
+        self._handles = [cache.add_mesh(b.name, face_primvars={"piece": "int"}) for b in self.bodies]
         self._render_handles = [cache.add_mesh(f"{self.bodies[r[0]].name}_render") for r in self._render]
         self._written_version = {}
 
@@ -1166,9 +1173,11 @@ class SolverFem:
         from .kernels import fem_elements as ke
 
         x = self.positions()
-        for i, (handle, (ids, faces)) in enumerate(zip(self._handles, self.surfaces(), strict=True)):
-            changed = self._written_version.get(i) != self.topology_version
-            cache.write_mesh(handle, frame, x[ids], faces if changed else None)
+        for i, (handle, (ids, faces, piece)) in enumerate(zip(self._handles, self._surface_data(), strict=True)):
+            if self._written_version.get(i) != self.topology_version:
+                cache.write_mesh(handle, frame, x[ids], faces, face_primvars={"piece": piece})
+            else:
+                cache.write_mesh(handle, frame, x[ids])
             self._written_version[i] = self.topology_version
         for handle, (_, elem, w, faces, out) in zip(self._render_handles, self._render, strict=True):
             wp.launch(
@@ -1338,6 +1347,10 @@ class SolverFem:
         """sum m (x - origin) x v [kg m^2/s]."""
         x = self.positions() - np.asarray(origin, dtype=np.float64)
         return self._mass_h @ np.cross(x, self.velocities())
+
+    def summary(self) -> str:
+        """One line for run reports: vertices and elements simulated."""
+        return f"{self.particle_count} FEM vertices, {self.bond_count} tetrahedra"
 
     def piece_count(self) -> int:
         """Number of face-connected pieces of all bodies together."""

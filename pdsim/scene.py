@@ -43,6 +43,7 @@ class RunReport:
     wall_seconds: float
     particle_count: int
     bond_count: int
+    summary: str = ""  # what the solvers simulated, e.g. "2560 particles, 309440 bonds"
 
 
 class Scene:
@@ -233,6 +234,10 @@ class Scene:
             wall_seconds=time.perf_counter() - wall0,
             particle_count=sum(s.particle_count for s in solvers),
             bond_count=sum(s.bond_count for s in solvers),
+            summary="; ".join(
+                s.summary() if hasattr(s, "summary") else f"{s.particle_count} particles, {s.bond_count} bonds"
+                for s in solvers
+            ),
         )
 
     def _speed_limit(self, solvers) -> float:
