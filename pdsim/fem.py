@@ -571,30 +571,8 @@ class SolverFem:
 
     def _update_accelerations(self):
         """a = f / m + g - c v at the current state, without a kick or a plastic update (after init and splits)."""
-        import warp as wp
-
-        from .kernels import fem_solver as ks
-
-        _, gather_kick = ks.explicit_kernels(self.dtype)
         self._compute_element_forces(0.0)
-        wp.launch(
-            gather_kick,
-            dim=self.vertex_count,
-            inputs=[
-                self._vertex_offsets,
-                self._vertex_slots,
-                self._corner,
-                self._inv_mass,
-                self._kind,
-                self.gravity,
-                self._damping,
-                self.dtype(0.0),
-                self.velocities_wp,
-                self._accelerations,
-                self._forces,
-            ],
-            device=self.device,
-        )
+        self._gather_kick(0.0)
         if self.fracture:
             self._over_count.zero_()
 
@@ -675,7 +653,7 @@ class SolverFem:
 
         from .kernels import fem_solver as ks
 
-        kick_drift, gather_kick = ks.explicit_kernels(self.dtype)
+        kick_drift, _ = ks.explicit_kernels(self.dtype)
         d = self.device
         wp.launch(
             kick_drift,
@@ -693,6 +671,16 @@ class SolverFem:
         )
         self._collide(dt)
         self._compute_element_forces(dt)
+        self._gather_kick(dt)
+
+    def _gather_kick(self, dt: float):
+        """Gathers the element corner forces into vertex forces, a = f / m + g - c v, and kicks free vertices by
+        dt / 2 (dt = 0: accelerations only)."""
+        import warp as wp
+
+        from .kernels import fem_solver as ks
+
+        _, gather_kick = ks.explicit_kernels(self.dtype)
         wp.launch(
             gather_kick,
             dim=self.vertex_count,
@@ -709,7 +697,7 @@ class SolverFem:
                 self._accelerations,
                 self._forces,
             ],
-            device=d,
+            device=self.device,
         )
 
     def _operator_mass(self, dt: float):
