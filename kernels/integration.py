@@ -1,4 +1,4 @@
-"""Velocity-Verlet integration with boundary conditions and the ground-plane collider.
+"""Velocity-Verlet integration with boundary conditions.
 
 One step of length dt, with a_n the acceleration from the previous force evaluation:
     integrate_kick_drift:  v <- v + dt/2 a_n ; x <- x + dt v      (then boundary conditions and colliders)
@@ -67,37 +67,6 @@ def integrate_kick(
         velocities[i] = v + (0.5 * dt) * a
     elif c == PARTICLE_PRESCRIBED:
         velocities[i] = v + (0.5 * dt) * wp.cw_mul(wp.vec3(1.0) - prescribed_axes[i], a)
-
-
-@wp.kernel
-def collide_ground_plane(
-    positions: wp.array(dtype=wp.vec3),
-    velocities: wp.array(dtype=wp.vec3),
-    kind: wp.array(dtype=wp.int32),
-    radius: wp.array(dtype=float),
-    normal: wp.vec3,
-    offset: float,
-    friction: float,
-):
-    """Keeps free particles (spheres of the given radius) above the plane n . x = offset: a penetrating particle is
-    projected back onto the plane, its approaching normal velocity removed (inelastic) and its tangential velocity
-    reduced by Coulomb friction (friction * removed normal speed, never reversing it)."""
-    i = wp.tid()
-    if kind[i] != PARTICLE_FREE:
-        return
-    x = positions[i]
-    depth = radius[i] + offset - wp.dot(normal, x)
-    if depth > 0.0:
-        positions[i] = x + depth * normal
-        v = velocities[i]
-        vn = wp.dot(v, normal)
-        if vn < 0.0:
-            vt = v - vn * normal
-            vt_len = wp.length(vt)
-            scale = float(0.0)
-            if vt_len > 0.0:
-                scale = wp.max(0.0, 1.0 - friction * (-vn) / vt_len)
-            velocities[i] = vt * scale
 
 
 @wp.kernel

@@ -7,11 +7,20 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
+from .colliders import BoxProjectile, GroundPlane, MeshCollider, MeshProjectile, SphereProjectile
 from .errors import FeatureNotAvailableError, GeometryError, InstabilityError, ParameterError, PdsimError
-from .fem import FemBody, FemPlasticity, SolverFem
-from .fem_mesh import TetMesh, box_tet_mesh, load_tet_mesh, tet_mesh_from_arrays, tetrahedralize, write_tet_mesh
+from .fem import (
+    FemBody,
+    FemPlasticity,
+    SolverFem,
+    TetMesh,
+    box_tet_mesh,
+    load_tet_mesh,
+    tet_mesh_from_arrays,
+    tetrahedralize,
+    write_tet_mesh,
+)
 from .geometry import SolidShape, box, cylinder, load_mesh, shape_from_arrays, sphere
-from .contact import BoxProjectile, MeshCollider, MeshProjectile, SphereProjectile
 from .lattice import (
     Lattice,
     LatticeBody,
@@ -23,10 +32,10 @@ from .lattice import (
     LatticeRuleDistanceWeighted,
     LatticeRuleMixedCoordinate,
     LatticeType,
+    SolverLattice,
 )
-from .lattice_solver import SolverLattice
 from .materials import Anisotropy, Material
-from .peridynamics import GroundPlane, PeridynamicBody, SolverPeridynamics
+from .peridynamics import PeridynamicBody, SolverPeridynamics
 from .regions import BoxRegion, HalfSpace, SphereRegion
 from .scene import RunReport, Scene
 

@@ -41,6 +41,9 @@ def load_scene_script(path: str):
         raise ParameterError("scene", path, "a Python scene script (*.py)")
     if not os.path.isfile(path):
         raise ParameterError("scene", path, "an existing file")
+    folder = os.path.dirname(os.path.abspath(path))
+    if folder not in sys.path:  # as when the script runs on its own: its folder's modules import
+        sys.path.insert(0, folder)
     spec = importlib.util.spec_from_file_location("pdsim_user_scene", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

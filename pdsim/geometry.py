@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import GeometryError, ParameterError
-from .materials import _check_range
+from .validate import check_range
 
 MESH_SUFFIXES = (".obj", ".stl", ".ply", ".glb", ".gltf", ".off")
 
@@ -90,7 +90,7 @@ def load_mesh(path: str | os.PathLike, *, scale: float = 1.0, translate=(0.0, 0.
         raise GeometryError(f"{path}: unknown mesh file type '{suffix}'; supported: {', '.join(MESH_SUFFIXES)}")
     if not os.path.isfile(path):
         raise GeometryError(f"{path}: no such file")
-    scale = _check_range("scale", scale, 0.0, None)
+    scale = check_range("scale", scale, 0.0, None)
     translate = _vec3("translate", translate)
     try:
         mesh = trimesh.load(path, force="mesh", process=True)
@@ -146,7 +146,7 @@ def sphere(radius: float, *, center=(0.0, 0.0, 0.0), subdivisions: int = 4, name
     """A sphere of ``radius`` [m] (> 0), an icosphere with ``subdivisions`` levels (1..7)."""
     import trimesh
 
-    r = _check_range("radius", radius, 0.0, None)
+    r = check_range("radius", radius, 0.0, None)
     if int(subdivisions) != subdivisions or not 1 <= subdivisions <= 7:
         raise ParameterError("subdivisions", subdivisions, "an integer in [1, 7]")
     m = trimesh.creation.icosphere(subdivisions=int(subdivisions), radius=r)
@@ -160,8 +160,8 @@ def cylinder(
     """A cylinder of ``radius`` and ``height`` [m] (both > 0) along ``axis`` ('x', 'y' or 'z')."""
     import trimesh
 
-    r = _check_range("radius", radius, 0.0, None)
-    h = _check_range("height", height, 0.0, None)
+    r = check_range("radius", radius, 0.0, None)
+    h = check_range("height", height, 0.0, None)
     if axis not in ("x", "y", "z"):
         raise ParameterError("axis", axis, "'x', 'y' or 'z'")
     if int(sections) != sections or sections < 8:

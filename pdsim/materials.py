@@ -6,25 +6,7 @@ import math
 from dataclasses import dataclass
 
 from .errors import ParameterError
-
-
-def _check_range(field: str, value: float, lo: float | None, hi: float | None, *, lo_open=True, hi_open=True) -> float:
-    """Return ``value`` as float, or raise ParameterError naming the field, value and allowed range."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ParameterError(field, value, "a real number") from None
-    if not math.isfinite(v):
-        raise ParameterError(field, value, "a finite real number")
-    below = lo is not None and (v <= lo if lo_open else v < lo)
-    above = hi is not None and (v >= hi if hi_open else v > hi)
-    if below or above:
-        left = "-inf" if lo is None else f"{lo:g}"
-        right = "inf" if hi is None else f"{hi:g}"
-        lb = "(" if lo_open or lo is None else "["
-        rb = ")" if hi_open or hi is None else "]"
-        raise ParameterError(field, value, f"{lb}{left}, {right}{rb}")
-    return v
+from .validate import check_range
 
 
 @dataclass(frozen=True)
@@ -54,8 +36,8 @@ class Anisotropy:
         if len(a) != 3 or not math.isfinite(norm) or norm == 0.0:
             raise ParameterError("axis", self.axis, "3 finite numbers, not all zero")
         object.__setattr__(self, "axis", tuple(x / norm for x in a))
-        object.__setattr__(self, "stiffness_ratio", _check_range("stiffness_ratio", self.stiffness_ratio, 0.0, None))
-        object.__setattr__(self, "strength_ratio", _check_range("strength_ratio", self.strength_ratio, 0.0, None))
+        object.__setattr__(self, "stiffness_ratio", check_range("stiffness_ratio", self.stiffness_ratio, 0.0, None))
+        object.__setattr__(self, "strength_ratio", check_range("strength_ratio", self.strength_ratio, 0.0, None))
 
 
 @dataclass(frozen=True)
@@ -94,30 +76,30 @@ class Material:
     anisotropy: Anisotropy | None = None
 
     def __post_init__(self):
-        object.__setattr__(self, "density", _check_range("density", self.density, 0.0, None))
-        object.__setattr__(self, "youngs_modulus", _check_range("youngs_modulus", self.youngs_modulus, 0.0, None))
-        object.__setattr__(self, "poisson_ratio", _check_range("poisson_ratio", self.poisson_ratio, -1.0, 0.5))
+        object.__setattr__(self, "density", check_range("density", self.density, 0.0, None))
+        object.__setattr__(self, "youngs_modulus", check_range("youngs_modulus", self.youngs_modulus, 0.0, None))
+        object.__setattr__(self, "poisson_ratio", check_range("poisson_ratio", self.poisson_ratio, -1.0, 0.5))
         if self.yield_stress is not None:
-            object.__setattr__(self, "yield_stress", _check_range("yield_stress", self.yield_stress, 0.0, None))
+            object.__setattr__(self, "yield_stress", check_range("yield_stress", self.yield_stress, 0.0, None))
         object.__setattr__(
             self,
             "hardening_modulus",
-            _check_range("hardening_modulus", self.hardening_modulus, 0.0, None, lo_open=False),
+            check_range("hardening_modulus", self.hardening_modulus, 0.0, None, lo_open=False),
         )
         if self.fracture_energy is not None and self.critical_stretch is not None:
             raise ParameterError("critical_stretch", self.critical_stretch, "None when fracture_energy is given")
         if self.fracture_energy is not None:
             object.__setattr__(
-                self, "fracture_energy", _check_range("fracture_energy", self.fracture_energy, 0.0, None)
+                self, "fracture_energy", check_range("fracture_energy", self.fracture_energy, 0.0, None)
             )
         if self.critical_stretch is not None:
             object.__setattr__(
-                self, "critical_stretch", _check_range("critical_stretch", self.critical_stretch, 0.0, None)
+                self, "critical_stretch", check_range("critical_stretch", self.critical_stretch, 0.0, None)
             )
         object.__setattr__(
             self,
             "compressive_bonus",
-            _check_range("compressive_bonus", self.compressive_bonus, 0.0, None, lo_open=False),
+            check_range("compressive_bonus", self.compressive_bonus, 0.0, None, lo_open=False),
         )
         if self.failure_plastic_strain is not None:
             if self.yield_stress is None:
@@ -127,7 +109,7 @@ class Material:
             object.__setattr__(
                 self,
                 "failure_plastic_strain",
-                _check_range("failure_plastic_strain", self.failure_plastic_strain, 0.0, None),
+                check_range("failure_plastic_strain", self.failure_plastic_strain, 0.0, None),
             )
         if self.anisotropy is not None and not isinstance(self.anisotropy, Anisotropy):
             raise ParameterError("anisotropy", self.anisotropy, "a pdsim.Anisotropy or None")

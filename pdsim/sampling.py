@@ -6,7 +6,7 @@ import numpy as np
 
 from .errors import GeometryError, ParameterError
 from .geometry import SolidShape
-from .materials import _check_range
+from .validate import check_range
 
 MAX_LATTICE_POINTS = 200_000_000
 
@@ -55,7 +55,7 @@ def fill_solid(shape: SolidShape, spacing: float, *, device: str = "cpu") -> tup
         positions: particle reference positions [m], shape [n, 3], float64.
         volumes: particle volumes h^3 [m^3], shape [n].
     """
-    h = _check_range("spacing", spacing, 0.0, None)
+    h = check_range("spacing", spacing, 0.0, None)
     smallest = float(np.min(shape.extent))
     if h > smallest:
         raise ParameterError("spacing", spacing, f"(0, {smallest:g}] for '{shape.name}' (its smallest extent)")

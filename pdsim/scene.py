@@ -5,23 +5,29 @@ from __future__ import annotations
 import math
 import os
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
+from .colliders import GroundPlane
 from .errors import ParameterError
 from .geometry import SolidShape
-from .materials import Material, _check_range
-from .peridynamics import GroundPlane, PeridynamicBody, check_time_step, warn_if_above_estimate
+from .materials import Material
+from .peridynamics import PeridynamicBody
+from .validate import check_frames, check_range, check_time_step
 
 UP_AXES = {"Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
 
 
-def check_frames(frames) -> int:
-    """Validates a frame count (an integer >= 1)."""
-    if isinstance(frames, bool) or not isinstance(frames, (int, np.integer)) or frames < 1:
-        raise ParameterError("frames", frames, "an integer >= 1")
-    return int(frames)
+def warn_if_above_estimate(dt: float, dt_crit: float):
+    """Warns when a user time step exceeds the (conservative) stable estimate; divergence is still detected."""
+    if dt > dt_crit:
+        warnings.warn(
+            f"time step {dt:.3g} s exceeds the stable estimate {dt_crit:.3g} s; the run is checked for "
+            "divergence every frame",
+            stacklevel=3,
+        )
 
 
 def default_device() -> str:
@@ -70,7 +76,7 @@ class Scene:
     ):
         if up_axis not in UP_AXES:
             raise ParameterError("up_axis", up_axis, "'Y' or 'Z'")
-        self.fps = _check_range("fps", fps, 0.0, 1000.0, hi_open=False)
+        self.fps = check_range("fps", fps, 0.0, 1000.0, hi_open=False)
         self.frames = check_frames(frames)
         self.up_axis = up_axis
         up = np.asarray(UP_AXES[up_axis])
@@ -78,7 +84,7 @@ class Scene:
         if g.shape != (3,) or not np.all(np.isfinite(g)):
             raise ParameterError("gravity", gravity, "3 finite numbers [m/s^2]")
         self.gravity = tuple(float(x) for x in g)
-        self.time_step_safety = _check_range("time_step_safety", time_step_safety, 0.0, 1.0, hi_open=False)
+        self.time_step_safety = check_range("time_step_safety", time_step_safety, 0.0, 1.0, hi_open=False)
         self.name = name
         self.bodies: list = []
         self.ground: GroundPlane | None = None
@@ -107,8 +113,8 @@ class Scene:
 
     def add_ground_plane(self, *, height: float = 0.0, friction: float = 0.5) -> GroundPlane:
         """A ground plane perpendicular to the up axis at ``height`` [m], Coulomb ``friction`` >= 0."""
-        h = _check_range("height", height, None, None)
-        mu = _check_range("friction", friction, 0.0, None, lo_open=False)
+        h = check_range("height", height, None, None)
+        mu = check_range("friction", friction, 0.0, None, lo_open=False)
         self.ground = GroundPlane(normal=UP_AXES[self.up_axis], offset=h, friction=mu)
         return self.ground
 

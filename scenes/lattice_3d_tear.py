@@ -6,7 +6,7 @@ cache (primvars kind, pe1, pe1_intact, pe2, displacement, broken_links, fragment
 Run:  python scenes/lattice_3d_tear.py [--out lattice_3d_tear.usdc]   or   pdsim run scenes/lattice_3d_tear.py
 """
 
-from pdsim.lattice_cases import tear_3d_scene as build_scene
+from lattice_paper import tear_3d_scene as build_scene
 
 if __name__ == "__main__":
     from pdsim.cli import run_script

@@ -2,16 +2,16 @@
 clamped, right column pulled at 0.35 units/step for 10 steps then released into followers, 401 steps; tracks the
 central particle j = 67 (Figures 5, 6, 8, 9).
 
-Parameters: pdsim/lattice_cases.py and docs/lattice.md. Writes the USD cache and the PNG figures (PE1 and PE2 contour
+Parameters: scenes/lattice_paper.py and docs/lattice.md. Writes the USD cache and the PNG figures (PE1 and PE2 contour
 plots at the paper's steps, trajectories of the tracked particles).
 
 Run:  python scenes/lattice_case_a.py [--out lattice_case_a.usdc] [--plots lattice_case_a_plots]
   or  pdsim run scenes/lattice_case_a.py   (cache only)
 """
 
-from pdsim.lattice_cases import case_a_scene as build_scene
+from lattice_paper import case_a_scene as build_scene
 
 if __name__ == "__main__":
-    from pdsim.lattice_plots import run_lattice_scene
+    from lattice_paper import run_lattice_scene
 
     raise SystemExit(run_lattice_scene(build_scene, frames=[1, 10, 20, 401], pe2_frames=[2, 10]))

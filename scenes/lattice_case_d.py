@@ -2,16 +2,16 @@
 10 steps, links lost beyond 2.0 / 2.5 units (shell 1 / 2), fictitious points at the rest offset; first and second
 gradient; tracks j = 103 (Figures 14, 15, 16).
 
-Parameters: pdsim/lattice_cases.py and docs/lattice.md. Writes the USD cache and the PNG figures (PE1 and PE2 contour
+Parameters: scenes/lattice_paper.py and docs/lattice.md. Writes the USD cache and the PNG figures (PE1 and PE2 contour
 plots at the paper's steps, trajectories of the tracked particles).
 
 Run:  python scenes/lattice_case_d.py [--out lattice_case_d.usdc] [--plots lattice_case_d_plots]
   or  pdsim run scenes/lattice_case_d.py   (cache only)
 """
 
-from pdsim.lattice_cases import case_d_scene as build_scene
+from lattice_paper import case_d_scene as build_scene
 
 if __name__ == "__main__":
-    from pdsim.lattice_plots import run_lattice_scene
+    from lattice_paper import run_lattice_scene
 
     raise SystemExit(run_lattice_scene(build_scene, frames=[1, 5, 6, 7, 8, 100], pe2_frames=[5, 6]))

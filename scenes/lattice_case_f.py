@@ -2,16 +2,16 @@
 and second gradient) beside the square one, averaging frame rule, 400 steps; the hexagonal tracked particle j = 133
 rebounds (Figures 18-21).
 
-Parameters: pdsim/lattice_cases.py and docs/lattice.md. Writes the USD cache and the PNG figures (PE1 and PE2 contour
+Parameters: scenes/lattice_paper.py and docs/lattice.md. Writes the USD cache and the PNG figures (PE1 and PE2 contour
 plots at the paper's steps, trajectories of the tracked particles).
 
 Run:  python scenes/lattice_case_f.py [--out lattice_case_f.usdc] [--plots lattice_case_f_plots]
   or  pdsim run scenes/lattice_case_f.py   (cache only)
 """
 
-from pdsim.lattice_cases import case_f_scene as build_scene
+from lattice_paper import case_f_scene as build_scene
 
 if __name__ == "__main__":
-    from pdsim.lattice_plots import run_lattice_scene
+    from lattice_paper import run_lattice_scene
 
     raise SystemExit(run_lattice_scene(build_scene, frames=[1, 7, 8, 9, 10, 12, 27, 400], pe2_frames=[8, 9]))

@@ -1,16 +1,16 @@
 """Lattice case g of shared/seeds/pbd_lattice.txt: the frame rule: hexagonal fracture, second gradient, averaging frame
 rule against the single-follower rule; with averaging two frame points stay between the pieces (Figure 22).
 
-Parameters: pdsim/lattice_cases.py and docs/lattice.md. Writes the USD cache and the PNG figures (PE1 and PE2 contour
+Parameters: scenes/lattice_paper.py and docs/lattice.md. Writes the USD cache and the PNG figures (PE1 and PE2 contour
 plots at the paper's steps, trajectories of the tracked particles).
 
 Run:  python scenes/lattice_case_g.py [--out lattice_case_g.usdc] [--plots lattice_case_g_plots]
   or  pdsim run scenes/lattice_case_g.py   (cache only)
 """
 
-from pdsim.lattice_cases import case_g_scene as build_scene
+from lattice_paper import case_g_scene as build_scene
 
 if __name__ == "__main__":
-    from pdsim.lattice_plots import run_lattice_scene
+    from lattice_paper import run_lattice_scene
 
     raise SystemExit(run_lattice_scene(build_scene, frames=[1, 8, 9, 100], pe2_frames=None))

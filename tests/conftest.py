@@ -1,7 +1,16 @@
 """Shared test set-up: Warp quiet; tests that take the ``device`` fixture run on the CPU always and on CUDA when
 present (CI has no GPU, so there they run on the CPU backend only)."""
 
+import os
+import sys
+
 import pytest
+
+# scene scripts and tools are scripts, not package modules: make them importable by the tests
+_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+for _folder in ("scenes", "tools"):
+    if os.path.join(_ROOT, _folder) not in sys.path:
+        sys.path.insert(0, os.path.join(_ROOT, _folder))
 
 
 def _devices():

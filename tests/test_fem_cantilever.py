@@ -5,7 +5,7 @@ import pytest
 
 import pdsim
 from pdsim.fem import FemBody, SolverFem
-from pdsim.fem_mesh import box_tet_mesh
+from pdsim.fem.mesh import box_tet_mesh
 
 LENGTH, HEIGHT = 1.0, 0.1
 G = 9.81

@@ -6,7 +6,7 @@ import pytest
 
 import pdsim
 from pdsim.fem import FemBody, SolverFem
-from pdsim.fem_mesh import box_tet_mesh
+from pdsim.fem.mesh import box_tet_mesh
 
 MAT = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)
 EPS32 = float(np.finfo(np.float32).eps)

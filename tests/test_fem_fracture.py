@@ -6,8 +6,8 @@ import pytest
 
 import pdsim
 from pdsim.fem import FemBody, SolverFem
-from pdsim.fem_fracture import boundary_faces, closed_surface_defects, element_pieces
-from pdsim.fem_mesh import box_tet_mesh, tet_mesh_from_arrays
+from pdsim.fem.fracture import boundary_faces, closed_surface_defects, element_pieces
+from pdsim.fem.mesh import box_tet_mesh, tet_mesh_from_arrays
 
 MAT = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)
 STRENGTH = 2.0e4  # [Pa]: a strain of about 2 %

@@ -6,8 +6,8 @@ import pytest
 
 import pdsim
 from pdsim.fem import FemBody, FemPlasticity
-from pdsim.fem_fracture import closed_surface_defects
-from pdsim.fem_mesh import (
+from pdsim.fem.fracture import closed_surface_defects
+from pdsim.fem.mesh import (
     box_tet_mesh,
     load_tet_mesh,
     signed_volumes,

@@ -5,7 +5,7 @@ import pytest
 
 import pdsim
 from pdsim.fem import FemBody, FemPlasticity, SolverFem
-from pdsim.fem_mesh import box_tet_mesh
+from pdsim.fem.mesh import box_tet_mesh
 
 MAT = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)
 
@@ -13,8 +13,7 @@ MAT = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)
 def _apply_rule(total, plastic, params, dt, device):
     """Runs the plastic update kernel (the function the element force kernel calls) on arrays of 3x3 strains."""
     import warp as wp
-
-    from pdsim.kernels import fem_elements as ke
+    from pdsim.kernels.fem import elements as ke
 
     _, mat33, _ = ke.fem_types(wp.float64)
     t = wp.array(np.asarray(total, dtype=np.float64), dtype=mat33, device=device)

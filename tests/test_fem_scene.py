@@ -6,8 +6,8 @@ import pytest
 
 import pdsim
 from pdsim.fem import FemBody
-from pdsim.fem_fracture import closed_surface_defects
-from pdsim.fem_mesh import box_tet_mesh, tet_mesh_from_arrays
+from pdsim.fem.fracture import closed_surface_defects
+from pdsim.fem.mesh import box_tet_mesh, tet_mesh_from_arrays
 from pdsim.output import validate_usd
 
 MAT = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)

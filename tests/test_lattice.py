@@ -14,8 +14,8 @@ from pdsim.lattice import (
     LatticeKind,
     LatticeNeighbourhood,
     LatticeRuleMixedCoordinate,
+    SolverLattice,
 )
-from pdsim.lattice_solver import SolverLattice
 
 V_TABLE1 = 0.35  # Table 1: leader speed [units/step] for 10 steps
 FRACTURE = (2.0, 2.5)  # per-shell link-loss thresholds [units] (docs/lattice.md: chosen so fracture starts at step 4-6)

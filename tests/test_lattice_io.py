@@ -10,9 +10,9 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 import warp as wp
+from pdsim.kernels.lattice import rules as kl
 
 import pdsim
-from pdsim.kernels import lattice as kl
 from pdsim.lattice import (
     Lattice,
     LatticeBody,
@@ -22,8 +22,8 @@ from pdsim.lattice import (
     LatticeRule,
     LatticeRuleDistanceWeighted,
     LatticeRuleMixedCoordinate,
+    SolverLattice,
 )
-from pdsim.lattice_solver import SolverLattice
 
 
 @wp.func
@@ -223,7 +223,8 @@ def test_scene_runs_lattice_into_a_valid_usd_cache(tmp_path):
     time step (stable_time_step is inf), each frame advances 3 steps, and the cache holds per-frame points with the
     primvars kind, pe1, pe1_intact, pe2, displacement, broken_links and fragment; it passes pxr.UsdValidation. The
     paper-style figures (PE1, PE2 contours, trajectory) are drawn from it when matplotlib is installed."""
-    from pdsim.lattice_plots import read_lattice_cache, write_case_plots
+    from lattice_plots import read_lattice_cache, write_case_plots
+
     from pdsim.output import validate_usd
 
     scene = pdsim.Scene(fps=24, frames=4, name="lattice")
@@ -255,7 +256,7 @@ def test_scene_runs_lattice_into_a_valid_usd_cache(tmp_path):
 def test_3d_mesh_body_tears_in_the_neck():
     """3D: the dog-bone bar of scenes/lattice_3d_tear.py (simple cubic lattice filling a closed mesh), pulled slowly,
     tears into two pieces at its neck (|x| < 2 units of the middle), not at a grip."""
-    from pdsim.lattice_cases import tear_3d_scene
+    from lattice_paper import tear_3d_scene
 
     scene = tear_3d_scene(frames=50)
     solver = scene.build_solver(device="cpu")
@@ -274,9 +275,10 @@ def test_3d_mesh_body_tears_in_the_neck():
 @pytest.mark.parametrize("case", ["a", "b", "c", "d", "e", "f", "g", "3d"])
 def test_reference_scenes_run(case, tmp_path):
     """Every shipped lattice scene (scenes/lattice_case_*.py, scenes/lattice_3d_tear.py: the builders of
-    pdsim.lattice_cases) builds and runs two frames into a cache that passes pxr.UsdValidation, with one prim per
+    scenes/lattice_paper.py) builds and runs two frames into a cache that passes pxr.UsdValidation, with one prim per
     body."""
-    from pdsim import lattice_cases
+    import lattice_paper as lattice_cases
+
     from pdsim.output import validate_usd
 
     build = lattice_cases.tear_3d_scene if case == "3d" else getattr(lattice_cases, f"case_{case}_scene")

@@ -7,14 +7,8 @@ import numpy as np
 import pytest
 
 import pdsim
-from pdsim.contact import (
-    BoxProjectile,
-    MeshCollider,
-    MeshProjectile,
-    ParticleContact,
-    SphereProjectile,
-    bond_stiffness_row_sum,
-)
+from pdsim.colliders import BoxProjectile, MeshCollider, MeshProjectile, SphereProjectile
+from pdsim.contact import ParticleContact, bond_stiffness_row_sum
 
 MAT = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.25)  # P-wave speed 34.6 m/s
 H = 0.01

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import pdsim
-from pdsim.fragments import FragmentTracker, fragment_labels
-from pdsim.surfaces import FragmentSurfaces
+from pdsim.graph import FragmentTracker, fragment_labels
+from pdsim.peridynamics.surfaces import FragmentSurfaces
 
 MATERIAL = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.25)
 

@@ -32,7 +32,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 import pdsim
 from pdsim.fem import FemBody, SolverFem
-from pdsim.fem_mesh import box_tet_mesh
+from pdsim.fem.mesh import box_tet_mesh
 
 MAT = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)
 SIZE = (1.0, 0.5, 0.25)

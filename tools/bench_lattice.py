@@ -38,7 +38,7 @@ def build(dim: int, n: int, gradient: int, fracture: bool):
 def measure(dim: int, n: int, gradient: int, *, steps: int, repeat: int, device: str, fracture: bool) -> dict:
     import warp as wp
 
-    from pdsim.lattice_solver import SolverLattice
+    from pdsim.lattice import SolverLattice
 
     t0 = time.perf_counter()
     body = build(dim, n, gradient, fracture)

@@ -95,7 +95,8 @@ def kernel_source_digest() -> str:
     """Short SHA-1 of the step's kernel sources (pd_bonds.py, integration.py): identifies the code that was timed."""
     import hashlib
 
-    from pdsim.kernels import integration, pd_bonds
+    from pdsim.kernels import integration
+    from pdsim.kernels.peridynamics import bonds as pd_bonds
 
     digest = hashlib.sha1()
     for module in (pd_bonds, integration):

@@ -38,7 +38,7 @@ LATTICE_FRAME = wp.constant(2)
 
 @wp.struct
 class LatticeRuleParams:
-    """Parameters of a follower rule (meaning per rule; see pdsim/lattice.py).
+    """Parameters of a follower rule (meaning per rule; see pdsim/lattice/body.py).
 
     scalars: (relaxation omega, K [1/m] of the mixed-coordinate rule, distance exponent of shell 1, of shell 2).
     axis: unit axis of the mixed-coordinate rule.

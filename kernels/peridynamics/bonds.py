@@ -5,7 +5,7 @@ n = eta / l, Lambda = n . xi / L, extension e = l - L, weight w = delta / L, V_j
 partial-volume factor. Per bond we store ``bond_geom = (xi / L, L)`` and ``bond_wv = w V_j beta``.
 
 The supplement's model, with per-particle parameters a_k, b_k, d_k (the supplement's continuum values, or the same
-matching conditions evaluated on each particle's discrete family, see pdsim/peridynamics.py):
+matching conditions evaluated on each particle's discrete family, see pdsim/peridynamics/solver.py):
 
     theta_k = d_k sum_j w s (n . xi) V_j          = d_k sum_j w e Lambda V_j
     e^d_kj  = e - g_k Lambda theta_k,              g_k = (5 mu / 6) d_k / b_k    (= delta / 4 for the continuum values)

@@ -1,7 +1,7 @@
 """Tetrahedral finite element solid with plasticity and fracture (shared/seeds/fem_slides.txt, DESIGN.md section 3).
 
 A :class:`FemBody` is a linear-tetrahedron mesh of a solid (meshed from a closed surface by fTetWild, or loaded ready)
-with a :class:`pdsim.Material`, a strain measure ("linear", "corotated" or "green", see kernels/fem_elements.py), an
+with a :class:`pdsim.Material`, a strain measure ("linear", "corotated" or "green", see kernels/fem/elements.py), an
 integrator ("explicit" or "implicit"), and optional plasticity (:class:`FemPlasticity`) and fracture
 (``tensile_strength``). :class:`SolverFem` steps all FEM bodies of a scene together; the scene layer, colliders and USD
 output are shared with the peridynamic solid (``Scene.add_body(FemBody(...))``).
@@ -18,7 +18,7 @@ Integrators:
   automatic step). :meth:`SolverFem.step` refuses a larger step (ParameterError);
   :meth:`SolverFem.simulate` (what the Scene calls) splits each requested step into equal substeps no longer than
   dt_stable instead (automatic substepping).
-- implicit: linearly implicit backward Euler with the corotated stiffness (kernels/fem_solver.py), one CG solve per
+- implicit: linearly implicit backward Euler with the corotated stiffness (kernels/fem/solver.py), one CG solve per
   step, at any step size; :meth:`SolverFem.stable_time_step` then reports ``implicit_step_ratio`` (default 10) times the
   explicit limit as the step the scene should use. The linear measure uses the constant stiffness, the Green measure
   has no implicit integrator here (ParameterError).
@@ -27,7 +27,7 @@ A quasi-static solve (:meth:`SolverFem.solve_static`, Newton iterations with the
 (patch test, cantilever).
 
 Plasticity is compiled into the element force kernel and its state (a plastic strain tensor per element) allocated
-only when some body yields. Fracture (pdsim/fem_fracture.py) costs one eigen-decomposition per element whose
+only when some body yields. Fracture (pdsim/fem/fracture.py) costs one eigen-decomposition per element whose
 Samuelson bound exceeds its strength, a counter read per step, and host topology work (vectorised numpy/scipy, local to
 the split vertices) only on steps where some element exceeded its strength; vertex arrays are then reallocated.
 
@@ -45,191 +45,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InstabilityError, ParameterError
-from .fem_mesh import DEFAULT_MIN_QUALITY, TetMesh, boundary_faces, element_heights, tetrahedralize
-from .geometry import SolidShape
-from .materials import Material, _check_range
-from .regions import region_mask
+from ..errors import InstabilityError, ParameterError
+from ..validate import check_range
+from .body import PRECISIONS, STIFFNESS_MODES, FemBody
+from .mesh import boundary_faces, element_heights
 
-MEASURES = ("linear", "corotated", "green")
-INTEGRATORS = ("explicit", "implicit")
-PRECISIONS = ("float32", "float64")
-STIFFNESS_MODES = ("matrix_free", "assembled")
 EXPLICIT_STEP_FACTOR = 0.5  # dt_stable = 0.5 h_min / c_p (see the module docstring)
 CG_CHUNK = 256  # vertices per partial sum of the CG reductions
-
-
-@dataclass(frozen=True)
-class FemPlasticity:
-    """Plasticity parameters of the slides' update rule (kernels/fem_elements.py), on the Frobenius norm of the strain.
-
-    Args:
-        yield_strain: elastic strain norm above which the element flows [-], > 0.
-        creep: rate at which the plastic strain absorbs the elastic strain [1/s], > 0 (the per-step fraction is
-            min(creep dt, 1)).
-        max_strain: largest plastic strain norm [-], > 0.
-    """
-
-    yield_strain: float
-    creep: float
-    max_strain: float
-
-    def __post_init__(self):
-        object.__setattr__(self, "yield_strain", _check_range("yield_strain", self.yield_strain, 0.0, None))
-        object.__setattr__(self, "creep", _check_range("creep", self.creep, 0.0, None))
-        object.__setattr__(self, "max_strain", _check_range("max_strain", self.max_strain, 0.0, None))
-
-
-class FemBody:
-    """A solid meshed with linear tetrahedra, simulated with the finite element method.
-
-    Args:
-        shape: a closed surface (:class:`pdsim.SolidShape`, meshed with fTetWild at ``edge_length``) or a ready
-            :class:`pdsim.fem_mesh.TetMesh` (``load_tet_mesh``, ``box_tet_mesh``, ``tet_mesh_from_arrays``).
-        material: density and elastic constants (nu < 0.5 is enforced by Material).
-        edge_length: target edge length of the mesher [m] (surfaces only); default 1/20 of the bounding-box diagonal.
-        measure: strain measure "linear", "corotated" (default) or "green".
-        integrator: "explicit" (default) or "implicit".
-        plasticity: plastic flow parameters, or None for a purely elastic body (nothing is allocated or launched).
-        tensile_strength: largest principal stress before an element cracks [Pa], > 0; None: no fracture.
-        damping: mass-proportional damping c [1/s], >= 0 (a = f / m + g - c v).
-        implicit_step_ratio: implicit integrator: the step the scene uses, as a multiple of the explicit limit, >= 1.
-        render_mesh: a high-resolution surface embedded in the tetrahedra (barycentric) and written as its own
-            UsdGeom.Mesh ("<name>_render") that follows them; True embeds ``shape`` itself (surfaces only). It is not
-            cut by cracks: where the body fractures, its triangles stretch across the gap. Default None.
-        name: label in the USD cache; defaults to the shape's name.
-        min_quality: element quality check of the mesh (see pdsim.fem_mesh), in [0, 1).
-        mesh_cache: folder where meshes made by fTetWild are kept and reused (its output varies from run to run;
-            see pdsim.fem_mesh.tetrahedralize), or None.
-    """
-
-    def __init__(
-        self,
-        shape: SolidShape | TetMesh,
-        material: Material,
-        *,
-        edge_length: float | None = None,
-        measure: str = "corotated",
-        integrator: str = "explicit",
-        plasticity: FemPlasticity | None = None,
-        tensile_strength: float | None = None,
-        damping: float = 0.0,
-        implicit_step_ratio: float = 10.0,
-        render_mesh: SolidShape | bool | None = None,
-        name: str | None = None,
-        min_quality: float = DEFAULT_MIN_QUALITY,
-        mesh_cache: str | None = None,
-    ):
-        if not isinstance(material, Material):
-            raise ParameterError("material", material, "a pdsim.Material")
-        if measure not in MEASURES:
-            raise ParameterError("measure", measure, " or ".join(map(repr, MEASURES)))
-        if integrator not in INTEGRATORS:
-            raise ParameterError("integrator", integrator, " or ".join(map(repr, INTEGRATORS)))
-        if integrator == "implicit" and measure == "green":
-            raise ParameterError("measure", measure, "'linear' or 'corotated' with the implicit integrator")
-        if plasticity is not None and not isinstance(plasticity, FemPlasticity):
-            raise ParameterError("plasticity", plasticity, "a pdsim.fem.FemPlasticity or None")
-        if isinstance(shape, TetMesh):
-            if edge_length is not None:
-                raise ParameterError("edge_length", edge_length, "None for a ready TetMesh (it is not remeshed)")
-            self.mesh = shape
-        elif isinstance(shape, SolidShape):
-            self.mesh = tetrahedralize(shape, edge_length=edge_length, min_quality=min_quality, cache_dir=mesh_cache)
-        else:
-            raise ParameterError("shape", shape, "a pdsim SolidShape or a pdsim.fem_mesh.TetMesh")
-        if render_mesh is True:
-            if not isinstance(shape, SolidShape):
-                raise ParameterError("render_mesh", True, "a SolidShape (True needs a surface shape to embed)")
-            render_mesh = shape
-        elif render_mesh is False:
-            render_mesh = None
-        if render_mesh is not None and not isinstance(render_mesh, SolidShape):
-            raise ParameterError("render_mesh", render_mesh, "a pdsim SolidShape, True or None")
-        self.render_mesh = render_mesh
-        self.material = material
-        self.measure = measure
-        self.integrator = integrator
-        self.plasticity = plasticity
-        self.tensile_strength = (
-            None if tensile_strength is None else _check_range("tensile_strength", tensile_strength, 0.0, None)
-        )
-        self.damping = _check_range("damping", damping, 0.0, None, lo_open=False)
-        self.implicit_step_ratio = _check_range("implicit_step_ratio", implicit_step_ratio, 1.0, None, lo_open=False)
-        self.name = name or shape.name
-        n = self.mesh.vertex_count
-        self.kind = np.zeros(n, dtype=np.int32)
-        self.prescribed_velocity = np.zeros((n, 3), dtype=np.float64)
-        self.initial_velocity = np.zeros((n, 3), dtype=np.float64)
-        self.release_time = np.full(n, np.inf)  # prescribed vertices become free at this time [s]
-
-    @property
-    def vertex_count(self) -> int:
-        return self.mesh.vertex_count
-
-    @property
-    def element_count(self) -> int:
-        return self.mesh.element_count
-
-    @property
-    def rest_positions(self) -> np.ndarray:
-        """Rest positions of the mesh vertices [m], shape [vertex_count, 3]."""
-        return self.mesh.vertices
-
-    @property
-    def fractures(self) -> bool:
-        """True when the body can crack (a tensile strength is set)."""
-        return self.tensile_strength is not None
-
-    @classmethod
-    def build_solver(cls, bodies, *, device, gravity, ground, contact=None, colliders=()):
-        """The scene's solver for all its FEM bodies. ``colliders`` (static meshes, kinematic projectiles) act on the
-        vertices; ``contact`` (particle contact between unbonded particles) has no FEM counterpart yet: FEM pieces and
-        bodies pass through each other, and the setting is ignored."""
-        return SolverFem(bodies, device=device, gravity=gravity, ground=ground, colliders=colliders)
-
-    def _select(self, region) -> np.ndarray:
-        mask = region_mask(region, self.mesh.vertices, field="region")
-        if not mask.any():
-            raise ParameterError("region", region, f"a region containing at least one vertex of '{self.name}'")
-        return mask
-
-    def fix(self, region) -> int:
-        """Holds the vertices whose rest position lies in ``region`` at rest; returns how many."""
-        mask = self._select(region)
-        self.kind[mask] = 1
-        self.prescribed_velocity[mask] = 0.0
-        self.release_time[mask] = np.inf
-        return int(mask.sum())
-
-    def set_velocity(self, region, velocity, *, until: float | None = None) -> int:
-        """Moves the vertices in ``region`` at the constant ``velocity`` [m/s] (a displacement-driven boundary); with
-        ``until`` [s] (> 0) they are released (become free, keeping their velocity) at that time."""
-        v = np.asarray(velocity, dtype=np.float64)
-        if v.shape != (3,) or not np.all(np.isfinite(v)):
-            raise ParameterError("velocity", velocity, "a sequence of 3 finite numbers [m/s]")
-        release = np.inf if until is None else _check_range("until", until, 0.0, None)
-        mask = self._select(region)
-        self.kind[mask] = 2
-        self.prescribed_velocity[mask] = v
-        self.release_time[mask] = release
-        return int(mask.sum())
-
-    def set_initial_velocity(self, velocity, region=None) -> int:
-        """Initial velocity [m/s]: a vector for all vertices (or those in ``region``), or an array [vertex_count, 3]."""
-        v = np.asarray(velocity, dtype=np.float64)
-        n = self.vertex_count
-        if v.shape == (n, 3) and region is None:
-            mask, values = np.ones(n, dtype=bool), v
-        elif v.shape == (3,):
-            mask = np.ones(n, dtype=bool) if region is None else self._select(region)
-            values = np.broadcast_to(v, (int(mask.sum()), 3))
-        else:
-            raise ParameterError("velocity", velocity, f"3 numbers or an array of shape ({n}, 3)")
-        if not np.all(np.isfinite(values)):
-            raise ParameterError("velocity", velocity, "finite values")
-        self.initial_velocity[mask] = values
-        return int(mask.sum())
 
 
 @dataclass
@@ -307,7 +129,7 @@ class SolverFem:
     ):
         import warp as wp
 
-        from .kernels import fem_elements as ke
+        from ..kernels.fem import elements as ke
 
         bodies = list(bodies)
         if not bodies or not all(isinstance(b, FemBody) for b in bodies):
@@ -342,7 +164,7 @@ class SolverFem:
         self.measure = bodies[0].measure
         self.integrator = bodies[0].integrator
         default_tol = 1.0e-10 if precision == "float64" else 1.0e-5
-        self.cg_tolerance = _check_range("cg_tolerance", default_tol if cg_tolerance is None else cg_tolerance, 0, 1)
+        self.cg_tolerance = check_range("cg_tolerance", default_tol if cg_tolerance is None else cg_tolerance, 0, 1)
         self.cg_max_iterations = int(cg_max_iterations)
         self.cg_reports: list[CgReport] = []  # of the last step / static solve
         self.time = 0.0
@@ -377,7 +199,7 @@ class SolverFem:
     def _build_model(self):
         import warp as wp
 
-        from .kernels import fem_elements as ke
+        from ..kernels.fem import elements as ke
 
         bodies = self.bodies
         v_counts = [b.vertex_count for b in bodies]
@@ -478,7 +300,7 @@ class SolverFem:
         """(Re)allocates every per-vertex array from host data and the current topology ``self._tets_h``."""
         import warp as wp
 
-        from .fem_fracture import vertex_incidence
+        from .fracture import vertex_incidence
 
         dev, f = self.device, self.np_dtype
         n = len(self._rest_h)
@@ -581,7 +403,7 @@ class SolverFem:
         peridynamic solver does."""
         import warp as wp
 
-        from .kernels import fem_solver as ks
+        from ..kernels.fem import solver as ks
 
         if self.ground is not None:
             g = self.ground
@@ -608,7 +430,7 @@ class SolverFem:
     def step(self, dt: float):
         """Advances all bodies by one step of ``dt`` [s]. The explicit integrator refuses dt above its stable limit
         (ParameterError); use :meth:`simulate` for automatic substepping."""
-        dt = _check_range("dt", dt, 0.0, None)
+        dt = check_range("dt", dt, 0.0, None)
         if self.integrator == "explicit":
             limit = self._explicit_dt
             if dt > limit * (1.0 + 1.0e-9):
@@ -641,7 +463,7 @@ class SolverFem:
     def simulate(self, dt: float, steps: int):
         """Runs ``steps`` steps of ``dt`` [s]; the explicit integrator splits each into ceil(dt / dt_stable) equal
         substeps when dt exceeds its stable limit."""
-        dt = _check_range("dt", dt, 0.0, None)
+        dt = check_range("dt", dt, 0.0, None)
         sub = 1
         if self.integrator == "explicit":
             sub = max(1, math.ceil(dt / self._explicit_dt - 1.0e-9))
@@ -651,7 +473,7 @@ class SolverFem:
     def _step_explicit(self, dt: float):
         import warp as wp
 
-        from .kernels import fem_solver as ks
+        from ..kernels.fem import solver as ks
 
         kick_drift, _ = ks.explicit_kernels(self.dtype)
         d = self.device
@@ -678,7 +500,7 @@ class SolverFem:
         dt / 2 (dt = 0: accelerations only)."""
         import warp as wp
 
-        from .kernels import fem_solver as ks
+        from ..kernels.fem import solver as ks
 
         _, gather_kick = ks.explicit_kernels(self.dtype)
         wp.launch(
@@ -713,7 +535,7 @@ class SolverFem:
     def _step_implicit(self, dt: float):
         import warp as wp
 
-        from .kernels import fem_solver as ks
+        from ..kernels.fem import solver as ks
 
         d = self.device
         self._compute_element_forces(dt)
@@ -751,7 +573,7 @@ class SolverFem:
     def _apply_stiffness(self, u, out_corner):
         import warp as wp
 
-        from .kernels import fem_elements as ke
+        from ..kernels.fem import elements as ke
 
         wp.launch(
             ke.element_stiffness_product_kernel(self.dtype, self._rotated),
@@ -765,7 +587,7 @@ class SolverFem:
         preconditioned CG; ``self._cg_x`` holds the initial guess (kept on constrained vertices) and the result."""
         import warp as wp
 
-        from .kernels import fem_solver as ks
+        from ..kernels.fem import solver as ks
 
         k = ks.cg_kernels(self.dtype, self._rotated)
         d, n, ch, chunks = self.device, self.vertex_count, self._chunk, self._cg_chunks
@@ -876,8 +698,8 @@ class SolverFem:
         element blocks by a gather over the precomputed contribution lists)."""
         import warp as wp
 
-        from .kernels import fem_elements as ke
-        from .kernels import fem_solver as ks
+        from ..kernels.fem import elements as ke
+        from ..kernels.fem import solver as ks
 
         d = self.device
         if self._bsr is None:
@@ -945,13 +767,13 @@ class SolverFem:
         """
         import warp as wp
 
-        from .kernels import fem_solver as ks
+        from ..kernels.fem import solver as ks
 
         n = self.vertex_count
         mask = self._kind_h != 0 if constrained is None else np.asarray(constrained)
         if mask.shape != (n,) or mask.dtype != np.bool_:
             raise ParameterError("constrained", constrained, f"a bool mask of shape ({n},) or None")
-        tolerance = _check_range("tolerance", tolerance, 0.0, None)
+        tolerance = check_range("tolerance", tolerance, 0.0, None)
         vk = ks.vertex_kernels(self.dtype)
         d = self.device
         constrained_wp = wp.array(mask.astype(np.int32), dtype=wp.int32, device=d)
@@ -1028,7 +850,7 @@ class SolverFem:
         topology changed."""
         import warp as wp
 
-        from .fem_fracture import choose_splits, make_manifold, split_vertices
+        from .fracture import choose_splits, make_manifold, split_vertices
 
         if int(self._over_count.numpy()[0]) == 0:
             return False
@@ -1057,7 +879,7 @@ class SolverFem:
         crack[nv:] = True
         self.split_count += len(verts)
         self.last_splits = (verts.copy(), normals.copy())
-        # an element splits at most once (pdsim/fem_fracture.py): retire the sources from the strength test
+        # an element splits at most once (pdsim/fem/fracture.py): retire the sources from the strength test
         self._strength_h[sources] = np.inf
         self._strength = wp.array(self._strength_h.astype(self.np_dtype), dtype=self.dtype, device=self.device)
         self._apply_topology(tets2, parent, crack)
@@ -1086,7 +908,7 @@ class SolverFem:
         """Raises InstabilityError if a position or velocity is not finite or a speed exceeds ``speed_limit`` [m/s]."""
         import warp as wp
 
-        from .kernels import fem_solver as ks
+        from ..kernels.fem import solver as ks
 
         self._check.zero_()
         wp.launch(
@@ -1132,7 +954,7 @@ class SolverFem:
 
     def _surface_data(self):
         """Per body: (vertex ids, triangles, piece label per triangle), rebuilt when the topology changed."""
-        from .fem_fracture import element_pieces
+        from .fracture import element_pieces
 
         if self._surfaces is None:
             faces, elem = boundary_faces(self._tets_h, return_elements=True)
@@ -1158,7 +980,7 @@ class SolverFem:
         meshes (topology on their first frame)."""
         import warp as wp
 
-        from .kernels import fem_elements as ke
+        from ..kernels.fem import elements as ke
 
         x = self.positions()
         for i, (handle, (ids, faces, piece)) in enumerate(zip(self._handles, self._surface_data(), strict=True)):
@@ -1180,7 +1002,7 @@ class SolverFem:
         """Current vertices of the ``index``-th render mesh [m], shape [render_vertex_count, 3]."""
         import warp as wp
 
-        from .kernels import fem_elements as ke
+        from ..kernels.fem import elements as ke
 
         _, elem, w, _, out = self._render[index]
         wp.launch(
@@ -1242,7 +1064,7 @@ class SolverFem:
         update)."""
         import warp as wp
 
-        from .kernels import fem_solver as ks
+        from ..kernels.fem import solver as ks
 
         pos = None
         if positions is not None:
@@ -1267,7 +1089,7 @@ class SolverFem:
         corotated measure) [N/m], shape [element_count, 12, 12] (rows/cols: corner-major, xyz-minor)."""
         import warp as wp
 
-        from .kernels import fem_elements as ke
+        from ..kernels.fem import elements as ke
 
         blocks = wp.zeros(16 * self.element_count, dtype=self.mat33, device=self.device)
         wp.launch(
@@ -1296,7 +1118,7 @@ class SolverFem:
         """Elastic energy sum_e V (mu |eps_el|^2 + lambda/2 tr(eps_el)^2) [J] at the current positions."""
         import warp as wp
 
-        from .kernels import fem_elements as ke
+        from ..kernels.fem import elements as ke
 
         wp.launch(
             ke.element_energy_kernel(self.dtype, self._measure_id, self.plastic),
@@ -1342,9 +1164,9 @@ class SolverFem:
 
     def piece_count(self) -> int:
         """Number of face-connected pieces of all bodies together."""
-        from .fem_fracture import element_pieces
+        from .fracture import element_pieces
 
         return int(element_pieces(self._tets_h)[0])
 
 
-__all__ = ["CgReport", "FemBody", "FemPlasticity", "SolverFem", "StaticSolveReport"]
+__all__ = ["CgReport", "SolverFem", "StaticSolveReport"]

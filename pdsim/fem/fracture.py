@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .fem_mesh import TET_FACES, boundary_faces, interior_face_pairs
+from .mesh import TET_FACES, boundary_faces, interior_face_pairs
 
 MIN_SIDE = 2  # elements each side of a crack plane must keep around the split vertex
 
@@ -189,7 +189,7 @@ def _edge_fans(tets: np.ndarray):
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    from .fem_mesh import TET_EDGES
+    from .mesh import TET_EDGES
 
     m = tets.shape[0]
     ev = np.sort(tets[:, TET_EDGES], axis=2)  # [m, 6, 2]
@@ -217,7 +217,7 @@ def _edge_fans(tets: np.ndarray):
 
 
 def _local_edge(a: int, b: int) -> int:
-    from .fem_mesh import TET_EDGES
+    from .mesh import TET_EDGES
 
     lo, hi = min(a, b), max(a, b)
     return int(np.flatnonzero((TET_EDGES[:, 0] == lo) & (TET_EDGES[:, 1] == hi))[0])
@@ -232,7 +232,7 @@ def separate_edge_fans(tets: np.ndarray, vertex_count: int, dirty: np.ndarray | 
     a dirty endpoint are examined (their fans are complete in the subset).
 
     Returns (new tets, parent, changed)."""
-    from .fem_mesh import TET_EDGES
+    from .mesh import TET_EDGES
 
     tets = np.asarray(tets, dtype=np.int64)
     m = tets.shape[0]

@@ -1,7 +1,7 @@
 """Vertex kernels of the tetrahedral FEM solver: force gathers, explicit and implicit integration, boundary conditions,
 the ground-plane collider, and a preconditioned conjugate-gradient solver built from Warp kernels.
 
-Element kernels (kernels/fem_elements.py) write one vector per element corner ("slot" 4 e + a); the vertex kernels
+Element kernels (kernels/fem/elements.py) write one vector per element corner ("slot" 4 e + a); the vertex kernels
 gather them over a CSR incidence list (``vertex_offsets``, ``vertex_slots``): one thread per vertex, no atomics, so the
 CPU and the GPU sum in the same order.
 
@@ -29,7 +29,7 @@ import functools
 
 import warp as wp
 
-from .fem_elements import fem_funcs, fem_types
+from .elements import fem_funcs, fem_types
 
 VERTEX_FREE = wp.constant(0)
 VERTEX_FIXED = wp.constant(1)

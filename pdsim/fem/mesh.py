@@ -24,9 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import GeometryError, ParameterError
-from .geometry import SolidShape
-from .materials import _check_range
+from ..errors import GeometryError, ParameterError
+from ..geometry import SolidShape
+from ..validate import check_range
 
 TET_MESH_SUFFIXES = (".msh", ".vtk", ".vtu", ".mesh", ".inp", ".xdmf", ".med", ".usd", ".usda", ".usdc")
 DEFAULT_MIN_QUALITY = 1.0e-3
@@ -86,7 +86,7 @@ class TetMesh:
 
     def transformed(self, *, scale: float = 1.0, translate=(0.0, 0.0, 0.0)) -> TetMesh:
         """A copy scaled by ``scale`` (> 0) and then translated by ``translate`` [m]."""
-        s = _check_range("scale", scale, 0.0, None)
+        s = check_range("scale", scale, 0.0, None)
         t = np.asarray(translate, dtype=np.float64)
         if t.shape != (3,) or not np.all(np.isfinite(t)):
             raise ParameterError("translate", translate, "a sequence of 3 finite numbers [m]")
@@ -189,7 +189,7 @@ def tet_mesh_from_arrays(vertices, tets, *, name: str = "tet_mesh", min_quality:
         GeometryError: empty mesh, non-finite vertices, bad indices, degenerate (zero or near-zero volume), inverted
             (folded) or non-manifold elements; the message names the first offending element.
     """
-    min_quality = _check_range("min_quality", min_quality, 0.0, 1.0, lo_open=False)
+    min_quality = check_range("min_quality", min_quality, 0.0, 1.0, lo_open=False)
     try:
         v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
         t_raw = np.asarray(tets, dtype=np.float64).reshape(-1, 4)
@@ -282,8 +282,8 @@ def tetrahedralize(
     diag = float(np.linalg.norm(shape.extent))
     if edge_length is None:
         edge_length = diag / 20.0
-    edge_length = _check_range("edge_length", edge_length, 0.0, diag, hi_open=False)
-    epsilon = _check_range("epsilon", epsilon, 0.0, 0.1, hi_open=False)
+    edge_length = check_range("edge_length", edge_length, 0.0, diag, hi_open=False)
+    epsilon = check_range("epsilon", epsilon, 0.0, 0.1, hi_open=False)
     if int(threads) != threads or threads < 0:
         raise ParameterError("threads", threads, "an integer >= 0")
     label = name or shape.name
@@ -477,7 +477,7 @@ def box_tet_mesh(size, cells, *, center=(0.0, 0.0, 0.0), name: str = "box", jitt
     c = np.asarray(cells)
     if c.shape != (3,) or not np.all(c == np.round(c)) or np.any(c < 1):
         raise ParameterError("cells", cells, "three integers >= 1")
-    jitter = _check_range("jitter", jitter, 0.0, 0.3, lo_open=False)
+    jitter = check_range("jitter", jitter, 0.0, 0.3, lo_open=False)
     nx, ny, nz = (int(k) for k in c)
     gx, gy, gz = (np.linspace(-0.5 * s[i], 0.5 * s[i], int(c[i]) + 1) for i in range(3))
     xs, ys, zs = np.meshgrid(gx, gy, gz, indexing="ij")

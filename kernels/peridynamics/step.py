@@ -4,7 +4,7 @@
 removed at code generation (``wp.static``), so an elastic scene runs exactly the elastic arithmetic. The kernels'
 signatures are the same for every variant; arrays of dead features are passed as length-1 placeholders.
 
-Formulas (kernels/pd_bonds.py gives the notation and the elastic model):
+Formulas (kernels/peridynamics/bonds.py gives the notation and the elastic model):
 
 - Elastic + plastic force: A_kj / (4 w) = Lambda P_k + b_k (e - e^p_kj), so
   f_k = sum_j 2 (w V beta G^dil Lambda (P_k + P_j) + w V beta G^dev (b_k (e - e^p_kj) + b_j (e - e^p_jk))) n,

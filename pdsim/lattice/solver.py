@@ -1,5 +1,5 @@
 """The solver of the position-based particle lattice: steps, diagnostics (PE1, PE2, trajectories, fragments) and USD
-output for the lattice bodies of a scene (pdsim/lattice.py describes the model, kernels/lattice.py the step).
+output for the lattice bodies of a scene (pdsim/lattice/body.py describes the model, kernels/lattice/rules.py the step).
 
 Scene protocol: a lattice is step-based and has no time step of its own, so ``stable_time_step()`` is ``math.inf``
 (it never limits the other bodies of a scene) and every ``simulate(dt, steps)`` call, which ``Scene.run`` makes once
@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from .errors import InstabilityError, ParameterError
-from .lattice import LatticeBody, LatticeKind
+from ..errors import InstabilityError, ParameterError
+from .body import LatticeBody, LatticeKind
 
 __all__ = ["SolverLattice"]
 
@@ -26,7 +26,7 @@ class _LatticeRuntime:
     def __init__(self, body: LatticeBody, device):
         import warp as wp
 
-        from .kernels import lattice as kl
+        from ..kernels.lattice import rules as kl
 
         self.body = body
         self.device = device
@@ -126,7 +126,7 @@ class _LatticeRuntime:
     def step(self):
         import warp as wp
 
-        from .kernels import lattice as kl
+        from ..kernels.lattice import rules as kl
 
         t = self.step_count + 1
         d = self.device
@@ -226,7 +226,7 @@ class _LatticeRuntime:
     def _record_tracks(self):
         import warp as wp
 
-        from .kernels import lattice as kl
+        from ..kernels.lattice import rules as kl
 
         if len(self.tracked) == 0:
             return
@@ -265,7 +265,7 @@ class _LatticeRuntime:
     def pseudo_energy(self):
         import warp as wp
 
-        from .kernels import lattice as kl
+        from ..kernels.lattice import rules as kl
 
         wp.launch(
             kl.lattice_pseudo_energy,
@@ -294,7 +294,7 @@ class _LatticeRuntime:
     def fragments(self) -> np.ndarray:
         import warp as wp
 
-        from .kernels import lattice as kl
+        from ..kernels.lattice import rules as kl
 
         key = (int(self.broken_total.numpy()[0]), self.kind_host.tobytes())
         if self._fragments is not None and self._fragments[0] == key:
@@ -329,7 +329,7 @@ class _LatticeRuntime:
     def check(self) -> tuple[float, bool]:
         import warp as wp
 
-        from .kernels import lattice as kl
+        from ..kernels.lattice import rules as kl
 
         self._check.zero_()
         wp.launch(kl.lattice_check_finite, dim=self.n, inputs=[self.u_cur, self._check], device=self.device)

@@ -24,6 +24,7 @@ grows). ``save_interval_s=0`` saves after every frame regardless of cost.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import time
@@ -32,7 +33,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-import contextlib
 
 if TYPE_CHECKING:
     from typing import Self

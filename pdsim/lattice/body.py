@@ -1,5 +1,5 @@
 """Position-based particle lattice (shared/seeds/pbd_lattice.txt, dell'Erba 2018): lattices, neighbourhoods, rules,
-fracture and bodies. The solver is in pdsim/lattice_solver.py, the kernels in kernels/lattice.py, the choices made where
+fracture and bodies. The solver is in pdsim/lattice/solver.py, the kernels in kernels/lattice/rules.py, the choices made where
 the paper is open in docs/lattice.md.
 
 A body is a set of lattice points filling a shape (the leaders and followers) surrounded by a frame (a shell of lattice
@@ -20,8 +20,8 @@ from enum import Enum, IntEnum
 
 import numpy as np
 
-from .errors import GeometryError, ParameterError
-from .materials import _check_range
+from ..errors import GeometryError, ParameterError
+from ..validate import check_range
 
 __all__ = [
     "Lattice",
@@ -92,28 +92,28 @@ class Lattice:
     @classmethod
     def square(cls, spacing: float) -> Lattice:
         """Square lattice of side ``spacing`` [m] (coordination number 4)."""
-        h = _check_range("spacing", spacing, 0.0, None)
+        h = check_range("spacing", spacing, 0.0, None)
         return cls(LatticeType.SQUARE, np.array([[h, 0.0, 0.0], [0.0, h, 0.0]]), h)
 
     @classmethod
     def hexagonal(cls, spacing: float) -> Lattice:
         """Hexagonal (triangular) lattice, nearest-neighbour distance ``spacing`` [m], rows along x (coordination 6)."""
-        h = _check_range("spacing", spacing, 0.0, None)
+        h = check_range("spacing", spacing, 0.0, None)
         return cls(LatticeType.HEXAGONAL, np.array([[h, 0.0, 0.0], [0.5 * h, 0.5 * math.sqrt(3.0) * h, 0.0]]), h)
 
     @classmethod
     def rectangular(cls, spacing: float, *, aspect: float = 1.5) -> Lattice:
         """Rectangular lattice: ``spacing`` [m] along x, ``aspect`` x ``spacing`` along y; aspect in [0.25, 4]."""
-        h = _check_range("spacing", spacing, 0.0, None)
-        r = _check_range("aspect", aspect, 0.25, 4.0, lo_open=False, hi_open=False)
+        h = check_range("spacing", spacing, 0.0, None)
+        r = check_range("aspect", aspect, 0.25, 4.0, lo_open=False, hi_open=False)
         return cls(LatticeType.RECTANGULAR, np.array([[h, 0.0, 0.0], [0.0, r * h, 0.0]]), h * min(1.0, r))
 
     @classmethod
     def centred_rectangular(cls, spacing: float, *, aspect: float = 1.5) -> Lattice:
         """Centred rectangular lattice: a rectangular cell ``spacing`` x ``aspect`` ``spacing`` [m] with a point at its
         centre (primitive vectors (a, 0) and (a/2, b/2)); aspect in [0.25, 4], != sqrt(3) (that is hexagonal)."""
-        h = _check_range("spacing", spacing, 0.0, None)
-        r = _check_range("aspect", aspect, 0.25, 4.0, lo_open=False, hi_open=False)
+        h = check_range("spacing", spacing, 0.0, None)
+        r = check_range("aspect", aspect, 0.25, 4.0, lo_open=False, hi_open=False)
         if abs(r - math.sqrt(3.0)) < 1.0e-9:
             raise ParameterError("aspect", aspect, "[0.25, 4] except sqrt(3) (use Lattice.hexagonal)")
         basis = np.array([[h, 0.0, 0.0], [0.5 * h, 0.5 * r * h, 0.0]])
@@ -123,29 +123,29 @@ class Lattice:
     def oblique(cls, spacing: float, *, ratio: float = 1.2, angle: float = 75.0) -> Lattice:
         """Oblique lattice: a1 = (spacing, 0), a2 of length ``ratio`` x ``spacing`` at ``angle`` degrees from a1;
         ratio in [0.5, 2], angle in [30, 150]."""
-        h = _check_range("spacing", spacing, 0.0, None)
-        r = _check_range("ratio", ratio, 0.5, 2.0, lo_open=False, hi_open=False)
-        g = math.radians(_check_range("angle", angle, 30.0, 150.0, lo_open=False, hi_open=False))
+        h = check_range("spacing", spacing, 0.0, None)
+        r = check_range("ratio", ratio, 0.5, 2.0, lo_open=False, hi_open=False)
+        g = math.radians(check_range("angle", angle, 30.0, 150.0, lo_open=False, hi_open=False))
         basis = np.array([[h, 0.0, 0.0], [r * h * math.cos(g), r * h * math.sin(g), 0.0]])
         return cls(LatticeType.OBLIQUE, basis, h * min(1.0, r))
 
     @classmethod
     def simple_cubic(cls, spacing: float) -> Lattice:
         """Simple cubic lattice of side ``spacing`` [m] (coordination number 6)."""
-        h = _check_range("spacing", spacing, 0.0, None)
+        h = check_range("spacing", spacing, 0.0, None)
         return cls(LatticeType.SIMPLE_CUBIC, np.eye(3) * h, h)
 
     @classmethod
     def body_centred_cubic(cls, spacing: float) -> Lattice:
         """Body-centred cubic lattice of cube side ``spacing`` [m] (nearest neighbours at sqrt(3)/2 spacing)."""
-        h = _check_range("spacing", spacing, 0.0, None)
+        h = check_range("spacing", spacing, 0.0, None)
         basis = np.array([[h, 0.0, 0.0], [0.0, h, 0.0], [0.5 * h, 0.5 * h, 0.5 * h]])
         return cls(LatticeType.BODY_CENTRED_CUBIC, basis, 0.5 * math.sqrt(3.0) * h)
 
     @classmethod
     def face_centred_cubic(cls, spacing: float) -> Lattice:
         """Face-centred cubic lattice of cube side ``spacing`` [m] (nearest neighbours at spacing / sqrt(2))."""
-        h = _check_range("spacing", spacing, 0.0, None)
+        h = check_range("spacing", spacing, 0.0, None)
         basis = 0.5 * h * np.array([[0.0, 1.0, 1.0], [1.0, 0.0, 1.0], [1.0, 1.0, 0.0]])
         return cls(LatticeType.FACE_CENTRED_CUBIC, basis, h / math.sqrt(2.0))
 
@@ -212,7 +212,7 @@ class LatticeNeighbourhood:
         if isinstance(self.gradient, bool) or self.gradient not in (1, 2):
             raise ParameterError("gradient", self.gradient, "1 (first gradient) or 2 (second gradient)")
         if self.radius is not None:
-            _check_range("radius", self.radius, 0.0, None)
+            check_range("radius", self.radius, 0.0, None)
         s = np.asarray(self.metric_scale, dtype=np.float64)
         if s.shape != (3,) or not np.all(np.isfinite(s)) or np.any(s <= 0):
             raise ParameterError("metric_scale", self.metric_scale, "3 finite numbers > 0")
@@ -290,7 +290,7 @@ class LatticeRule:
 
     Subclasses name two Warp functions (``warp_functions``) with the signatures of ``lattice_weight_uniform``
     (delta, rest_delta, shell, params) -> weight and ``lattice_update_centroid`` (centroid, u_old, rest, params) ->
-    new displacement in kernels/lattice.py, and fill the parameter block (``parameters``); a custom rule is a
+    new displacement in kernels/lattice/rules.py, and fill the parameter block (``parameters``); a custom rule is a
     subclass with its own ``@wp.func`` pair. The solver compiles one follower kernel per pair.
 
     Args:
@@ -301,11 +301,11 @@ class LatticeRule:
     relaxation: float = 1.0
 
     def __post_init__(self):
-        _check_range("relaxation", self.relaxation, 0.0, 2.0)
+        check_range("relaxation", self.relaxation, 0.0, 2.0)
 
     def warp_functions(self):
         """(weight function, update function) as Warp ``@wp.func`` objects."""
-        from .kernels import lattice as kl
+        from ..kernels.lattice import rules as kl
 
         return kl.lattice_weight_uniform, kl.lattice_update_centroid
 
@@ -338,7 +338,7 @@ class LatticeRuleDistanceWeighted(LatticeRule):
             raise ParameterError("exponent", self.exponent, "1 or 2 numbers in [0, 4] (per shell)")
 
     def warp_functions(self):
-        from .kernels import lattice as kl
+        from ..kernels.lattice import rules as kl
 
         return kl.lattice_weight_distance, kl.lattice_update_centroid
 
@@ -366,7 +366,7 @@ class LatticeRuleMixedCoordinate(LatticeRule):
 
     def __post_init__(self):
         super().__post_init__()
-        _check_range("k", self.k, None, None)
+        check_range("k", self.k, None, None)
         a = np.asarray(self.axis, dtype=np.float64)
         if a.shape != (3,) or not np.all(np.isfinite(a)) or np.linalg.norm(a) == 0:
             raise ParameterError("axis", self.axis, "3 finite numbers, not all zero")
@@ -376,7 +376,7 @@ class LatticeRuleMixedCoordinate(LatticeRule):
                 raise ParameterError("origin", self.origin, "3 finite numbers [m] or None")
 
     def warp_functions(self):
-        from .kernels import lattice as kl
+        from ..kernels.lattice import rules as kl
 
         return kl.lattice_weight_uniform, kl.lattice_update_mixed_coordinate
 
@@ -415,7 +415,7 @@ class LatticeFracture:
         if d.ndim != 1 or len(d) not in (1, 2) or not np.all(np.isfinite(d)) or np.any(d <= 0):
             raise ParameterError("distances", self.distances, "1 or 2 finite lengths > 0 [m] (per shell)")
         if self.fictitious_distance is not None:
-            _check_range("fictitious_distance", self.fictitious_distance, 0.0, 4.0)
+            check_range("fictitious_distance", self.fictitious_distance, 0.0, 4.0)
 
     def thresholds(self) -> tuple[float, float]:
         """(d1, d2) [m]."""
@@ -537,7 +537,7 @@ class LatticeBody:
         self.steps_per_frame = int(steps_per_frame)
         self.name = name
         self.point_width = (
-            0.5 * lattice.spacing if point_width is None else _check_range("point_width", point_width, 0.0, None)
+            0.5 * lattice.spacing if point_width is None else check_range("point_width", point_width, 0.0, None)
         )
 
         if (shape is None) == (counts is None):
@@ -697,7 +697,7 @@ class LatticeBody:
     def build_solver(cls, bodies, *, device, gravity=None, ground=None, **scene_options):
         """The scene's solver for all its lattice bodies. Position rules know no forces: gravity, ground planes,
         contact and colliders (``scene_options`` such as ``contact``, ``colliders``) do not act on lattices."""
-        from .lattice_solver import SolverLattice
+        from .solver import SolverLattice
 
         return SolverLattice(bodies, device=device)
 
@@ -720,7 +720,7 @@ class LatticeBody:
     def select(self, region, field_name: str = "region") -> np.ndarray:
         """Indices of the body points selected by ``region``: a region object or callable evaluated on rest
         positions (frame points excluded), an index or a sequence of indices, or a bool mask over body points."""
-        from .regions import region_mask
+        from ..regions import region_mask
 
         nb = self.body_count
         if isinstance(region, (int, np.integer)) and not isinstance(region, bool):
@@ -866,8 +866,8 @@ def _block_coords(lattice: Lattice, counts, origin):
 
 
 def _shape_coords(lattice: Lattice, shape, origin):
-    from .geometry import SolidShape
-    from .regions import BoxRegion, SphereRegion
+    from ..geometry import SolidShape
+    from ..regions import BoxRegion, SphereRegion
 
     dim = lattice.dim
     if isinstance(shape, SolidShape):
@@ -924,7 +924,7 @@ def _shape_coords(lattice: Lattice, shape, origin):
 
 def _inside_mesh(shape, points: np.ndarray) -> np.ndarray:
     """Winding-number inside test of points [n, 3] [m] against a closed SolidShape (pdsim.sampling.points_inside)."""
-    from .sampling import points_inside
+    from ..sampling import points_inside
 
     return points_inside(shape, points, device="cpu")
 

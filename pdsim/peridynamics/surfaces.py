@@ -65,7 +65,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import SolidShape
+from ..geometry import SolidShape
 
 __all__ = ["FragmentSurfaces"]
 
@@ -207,7 +207,7 @@ def _points_near_solid(shape: SolidShape, points: np.ndarray, radius: float, dev
     """Bool mask [n]: points [m] [n, 3] inside the closed ``shape`` or within ``radius`` [m] of its surface."""
     import warp as wp
 
-    from .kernels import fragments as kf
+    from ..kernels.peridynamics import surfaces as kf
 
     with wp.ScopedDevice(device):
         mesh = wp.Mesh(

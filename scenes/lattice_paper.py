@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .lattice import (
+from pdsim.lattice import (
     Lattice,
     LatticeBody,
     LatticeFracture,
@@ -32,6 +32,7 @@ __all__ = [
     "fracture_specimen",
     "saint_venant_body",
     "tear_3d_scene",
+    "run_lattice_scene",
     "tensile_specimen",
 ]
 
@@ -114,7 +115,7 @@ def saint_venant_body(*, count: int = 20, speed: float = TABLE1_SPEED, stop_step
 
 
 def _scene(name: str, frames: int, bodies):
-    from .scene import Scene
+    from pdsim.scene import Scene
 
     scene = Scene(fps=24, frames=frames, name=name)
     for b in bodies:
@@ -186,7 +187,7 @@ def dogbone_shape(*, length: float = 24.0, radius: float = 4.0, neck_radius: flo
     neck_radius) exp(-(x / 3)^2) [units], from -length/2 to length/2."""
     import trimesh
 
-    from .geometry import shape_from_arrays
+    from pdsim.geometry import shape_from_arrays
 
     x = np.linspace(-0.5 * length, 0.5 * length, 49)
     r = radius - (radius - neck_radius) * np.exp(-((x / 3.0) ** 2))
@@ -212,3 +213,14 @@ def tear_3d_scene(*, spacing: float = 1.0, frames: int = 100, steps_per_frame: i
     body.clamp(x < x.min() + 2.5 * spacing)
     body.add_leaders(x > x.max() - 2.5 * spacing, velocity=(0.005 * spacing, 0.0, 0.0), stop_step=1200)
     return _scene("lattice_3d_tear", frames, [body])
+
+
+def run_lattice_scene(build_scene, *, frames, pe2_frames=None, argv=None) -> int:
+    """Runs a case scene into a cache and writes its paper-style figures (tools/lattice_plots.py)."""
+    import os
+    import sys
+
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tools"))
+    from lattice_plots import run_lattice_scene as run
+
+    return run(build_scene, frames=frames, pe2_frames=pe2_frames, argv=argv)

@@ -1,0 +1,211 @@
+"""Collider kernels: the ground plane, static triangle meshes and kinematic rigid projectiles (sphere, box, mesh).
+
+Colliders push a penetrating free particle (a sphere of its collision radius) back to the surface along the outward
+normal, remove its approaching normal velocity relative to the collider's surface velocity and reduce the relative
+tangential velocity by Coulomb friction (the convention of ``integration.collide_ground_plane``). A kinematic collider
+is not pushed back.
+"""
+
+import warp as wp
+
+from .integration import PARTICLE_FREE
+
+
+@wp.kernel
+def collide_ground_plane(
+    positions: wp.array(dtype=wp.vec3),
+    velocities: wp.array(dtype=wp.vec3),
+    kind: wp.array(dtype=wp.int32),
+    radius: wp.array(dtype=float),
+    normal: wp.vec3,
+    offset: float,
+    friction: float,
+):
+    """Keeps free particles (spheres of the given radius) above the plane n . x = offset: a penetrating particle is
+    projected back onto the plane, its approaching normal velocity removed (inelastic) and its tangential velocity
+    reduced by Coulomb friction (friction * removed normal speed, never reversing it)."""
+    i = wp.tid()
+    if kind[i] != PARTICLE_FREE:
+        return
+    x = positions[i]
+    depth = radius[i] + offset - wp.dot(normal, x)
+    if depth > 0.0:
+        positions[i] = x + depth * normal
+        v = velocities[i]
+        vn = wp.dot(v, normal)
+        if vn < 0.0:
+            vt = v - vn * normal
+            vt_len = wp.length(vt)
+            scale = float(0.0)
+            if vt_len > 0.0:
+                scale = wp.max(0.0, 1.0 - friction * (-vn) / vt_len)
+            velocities[i] = vt * scale
+
+
+@wp.func
+def collider_response(
+    x: wp.vec3,
+    v: wp.vec3,
+    sdf: float,
+    n: wp.vec3,
+    r: float,
+    v_surface: wp.vec3,
+    friction: float,
+):
+    """Projection and velocity response of a particle of radius r at signed distance sdf [m] (outward normal n) from a
+    collider surface moving at v_surface [m/s]. Returns (new position, new velocity)."""
+    x_new = x + (r - sdf) * n
+    v_rel = v - v_surface
+    vn = wp.dot(v_rel, n)
+    v_new = v
+    if vn < 0.0:
+        vt = v_rel - vn * n
+        vt_len = wp.length(vt)
+        scale = float(0.0)
+        if vt_len > 0.0:
+            scale = wp.max(0.0, 1.0 - friction * (-vn) / vt_len)
+        v_new = v_surface + vt * scale
+    return x_new, v_new
+
+
+@wp.struct
+class RigidMotion:
+    """Pose and velocity of a collider over the current step, stored in a one-element device array that the host
+    rewrites once per step (so a captured graph replays with the new pose).
+
+    pose: body frame to world; linear_velocity [m/s] of the frame origin; angular_velocity [rad/s] (world axes);
+    band: detection depth below a mesh surface [m] (meshes only)."""
+
+    pose: wp.transform
+    linear_velocity: wp.vec3
+    angular_velocity: wp.vec3
+    band: float
+
+
+@wp.func
+def rigid_point_velocity(x: wp.vec3, motion: RigidMotion):
+    """Velocity [m/s] of the material point of a rigid body at world position x: v + omega x (x - origin)."""
+    return motion.linear_velocity + wp.cross(motion.angular_velocity, x - wp.transform_get_translation(motion.pose))
+
+
+@wp.kernel
+def collide_sphere(
+    positions: wp.array(dtype=wp.vec3),
+    velocities: wp.array(dtype=wp.vec3),
+    kind: wp.array(dtype=wp.int32),
+    radius: wp.array(dtype=float),
+    body: wp.array(dtype=RigidMotion),
+    sphere_radius: float,
+    friction: float,
+):
+    """Sphere of radius sphere_radius [m] centred at the pose's translation: sdf = |x - c| - R."""
+    i = wp.tid()
+    if kind[i] != PARTICLE_FREE:
+        return
+    motion = body[0]
+    pose = motion.pose
+    x = positions[i]
+    d = x - wp.transform_get_translation(pose)
+    dist = wp.length(d)
+    sdf = dist - sphere_radius
+    r = radius[i]
+    if sdf < r:
+        n = wp.vec3(0.0, 0.0, 1.0)
+        if dist > 0.0:
+            n = d / dist
+        vs = rigid_point_velocity(x, motion)
+        x_new, v_new = collider_response(x, velocities[i], sdf, n, r, vs, friction)
+        positions[i] = x_new
+        velocities[i] = v_new
+
+
+@wp.kernel
+def collide_box(
+    positions: wp.array(dtype=wp.vec3),
+    velocities: wp.array(dtype=wp.vec3),
+    kind: wp.array(dtype=wp.int32),
+    radius: wp.array(dtype=float),
+    body: wp.array(dtype=RigidMotion),
+    half_extents: wp.vec3,
+    friction: float,
+):
+    """Oriented box with half edge lengths half_extents [m] in the frame of pose (exact signed distance; inside, the
+    normal is the face of least penetration)."""
+    i = wp.tid()
+    if kind[i] != PARTICLE_FREE:
+        return
+    motion = body[0]
+    pose = motion.pose
+    x = positions[i]
+    r = radius[i]
+    p = wp.transform_point(wp.transform_inverse(pose), x)
+    q = wp.vec3(wp.abs(p[0]) - half_extents[0], wp.abs(p[1]) - half_extents[1], wp.abs(p[2]) - half_extents[2])
+    qmax = wp.max(q[0], wp.max(q[1], q[2]))
+    if qmax >= r:
+        return
+    sdf = float(0.0)
+    n_local = wp.vec3(0.0)
+    if qmax > 0.0:
+        c = wp.vec3(
+            wp.clamp(p[0], -half_extents[0], half_extents[0]),
+            wp.clamp(p[1], -half_extents[1], half_extents[1]),
+            wp.clamp(p[2], -half_extents[2], half_extents[2]),
+        )
+        d = p - c
+        sdf = wp.length(d)
+        if sdf >= r:
+            return
+        n_local = d / sdf
+    else:
+        sdf = qmax
+        if q[0] == qmax:
+            n_local = wp.vec3(wp.sign(p[0]), 0.0, 0.0)
+        elif q[1] == qmax:
+            n_local = wp.vec3(0.0, wp.sign(p[1]), 0.0)
+        else:
+            n_local = wp.vec3(0.0, 0.0, wp.sign(p[2]))
+    n = wp.transform_vector(pose, n_local)
+    vs = rigid_point_velocity(x, motion)
+    x_new, v_new = collider_response(x, velocities[i], sdf, n, r, vs, friction)
+    positions[i] = x_new
+    velocities[i] = v_new
+
+
+@wp.kernel
+def collide_mesh(
+    positions: wp.array(dtype=wp.vec3),
+    velocities: wp.array(dtype=wp.vec3),
+    kind: wp.array(dtype=wp.int32),
+    radius: wp.array(dtype=float),
+    mesh: wp.uint64,
+    body: wp.array(dtype=RigidMotion),
+    friction: float,
+):
+    """Closed triangle mesh (vertices in the frame of pose). A particle is found when its centre lies within
+    radius + band [m] of the surface; the sign (inside/outside) comes from the angle-weighted pseudo-normal, so a
+    particle inside the mesh by less than radius + band is pushed out too."""
+    i = wp.tid()
+    if kind[i] != PARTICLE_FREE:
+        return
+    motion = body[0]
+    pose = motion.pose
+    x = positions[i]
+    r = radius[i]
+    p = wp.transform_point(wp.transform_inverse(pose), x)
+    hit = wp.mesh_query_point_sign_normal(mesh, p, r + motion.band)
+    if not hit.result:
+        return
+    closest = wp.mesh_eval_position(mesh, hit.face, hit.u, hit.v)
+    d = p - closest
+    dist = wp.length(d)
+    sdf = hit.sign * dist
+    if sdf >= r:
+        return
+    n_local = wp.mesh_eval_face_normal(mesh, hit.face)
+    if dist > 1.0e-6 * r:
+        n_local = (hit.sign / dist) * d
+    n = wp.transform_vector(pose, n_local)
+    vs = rigid_point_velocity(x, motion)
+    x_new, v_new = collider_response(x, velocities[i], sdf, n, r, vs, friction)
+    positions[i] = x_new
+    velocities[i] = v_new

@@ -1,0 +1,390 @@
+"""Colliders: the ground plane, static triangle meshes and kinematic rigid projectiles (sphere, box, mesh, moving
+ballistically or along a scripted path). They act on every method that has mass; kernels/colliders.py holds the
+formulas."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import ParameterError
+from .validate import check_range
+
+
+@dataclass(frozen=True)
+class GroundPlane:
+    """A static plane n . x = offset that free particles cannot cross (inelastic contact with Coulomb friction)."""
+
+    normal: tuple = (0.0, 0.0, 1.0)
+    offset: float = 0.0
+    friction: float = 0.5
+
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of quaternions (x, y, z, w)."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return np.array(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ]
+    )
+
+
+def _quat_from_rotation_vector(w: np.ndarray) -> np.ndarray:
+    angle = float(np.linalg.norm(w))
+    if angle == 0.0:
+        return np.array([0.0, 0.0, 0.0, 1.0])
+    s = math.sin(0.5 * angle) / angle
+    return np.array([w[0] * s, w[1] * s, w[2] * s, math.cos(0.5 * angle)])
+
+
+def _rotation_vector(q: np.ndarray) -> np.ndarray:
+    """Rotation vector (axis * angle, angle in [0, pi]) of a unit quaternion (x, y, z, w)."""
+    if q[3] < 0.0:
+        q = -q
+    s = float(np.linalg.norm(q[:3]))
+    if s == 0.0:
+        return np.zeros(3)
+    return q[:3] * (2.0 * math.atan2(s, q[3]) / s)
+
+
+def _vec3(name: str, value) -> np.ndarray:
+    a = np.asarray(value, dtype=np.float64)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ParameterError(name, value, "3 finite numbers")
+    return a
+
+
+def _quat(name: str, value) -> np.ndarray:
+    q = np.asarray(value, dtype=np.float64)
+    if q.shape != (4,) or not np.all(np.isfinite(q)) or np.linalg.norm(q) == 0.0:
+        raise ParameterError(name, value, "a non-zero quaternion (x, y, z, w)")
+    return q / np.linalg.norm(q)
+
+
+def _mesh_arrays(shape, name: str):
+    """Vertices [m] (float64 [v, 3]) and triangles (int32 [f, 3]) of a SolidShape or trimesh.Trimesh."""
+    v = np.asarray(getattr(shape, "vertices", None), dtype=np.float64)
+    f = np.asarray(getattr(shape, "faces", None))
+    if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
+        raise ParameterError(name, shape, "a closed triangle mesh (pdsim SolidShape or trimesh.Trimesh)")
+    return v, f.astype(np.int32)
+
+
+class Collider:
+    """A collider pushes penetrating free particles out of its volume (see kernels/contact.py).
+
+    ``apply(positions, velocities, radius, kind, time, dt)`` is called after the drift, with positions [m] and
+    velocities [m/s] (vec3 [n]), collision radii [m] (float [n]), particle kinds (int32 [n], 0 = free), ``time`` [s]
+    the time of the positions (the end of the step) and ``dt`` [s] the step that led there."""
+
+    friction: float = 0.0
+
+    def apply(self, positions, velocities, radius, kind, time: float, dt: float):
+        raise NotImplementedError
+
+
+class _MotionBuffer:
+    """The collider's RigidMotion in a one-element device array, rewritten from the host once per step (through a
+    pinned staging copy on CUDA); the kernels read it, so no launch argument changes between steps."""
+
+    def __init__(self, device):
+        import warp as wp
+
+        from .kernels import colliders as kc
+
+        self.device = device
+        self.array = wp.zeros(1, dtype=kc.RigidMotion, device=device)
+        self._staging = self.array if device.is_cpu else wp.zeros(1, dtype=kc.RigidMotion, device="cpu", pinned=True)
+        self._view = self._staging.numpy()  # zero-copy structured view of the host array
+
+    def write(self, position, rotation, linear_velocity, angular_velocity, band: float = 0.0):
+        import warp as wp
+
+        v = self._view
+        v["pose"][0, :3] = position
+        v["pose"][0, 3:] = rotation
+        v["linear_velocity"][0] = linear_velocity
+        v["angular_velocity"][0] = angular_velocity
+        v["band"][0] = band
+        if self._staging is not self.array:
+            wp.copy(self.array, self._staging)
+
+
+class _MeshData:
+    """A wp.Mesh with its arrays kept alive, and the mesh's bounding radius about the local origin [m]."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, device):
+        import warp as wp
+
+        self.points = wp.array(vertices.astype(np.float32), dtype=wp.vec3, device=device)
+        self.indices = wp.array(faces.ravel(), dtype=wp.int32, device=device)
+        self.mesh = wp.Mesh(points=self.points, indices=self.indices)
+        self.bounding_radius = float(np.linalg.norm(vertices, axis=1).max())
+
+
+class _RadiusBound:
+    """Largest collision radius [m] of a Warp array, read from the device once per array."""
+
+    def __init__(self):
+        self._array = None
+        self._value = 0.0
+
+    def __call__(self, radius) -> float:
+        if radius is not self._array:
+            self._array = radius
+            self._value = float(radius.numpy().max())
+        return self._value
+
+
+def _mesh_band(band: float | None, radius_bound: _RadiusBound, radius) -> float:
+    """Detection depth below a mesh surface [m]: the given band, or twice the largest particle radius."""
+    return band if band is not None else 2.0 * radius_bound(radius)
+
+
+IDENTITY_ROTATION = np.array([0.0, 0.0, 0.0, 1.0])
+
+
+class MeshCollider(Collider):
+    """A static closed triangle mesh (pdsim SolidShape or trimesh.Trimesh, world coordinates [m]).
+
+    Particles closer to the surface than their radius, or inside the mesh, are pushed out along the normal; a
+    particle is found while its centre lies within radius + ``band`` of the surface (default band: 2 x the largest
+    particle radius, far more than a particle moves in one stable step).
+
+    Args:
+        shape: the mesh.
+        friction: Coulomb coefficient, >= 0.
+        band: detection depth below the surface [m] (> 0) or None.
+        device: Warp device.
+    """
+
+    def __init__(self, shape, *, friction: float = 0.5, band: float | None = None, device="cpu"):
+        import warp as wp
+
+        self.friction = check_range("friction", friction, 0.0, None, lo_open=False)
+        self.band = None if band is None else check_range("band", band, 0.0, None)
+        self.device = wp.get_device(device)
+        v, f = _mesh_arrays(shape, "shape")
+        self._mesh = _MeshData(v, f, self.device)
+        self._motion = _MotionBuffer(self.device)
+        self._radius_bound = _RadiusBound()
+        self._band_written = None
+
+    def apply(self, positions, velocities, radius, kind, time: float, dt: float):
+        import warp as wp
+
+        from .kernels import colliders as kc
+
+        band = _mesh_band(self.band, self._radius_bound, radius)
+        if band != self._band_written:  # static: the pose is written once (again only if the radii change)
+            self._motion.write(np.zeros(3), IDENTITY_ROTATION, np.zeros(3), np.zeros(3), band)
+            self._band_written = band
+        wp.launch(
+            kc.collide_mesh,
+            dim=positions.shape[0],
+            inputs=[positions, velocities, kind, radius, self._mesh.mesh.id, self._motion.array, self.friction],
+            device=self.device,
+        )
+
+
+class RigidProjectile(Collider):
+    """A kinematic rigid body: it pushes particles and is not pushed back.
+
+    Its motion is either ballistic (``velocity`` [m/s], ``angular_velocity`` [rad/s, world axes] and ``gravity``
+    [m/s^2] from the initial pose at time 0) or scripted: ``path(t)`` returns the position [m] of the body's origin at
+    time t [s], or a pair (position, rotation quaternion (x, y, z, w)). The pose is evaluated once per step on the
+    host and written to a one-element device array; the surface velocity used in the contact response is the rigid
+    motion over the step, (p(t) - p(t - dt)) / dt plus the rotation between the two poses.
+
+    Args:
+        center: initial position of the body's origin [m].
+        rotation: initial rotation quaternion (x, y, z, w).
+        velocity, angular_velocity, gravity: ballistic motion (ignored with a path).
+        path: callable t -> position or (position, quaternion), or None.
+        friction: Coulomb coefficient between the body and particles, >= 0.
+        device: Warp device.
+    """
+
+    def __init__(
+        self,
+        center=(0.0, 0.0, 0.0),
+        *,
+        rotation=(0.0, 0.0, 0.0, 1.0),
+        velocity=(0.0, 0.0, 0.0),
+        angular_velocity=(0.0, 0.0, 0.0),
+        gravity=(0.0, 0.0, 0.0),
+        path: Callable | None = None,
+        friction: float = 0.0,
+        device="cpu",
+    ):
+        import warp as wp
+
+        if path is not None and not callable(path):
+            raise ParameterError("path", path, "a callable t -> position or (position, quaternion)")
+        self.center = _vec3("center", center)
+        self.rotation = _quat("rotation", rotation)
+        self.velocity = _vec3("velocity", velocity)
+        self.angular_velocity = _vec3("angular_velocity", angular_velocity)
+        self.gravity = _vec3("gravity", gravity)
+        self.path = path
+        self.friction = check_range("friction", friction, 0.0, None, lo_open=False)
+        self.device = wp.get_device(device)
+        self._motion = _MotionBuffer(self.device)
+        self._last: tuple | None = None  # (time, position, quaternion) of the last evaluated pose
+
+    def pose(self, time: float) -> tuple[np.ndarray, np.ndarray]:
+        """Position of the origin [m] (shape [3]) and rotation quaternion (x, y, z, w) at ``time`` [s]."""
+        t = float(time)
+        if self.path is None:
+            p = self.center + self.velocity * t + 0.5 * self.gravity * t * t
+            q = _quat_mul(_quat_from_rotation_vector(self.angular_velocity * t), self.rotation)
+            return p, q
+        value = self.path(t)
+        if isinstance(value, tuple) and len(value) == 2:
+            return _vec3("path(t) position", value[0]), _quat("path(t) rotation", value[1])
+        return _vec3("path(t)", value), IDENTITY_ROTATION.copy()
+
+    def _update_motion(self, time: float, dt: float, band: float = 0.0):
+        """Writes the pose at ``time`` and the rigid motion over [time - dt, time] to the device; the pose at the
+        start of the step is the one evaluated by the previous call when it matches (to round-off of the time).
+        ``band`` [m] is widened by the distance the surface sweeps in the step (meshes)."""
+        t0 = float(time) - float(dt)
+        if self._last is not None and math.isclose(self._last[0], t0, rel_tol=1.0e-9, abs_tol=1.0e-6 * float(dt)):
+            p0, q0 = self._last[1], self._last[2]
+        else:
+            p0, q0 = self.pose(t0)
+        p1, q1 = self.pose(time)
+        self._last = (float(time), p1, q1)
+        if dt > 0.0:
+            v = (p1 - p0) / dt
+            w = _rotation_vector(_quat_mul(q1, q0 * np.array([-1.0, -1.0, -1.0, 1.0]))) / dt
+        else:
+            v = w = np.zeros(3)
+        sweep = float(np.linalg.norm(p1 - p0) + np.linalg.norm(w) * dt * self._bounding_radius())
+        self._motion.write(p1, q1, v, w, band + sweep)
+
+    def _bounding_radius(self) -> float:
+        return 0.0
+
+
+class SphereProjectile(RigidProjectile):
+    """A kinematic sphere of ``radius`` [m] centred at ``center`` [m] (see RigidProjectile for the motion)."""
+
+    def __init__(self, radius: float, center=(0.0, 0.0, 0.0), **kwargs):
+        super().__init__(center, **kwargs)
+        self.sphere_radius = check_range("radius", radius, 0.0, None)
+
+    def _bounding_radius(self) -> float:
+        return self.sphere_radius
+
+    def apply(self, positions, velocities, radius, kind, time: float, dt: float):
+        import warp as wp
+
+        from .kernels import colliders as kc
+
+        self._update_motion(time, dt)
+        wp.launch(
+            kc.collide_sphere,
+            dim=positions.shape[0],
+            inputs=[positions, velocities, kind, radius, self._motion.array, self.sphere_radius, self.friction],
+            device=self.device,
+        )
+
+
+class BoxProjectile(RigidProjectile):
+    """A kinematic box of edge lengths ``size`` [m] centred at ``center`` [m], turned by ``rotation`` (see
+    RigidProjectile for the motion)."""
+
+    def __init__(self, size, center=(0.0, 0.0, 0.0), **kwargs):
+        super().__init__(center, **kwargs)
+        s = _vec3("size", size)
+        if np.any(s <= 0.0):
+            raise ParameterError("size", size, "three edge lengths > 0")
+        self.half_extents = 0.5 * s
+
+    def _bounding_radius(self) -> float:
+        return float(np.linalg.norm(self.half_extents))
+
+    def apply(self, positions, velocities, radius, kind, time: float, dt: float):
+        import warp as wp
+
+        from .kernels import colliders as kc
+
+        self._update_motion(time, dt)
+        wp.launch(
+            kc.collide_box,
+            dim=positions.shape[0],
+            inputs=[
+                positions,
+                velocities,
+                kind,
+                radius,
+                self._motion.array,
+                wp.vec3(*self.half_extents),
+                self.friction,
+            ],
+            device=self.device,
+        )
+
+
+class MeshProjectile(RigidProjectile):
+    """A kinematic closed triangle mesh (SolidShape or trimesh.Trimesh, vertices in world coordinates at time 0).
+
+    Its origin (the point whose motion ``velocity`` / ``path`` describe) is ``center`` [m], by default the centre of
+    the mesh's bounding box; ``rotation`` is the rotation at time 0 relative to the mesh as given. The detection band
+    below the surface is ``band`` [m] (default 2 x the largest particle radius) plus the distance the surface sweeps
+    in the step.
+    """
+
+    def __init__(self, shape, center=None, *, band: float | None = None, **kwargs):
+        v, f = _mesh_arrays(shape, "shape")
+        c = 0.5 * (v.min(axis=0) + v.max(axis=0)) if center is None else _vec3("center", center)
+        super().__init__(c, **kwargs)
+        self.band = None if band is None else check_range("band", band, 0.0, None)
+        # body frame: vertices relative to the origin, un-rotated by the initial rotation
+        q_inv = self.rotation * np.array([-1.0, -1.0, -1.0, 1.0])
+        self._mesh = _MeshData(_rotate(q_inv, v - c), f, self.device)
+        self._radius_bound = _RadiusBound()
+
+    def _bounding_radius(self) -> float:
+        return self._mesh.bounding_radius
+
+    def apply(self, positions, velocities, radius, kind, time: float, dt: float):
+        import warp as wp
+
+        from .kernels import colliders as kc
+
+        self._update_motion(time, dt, band=_mesh_band(self.band, self._radius_bound, radius))
+        wp.launch(
+            kc.collide_mesh,
+            dim=positions.shape[0],
+            inputs=[positions, velocities, kind, radius, self._mesh.mesh.id, self._motion.array, self.friction],
+            device=self.device,
+        )
+
+
+def _rotate(q: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Rotates points [n, 3] by the unit quaternion q (x, y, z, w)."""
+    u = q[:3]
+    t = 2.0 * np.cross(u, points)
+    return points + q[3] * t + np.cross(u, t)
+
+
+__all__ = [
+    "BoxProjectile",
+    "Collider",
+    "GroundPlane",
+    "MeshCollider",
+    "MeshProjectile",
+    "RigidProjectile",
+    "SphereProjectile",
+]

@@ -1,0 +1,15 @@
+"""State-based peridynamics (shared/seeds/pd_supplement.txt): bodies, the model built from them, the explicit solver
+and the renderable fragment surfaces."""
+
+from .body import SURFACE_CORRECTIONS, PeridynamicBody
+from .model import PeridynamicModel, PeridynamicState, build_model
+from .solver import SolverPeridynamics
+
+__all__ = [
+    "SURFACE_CORRECTIONS",
+    "PeridynamicBody",
+    "PeridynamicModel",
+    "PeridynamicState",
+    "SolverPeridynamics",
+    "build_model",
+]
