@@ -1,6 +1,7 @@
 """Collider kernels: the ground plane, static triangle meshes and kinematic rigid projectiles (sphere, box, mesh).
 
-Colliders push a penetrating free particle (a sphere of its collision radius) back to the surface along the outward
+Points are at rest + displacement in the solver's local frame (kernels/integration.py); poses are given in that
+frame too. Colliders push a penetrating free particle (a sphere of its collision radius) back to the surface along the outward
 normal, remove its approaching normal velocity relative to the collider's surface velocity and reduce the relative
 tangential velocity by Coulomb friction (the convention of ``integration.collide_ground_plane``). A kinematic collider
 is not pushed back.
@@ -13,7 +14,8 @@ from .integration import PARTICLE_FREE
 
 @wp.kernel
 def collide_ground_plane(
-    positions: wp.array(dtype=wp.vec3),
+    rest: wp.array(dtype=wp.vec3),
+    displacements: wp.array(dtype=wp.vec3),
     velocities: wp.array(dtype=wp.vec3),
     kind: wp.array(dtype=wp.int32),
     radius: wp.array(dtype=float),
@@ -21,16 +23,17 @@ def collide_ground_plane(
     offset: float,
     friction: float,
 ):
-    """Keeps free particles (spheres of the given radius) above the plane n . x = offset: a penetrating particle is
-    projected back onto the plane, its approaching normal velocity removed (inelastic) and its tangential velocity
-    reduced by Coulomb friction (friction * removed normal speed, never reversing it)."""
+    """Keeps free points (spheres of the given radius, at rest + displacement in the solver's local frame) above the
+    plane n . x = offset (local frame): a penetrating point is projected back onto the plane, its approaching normal
+    velocity removed (inelastic) and its tangential velocity reduced by Coulomb friction (friction * removed normal
+    speed, never reversing it)."""
     i = wp.tid()
     if kind[i] != PARTICLE_FREE:
         return
-    x = positions[i]
+    x = rest[i] + displacements[i]
     depth = radius[i] + offset - wp.dot(normal, x)
     if depth > 0.0:
-        positions[i] = x + depth * normal
+        displacements[i] = displacements[i] + depth * normal
         v = velocities[i]
         vn = wp.dot(v, normal)
         if vn < 0.0:
@@ -90,7 +93,8 @@ def rigid_point_velocity(x: wp.vec3, motion: RigidMotion):
 
 @wp.kernel
 def collide_sphere(
-    positions: wp.array(dtype=wp.vec3),
+    rest: wp.array(dtype=wp.vec3),
+    displacements: wp.array(dtype=wp.vec3),
     velocities: wp.array(dtype=wp.vec3),
     kind: wp.array(dtype=wp.int32),
     radius: wp.array(dtype=float),
@@ -104,7 +108,7 @@ def collide_sphere(
         return
     motion = body[0]
     pose = motion.pose
-    x = positions[i]
+    x = rest[i] + displacements[i]
     d = x - wp.transform_get_translation(pose)
     dist = wp.length(d)
     sdf = dist - sphere_radius
@@ -115,13 +119,14 @@ def collide_sphere(
             n = d / dist
         vs = rigid_point_velocity(x, motion)
         x_new, v_new = collider_response(x, velocities[i], sdf, n, r, vs, friction)
-        positions[i] = x_new
+        displacements[i] = displacements[i] + (x_new - x)
         velocities[i] = v_new
 
 
 @wp.kernel
 def collide_box(
-    positions: wp.array(dtype=wp.vec3),
+    rest: wp.array(dtype=wp.vec3),
+    displacements: wp.array(dtype=wp.vec3),
     velocities: wp.array(dtype=wp.vec3),
     kind: wp.array(dtype=wp.int32),
     radius: wp.array(dtype=float),
@@ -136,7 +141,7 @@ def collide_box(
         return
     motion = body[0]
     pose = motion.pose
-    x = positions[i]
+    x = rest[i] + displacements[i]
     r = radius[i]
     p = wp.transform_point(wp.transform_inverse(pose), x)
     q = wp.vec3(wp.abs(p[0]) - half_extents[0], wp.abs(p[1]) - half_extents[1], wp.abs(p[2]) - half_extents[2])
@@ -167,13 +172,14 @@ def collide_box(
     n = wp.transform_vector(pose, n_local)
     vs = rigid_point_velocity(x, motion)
     x_new, v_new = collider_response(x, velocities[i], sdf, n, r, vs, friction)
-    positions[i] = x_new
+    displacements[i] = displacements[i] + (x_new - x)
     velocities[i] = v_new
 
 
 @wp.kernel
 def collide_mesh(
-    positions: wp.array(dtype=wp.vec3),
+    rest: wp.array(dtype=wp.vec3),
+    displacements: wp.array(dtype=wp.vec3),
     velocities: wp.array(dtype=wp.vec3),
     kind: wp.array(dtype=wp.int32),
     radius: wp.array(dtype=float),
@@ -189,7 +195,7 @@ def collide_mesh(
         return
     motion = body[0]
     pose = motion.pose
-    x = positions[i]
+    x = rest[i] + displacements[i]
     r = radius[i]
     p = wp.transform_point(wp.transform_inverse(pose), x)
     hit = wp.mesh_query_point_sign_normal(mesh, p, r + motion.band)
@@ -207,5 +213,5 @@ def collide_mesh(
     n = wp.transform_vector(pose, n_local)
     vs = rigid_point_velocity(x, motion)
     x_new, v_new = collider_response(x, velocities[i], sdf, n, r, vs, friction)
-    positions[i] = x_new
+    displacements[i] = displacements[i] + (x_new - x)
     velocities[i] = v_new

@@ -1,86 +1,281 @@
-"""Velocity-Verlet integration with boundary conditions.
+"""Shared kinematics of every method with mass: velocity-Verlet integration on displacements, boundary conditions,
+loads with time curves, reaction forces and the finite/speed watchdog.
 
-One step of length dt, with a_n the acceleration from the previous force evaluation:
-    integrate_kick_drift:  v <- v + dt/2 a_n ; x <- x + dt v      (then boundary conditions and colliders)
-    (dilatation and force kernels at the new positions)
-    integrate_kick:        a_{n+1} = f / rho + g - c v ; v <- v + dt/2 a_{n+1}
-Particle kinds: 0 free, 1 fixed (held at its reference position), 2 prescribed velocity on the axes whose entry of
-``prescribed_axes`` is 1 (the other components move freely, e.g. a roller grip).
+State per point: displacement u from the rest position [m], velocity v [m/s], acceleration a [m/s^2]. Positions are
+never integrated in world coordinates: a point's position is X + u with X its rest position in the solver's local
+frame, so float32 resolves a displacement to about 1e-7 of its own size wherever the body sits in the world, and
+deformation is computed from displacement differences (see kernels/peridynamics/step.py and kernels/fem/).
+
+One step of length dt, with a_n the acceleration of the previous force evaluation:
+
+    evaluate_conditions:  each boundary condition's state at the mid-step time t + dt/2 (active or not, velocity)
+    kick_drift:           v <- v + dt/2 a_n ; u <- u + dt v          (constrained axes: v prescribed, fixed: v = 0)
+    (colliders and contact move u and v; internal forces at the new displacements; apply_loads adds f_ext(t + dt))
+    kick:                 a = f / m + g - c v ; v <- v + dt/2 a       (free axes only)
+
+``f / m`` is the force per unit mass: force density over density for peridynamics (f [N/m^3], inv_mass = 1 / rho),
+nodal force over lumped mass for the FEM (f [N], inv_mass = 1 / m).
+
+Boundary conditions: each constrained point names one condition (``point_condition``, -1 for none). A condition has
+a kind (fixed or prescribed velocity), the axes it constrains (1 per constrained component; the others move freely,
+e.g. a roller grip), a velocity [m/s] scaled by a time curve, and a window [start, release) outside which its points
+are free. The kind in force this step is written per point (``point_kind``) for the colliders and contact, which act
+on free points only.
+
+Time curves are piecewise-linear tables (time [s], value), constant beyond their ends: a constant is one entry, a
+ramp two. ``curve_span[c] = (first, count)`` locates curve c in the concatenated tables.
+
+Kernels are built per scalar type (float32 for peridynamics, float32 or float64 for the FEM) by
+``integration_kernels(dtype)``; the condition and curve tables are always float32.
 """
+
+import functools
 
 import warp as wp
 
-PARTICLE_FREE = wp.constant(0)
-PARTICLE_FIXED = wp.constant(1)
-PARTICLE_PRESCRIBED = wp.constant(2)
+POINT_FREE = wp.constant(0)
+POINT_FIXED = wp.constant(1)
+POINT_PRESCRIBED = wp.constant(2)
+PARTICLE_FREE = POINT_FREE  # name used by the collider and contact kernels
+
+
+@wp.func
+def curve_value(span: wp.vec2i, times: wp.array(dtype=float), values: wp.array(dtype=float), t: float):
+    """Value of a piecewise-linear time curve at t [s], held constant before its first and after its last entry."""
+    first = span[0]
+    count = span[1]
+    if count <= 1 or t <= times[first]:
+        return values[first]
+    last = first + count - 1
+    if t >= times[last]:
+        return values[last]
+    k = first
+    while times[k + 1] < t:
+        k += 1
+    t0 = times[k]
+    t1 = times[k + 1]
+    w = (t - t0) / (t1 - t0)
+    return values[k] + w * (values[k + 1] - values[k])
 
 
 @wp.kernel
-def integrate_kick_drift(
-    positions: wp.array(dtype=wp.vec3),
-    velocities: wp.array(dtype=wp.vec3),
-    accelerations: wp.array(dtype=wp.vec3),
-    rest_positions: wp.array(dtype=wp.vec3),
-    kind: wp.array(dtype=wp.int32),
-    prescribed_velocity: wp.array(dtype=wp.vec3),
-    prescribed_axes: wp.array(dtype=wp.vec3),
-    dt: float,
+def evaluate_conditions(
+    cond_kind: wp.array(dtype=wp.int32),
+    cond_start: wp.array(dtype=float),
+    cond_release: wp.array(dtype=float),
+    cond_velocity: wp.array(dtype=wp.vec3),
+    cond_curve: wp.array(dtype=wp.vec2i),
+    curve_time: wp.array(dtype=float),
+    curve_data: wp.array(dtype=float),
+    t: float,
+    active_kind: wp.array(dtype=wp.int32),
+    active_velocity: wp.array(dtype=wp.vec3),
 ):
-    """First half kick and drift; fixed particles stay at rest, prescribed components move at their velocity."""
-    i = wp.tid()
-    c = kind[i]
-    if c == PARTICLE_FIXED:
-        positions[i] = rest_positions[i]
-        velocities[i] = wp.vec3(0.0)
-    elif c == PARTICLE_PRESCRIBED:
-        m = prescribed_axes[i]
-        free = velocities[i] + (0.5 * dt) * accelerations[i]
-        v = wp.cw_mul(m, prescribed_velocity[i]) + wp.cw_mul(wp.vec3(1.0) - m, free)
+    """State of boundary condition c at time t: its kind inside [start, release), free outside; its velocity scaled
+    by its time curve (zero for a fixed condition)."""
+    c = wp.tid()
+    kind = cond_kind[c]
+    if t < cond_start[c] or t >= cond_release[c]:
+        kind = POINT_FREE
+    active_kind[c] = kind
+    v = wp.vec3(0.0)
+    if kind == POINT_PRESCRIBED:
+        v = cond_velocity[c] * curve_value(cond_curve[c], curve_time, curve_data, t)
+    active_velocity[c] = v
+
+
+@wp.kernel
+def evaluate_curves(
+    span: wp.array(dtype=wp.vec2i),
+    curve_time: wp.array(dtype=float),
+    curve_data: wp.array(dtype=float),
+    t: float,
+    value: wp.array(dtype=float),
+):
+    """value[c] = curve c at time t (the load scales of a step)."""
+    c = wp.tid()
+    value[c] = curve_value(span[c], curve_time, curve_data, t)
+
+
+@functools.cache
+def integration_kernels(dtype=wp.float32):
+    """Integration kernels for scalar ``dtype`` (wp.float32 or wp.float64), returned as a namespace."""
+    vec3 = wp.vec3d if dtype == wp.float64 else wp.vec3
+
+    @wp.func
+    def constrained_velocity(v: vec3, axes: wp.vec3, prescribed: wp.vec3):
+        """v with its constrained components replaced by the prescribed ones."""
+        out = v
+        for d in range(3):
+            if axes[d] > 0.5:
+                out[d] = dtype(prescribed[d])
+        return out
+
+    @wp.func
+    def free_part(a: vec3, axes: wp.vec3):
+        """a with its constrained components zeroed."""
+        out = a
+        for d in range(3):
+            if axes[d] > 0.5:
+                out[d] = dtype(0.0)
+        return out
+
+    @wp.kernel(module="unique")
+    def kick_drift(
+        displacements: wp.array(dtype=vec3),
+        velocities: wp.array(dtype=vec3),
+        accelerations: wp.array(dtype=vec3),
+        point_condition: wp.array(dtype=wp.int32),
+        active_kind: wp.array(dtype=wp.int32),
+        cond_axes: wp.array(dtype=wp.vec3),
+        active_velocity: wp.array(dtype=wp.vec3),
+        dt: dtype,
+        point_kind: wp.array(dtype=wp.int32),
+    ):
+        """First half kick and drift. A fixed point keeps its displacement on the constrained axes (zero velocity
+        there); a prescribed one moves at the condition's mid-step velocity; free axes follow the half kick."""
+        i = wp.tid()
+        v = velocities[i] + (dtype(0.5) * dt) * accelerations[i]
+        kind = POINT_FREE
+        c = point_condition[i]
+        if c >= 0:
+            kind = active_kind[c]
+            if kind != POINT_FREE:
+                v = constrained_velocity(v, cond_axes[c], active_velocity[c])
+        point_kind[i] = kind
         velocities[i] = v
-        positions[i] = positions[i] + dt * v
-    else:
-        v = velocities[i] + (0.5 * dt) * accelerations[i]
-        velocities[i] = v
-        positions[i] = positions[i] + dt * v
+        displacements[i] = displacements[i] + dt * v
 
+    @wp.func
+    def kick_point(
+        i: int,
+        f: vec3,
+        inv_mass: dtype,
+        gravity: vec3,
+        damping: dtype,
+        dt: dtype,
+        point_condition: wp.array(dtype=wp.int32),
+        point_kind: wp.array(dtype=wp.int32),
+        cond_axes: wp.array(dtype=wp.vec3),
+        velocities: wp.array(dtype=vec3),
+        accelerations: wp.array(dtype=vec3),
+    ):
+        """a = f / m + g - c v; second half kick on the free axes (the fused step of kick, shared with the FEM's
+        gather-and-kick)."""
+        v = velocities[i]
+        a = f * inv_mass + gravity - damping * v
+        accelerations[i] = a
+        dv = (dtype(0.5) * dt) * a
+        if point_kind[i] != POINT_FREE:
+            dv = free_part(dv, cond_axes[point_condition[i]])
+        velocities[i] = v + dv
 
-@wp.kernel
-def integrate_kick(
-    velocities: wp.array(dtype=wp.vec3),
-    force_density: wp.array(dtype=wp.vec3),
-    inv_density: wp.array(dtype=float),
-    kind: wp.array(dtype=wp.int32),
-    prescribed_axes: wp.array(dtype=wp.vec3),
-    gravity: wp.vec3,
-    damping: wp.array(dtype=float),
-    dt: float,
-    accelerations: wp.array(dtype=wp.vec3),
-):
-    """a = f / rho + g - damping v (v at the half step); second half kick for free particles and for the free
-    components of prescribed ones."""
-    i = wp.tid()
-    v = velocities[i]
-    a = force_density[i] * inv_density[i] + gravity - damping[i] * v
-    accelerations[i] = a
-    c = kind[i]
-    if c == PARTICLE_FREE:
-        velocities[i] = v + (0.5 * dt) * a
-    elif c == PARTICLE_PRESCRIBED:
-        velocities[i] = v + (0.5 * dt) * wp.cw_mul(wp.vec3(1.0) - prescribed_axes[i], a)
+    @wp.kernel(module="unique")
+    def kick(
+        force: wp.array(dtype=vec3),
+        inv_mass: wp.array(dtype=dtype),
+        gravity: vec3,
+        damping: wp.array(dtype=dtype),
+        dt: dtype,
+        point_condition: wp.array(dtype=wp.int32),
+        point_kind: wp.array(dtype=wp.int32),
+        cond_axes: wp.array(dtype=wp.vec3),
+        velocities: wp.array(dtype=vec3),
+        accelerations: wp.array(dtype=vec3),
+    ):
+        """Second half kick from the force of this step (see kick_point)."""
+        i = wp.tid()
+        kick_point(
+            i,
+            force[i],
+            inv_mass[i],
+            gravity,
+            damping[i],
+            dt,
+            point_condition,
+            point_kind,
+            cond_axes,
+            velocities,
+            accelerations,
+        )
 
+    @wp.kernel(module="unique")
+    def apply_loads(
+        load_point: wp.array(dtype=wp.int32),
+        load_index: wp.array(dtype=wp.int32),
+        load_force: wp.array(dtype=wp.vec3),
+        load_scale: wp.array(dtype=float),
+        force: wp.array(dtype=vec3),
+    ):
+        """force[p] += scale(load) * F for each (point, load) entry; F is already in the solver's force unit
+        (force density for peridynamics, newtons for the FEM)."""
+        q = wp.tid()
+        f = load_force[q] * load_scale[load_index[q]]
+        wp.atomic_add(force, load_point[q], vec3(dtype(f[0]), dtype(f[1]), dtype(f[2])))
 
-@wp.kernel
-def max_speed_and_finite(
-    positions: wp.array(dtype=wp.vec3),
-    velocities: wp.array(dtype=wp.vec3),
-    result: wp.array(dtype=float),
-):
-    """result[0] = max |v| over particles; result[1] = 1 when any position or velocity is not finite."""
-    i = wp.tid()
-    x = positions[i]
-    v = velocities[i]
-    s = wp.length(v)
-    if wp.isnan(s) or wp.isinf(s) or wp.isnan(wp.length(x)) or wp.isinf(wp.length(x)):
-        result[1] = 1.0
-    else:
-        wp.atomic_max(result, 0, s)
+    @wp.kernel(module="unique")
+    def add_velocity(points: wp.array(dtype=wp.int32), dv: wp.vec3, velocities: wp.array(dtype=vec3)):
+        """A velocity kick: v += dv on the listed points."""
+        q = wp.tid()
+        i = points[q]
+        velocities[i] = velocities[i] + vec3(dtype(dv[0]), dtype(dv[1]), dtype(dv[2]))
+
+    @wp.kernel(module="unique")
+    def condition_reactions(
+        point_condition: wp.array(dtype=wp.int32),
+        active_kind: wp.array(dtype=wp.int32),
+        cond_axes: wp.array(dtype=wp.vec3),
+        force: wp.array(dtype=vec3),
+        force_to_newton: wp.array(dtype=dtype),
+        mass: wp.array(dtype=dtype),
+        gravity: vec3,
+        reaction: wp.array(dtype=wp.vec3d),
+    ):
+        """Force [N] each active condition exerts on the body: on its constrained axes, minus the sum over its points
+        of the internal force, the loads and the weight (the support's share of equilibrium; the inertia of a
+        point whose prescribed velocity changes is neglected)."""
+        i = wp.tid()
+        c = point_condition[i]
+        if c < 0:
+            return
+        if active_kind[c] == POINT_FREE:
+            return
+        s = -(force[i] * force_to_newton[i] + mass[i] * gravity)
+        axes = cond_axes[c]
+        r = wp.vec3d(
+            wp.float64(s[0]) * wp.float64(axes[0]),
+            wp.float64(s[1]) * wp.float64(axes[1]),
+            wp.float64(s[2]) * wp.float64(axes[2]),
+        )
+        wp.atomic_add(reaction, c, r)
+
+    @wp.kernel(module="unique")
+    def max_speed_and_finite(
+        displacements: wp.array(dtype=vec3),
+        velocities: wp.array(dtype=vec3),
+        result: wp.array(dtype=float),
+    ):
+        """result[0] = max |v| over points [m/s]; result[1] = 1 when any displacement or velocity is not finite."""
+        i = wp.tid()
+        s = float(wp.length(velocities[i]))
+        x = float(wp.length(displacements[i]))
+        if wp.isnan(s) or wp.isinf(s) or wp.isnan(x) or wp.isinf(x):
+            result[1] = 1.0
+        else:
+            wp.atomic_max(result, 0, s)
+
+    class IntegrationKernels:
+        pass
+
+    ns = IntegrationKernels()
+    ns.vec3 = vec3
+    ns.kick_drift = kick_drift
+    ns.kick_point = kick_point
+    ns.kick = kick
+    ns.apply_loads = apply_loads
+    ns.add_velocity = add_velocity
+    ns.condition_reactions = condition_reactions
+    ns.max_speed_and_finite = max_speed_and_finite
+    ns.constrained_velocity = constrained_velocity
+    ns.free_part = free_part
+    return ns

@@ -14,14 +14,56 @@ from .errors import ParameterError
 from .validate import check_range
 
 
-@dataclass(frozen=True)
-class GroundPlane:
-    """A static plane n . x = offset that free particles cannot cross (inelastic contact with Coulomb friction)."""
+class Collider:
+    """A collider pushes penetrating free points out of its volume (see kernels/colliders.py).
+
+    ``apply(rest, displacements, velocities, radius, kind, time, dt)`` is called after the drift with the solver's
+    points in its local frame: rest positions [m], displacements [m] and velocities [m/s] (vec3 [n]), collision radii
+    [m] (float [n], zero for FEM vertices), kinematic kinds (int32 [n], 0 = free), ``time`` [s] the time of the
+    positions (the end of the step) and ``dt`` [s] the step that led there. The scene first calls
+    ``bind(origin)``: world = origin + local."""
+
+    friction: float = 0.0
+    origin: np.ndarray = np.zeros(3)
+
+    def bind(self, origin) -> None:
+        """Sets the origin [m] of the solvers' local frame (world = origin + local)."""
+        self.origin = np.asarray(origin, dtype=np.float64)
+
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float):
+        raise NotImplementedError
+
+
+@dataclass
+class GroundPlane(Collider):
+    """A static plane n . x = offset (world) that free points cannot cross (inelastic contact with Coulomb
+    friction)."""
 
     normal: tuple = (0.0, 0.0, 1.0)
     offset: float = 0.0
     friction: float = 0.5
 
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float):
+        import warp as wp
+
+        from .kernels import colliders as kc
+
+        n = np.asarray(self.normal, dtype=np.float64)
+        wp.launch(
+            kc.collide_ground_plane,
+            dim=rest.shape[0],
+            inputs=[
+                rest,
+                displacements,
+                velocities,
+                kind,
+                radius,
+                wp.vec3(*n),
+                float(self.offset - n @ self.origin),
+                float(self.friction),
+            ],
+            device=rest.device,
+        )
 
 
 def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -77,19 +119,6 @@ def _mesh_arrays(shape, name: str):
     if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
         raise ParameterError(name, shape, "a closed triangle mesh (pdsim SolidShape or trimesh.Trimesh)")
     return v, f.astype(np.int32)
-
-
-class Collider:
-    """A collider pushes penetrating free particles out of its volume (see kernels/contact.py).
-
-    ``apply(positions, velocities, radius, kind, time, dt)`` is called after the drift, with positions [m] and
-    velocities [m/s] (vec3 [n]), collision radii [m] (float [n]), particle kinds (int32 [n], 0 = free), ``time`` [s]
-    the time of the positions (the end of the step) and ``dt`` [s] the step that led there."""
-
-    friction: float = 0.0
-
-    def apply(self, positions, velocities, radius, kind, time: float, dt: float):
-        raise NotImplementedError
 
 
 class _MotionBuffer:
@@ -173,25 +202,31 @@ class MeshCollider(Collider):
         self.friction = check_range("friction", friction, 0.0, None, lo_open=False)
         self.band = None if band is None else check_range("band", band, 0.0, None)
         self.device = wp.get_device(device)
-        v, f = _mesh_arrays(shape, "shape")
-        self._mesh = _MeshData(v, f, self.device)
+        self.vertices, self.faces = _mesh_arrays(shape, "shape")
+        # the mesh's frame: centred on its bounding box, so float32 vertices keep their precision anywhere
+        self.center = 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0))
+        self._mesh = _MeshData(self.vertices - self.center, self.faces, self.device)
         self._motion = _MotionBuffer(self.device)
         self._radius_bound = _RadiusBound()
         self._band_written = None
 
-    def apply(self, positions, velocities, radius, kind, time: float, dt: float):
+    def bind(self, origin) -> None:
+        super().bind(origin)
+        self._band_written = None
+
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float):
         import warp as wp
 
         from .kernels import colliders as kc
 
         band = _mesh_band(self.band, self._radius_bound, radius)
         if band != self._band_written:  # static: the pose is written once (again only if the radii change)
-            self._motion.write(np.zeros(3), IDENTITY_ROTATION, np.zeros(3), np.zeros(3), band)
+            self._motion.write(self.center - self.origin, IDENTITY_ROTATION, np.zeros(3), np.zeros(3), band)
             self._band_written = band
         wp.launch(
             kc.collide_mesh,
-            dim=positions.shape[0],
-            inputs=[positions, velocities, kind, radius, self._mesh.mesh.id, self._motion.array, self.friction],
+            dim=rest.shape[0],
+            inputs=[rest, displacements, velocities, kind, radius, self._mesh.mesh.id, self._motion.array, self.friction],
             device=self.device,
         )
 
@@ -270,7 +305,7 @@ class RigidProjectile(Collider):
         else:
             v = w = np.zeros(3)
         sweep = float(np.linalg.norm(p1 - p0) + np.linalg.norm(w) * dt * self._bounding_radius())
-        self._motion.write(p1, q1, v, w, band + sweep)
+        self._motion.write(p1 - self.origin, q1, v, w, band + sweep)
 
     def _bounding_radius(self) -> float:
         return 0.0
@@ -286,7 +321,7 @@ class SphereProjectile(RigidProjectile):
     def _bounding_radius(self) -> float:
         return self.sphere_radius
 
-    def apply(self, positions, velocities, radius, kind, time: float, dt: float):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float):
         import warp as wp
 
         from .kernels import colliders as kc
@@ -294,8 +329,8 @@ class SphereProjectile(RigidProjectile):
         self._update_motion(time, dt)
         wp.launch(
             kc.collide_sphere,
-            dim=positions.shape[0],
-            inputs=[positions, velocities, kind, radius, self._motion.array, self.sphere_radius, self.friction],
+            dim=rest.shape[0],
+            inputs=[rest, displacements, velocities, kind, radius, self._motion.array, self.sphere_radius, self.friction],
             device=self.device,
         )
 
@@ -314,7 +349,7 @@ class BoxProjectile(RigidProjectile):
     def _bounding_radius(self) -> float:
         return float(np.linalg.norm(self.half_extents))
 
-    def apply(self, positions, velocities, radius, kind, time: float, dt: float):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float):
         import warp as wp
 
         from .kernels import colliders as kc
@@ -322,9 +357,10 @@ class BoxProjectile(RigidProjectile):
         self._update_motion(time, dt)
         wp.launch(
             kc.collide_box,
-            dim=positions.shape[0],
+            dim=rest.shape[0],
             inputs=[
-                positions,
+                rest,
+                displacements,
                 velocities,
                 kind,
                 radius,
@@ -358,7 +394,7 @@ class MeshProjectile(RigidProjectile):
     def _bounding_radius(self) -> float:
         return self._mesh.bounding_radius
 
-    def apply(self, positions, velocities, radius, kind, time: float, dt: float):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float):
         import warp as wp
 
         from .kernels import colliders as kc
@@ -366,8 +402,8 @@ class MeshProjectile(RigidProjectile):
         self._update_motion(time, dt, band=_mesh_band(self.band, self._radius_bound, radius))
         wp.launch(
             kc.collide_mesh,
-            dim=positions.shape[0],
-            inputs=[positions, velocities, kind, radius, self._mesh.mesh.id, self._motion.array, self.friction],
+            dim=rest.shape[0],
+            inputs=[rest, displacements, velocities, kind, radius, self._mesh.mesh.id, self._motion.array, self.friction],
             device=self.device,
         )
 

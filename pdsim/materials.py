@@ -89,9 +89,7 @@ class Material:
         if self.fracture_energy is not None and self.critical_stretch is not None:
             raise ParameterError("critical_stretch", self.critical_stretch, "None when fracture_energy is given")
         if self.fracture_energy is not None:
-            object.__setattr__(
-                self, "fracture_energy", check_range("fracture_energy", self.fracture_energy, 0.0, None)
-            )
+            object.__setattr__(self, "fracture_energy", check_range("fracture_energy", self.fracture_energy, 0.0, None))
         if self.critical_stretch is not None:
             object.__setattr__(
                 self, "critical_stretch", check_range("critical_stretch", self.critical_stretch, 0.0, None)

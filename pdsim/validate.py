@@ -29,7 +29,6 @@ def check_range(field: str, value: float, lo: float | None, hi: float | None, *,
     return v
 
 
-
 def check_vec3(field: str, value) -> np.ndarray:
     """Three finite numbers as a float64 array of shape [3]."""
     try:

@@ -30,9 +30,9 @@ __all__ = [
     "case_g_scene",
     "dogbone_shape",
     "fracture_specimen",
+    "run_lattice_scene",
     "saint_venant_body",
     "tear_3d_scene",
-    "run_lattice_scene",
     "tensile_specimen",
 ]
 

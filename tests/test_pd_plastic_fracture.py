@@ -231,8 +231,9 @@ def test_anisotropic_crack_follows_weak_plane(tilt_deg):
     t = math.radians(tilt_deg)
     R = np.array([[1.0, 0.0, 0.0], [0.0, math.cos(t), -math.sin(t)], [0.0, math.sin(t), math.cos(t)]])
     layered = pdsim.Anisotropy(axis=(0.0, 0.0, 1.0), strength_ratio=0.1)
-    mat = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.25, critical_stretch=0.01,
-                         anisotropy=layered)
+    mat = pdsim.Material(
+        density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.25, critical_stretch=0.01, anisotropy=layered
+    )
     h = 0.005
     body = pdsim.PeridynamicBody(pdsim.box((0.06, 0.1, 0.12)), mat, h, material_rotation=R)
     grip = 0.06 - 2.0 * h
@@ -268,8 +269,14 @@ def test_brittle_wall_shatters_ductile_wall_bends_then_tears():
     four_walls = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(four_walls)
     _, _, ductile, _ = four_walls.wall_materials()
-    brittle = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.25, critical_stretch=0.01,
-                             yield_stress=2.0e6, name="brittle")
+    brittle = pdsim.Material(
+        density=1000.0,
+        youngs_modulus=1.0e6,
+        poisson_ratio=0.25,
+        critical_stretch=0.01,
+        yield_stress=2.0e6,
+        name="brittle",
+    )
     scene = four_walls.build_scene(materials=[brittle, ductile], speed=6.0)
     solver = scene.build_solver(device="cpu")
     assert {"fracture", "plasticity", "contact", "colliders"} <= solver.features

@@ -193,5 +193,3 @@ class FemBody:
             raise ParameterError("velocity", velocity, "finite values")
         self.initial_velocity[mask] = values
         return int(mask.sum())
-
-

@@ -177,5 +177,3 @@ def _rotation_matrix(value) -> np.ndarray:
     if np.linalg.det(R) < 0.0:
         raise ParameterError("material_rotation", value, "a proper rotation (determinant +1)")
     return R
-
-

@@ -416,5 +416,3 @@ def _cut_bonds(cut, first: int, count: int, rest, offsets, neighbors, alive, dev
             inputs=[first, mesh.id, rest, offsets, neighbors, alive],
             device=device,
         )
-
-

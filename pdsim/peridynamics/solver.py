@@ -558,5 +558,3 @@ class SolverPeridynamics:
     def body_slice(self, index: int) -> slice:
         """Rows of the solver's body ``index`` (in ``self.bodies`` order) in the concatenated particle arrays."""
         return slice(int(self.model.body_offsets[index]), int(self.model.body_offsets[index + 1]))
-
-

@@ -1,0 +1,378 @@
+"""The shared point state of every method with mass, and the launches of kernels/integration.py.
+
+:class:`PointKinematics` holds what every point-based solver integrates the same way: displacements from the rest
+configuration, velocities, accelerations, the kinematic kind of each point this step, the boundary-condition and
+time-curve tables of all the solver's bodies, and the loads resolved onto points. A solver owns one, gives it the
+per-point inverse mass in its own force unit and calls
+
+    begin_step(t, dt)            conditions at t + dt/2, kick-drift (u and v at t + dt)
+    (colliders, contact, internal forces into ``force``)
+    add_loads(force, t + dt)     loads scaled by their curves at t + dt
+    end_step(force, dt)          second half kick
+
+Rest positions are stored relative to the scene's origin (``origin``, float64 [3]), so the float32 arrays resolve
+the same deformation wherever the scene sits in the world; world positions are ``origin + rest + u``, formed in
+float64 only on the host for output.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .errors import InstabilityError
+
+
+class PointKinematics:
+    """Displacements, velocities and accelerations of ``point_count`` points, with their boundary conditions and
+    loads.
+
+    Args:
+        bodies: the solver's PointBody instances, in the order of their points.
+        body_offsets: first point of each body, int [body_count + 1].
+        rest_world: rest positions [m] in world coordinates, float64 [n, 3].
+        origin: the scene's origin [m], float64 [3] (the local frame's origin).
+        mass: point masses [kg], float64 [n].
+        force_to_newton: what turns the solver's force unit into newtons per point (the particle volume for a force
+            density, 1 for nodal forces), float64 [n].
+        damping: mass-proportional damping [1/s] per point, float64 [n].
+        gravity: scene gravity [m/s^2], 3 numbers.
+        device: Warp device.
+        dtype: wp.float32 or wp.float64 (the solver's state precision).
+    """
+
+    def __init__(self, bodies, body_offsets, rest_world, origin, mass, force_to_newton, damping, gravity, device, dtype):
+        import warp as wp
+
+        from .kernels import integration as ki
+
+        self.device = wp.get_device(device)
+        self.dtype = dtype
+        self.k = ki.integration_kernels(dtype)
+        vec3 = self.k.vec3
+        npf = np.float64 if dtype == wp.float64 else np.float32
+        self.npf = npf
+        n = int(body_offsets[-1])
+        self.point_count = n
+        self.bodies = list(bodies)
+        self.body_offsets = np.asarray(body_offsets, dtype=np.int64)
+        self.origin = np.asarray(origin, dtype=np.float64)
+        self.rest_world = np.asarray(rest_world, dtype=np.float64)
+        self.rest_local_host = self.rest_world - self.origin
+        self.mass_host = np.asarray(mass, dtype=np.float64)
+        self.force_to_newton_host = np.asarray(force_to_newton, dtype=np.float64)
+        d = self.device
+
+        def v3(a):
+            return wp.array(np.asarray(a, dtype=npf).reshape(-1, 3), dtype=vec3, device=d)
+
+        def sc(a):
+            return wp.array(np.asarray(a, dtype=npf), dtype=dtype, device=d)
+
+        self.rest = v3(self.rest_local_host)
+        init_v = np.concatenate([b.initial_velocity for b in bodies]) if bodies else np.zeros((0, 3))
+        self.u = wp.zeros(n, dtype=vec3, device=d)
+        self.v = v3(init_v)
+        self.a = wp.zeros(n, dtype=vec3, device=d)
+        self.mass = sc(self.mass_host)
+        self.force_to_newton = sc(self.force_to_newton_host)
+        self.damping = sc(damping)
+        self.gravity_host = np.asarray(gravity, dtype=np.float64)
+        self.gravity = vec3(*[float(g) for g in self.gravity_host])
+        self.point_kind = wp.zeros(n, dtype=wp.int32, device=d)
+        self._check = wp.zeros(2, dtype=float, device=d)
+        self._build_conditions()
+        self._build_loads()
+        self.time = 0.0
+
+    # -- tables --------------------------------------------------------------------------------------------------------
+    def _build_conditions(self):
+        import warp as wp
+
+        d = self.device
+        conds, point_cond, names = [], [], []
+        for b, lo in zip(self.bodies, self.body_offsets[:-1]):
+            pc = b.point_condition.astype(np.int64)
+            point_cond.append(np.where(pc >= 0, pc + len(conds), -1))
+            conds += b.conditions
+            names += [(b.name, c.name) for c in b.conditions]
+        self.condition_names = names
+        self.condition_count = len(conds)
+        pc = np.concatenate(point_cond) if point_cond else np.zeros(0)
+        self.point_condition_host = pc.astype(np.int32)
+        self.point_condition = wp.array(self.point_condition_host, dtype=wp.int32, device=d)
+        m = max(len(conds), 1)
+        kind = np.zeros(m, dtype=np.int32)
+        axes = np.zeros((m, 3), dtype=np.float32)
+        vel = np.zeros((m, 3), dtype=np.float32)
+        start = np.zeros(m, dtype=np.float32)
+        release = np.full(m, np.finfo(np.float32).max, dtype=np.float32)
+        for i, c in enumerate(conds):
+            kind[i] = int(c.kind)
+            axes[i] = c.axes
+            vel[i] = c.velocity
+            start[i] = c.start
+            release[i] = min(c.release, float(np.finfo(np.float32).max))
+        spans, times, values = _curve_tables([c.curve for c in conds])
+        self.cond_kind = wp.array(kind, dtype=wp.int32, device=d)
+        self.cond_axes = wp.array(axes, dtype=wp.vec3, device=d)
+        self.cond_velocity = wp.array(vel, dtype=wp.vec3, device=d)
+        self.cond_start = wp.array(start, dtype=float, device=d)
+        self.cond_release = wp.array(release, dtype=float, device=d)
+        self.cond_curve = wp.array(spans, dtype=wp.vec2i, device=d)
+        self.cond_curve_time = wp.array(times, dtype=float, device=d)
+        self.cond_curve_value = wp.array(values, dtype=float, device=d)
+        self.active_kind = wp.zeros(m, dtype=wp.int32, device=d)
+        self.active_velocity = wp.zeros(m, dtype=wp.vec3, device=d)
+        self._reaction = wp.zeros(m, dtype=wp.vec3d, device=d)
+
+    def _build_loads(self):
+        import warp as wp
+
+        d = self.device
+        points, forces, index, curves = [], [], [], []
+        for b, lo in zip(self.bodies, self.body_offsets[:-1]):
+            hi = lo + b.point_count
+            for pts, f, curve in b.resolved_loads(self.rest_world[lo:hi], self.mass_host[lo:hi]):
+                gp = pts + lo
+                points.append(gp)
+                forces.append(f / self.force_to_newton_host[gp, None])  # newtons -> the solver's force unit
+                index.append(np.full(len(pts), len(curves)))
+                curves.append(curve)
+        self.load_count = len(curves)
+        self.load_entry_count = int(sum(len(p) for p in points))
+        if self.load_count:
+            self.load_point = wp.array(np.concatenate(points).astype(np.int32), dtype=wp.int32, device=d)
+            self.load_force = wp.array(np.concatenate(forces).astype(np.float32), dtype=wp.vec3, device=d)
+            self.load_index = wp.array(np.concatenate(index).astype(np.int32), dtype=wp.int32, device=d)
+            spans, times, values = _curve_tables(curves)
+            self.load_curve = wp.array(spans, dtype=wp.vec2i, device=d)
+            self.load_curve_time = wp.array(times, dtype=float, device=d)
+            self.load_curve_value = wp.array(values, dtype=float, device=d)
+            self.load_scale = wp.zeros(self.load_count, dtype=float, device=d)
+        self.kicks = []  # (time, points, dv), sorted by time
+        for b, lo in zip(self.bodies, self.body_offsets[:-1]):
+            for kick in b.kicks:
+                pts = wp.array((b.kick_points(kick) + lo).astype(np.int32), dtype=wp.int32, device=d)
+                self.kicks.append((kick.time, pts, kick.velocity))
+        self.kicks.sort(key=lambda k: k[0])
+        self._next_kick = 0
+
+    @property
+    def features(self) -> set[str]:
+        """Live kinematic features: boundary_conditions, loads, velocity_kicks, gravity, damping."""
+        out = set()
+        if self.condition_count:
+            out.add("boundary_conditions")
+        if self.load_count:
+            out.add("loads")
+        if self.kicks:
+            out.add("velocity_kicks")
+        if np.any(self.gravity_host != 0.0):
+            out.add("gravity")
+        if np.any(self.damping.numpy() != 0.0):
+            out.add("damping")
+        return out
+
+    # -- stepping ------------------------------------------------------------------------------------------------------
+    def begin_step(self, t: float, dt: float):
+        """Velocity kicks due in [t, t + dt), the conditions' state at t + dt/2, then the first half kick and drift."""
+        import warp as wp
+
+        from .kernels import integration as ki
+
+        d = self.device
+        while self._next_kick < len(self.kicks) and self.kicks[self._next_kick][0] < t + dt:
+            _, pts, dv = self.kicks[self._next_kick]
+            wp.launch(self.k.add_velocity, dim=pts.shape[0], inputs=[pts, wp.vec3(*dv), self.v], device=d)
+            self._next_kick += 1
+        if self.condition_count:
+            self._evaluate_conditions(t + 0.5 * dt)
+        wp.launch(
+            self.k.kick_drift,
+            dim=self.point_count,
+            inputs=[
+                self.u,
+                self.v,
+                self.a,
+                self.point_condition,
+                self.active_kind,
+                self.cond_axes,
+                self.active_velocity,
+                self.dtype(dt),
+                self.point_kind,
+            ],
+            device=d,
+        )
+        _ = ki
+
+    def _evaluate_conditions(self, t: float):
+        import warp as wp
+
+        from .kernels import integration as ki
+
+        wp.launch(
+            ki.evaluate_conditions,
+            dim=self.condition_count,
+            inputs=[
+                self.cond_kind,
+                self.cond_start,
+                self.cond_release,
+                self.cond_velocity,
+                self.cond_curve,
+                self.cond_curve_time,
+                self.cond_curve_value,
+                float(t),
+                self.active_kind,
+                self.active_velocity,
+            ],
+            device=self.device,
+        )
+
+    def add_loads(self, force, t: float):
+        """Adds every load, scaled by its curve at ``t`` [s], to ``force`` (the solver's force array)."""
+        import warp as wp
+
+        from .kernels import integration as ki
+
+        if not self.load_count:
+            return
+        d = self.device
+        wp.launch(
+            ki.evaluate_curves,
+            dim=self.load_count,
+            inputs=[self.load_curve, self.load_curve_time, self.load_curve_value, float(t), self.load_scale],
+            device=d,
+        )
+        wp.launch(
+            self.k.apply_loads,
+            dim=self.load_entry_count,
+            inputs=[self.load_point, self.load_index, self.load_force, self.load_scale, force],
+            device=d,
+        )
+
+    def end_step(self, force, inv_mass, dt: float):
+        """Second half kick: a = force * inv_mass + g - c v on the free axes."""
+        import warp as wp
+
+        wp.launch(
+            self.k.kick,
+            dim=self.point_count,
+            inputs=[
+                force,
+                inv_mass,
+                self.gravity,
+                self.damping,
+                self.dtype(dt),
+                self.point_condition,
+                self.point_kind,
+                self.cond_axes,
+                self.v,
+                self.a,
+            ],
+            device=self.device,
+        )
+
+    # -- outputs and checks --------------------------------------------------------------------------------------------
+    def reactions(self, force, t: float) -> dict:
+        """Force [N] each boundary condition exerts on its body at time ``t`` (from ``force``, the solver's internal
+        force plus loads of the last evaluation): {(body name, condition name): float64 [3]}; zero when inactive."""
+        import warp as wp
+
+        if not self.condition_count:
+            return {}
+        self._evaluate_conditions(t)
+        self._reaction.zero_()
+        wp.launch(
+            self.k.condition_reactions,
+            dim=self.point_count,
+            inputs=[
+                self.point_condition,
+                self.active_kind,
+                self.cond_axes,
+                force,
+                self.force_to_newton,
+                self.mass,
+                self.gravity,
+                self._reaction,
+            ],
+            device=self.device,
+        )
+        r = self._reaction.numpy()
+        return {name: r[i].astype(np.float64) for i, name in enumerate(self.condition_names)}
+
+    def check(self, speed_limit: float, where: str):
+        """Raises InstabilityError when a displacement or velocity is not finite or a speed exceeds ``speed_limit``."""
+        import warp as wp
+
+        self._check.zero_()
+        wp.launch(
+            self.k.max_speed_and_finite, dim=self.point_count, inputs=[self.u, self.v, self._check], device=self.device
+        )
+        vmax, bad = (float(x) for x in self._check.numpy())
+        if bad > 0 or vmax > speed_limit:
+            what = "non-finite displacements or velocities" if bad > 0 else f"a point speed of {vmax:.3g} m/s"
+            raise InstabilityError(f"the simulation diverged {where}: {what}")
+
+    def displacements(self) -> np.ndarray:
+        """u [m], float64 [n, 3]."""
+        return self.u.numpy().astype(np.float64)
+
+    def positions(self) -> np.ndarray:
+        """World positions origin + X + u [m], float64 [n, 3]."""
+        return self.rest_world + self.u.numpy().astype(np.float64)
+
+    def local_positions(self) -> np.ndarray:
+        """Positions in the local frame X + u [m], float64 [n, 3]."""
+        return self.rest_local_host + self.u.numpy().astype(np.float64)
+
+    def velocities(self) -> np.ndarray:
+        """v [m/s], float64 [n, 3]."""
+        return self.v.numpy().astype(np.float64)
+
+    def set_displacements(self, u):
+        import warp as wp
+
+        wp.copy(self.u, wp.array(np.asarray(u, dtype=self.npf).reshape(-1, 3), dtype=self.k.vec3, device=self.device))
+
+    def set_velocities(self, v):
+        import warp as wp
+
+        wp.copy(self.v, wp.array(np.asarray(v, dtype=self.npf).reshape(-1, 3), dtype=self.k.vec3, device=self.device))
+
+    def kinetic_energy(self) -> float:
+        v = self.velocities()
+        return float(0.5 * np.dot(self.mass_host, np.einsum("ij,ij->i", v, v)))
+
+    def linear_momentum(self) -> np.ndarray:
+        return self.mass_host @ self.velocities()
+
+    def angular_momentum(self, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
+        x = self.positions() - np.asarray(origin, dtype=np.float64)
+        return self.mass_host @ np.cross(x, self.velocities())
+
+
+def _curve_tables(curves):
+    """Concatenated (spans int32 [c, 2], times float32, values float32) of TimeCurves; one dummy entry when empty."""
+    if not curves:
+        return np.zeros((1, 2), dtype=np.int32), np.zeros(1, dtype=np.float32), np.ones(1, dtype=np.float32)
+    spans, first = [], 0
+    for c in curves:
+        spans.append((first, len(c.times)))
+        first += len(c.times)
+    times = np.concatenate([c.times for c in curves]).astype(np.float32)
+    values = np.concatenate([c.values for c in curves]).astype(np.float32)
+    return np.asarray(spans, dtype=np.int32), times, values
+
+
+def scene_origin(bounds) -> np.ndarray:
+    """The local frame's origin [m] for world-space bounding boxes ``bounds`` (pairs of float64 [3] lo, hi): the
+    centre of their union, so that every body's rest positions are as small as the scene's own extent."""
+    lo = np.min([b[0] for b in bounds], axis=0)
+    hi = np.max([b[1] for b in bounds], axis=0)
+    return 0.5 * (lo + hi)
+
+
+__all__ = ["PointKinematics", "scene_origin"]
+_ = math

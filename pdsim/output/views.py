@@ -1,0 +1,68 @@
+"""Method-neutral views of a solver's state, the only thing the output writer sees.
+
+Every solver returns, once a frame, a list of views: :class:`PointsView` (points with named per-point attributes) and
+:class:`MeshView` (a triangle surface with a topology version and per-face attributes). Attribute names mean the
+same in every method (``ATTRIBUTES``); a solver writes the ones its live features define and no others.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+ATTRIBUTES = {
+    # name: (kind, meaning)
+    "displacement": ("vector3f", "displacement from the rest position [m]"),
+    "damage": ("float", "broken share of a point's bonds or elements [-], 0 intact, 1 detached"),
+    "fragment": ("int", "fragment (connected piece) id, stable over the animation"),
+    "plastic_strain": ("float", "equivalent plastic strain [-]"),
+    "dilatation": ("float", "volumetric strain [-]"),
+    "crack": ("int", "1 on faces created by fracture, 0 on the input surface"),
+    "kind": ("int", "lattice point kind (follower, leader, frame, fictitious)"),
+    "pe1": ("float", "lattice pseudo-energy PE1 [m^2]"),
+    "pe2": ("float", "lattice pseudo-energy PE2 [m]"),
+    "pe1_intact": ("float", "lattice PE1 over intact links [m^2]"),
+    "broken_links": ("int", "lattice links lost by a point"),
+}
+
+
+def attribute_kind(name: str) -> str:
+    """USD primvar kind ("float", "int", "vector3f") of a shared attribute name."""
+    try:
+        return ATTRIBUTES[name][0]
+    except KeyError:
+        raise KeyError(f"attribute {name!r} is not a shared output attribute ({', '.join(sorted(ATTRIBUTES))})") from None
+
+
+@dataclass
+class PointsView:
+    """Points of one body at one frame.
+
+    name: the body's name (the prim name). positions: world positions [m], float64 [n, 3]. velocities: [m/s],
+    float64 [n, 3]. widths: point diameters [m], [n]. attributes: {shared name: values [n] or [n, 3]}."""
+
+    name: str
+    positions: np.ndarray
+    velocities: np.ndarray
+    widths: np.ndarray
+    attributes: dict = field(default_factory=dict)
+
+
+@dataclass
+class MeshView:
+    """A triangle surface of one body at one frame.
+
+    name: prim name (``<body>_surface`` for a body's surface). points: world vertex positions [m], float64 [v, 3].
+    velocities: vertex velocities [m/s], float64 [v, 3], or None. topology_version: an integer that changes exactly
+    when ``faces`` or the vertex count changes. faces: triangles, int [f, 3]. face_attributes: {shared name: [f]}."""
+
+    name: str
+    points: np.ndarray
+    velocities: np.ndarray | None
+    topology_version: int
+    faces: np.ndarray
+    face_attributes: dict = field(default_factory=dict)
+
+
+__all__ = ["ATTRIBUTES", "MeshView", "PointsView", "attribute_kind"]

@@ -1,0 +1,226 @@
+"""The solver contract: what the scene drives, whatever the method.
+
+A method plugs into pdsim with a body class (declaring ``method``) and a :class:`Solver` subclass registered for it
+(``SOLVERS``). The scene groups its bodies by method, builds one solver per method with a :class:`SolverContext`,
+chooses one time step for all of them (scene.py holds the time-step policy) and, once a frame, asks each solver for
+method-neutral output views.
+
+Methods with mass derive from :class:`PointSolver`, whose step is split in three phases so that the scene can couple
+methods inside a step (contact between bodies of different methods):
+
+    begin_step(dt)     conditions, kick-drift, colliders           (displacements and velocities at t + dt)
+    compute_forces()   internal forces and loads at t + dt          (``force`` holds them afterwards)
+    end_step(dt)       second half kick; time advances
+
+``step(dt)`` runs the three in turn.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from .errors import FeatureNotAvailableError
+
+
+@dataclass
+class SolverContext:
+    """What the scene gives every solver: Warp device, gravity [m/s^2], ground plane, particle contact setting
+    (None/False off, True or an options dict on), colliders, and the origin [m] of the local frame in which the
+    solvers store rest positions (world = origin + local)."""
+
+    device: str = "cpu"
+    gravity: tuple = (0.0, 0.0, 0.0)
+    ground: object = None
+    contact: object = None
+    colliders: list = field(default_factory=list)
+    origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+class Solver(ABC):
+    """Base of every method's solver.
+
+    Class attributes: ``method`` (the body classes' ``method``), ``supported_features`` (every setting the method can
+    honour; :meth:`check_features` raises FeatureNotAvailableError for the rest). Instance attributes: ``features``
+    (the live ones), ``time`` [s], ``step_count``.
+    """
+
+    method: ClassVar[str] = ""
+    supported_features: ClassVar[frozenset] = frozenset()
+
+    _force_time: float = 0.0
+    time: float = 0.0
+    step_count: int = 0
+
+    @classmethod
+    def requested_features(cls, bodies, context: SolverContext) -> dict:
+        """{feature: who asks for it} of what a scene asks this method for (subclasses add body-level settings)."""
+        asked = {}
+        if context.ground is not None:
+            asked["ground_plane"] = "the scene's ground plane (Scene.add_ground_plane)"
+        if context.colliders:
+            asked["colliders"] = "the scene's colliders (Scene.add_collider)"
+        if any(g != 0.0 for g in context.gravity):
+            asked["gravity"] = "the scene's gravity"
+        return asked
+
+    @classmethod
+    def check_features(cls, bodies, context: SolverContext) -> None:
+        """Raises FeatureNotAvailableError naming the body, the setting and what to use instead when a scene asks
+        this method for a feature it cannot honour."""
+        for feature, source in cls.requested_features(bodies, context).items():
+            if feature not in cls.supported_features:
+                names = ", ".join(f"'{b.name}'" for b in bodies)
+                raise FeatureNotAvailableError(
+                    f"{cls.method} bodies ({names}) cannot honour {source} ({feature}); {cls.instead(feature)}"
+                )
+
+    @classmethod
+    def instead(cls, feature: str) -> str:
+        """What a user can do instead of an unsupported feature (one sentence)."""
+        return "remove the setting or use a method that supports it (see docs/guide.md)"
+
+    @abstractmethod
+    def stable_time_step(self) -> float:
+        """Largest stable step [s] of the method's explicit integration (no safety factor), inf when unbounded."""
+
+    @abstractmethod
+    def simulate(self, dt: float, steps: int) -> None:
+        """Runs ``steps`` steps of ``dt`` [s]."""
+
+    @abstractmethod
+    def check_state(self, speed_limit: float) -> None:
+        """Raises InstabilityError when the state is not finite or a speed exceeds ``speed_limit`` [m/s]."""
+
+    @abstractmethod
+    def speed_scale(self) -> float:
+        """A speed [m/s] that the run's motion is measured against (wave, initial, prescribed, projectile speeds)."""
+
+    @abstractmethod
+    def views(self) -> list:
+        """Method-neutral output views of the current state (pdsim/output/views.py)."""
+
+    @property
+    @abstractmethod
+    def point_count(self) -> int:
+        """Particles or vertices simulated."""
+
+    @property
+    def bond_count(self) -> int:
+        """Bonds (peridynamics, lattice links) or 0."""
+        return 0
+
+    def summary(self) -> str:
+        """What the solver simulates, in a few words."""
+        return f"{self.point_count} points"
+
+    def reaction_forces(self) -> dict:
+        """{(body name, condition name): force [N], float64 [3]} the boundary conditions exert now."""
+        return {}
+
+
+class PointSolver(Solver):
+    """A solver whose state lives on points with mass, integrated by the shared kinematics (pdsim/kinematics.py).
+
+    Subclasses set ``self.kin`` (a PointKinematics), ``self.force`` (the force array the kick reads),
+    ``self.inv_mass`` (per point, in the force array's unit) and implement :meth:`compute_forces` and
+    :meth:`apply_colliders`."""
+
+    supported_features: ClassVar[frozenset] = frozenset({"gravity", "ground_plane", "colliders", "loads"})
+
+    def begin_step(self, dt: float) -> None:
+        """Kick-drift of the shared kinematics, then the colliders at t + dt."""
+        self._force_time = self.time + dt
+        self.kin.begin_step(self.time, dt)
+        self.apply_colliders(self._force_time, dt)
+
+    @abstractmethod
+    def apply_colliders(self, time: float, dt: float) -> None:
+        """Ground plane and colliders on the free points, at the positions of ``time`` [s]."""
+
+    @abstractmethod
+    def compute_forces(self) -> None:
+        """Internal forces (and contact within the method) at the current displacements into ``self.force``, then
+        the loads at the end of the step being taken (``self.kin.add_loads(self.force, self._force_time)``)."""
+
+    def end_step(self, dt: float) -> None:
+        """Second half kick; advances time and the step count."""
+        self.kin.end_step(self.force, self.inv_mass, dt)
+        self.time += dt
+        self.step_count += 1
+
+    def step(self, dt: float) -> None:
+        """One velocity-Verlet step of ``dt`` [s]."""
+        self.begin_step(dt)
+        self.compute_forces()
+        self.end_step(dt)
+
+    def simulate(self, dt: float, steps: int) -> None:
+        for _ in range(int(steps)):
+            self.step(dt)
+
+    def check_state(self, speed_limit: float) -> None:
+        self.kin.check(speed_limit, f"at t={self.time:.6g} s (step {self.step_count}) in {self.summary()}")
+
+    def reaction_forces(self) -> dict:
+        return self.kin.reactions(self.force, self.time)
+
+    @property
+    def point_count(self) -> int:
+        return self.kin.point_count
+
+    def displacements(self) -> np.ndarray:
+        """Displacements from the rest configuration [m], float64 [point_count, 3]."""
+        return self.kin.displacements()
+
+    def positions(self) -> np.ndarray:
+        """World positions [m], float64 [point_count, 3]."""
+        return self.kin.positions()
+
+    def velocities(self) -> np.ndarray:
+        """Velocities [m/s], float64 [point_count, 3]."""
+        return self.kin.velocities()
+
+    def masses(self) -> np.ndarray:
+        """Point masses [kg]."""
+        return self.kin.mass_host
+
+    def kinetic_energy(self) -> float:
+        """1/2 sum m v^2 [J]."""
+        return self.kin.kinetic_energy()
+
+    def linear_momentum(self) -> np.ndarray:
+        """sum m v [kg m/s]."""
+        return self.kin.linear_momentum()
+
+    def angular_momentum(self, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """sum m (x - origin) x v [kg m^2/s]."""
+        return self.kin.angular_momentum(origin)
+
+
+SOLVERS: dict[str, type] = {}
+
+
+def register_solver(cls):
+    """Class decorator: makes ``cls`` the solver of bodies whose ``method`` equals ``cls.method``."""
+    SOLVERS[cls.method] = cls
+    return cls
+
+
+def solver_for(body) -> type:
+    """The solver class of a body (its ``method``)."""
+    method = getattr(body, "method", "")
+    if method not in SOLVERS:
+        # importing the method's package registers its solver
+        import importlib
+
+        importlib.import_module(f"pdsim.{method}") if method else None
+    if method not in SOLVERS:
+        raise FeatureNotAvailableError(f"no solver for bodies of method {method!r} ({type(body).__name__})")
+    return SOLVERS[method]
+
+
+__all__ = ["SOLVERS", "PointSolver", "Solver", "SolverContext", "register_solver", "solver_for"]
