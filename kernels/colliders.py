@@ -1,10 +1,10 @@
 """Collider kernels: the ground plane, static triangle meshes and kinematic rigid projectiles (sphere, box, mesh).
 
 Points are at rest + displacement in the solver's local frame (kernels/integration.py); poses are given in that
-frame too. Colliders push a penetrating free particle (a sphere of its collision radius) back to the surface along the outward
-normal, remove its approaching normal velocity relative to the collider's surface velocity and reduce the relative
-tangential velocity by Coulomb friction (the convention of ``integration.collide_ground_plane``). A kinematic collider
-is not pushed back.
+frame too. Colliders push a penetrating free point (a sphere of its collision radius) back to the surface along the
+outward normal, remove its approaching normal velocity relative to the collider's surface velocity and reduce the
+relative tangential velocity by Coulomb friction (the convention of ``collide_ground_plane``). A kinematic collider is
+not pushed back; the push moves the point's displacement.
 """
 
 import warp as wp

@@ -282,12 +282,12 @@ def make_particle_contact_kernels(shielded: bool):
 
 @wp.kernel
 def apply_contact_projection(
-    positions: wp.array(dtype=wp.vec3),
+    displacements: wp.array(dtype=wp.vec3),
     velocities: wp.array(dtype=wp.vec3),
     position_delta: wp.array(dtype=wp.vec3),
     velocity_delta: wp.array(dtype=wp.vec3),
 ):
-    """x += position_delta, v += velocity_delta (the hard-floor projection of particle_contact_force)."""
+    """u += position_delta, v += velocity_delta (the hard-floor projection of particle_contact_force)."""
     i = wp.tid()
-    positions[i] = positions[i] + position_delta[i]
+    displacements[i] = displacements[i] + position_delta[i]
     velocities[i] = velocities[i] + velocity_delta[i]

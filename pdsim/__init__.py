@@ -7,6 +7,7 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
+from .bodies import BoundaryCondition, PointKind
 from .colliders import BoxProjectile, GroundPlane, MeshCollider, MeshProjectile, SphereProjectile
 from .errors import FeatureNotAvailableError, GeometryError, InstabilityError, ParameterError, PdsimError
 from .fem import (
@@ -34,13 +35,16 @@ from .lattice import (
     LatticeType,
     SolverLattice,
 )
+from .loads import TimeCurve
 from .materials import Anisotropy, Material
 from .peridynamics import PeridynamicBody, SolverPeridynamics
 from .regions import BoxRegion, HalfSpace, SphereRegion
 from .scene import RunReport, Scene
+from .solver import Solver, SolverContext
 
 __all__ = [
     "Anisotropy",
+    "BoundaryCondition",
     "BoxProjectile",
     "BoxRegion",
     "FeatureNotAvailableError",
@@ -66,15 +70,19 @@ __all__ = [
     "ParameterError",
     "PdsimError",
     "PeridynamicBody",
+    "PointKind",
     "RunReport",
     "Scene",
     "SolidShape",
+    "Solver",
+    "SolverContext",
     "SolverFem",
     "SolverLattice",
     "SolverPeridynamics",
     "SphereProjectile",
     "SphereRegion",
     "TetMesh",
+    "TimeCurve",
     "__version__",
     "box",
     "box_tet_mesh",

@@ -226,7 +226,16 @@ class MeshCollider(Collider):
         wp.launch(
             kc.collide_mesh,
             dim=rest.shape[0],
-            inputs=[rest, displacements, velocities, kind, radius, self._mesh.mesh.id, self._motion.array, self.friction],
+            inputs=[
+                rest,
+                displacements,
+                velocities,
+                kind,
+                radius,
+                self._mesh.mesh.id,
+                self._motion.array,
+                self.friction,
+            ],
             device=self.device,
         )
 
@@ -330,7 +339,16 @@ class SphereProjectile(RigidProjectile):
         wp.launch(
             kc.collide_sphere,
             dim=rest.shape[0],
-            inputs=[rest, displacements, velocities, kind, radius, self._motion.array, self.sphere_radius, self.friction],
+            inputs=[
+                rest,
+                displacements,
+                velocities,
+                kind,
+                radius,
+                self._motion.array,
+                self.sphere_radius,
+                self.friction,
+            ],
             device=self.device,
         )
 
@@ -403,7 +421,16 @@ class MeshProjectile(RigidProjectile):
         wp.launch(
             kc.collide_mesh,
             dim=rest.shape[0],
-            inputs=[rest, displacements, velocities, kind, radius, self._mesh.mesh.id, self._motion.array, self.friction],
+            inputs=[
+                rest,
+                displacements,
+                velocities,
+                kind,
+                radius,
+                self._mesh.mesh.id,
+                self._motion.array,
+                self.friction,
+            ],
             device=self.device,
         )
 

@@ -48,7 +48,8 @@ def _per_particle(name: str, value, n: int, *, dtype=np.float64) -> np.ndarray:
 
 def bond_stiffness_row_sum(bulk_modulus, shear_modulus, horizon):
     """Continuum Silling-Askari row sum of an interior particle's bonds [N/m^4] (the sum evaluated by
-    kernels/peridynamics/bonds.compute_stiffness_row_sum with the supplement's constants, integrals over the full sphere):
+    kernels/peridynamics/bonds.compute_stiffness_row_sum with the supplement's constants, integrals over the full
+    sphere):
     S = (60 mu + 81/4 |kappa/2 - 5 mu/6|) / delta^2. Measured on a 0.3 m cube (h = 0.02 m, nu = 0 to 0.45): the
     discrete sums lie between 0.65 S (surface particles) and 1.24 S (edges), interior particles at 0.90 S."""
     kappa = np.asarray(bulk_modulus, dtype=np.float64)
@@ -241,10 +242,11 @@ class ParticleContact:
         return self.exposed.numpy() != 0
 
     @classmethod
-    def from_bodies(cls, bodies, *, device="cpu", **kwargs) -> ParticleContact:
+    def from_bodies(cls, bodies, *, device="cpu", origin=(0.0, 0.0, 0.0), **kwargs) -> ParticleContact:
         """Contact between the particles of ``bodies`` (PeridynamicBody list), concatenated in the given order: pass
-        ``solver.bodies`` so that rows match the solver's arrays. ``shield_interior`` defaults to True only when no
-        body can break (``body.fractures``); keyword options: see the class."""
+        ``solver.bodies`` so that rows match the solver's arrays, and the solver's local-frame ``origin`` [m] (rest
+        positions are stored as world - origin). ``shield_interior`` defaults to True only when no body can break
+        (``body.fractures``); keyword options: see the class."""
         if not bodies:
             raise ParameterError("bodies", bodies, "at least one body")
         kwargs.setdefault("shield_interior", not any(getattr(b, "fractures", False) for b in bodies))
@@ -254,7 +256,7 @@ class ParticleContact:
             return np.repeat(np.asarray(values, dtype=np.float64), counts)
 
         return cls(
-            np.concatenate([b.rest_positions for b in bodies]),
+            np.concatenate([b.rest_positions for b in bodies]) - np.asarray(origin, dtype=np.float64),
             np.repeat(np.arange(len(bodies), dtype=np.int32), counts),
             rep([0.5 * b.spacing for b in bodies]),
             np.concatenate([b.volumes for b in bodies]),
@@ -267,12 +269,13 @@ class ParticleContact:
         )
 
     # -- stepping ------------------------------------------------------------------------------------------------
-    def apply(self, positions, velocities, force_density, kind=None):
-        """Adds the contact force density [N/m^3] to ``force_density`` (vec3 [n]) for ``positions`` [m] and
-        ``velocities`` [m/s] (vec3 [n]; the half-step velocities of velocity Verlet), then applies the hard-floor
-        projection to ``positions`` and ``velocities`` (free particles only: ``kind`` int32 [n], 0 = free; all free
-        when None). Call it after the bond force density and before the kick. Rebuilds the hash grid on
-        ``positions`` (measured: the rebuild is about 5 % of the call; the query dominates). No allocation."""
+    def apply(self, positions, displacements, velocities, force_density, kind=None):
+        """Adds the contact force density [N/m^3] to ``force_density`` (vec3 [n]) for ``positions`` [m] (rest + u in
+        the frame of this object's rest positions) and ``velocities`` [m/s] (vec3 [n]; the half-step velocities of
+        velocity Verlet), then applies the hard-floor projection to ``displacements`` and ``velocities`` (free
+        particles only: ``kind`` int32 [n], 0 = free; all free when None). Call it after the bond force density and
+        before the kick. Rebuilds the hash grid on ``positions`` (measured: the rebuild is about 5 % of the call; the
+        query dominates). No allocation."""
         import warp as wp
 
         from .kernels import contact as kc
@@ -310,7 +313,7 @@ class ParticleContact:
             wp.launch(
                 kc.apply_contact_projection,
                 dim=self.particle_count,
-                inputs=[positions, velocities, self._position_delta, self._velocity_delta],
+                inputs=[displacements, velocities, self._position_delta, self._velocity_delta],
                 device=self.device,
             )
 

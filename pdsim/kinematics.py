@@ -17,8 +17,6 @@ float64 only on the host for output.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from .errors import InstabilityError
@@ -42,7 +40,9 @@ class PointKinematics:
         dtype: wp.float32 or wp.float64 (the solver's state precision).
     """
 
-    def __init__(self, bodies, body_offsets, rest_world, origin, mass, force_to_newton, damping, gravity, device, dtype):
+    def __init__(
+        self, bodies, body_offsets, rest_world, origin, mass, force_to_newton, damping, gravity, device, dtype
+    ):
         import warp as wp
 
         from .kernels import integration as ki
@@ -92,7 +92,7 @@ class PointKinematics:
 
         d = self.device
         conds, point_cond, names = [], [], []
-        for b, lo in zip(self.bodies, self.body_offsets[:-1]):
+        for b in self.bodies:
             pc = b.point_condition.astype(np.int64)
             point_cond.append(np.where(pc >= 0, pc + len(conds), -1))
             conds += b.conditions
@@ -180,8 +180,6 @@ class PointKinematics:
         """Velocity kicks due in [t, t + dt), the conditions' state at t + dt/2, then the first half kick and drift."""
         import warp as wp
 
-        from .kernels import integration as ki
-
         d = self.device
         while self._next_kick < len(self.kicks) and self.kicks[self._next_kick][0] < t + dt:
             _, pts, dv = self.kicks[self._next_kick]
@@ -205,7 +203,6 @@ class PointKinematics:
             ],
             device=d,
         )
-        _ = ki
 
     def _evaluate_conditions(self, t: float):
         import warp as wp
@@ -302,8 +299,9 @@ class PointKinematics:
         r = self._reaction.numpy()
         return {name: r[i].astype(np.float64) for i, name in enumerate(self.condition_names)}
 
-    def check(self, speed_limit: float, where: str):
-        """Raises InstabilityError when a displacement or velocity is not finite or a speed exceeds ``speed_limit``."""
+    def check(self, speed_limit: float, where: str, hint: str = ""):
+        """Raises InstabilityError when a displacement or velocity is not finite or a speed exceeds ``speed_limit``
+        [m/s]; the message says ``where`` and ends with ``hint``."""
         import warp as wp
 
         self._check.zero_()
@@ -313,7 +311,7 @@ class PointKinematics:
         vmax, bad = (float(x) for x in self._check.numpy())
         if bad > 0 or vmax > speed_limit:
             what = "non-finite displacements or velocities" if bad > 0 else f"a point speed of {vmax:.3g} m/s"
-            raise InstabilityError(f"the simulation diverged {where}: {what}")
+            raise InstabilityError(f"the simulation diverged {where}: {what}" + (f"; {hint}" if hint else ""))
 
     def displacements(self) -> np.ndarray:
         """u [m], float64 [n, 3]."""
@@ -375,4 +373,3 @@ def scene_origin(bounds) -> np.ndarray:
 
 
 __all__ = ["PointKinematics", "scene_origin"]
-_ = math

@@ -184,7 +184,9 @@ class PointLoads:
 
     def add_velocity_kick(self, velocity, *, time: float = 0.0, region=None) -> VelocityKick:
         """Adds ``velocity`` [m/s] to the points of ``region`` (all points when None) at ``time`` [s] (>= 0)."""
-        kick = VelocityKick(check_vec3("velocity", velocity), check_range("time", time, 0.0, None, lo_open=False), region)
+        kick = VelocityKick(
+            check_vec3("velocity", velocity), check_range("time", time, 0.0, None, lo_open=False), region
+        )
         if region is not None:
             self._select(region)
         self.kicks.append(kick)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import time
@@ -80,6 +81,7 @@ class Scene:
         self.frames = check_frames(frames)
         self.up_axis = up_axis
         up = np.asarray(UP_AXES[up_axis])
+        self._gravity_is_default = gravity is None
         g = -9.81 * up if gravity is None else np.asarray(gravity, dtype=np.float64)
         if g.shape != (3,) or not np.all(np.isfinite(g)):
             raise ParameterError("gravity", gravity, "3 finite numbers [m/s^2]")
@@ -93,9 +95,9 @@ class Scene:
 
     # -- building -----------------------------------------------------------------------------------------------
     def add_body(self, body):
-        """Adds a body (any pdsim body type: it names its solver through ``build_solver``); names must be unique."""
-        if not callable(getattr(type(body), "build_solver", None)):
-            raise ParameterError("body", body, "a pdsim body (e.g. PeridynamicBody)")
+        """Adds a body of any method (PeridynamicBody, FemBody, LatticeBody); names must be unique."""
+        if not getattr(type(body), "method", ""):
+            raise ParameterError("body", body, "a pdsim body (PeridynamicBody, FemBody, LatticeBody)")
         if any(b.name == body.name for b in self.bodies):
             raise ParameterError("name", body.name, "a body name not already used in this scene")
         self.bodies.append(body)
@@ -126,40 +128,70 @@ class Scene:
 
     def add_collider(self, collider):
         """Adds a static MeshCollider or a kinematic projectile (SphereProjectile, BoxProjectile, MeshProjectile)."""
-        if not callable(getattr(collider, "apply", None)):
+        from .colliders import Collider
+
+        if not isinstance(collider, Collider):
             raise ParameterError("collider", collider, "a pdsim collider (MeshCollider, SphereProjectile, ...)")
         self.colliders.append(collider)
         return collider
 
     def _contact_setting(self, bodies):
+        """Automatic contact for the bodies of one method with mass: on with several bodies or a breakable one."""
         if self.contact is not None:
             return self.contact
+        if any(getattr(b, "method", "") == "lattice" for b in bodies):
+            return None  # massless: no contact
         breakable = any(getattr(b, "fractures", False) for b in bodies)
         return True if (len(bodies) > 1 or breakable) else None
 
     # -- running ------------------------------------------------------------------------------------------------
-    def build_solvers(self, *, device: str | None = None) -> list:
-        """One solver per body type, each over all bodies of that type (CUDA when present unless ``device`` given).
+    def origin(self) -> np.ndarray:
+        """Origin [m] of the solvers' local frame: the centre of the bodies' rest bounding box. Solvers store rest
+        positions relative to it, so a scene translated anywhere in the world simulates the same digits."""
+        from .kinematics import scene_origin
 
-        A solver provides: stable_time_step() [s], simulate(dt, steps), check_state(speed_limit), speed_scale() [m/s],
-        add_outputs(cache), write_outputs(cache, frame), particle_count and bond_count."""
+        bounds = []
+        for b in self.bodies:
+            x = np.asarray(
+                getattr(b, "point_rest_positions", None) if hasattr(b, "point_rest_positions") else b.rest_positions,
+                dtype=np.float64,
+            )
+            bounds.append((x.min(axis=0), x.max(axis=0)))
+        return scene_origin(bounds)
+
+    def context(self, *, device: str | None = None):
+        """The SolverContext every solver of this scene is built with."""
+        from .solver import SolverContext
+
+        ctx = SolverContext(
+            device=device or default_device(),
+            gravity=self.gravity,
+            ground=self.ground,
+            contact=self.contact,
+            colliders=list(self.colliders),
+            origin=self.origin(),
+            gravity_is_default=self._gravity_is_default,
+        )
+        return ctx
+
+    def build_solvers(self, *, device: str | None = None) -> list:
+        """One solver per method, each over all bodies of that method (CUDA when present unless ``device`` given).
+        Each method first checks that it can honour what the scene asks of it (FeatureNotAvailableError)."""
+        from .solver import solver_for
+
         if not self.bodies:
             raise ParameterError("bodies", [], "a scene with at least one body")
         groups: dict[type, list] = {}
         for b in self.bodies:
-            groups.setdefault(type(b), []).append(b)
-        dev = device or default_device()
-        return [
-            kind.build_solver(
-                bodies,
-                device=dev,
-                gravity=self.gravity,
-                ground=self.ground,
-                contact=self._contact_setting(bodies),
-                colliders=self.colliders,
-            )
-            for kind, bodies in groups.items()
-        ]
+            groups.setdefault(solver_for(b), []).append(b)
+        ctx = self.context(device=device)
+        contexts = {}
+        for cls, bodies in groups.items():
+            # automatic contact is decided per method (None: automatic, resolved on that method's bodies)
+            contact = self._contact_setting(bodies) if self.contact is None else self.contact
+            contexts[cls] = dataclasses.replace(ctx, contact=contact)
+            cls.check_features(bodies, contexts[cls])
+        return [cls(bodies, contexts[cls]) for cls, bodies in groups.items()]
 
     def build_solver(self, *, device: str | None = None):
         """The solver of a scene whose bodies are all of one type."""
@@ -192,6 +224,7 @@ class Scene:
                 ceil(frame time / dt), so the step used is at most dt.
         """
         from .output import UsdCache
+        from .output.writer import ViewWriter
 
         out = os.fspath(out)
         if os.path.splitext(out)[1].lower() not in (".usdc", ".usda", ".usd"):
@@ -214,19 +247,15 @@ class Scene:
         speed_limit = self._speed_limit(solvers)
 
         with UsdCache(out, fps=self.fps, start_frame=0, up_axis=self.up_axis, save_interval_s=save_interval_s) as cache:
-            for s in solvers:
-                s.add_outputs(cache)
-                s.write_outputs(cache, 0)
-            cache.end_frame(0)
+            writer = ViewWriter(cache)
+            self._write_frame(writer, cache, solvers, 0)
             bar = _progress(frame_count, enabled=progress, desc=f"pdsim {self.name}")
             try:
                 for frame in range(1, frame_count + 1):
+                    self._advance_frame(solvers, dt, substeps)
                     for s in solvers:
-                        s.simulate(dt, substeps)
                         s.check_state(speed_limit)
-                    for s in solvers:
-                        s.write_outputs(cache, frame)
-                    cache.end_frame(frame)
+                    self._write_frame(writer, cache, solvers, frame)
                     bar.update(1)
             finally:
                 bar.close()
@@ -238,13 +267,37 @@ class Scene:
             dt=dt,
             stable_dt=stable_dt,
             wall_seconds=time.perf_counter() - wall0,
-            particle_count=sum(s.particle_count for s in solvers),
+            particle_count=sum(s.point_count for s in solvers),
             bond_count=sum(s.bond_count for s in solvers),
-            summary="; ".join(
-                s.summary() if hasattr(s, "summary") else f"{s.particle_count} particles, {s.bond_count} bonds"
-                for s in solvers
-            ),
+            summary="; ".join(s.summary() for s in solvers),
         )
+
+    @staticmethod
+    def _advance_frame(solvers, dt: float, substeps: int) -> None:
+        """One frame: the solvers of methods with mass step together, phase by phase, so that forces between them
+        act within the step; the others (the lattice) advance by a frame."""
+        from .solver import PointSolver
+
+        coupled = [s for s in solvers if isinstance(s, PointSolver)]
+        for s in solvers:
+            if not isinstance(s, PointSolver):
+                s.simulate(dt, substeps)
+        if len(coupled) == 1:
+            coupled[0].simulate(dt, substeps)
+            return
+        for _ in range(substeps):
+            for s in coupled:
+                s.begin_step(dt)
+            for s in coupled:
+                s.compute_forces()
+            for s in coupled:
+                s.end_step(dt)
+
+    @staticmethod
+    def _write_frame(writer, cache, solvers, frame: int) -> None:
+        views = [v for s in solvers for v in s.views()]
+        writer.write(frame, views)
+        cache.end_frame(frame)
 
     def _speed_limit(self, solvers) -> float:
         """A speed no particle of a sane run reaches: 20 times the largest of the solvers' speed scales (wave,

@@ -38,6 +38,7 @@ class SolverContext:
     contact: object = None
     colliders: list = field(default_factory=list)
     origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    gravity_is_default: bool = True  # the scene's gravity was not given explicitly
 
 
 class Solver(ABC):

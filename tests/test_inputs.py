@@ -363,7 +363,7 @@ def test_fix_region_selects_nothing():
     with pytest.raises(pdsim.ParameterError) as ei:
         body.fix(pdsim.BoxRegion(lo=(5.0, 5.0, 5.0), hi=(6.0, 6.0, 6.0)))
     _assert_error(ei, pdsim.ParameterError, "region=", "at least one particle", f"'{body.name}'")
-    assert not body.kind.any()
+    assert not body.constrained.any()
 
 
 def test_bad_region_object():

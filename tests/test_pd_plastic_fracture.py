@@ -10,52 +10,45 @@ import pdsim
 H = 0.01  # particle spacing of the tension bars [m]
 
 
-def _tension_bar(material, *, n=10, length=0.2):
-    """A bar of n x n particles with 3-layer roller grips (axial motion prescribed, lateral free). Returns
-    (solver, measure, pull): pull(d_strain) moves the grips apart by d_strain of the bar length, then holds them and
-    lets the bar relax under damping (quasi-static: the measurement is taken at rest, so neither waves nor the
-    damping force bias it)."""
+def _tension_bar(material, increments, *, n=10, length=0.2):
+    """A bar of n x n particles with 3-layer roller grips (axial motion prescribed, lateral free), loaded by a
+    program of strain ``increments``: each moves the grips apart by that fraction of the bar length, then holds them
+    and lets the bar relax under damping (quasi-static: the measurement is taken at rest, so neither waves nor the
+    damping force bias it). The program is one TimeCurve per grip. Returns the path [(strain, stress)] after each
+    increment and the solver; the stress is the right grip's reaction force over the cross-section."""
     width = n * H
     omega = math.pi * material.bar_wave_speed / length  # fundamental axial mode
     body = pdsim.PeridynamicBody(pdsim.box((length, width, width)), material, H, damping=omega)
     grip = 0.5 * length - 3.0 * H
     right_grip = pdsim.HalfSpace((grip, 0.0, 0.0), (1.0, 0.0, 0.0))
     left_grip = pdsim.HalfSpace((-grip, 0.0, 0.0), (-1.0, 0.0, 0.0))
-    body.set_velocity(right_grip, (0.0, 0.0, 0.0), axes="x")  # roller grips: lateral contraction stays free
-    body.set_velocity(left_grip, (0.0, 0.0, 0.0), axes="x")
-    solver = pdsim.SolverPeridynamics([body])
-    X = body.rest_positions
-    right = X[:, 0] >= grip
-    mid = np.abs(X[:, 0]) < length / 6.0
-    dt = 0.7 * solver.stable_time_step()
+    probe = pdsim.PeridynamicBody(pdsim.box((length, width, width)), material, H)  # the same bar, to size the step
+    dt = 0.7 * pdsim.SolverPeridynamics([probe]).stable_time_step()
     transit = length / material.bar_wave_speed
     move_steps = max(1, int(0.5 * transit / dt))
     relax_steps = int(4.0 * transit / dt)
-    sign = np.where(X[:, 0] > 0.0, 1.0, -1.0)[:, None] * np.array([1.0, 0.0, 0.0])
-    held = (X[:, 0] >= grip) | (X[:, 0] <= -grip)
-
-    def pull(d_strain):
-        v = np.where(held[:, None], sign * (0.5 * d_strain * length / (move_steps * dt)), 0.0)
-        solver.model.prescribed_velocity.assign(v.astype(np.float32))
-        solver.simulate(dt, move_steps)
-        solver.model.prescribed_velocity.zero_()
-        solver.simulate(dt, relax_steps)
-
-    def measure():
-        """(strain fitted over the middle third, grip reaction / area) [-, Pa]."""
-        stress = -(body.volumes[right] @ solver.force_density()[right, 0]) / width**2
-        strain = np.polyfit(X[mid, 0], solver.positions()[mid, 0] - X[mid, 0], 1)[0]
-        return strain, stress
-
-    return solver, measure, pull
-
-
-def _load_path(measure, pull, increments):
-    path = []
+    # grip speed = v_unit * curve(t); the curve holds each increment during its move window and 0 while relaxing
+    # (its corners sit 0.1 dt off the window ends, so the mid-step times the integrator samples see flat values)
+    v_unit = 0.5 * length / (move_steps * dt)
+    times, values, t = [], [], 0.0
     for d in increments:
-        pull(d)
-        path.append(measure())
-    return np.array(path)
+        t1 = t + move_steps * dt
+        t = t1 + relax_steps * dt
+        times += [t1 - move_steps * dt + 0.1 * dt, t1 - 0.1 * dt, t1 + 0.1 * dt, t - 0.1 * dt]
+        values += [d, d, 0.0, 0.0]
+    curve = pdsim.TimeCurve.table([0.0, *times], [0.0, *values])
+    body.set_velocity(right_grip, (v_unit, 0.0, 0.0), axes="x", curve=curve, name="right_grip")
+    body.set_velocity(left_grip, (-v_unit, 0.0, 0.0), axes="x", curve=curve, name="left_grip")
+    solver = pdsim.SolverPeridynamics([body])
+    X = body.rest_positions
+    mid = np.abs(X[:, 0]) < length / 6.0
+    path = []
+    for _ in increments:
+        solver.simulate(dt, move_steps + relax_steps)
+        stress = solver.reaction_forces()[(body.name, "right_grip")][0] / width**2
+        strain = np.polyfit(X[mid, 0], solver.positions()[mid, 0] - X[mid, 0], 1)[0]
+        path.append((strain, stress))
+    return np.array(path), solver
 
 
 def test_uniaxial_tension_elastic_slope_yield_plateau_and_unloading():
@@ -65,9 +58,9 @@ def test_uniaxial_tension_elastic_slope_yield_plateau_and_unloading():
     elastic slope and leaves a permanent set (plastic strain > 1 %)."""
     sy, E = 1.0e4, 1.0e6
     mat = pdsim.Material(density=1000.0, youngs_modulus=E, poisson_ratio=0.25, yield_stress=sy)
-    solver, measure, pull = _tension_bar(mat)
-    load = _load_path(measure, pull, [0.002] * 4 + [0.004] * 5)  # to 2.8 % strain (yield strain 1 %)
-    unload = _load_path(measure, pull, [-0.004] * 3)
+    n_load = 9
+    path, solver = _tension_bar(mat, [0.002] * 4 + [0.004] * 5 + [-0.004] * 3)  # to 2.8 % strain (yield 1 %)
+    load, unload = path[:n_load], path[n_load:]
     elastic = load[:, 1] < 0.9 * sy
     slope = np.polyfit(np.r_[0.0, load[elastic, 0]], np.r_[0.0, load[elastic, 1]], 1)[0]
     assert slope == pytest.approx(E, rel=0.05)
@@ -86,8 +79,7 @@ def test_linear_hardening_gives_the_tangent_modulus():
     """With hardening H the post-yield slope is the tangent modulus E H / (E + H) within 20 %."""
     sy, E, Hm = 1.0e4, 1.0e6, 1.0e5
     mat = pdsim.Material(density=1000.0, youngs_modulus=E, poisson_ratio=0.25, yield_stress=sy, hardening_modulus=Hm)
-    _, measure, pull = _tension_bar(mat)
-    path = _load_path(measure, pull, [0.004] * 3 + [0.005] * 4)
+    path, _ = _tension_bar(mat, [0.004] * 3 + [0.005] * 4)
     plastic = path[:, 0] > 0.015
     slope = np.polyfit(path[plastic, 0], path[plastic, 1], 1)[0]
     assert slope == pytest.approx(E * Hm / (E + Hm), rel=0.20)

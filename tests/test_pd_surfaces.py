@@ -197,6 +197,8 @@ def test_usd_cache_topology_only_where_fragments_change(tmp_path):
     from pxr import Usd, UsdGeom
 
     from pdsim.output import UsdCache, validate_usd
+    from pdsim.output.views import PointsView
+    from pdsim.output.writer import ViewWriter
 
     shape = pdsim.box((0.4, 0.2, 0.2))
     h = 0.05
@@ -205,14 +207,12 @@ def test_usd_cache_topology_only_where_fragments_change(tmp_path):
     surf = FragmentSurfaces(shape, x0, h, "bar")
     path = tmp_path / "split.usdc"
     with UsdCache(path, fps=24.0) as cache:
-        points = cache.add_points("bar", widths=np.full(len(x0), h))
-        surf.add_outputs(cache)
+        writer = ViewWriter(cache)
         for frame in range(6):
             if frame >= 3:
                 assert surf.update_topology((x0[:, 0] > 0).astype(np.int32)) == (frame == 3)
             x = x0 + [0.0, 0.0, -0.02 * frame] + (x0[:, :1] > 0) * [0.03 * frame, 0.0, 0.0]
-            cache.write_points(points, frame, x)
-            surf.write(cache, frame, x)
+            writer.write(frame, [PointsView("bar", x, np.zeros_like(x), np.full(len(x0), h)), surf.view(x)])
             cache.end_frame(frame)
     assert validate_usd(path) == []
     stage = Usd.Stage.Open(str(path))

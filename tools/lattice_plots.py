@@ -36,12 +36,21 @@ KIND_LABELS = {0: "follower", 1: "leader", 2: "frame"}
 @dataclass
 class LatticeCacheBody:
     """One lattice body read from a cache: frames [F] (time codes), positions [F, n, 3] [m] and primvars
-    {name: [F, n]} (frames where a primvar has no sample repeat its last value)."""
+    {name: [F, n], or [F, n, 3] for vector primvars such as ``displacement`` [m]} (frames where a primvar has no
+    sample repeat its last value)."""
 
     name: str
     frames: np.ndarray
     positions: np.ndarray
     primvars: dict
+
+    def field(self, name: str) -> np.ndarray:
+        """Per-particle scalar values of primvar ``name``, [F, n]: the primvar itself, or the norm of a vector
+        primvar (``displacement``: |u| [m])."""
+        if name not in self.primvars:
+            raise ParameterError("field", name, f"a primvar of '{self.name}': {sorted(self.primvars)}")
+        values = self.primvars[name]
+        return np.linalg.norm(values, axis=-1) if values.ndim == 3 else values
 
     def frame_index(self, frame: int) -> int:
         """Row of ``frame`` in the arrays."""
@@ -99,25 +108,25 @@ def plot_configurations(
     stretch_mask: float = 3.0,
 ) -> str:
     """A row of panels, one per frame: the particles (leaders red, followers blue, frame yellow) at their positions
-    over a filled contour of ``field`` on the leaders and followers (one colour scale for all panels), interpolated
-    over the rest configuration's Delaunay triangles. Triangles that join two fragments (bodies with fracture: the
-    ``fragment`` primvar) or have an edge stretched over ``stretch_mask`` times its rest length are left blank, so
-    cracks and torn cells show. 2D lattices only (x, y); writes a PNG and returns its path."""
+    over a filled contour of ``field`` (a vector primvar as its norm) on the leaders and followers (one colour scale
+    for all panels), interpolated over the rest configuration's Delaunay triangles. Triangles that join two fragments
+    (bodies with fracture: the ``fragment`` primvar) or have an edge stretched over ``stretch_mask`` times its rest
+    length are left blank, so cracks and torn cells show. 2D lattices only (x, y); writes a PNG and returns its
+    path."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import matplotlib.tri as mtri
 
-    if field not in body.primvars:
-        raise ParameterError("field", field, f"a primvar of '{body.name}': {sorted(body.primvars)}")
+    values = body.field(field)  # [F, n] (the norm of a vector primvar such as displacement)
     rows = [body.frame_index(f) for f in frames]
     kind0 = body.primvars["kind"][0]
     solid = kind0 != 2
     rest = body.positions[0][solid]
     tris, spacing = _triangles(rest)
     rest_edges = np.linalg.norm(rest[tris][:, :, :2] - rest[np.roll(tris, -1, axis=1)][:, :, :2], axis=2)
-    vmax = max(float(body.primvars[field][r][solid].max()) for r in rows)
+    vmax = max(float(values[r][solid].max()) for r in rows)
     levels = np.linspace(0.0, vmax if vmax > 0 else 1.0, 21)
     fig, axes = plt.subplots(1, len(rows), figsize=(3.2 * len(rows) + 1.2, 3.6), squeeze=False, layout="constrained")
     lo = body.positions[rows].reshape(-1, 3).min(axis=0) - spacing
@@ -135,7 +144,7 @@ def plot_configurations(
             frag = body.primvars["fragment"][r][solid][tris]
             mask |= np.any(frag != frag[:, :1], axis=1)
         tri.set_mask(mask)
-        cs = ax.tricontourf(tri, body.primvars[field][r][solid], levels=levels, cmap="jet", extend="max")
+        cs = ax.tricontourf(tri, values[r][solid], levels=levels, cmap="jet", extend="max")
         for k, colour in KIND_COLOURS.items():
             m = kind == k
             if m.any():
@@ -172,7 +181,7 @@ def plot_trajectories(
         label = f"j = {j + 1}"
         axes[0].plot(body.frames, body.positions[:, j, 0], label=label)
         axes[1].plot(body.frames, body.positions[:, j, 1], label=label)
-        axes[2].plot(body.frames, body.primvars[field][:, j], label=label)
+        axes[2].plot(body.frames, body.field(field)[:, j], label=label)
     for ax, name in zip(axes, ("x [units]", "y [units]", field), strict=True):
         ax.set_xlabel("step")
         ax.set_ylabel(name)
@@ -242,7 +251,9 @@ def main(argv=None) -> int:
     p.add_argument("cache", help="a USD cache written by a lattice scene")
     p.add_argument("--frames", type=int, nargs="+", required=True, help="frames of the configuration panels")
     p.add_argument("--pe2-frames", type=int, nargs="*", default=None, help="frames of the PE2 panels")
-    p.add_argument("--field", default=None, help="another float primvar to contour (pe1_intact, displacement, ...)")
+    p.add_argument(
+        "--field", default=None, help="another primvar to contour (pe1_intact, displacement (its norm), ...)"
+    )
     p.add_argument("--track", type=int, nargs="*", default=[], help="particle indices to plot against the step")
     p.add_argument("--out", default=None, help="output folder (default: <cache>_plots)")
     args = p.parse_args(argv)

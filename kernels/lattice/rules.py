@@ -340,45 +340,6 @@ def lattice_record_tracks(
 
 
 @wp.kernel
-def lattice_label_init(kind: wp.array(dtype=wp.int32), label: wp.array(dtype=wp.int32)):
-    """Fragment labels start as the particle's own index (frame points get -1: they belong to no fragment)."""
-    i = wp.tid()
-    if kind[i] == LATTICE_FRAME:
-        label[i] = -1
-    else:
-        label[i] = i
-
-
-@wp.kernel
-def lattice_label_propagate(
-    kind: wp.array(dtype=wp.int32),
-    row_offsets: wp.array(dtype=wp.int32),
-    link_neighbor: wp.array(dtype=wp.int32),
-    link_alive: wp.array(dtype=wp.uint8),
-    use_alive: int,
-    label: wp.array(dtype=wp.int32),
-    changed: wp.array(dtype=wp.int32),
-):
-    """One pass of min-label propagation over intact links between non-frame particles, with pointer jumping; a
-    fixed point labels each fragment (connected piece) by its smallest particle index."""
-    i = wp.tid()
-    if kind[i] == LATTICE_FRAME:
-        return
-    m = label[i]
-    for q in range(row_offsets[i], row_offsets[i + 1]):
-        alive = True
-        if use_alive != 0:
-            alive = link_alive[q] != wp.uint8(0)
-        k = link_neighbor[q]
-        if alive and kind[k] != LATTICE_FRAME:
-            m = wp.min(m, label[k])
-    m = wp.min(m, label[m])
-    if m < label[i]:
-        label[i] = m
-        changed[0] = 1
-
-
-@wp.kernel
 def lattice_check_finite(u: wp.array(dtype=wp.vec3), result: wp.array(dtype=float)):
     """result[0] = max |u| [m]; result[1] = 1 when a displacement is not finite."""
     i = wp.tid()

@@ -41,7 +41,7 @@ def make_step_kernels(fracture: bool, plastic: bool):
 
     @wp.kernel(module="unique")
     def dilatation(
-        positions: wp.array(dtype=wp.vec3),
+        displacements: wp.array(dtype=wp.vec3),
         family_offsets: wp.array(dtype=wp.int32),
         family_neighbors: wp.array(dtype=wp.int32),
         bond_geom: wp.array(dtype=wp.vec4),
@@ -57,18 +57,25 @@ def make_step_kernels(fracture: bool, plastic: bool):
         stretch_min: wp.array(dtype=float),
     ):
         """theta_k = d_k sum_live w e Lambda V beta G^dil; caches each bond's (n, e) and Lambda for the later passes
-        and, with fracture, the particle's most compressive live stretch (for the compressive bonus)."""
+        and, with fracture, the particle's most compressive live stretch (for the compressive bonus).
+
+        The deformed bond is eta = xi + (u_j - u_k) with xi the reference bond, and the extension is evaluated as
+        e = |eta| - L = (2 xi . du + du . du) / (|eta| + L), which keeps float32's relative precision at any strain
+        (|eta| - L would lose it to cancellation below a strain of about 1e-5)."""
         k = wp.tid()
-        yk = positions[k]
+        uk = displacements[k]
         acc = float(0.0)
         smin = float(0.0)
         for q in range(family_offsets[k], family_offsets[k + 1]):
             g = bond_geom[q]
-            eta = positions[family_neighbors[q]] - yk
+            L = g[3]
+            xi = wp.vec3(g[0], g[1], g[2]) * L
+            du = displacements[family_neighbors[q]] - uk
+            eta = xi + du
             length = wp.length(eta)
             n = eta / length
             lam = wp.dot(n, wp.vec3(g[0], g[1], g[2]))
-            e = length - g[3]
+            e = (2.0 * wp.dot(xi, du) + wp.dot(du, du)) / (length + L)
             bond_ne[q] = wp.vec4(n[0], n[1], n[2], e)
             bond_lambda[q] = lam
             live = int(1)
@@ -250,6 +257,17 @@ def make_step_kernels(fracture: bool, plastic: bool):
     ks.dilatation, ks.plastic_update, ks.force, ks.energy = dilatation, plastic_update, force, energy
     _cache[key] = ks
     return ks
+
+
+@wp.kernel
+def compose_positions(
+    rest_positions: wp.array(dtype=wp.vec3),
+    displacements: wp.array(dtype=wp.vec3),
+    positions: wp.array(dtype=wp.vec3),
+):
+    """positions = rest + u [m] in the solver's local frame (for the contact pass's hash grid)."""
+    i = wp.tid()
+    positions[i] = rest_positions[i] + displacements[i]
 
 
 @wp.kernel

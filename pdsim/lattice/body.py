@@ -1,6 +1,6 @@
 """Position-based particle lattice (shared/seeds/pbd_lattice.txt, dell'Erba 2018): lattices, neighbourhoods, rules,
-fracture and bodies. The solver is in pdsim/lattice/solver.py, the kernels in kernels/lattice/rules.py, the choices made where
-the paper is open in docs/lattice.md.
+fracture and bodies. The solver is in pdsim/lattice/solver.py, the kernels in kernels/lattice/rules.py, the choices
+made where the paper is open in docs/lattice.md.
 
 A body is a set of lattice points filling a shape (the leaders and followers) surrounded by a frame (a shell of lattice
 points one or two layers deep that copies the displacement of its assigned body points). Its motion is step-based: at
@@ -469,7 +469,7 @@ class LatticeBody:
             release (docs/lattice.md).
         fracture: link-loss thresholds and fictitious points; None (default) = no fracture.
         steps_per_frame: lattice steps per frame of a scene (each solver ``simulate`` call), integer >= 1.
-        name: label in the USD cache.
+        name: label in the USD cache (the name of the body's output view).
         point_width: point diameter written to the cache [m]; default half the spacing.
 
     Attributes (built at construction; n = particle_count = body_count + frame_count, m = link_count):
@@ -483,6 +483,8 @@ class LatticeBody:
         frame_offsets, frame_sources: the frame points' source particles (CSR over all n rows; empty for body points).
         tracked: particle indices whose history the solver records.
     """
+
+    method = "lattice"  # simulated by SolverLattice (pdsim/lattice/solver.py)
 
     def __init__(
         self,
@@ -692,14 +694,6 @@ class LatticeBody:
             m = self.offset_shell == s
             out.append(float(self.offset_length[m].max()) if m.any() else 0.0)
         return out[0], out[1]
-
-    @classmethod
-    def build_solver(cls, bodies, *, device, gravity=None, ground=None, **scene_options):
-        """The scene's solver for all its lattice bodies. Position rules know no forces: gravity, ground planes,
-        contact and colliders (``scene_options`` such as ``contact``, ``colliders``) do not act on lattices."""
-        from .solver import SolverLattice
-
-        return SolverLattice(bodies, device=device)
 
     def particle_index(self, coords) -> int:
         """Particle index of the integer lattice coordinates ``coords`` (dim integers), or -1."""

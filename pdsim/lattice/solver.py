@@ -1,9 +1,12 @@
-"""The solver of the position-based particle lattice: steps, diagnostics (PE1, PE2, trajectories, fragments) and USD
-output for the lattice bodies of a scene (pdsim/lattice/body.py describes the model, kernels/lattice/rules.py the step).
+"""The solver of the position-based particle lattice: steps, diagnostics (PE1, PE2, trajectories, fragments) and output
+views for the lattice bodies of a scene (pdsim/lattice/body.py describes the model, kernels/lattice/rules.py the step).
 
-Scene protocol: a lattice is step-based and has no time step of its own, so ``stable_time_step()`` is ``math.inf``
-(it never limits the other bodies of a scene) and every ``simulate(dt, steps)`` call, which ``Scene.run`` makes once
-per frame, advances each body by its ``steps_per_frame`` lattice steps whatever ``dt`` and ``steps`` are.
+Scene protocol (pdsim/solver.py): a lattice is step-based and has no time step of its own, so ``stable_time_step()``
+is ``math.inf`` (it never limits the other bodies of a scene) and every ``simulate(dt, steps)`` call, which the scene
+makes once per frame, advances each body by its ``steps_per_frame`` lattice steps whatever ``dt`` and ``steps`` are.
+A lattice is massless and position-based: it cannot honour gravity, a ground plane, colliders, contact or loads
+(``check_features`` refuses them). Rest positions are kept relative to the context's origin (world = origin + local),
+so a body far from the world origin steps exactly as one at it.
 """
 
 from __future__ import annotations
@@ -13,6 +16,9 @@ import math
 import numpy as np
 
 from ..errors import InstabilityError, ParameterError
+from ..graph import fragment_labels
+from ..output.views import PointsView
+from ..solver import Solver, SolverContext, register_solver
 from .body import LatticeBody, LatticeKind
 
 __all__ = ["SolverLattice"]
@@ -21,9 +27,12 @@ _TRACK_CHUNK = 256
 
 
 class _LatticeRuntime:
-    """Device arrays and the step sequence of one lattice body (all launches are per body)."""
+    """Device arrays and the step sequence of one lattice body (all launches are per body).
 
-    def __init__(self, body: LatticeBody, device):
+    ``origin`` [m], float64 [3]: the solver's local frame. The kernels see rest positions and rule origins relative
+    to it (float32), so their rounding does not grow with the body's distance from the world origin."""
+
+    def __init__(self, body: LatticeBody, device, origin: np.ndarray):
         import warp as wp
 
         from ..kernels.lattice import rules as kl
@@ -43,8 +52,10 @@ class _LatticeRuntime:
         def flt(a):
             return wp.array(np.asarray(a, dtype=f32), dtype=float, device=device)
 
-        self.rest_host = body.rest_positions
-        self.rest = vec3(body.rest_positions)
+        self.origin = origin
+        self.rest_world = body.rest_positions  # X [m], float64 [n, 3] (world)
+        self.rest_local = body.rest_positions - origin  # X - origin [m], float64 [n, 3]
+        self.rest = vec3(self.rest_local)
         self.kind = i32(body.kind)
         self.group = i32(body.leader_group)
         paths = body.leader_paths
@@ -96,7 +107,7 @@ class _LatticeRuntime:
         p = kl.LatticeRuleParams()
         p.scalars = wp.vec4(*[float(v) for v in scalars])
         p.axis = wp.vec3(*[float(v) for v in axis])
-        p.origin = wp.vec3(*[float(v) for v in origin])
+        p.origin = wp.vec3(*[float(v) for v in np.asarray(origin, dtype=np.float64) - self.origin])  # local frame
         self.params = p
 
         self.u_cur = wp.zeros(n, dtype=wp.vec3, device=device)
@@ -106,10 +117,9 @@ class _LatticeRuntime:
         self.pe1 = wp.zeros(n, dtype=float, device=device)
         self.pe1_intact = wp.zeros(n, dtype=float, device=device)
         self.broken = wp.zeros(n, dtype=wp.int32, device=device)
-        self.label = wp.zeros(n, dtype=wp.int32, device=device)
-        self.changed = wp.zeros(1, dtype=wp.int32, device=device)
         self._check = wp.zeros(2, dtype=float, device=device)
-        self._fragments = None  # (key, labels) of the last fragment labelling
+        self._fragments = None  # (live links broken so far, labels) of the last fragment labelling
+        self._solid_links = None  # links joining two non-frame particles, bool [link_count] (built on first use)
 
         self.tracked = np.asarray(body.tracked, dtype=np.int64)
         t = len(self.tracked)
@@ -292,38 +302,25 @@ class _LatticeRuntime:
         )
 
     def fragments(self) -> np.ndarray:
-        import warp as wp
-
-        from ..kernels.lattice import rules as kl
-
-        key = (int(self.broken_total.numpy()[0]), self.kind_host.tobytes())
-        if self._fragments is not None and self._fragments[0] == key:
-            return self._fragments[1].copy()  # nothing broke and no category changed since the last labelling
-        d = self.device
-        wp.launch(kl.lattice_label_init, dim=self.n, inputs=[self.kind, self.label], device=d)
-        for _ in range(self.n + 1):
-            self.changed.zero_()
-            wp.launch(
-                kl.lattice_label_propagate,
-                dim=self.n,
-                inputs=[
-                    self.kind,
-                    self.row_offsets,
-                    self.link_neighbor,
-                    self.link_alive,
-                    int(self.fracture),
-                    self.label,
-                    self.changed,
-                ],
-                device=d,
-            )
-            if int(self.changed.numpy()[0]) == 0:
-                break
-        lab = self.label.numpy().astype(np.int64)
+        """Fragment id per particle, int64 [n]: connected components of the leaders and followers over intact links
+        (pdsim.graph, the one labeller), numbered 0, 1, ... in the order of their smallest particle index; -1 for
+        frame points. Relabelled only when links broke since the last call (one 4-byte read otherwise)."""
+        broken = int(self.broken_total.numpy()[0]) if self.fracture else 0
+        if self._fragments is not None and self._fragments[0] == broken:
+            return self._fragments[1].copy()  # nothing broke since the last labelling
+        b = self.body
+        # frame points stay frame points (category changes swap leaders and followers only): a static mask
+        solid = self.kind_host != int(LatticeKind.FRAME)
+        if self._solid_links is None:
+            owner_solid = np.repeat(solid, np.diff(b.row_offsets))
+            self._solid_links = owner_solid & solid[b.link_neighbor]
+        live = self._solid_links
+        if self.fracture:
+            live = live & (self.link_alive.numpy()[: b.link_count] != 0)
+        labels = fragment_labels(b.row_offsets, b.link_neighbor, live)  # frame points: singletons
         out = np.full(self.n, -1, dtype=np.int64)
-        ok = lab >= 0
-        out[ok] = np.unique(lab[ok], return_inverse=True)[1]
-        self._fragments = (key, out)
+        out[solid] = np.unique(labels[solid], return_inverse=True)[1]  # order kept: ranks by smallest index
+        self._fragments = (broken, out)
         return out.copy()
 
     def check(self) -> tuple[float, bool]:
@@ -337,17 +334,34 @@ class _LatticeRuntime:
         return float(umax), bool(bad > 0)
 
 
-class SolverLattice:
-    """Steps the lattice bodies of a scene and writes them to a USD cache.
+_INSTEAD = {
+    "gravity": "leave the scene's gravity at its default (it does not act on lattices) or put the body under gravity "
+    "as a peridynamic or FEM body",
+    "ground_plane": "remove the ground plane or make the body a peridynamic or FEM body",
+    "colliders": "remove the colliders or make the body a peridynamic or FEM body",
+    "contact": "leave contact automatic (Scene.enable_contact not called) or make the body a peridynamic or FEM body",
+}
+
+
+@register_solver
+class SolverLattice(Solver):
+    """Steps the lattice bodies of a scene and gives their output views.
 
     Args:
         bodies: the LatticeBody objects (each keeps its own arrays; they never interact).
-        device: Warp device ("cpu", "cuda", ...).
+        context: the scene's SolverContext; its ``origin`` [m] is the local frame of the rest positions (world =
+            origin + local). None: a default context on ``device`` with the origin at the centre of the bodies' rest
+            bounding box.
+        device: Warp device ("cpu", "cuda", ...); overrides the context's.
 
-    All bodies of one solver must have the same ``steps_per_frame``.
+    All bodies of one solver must have the same ``steps_per_frame``. Raises FeatureNotAvailableError when the context
+    asks for what a lattice cannot honour (see :meth:`requested_features`).
     """
 
-    def __init__(self, bodies: list[LatticeBody], *, device="cpu"):
+    method = "lattice"
+    supported_features = frozenset({"fracture", "frame"})
+
+    def __init__(self, bodies: list[LatticeBody], context: SolverContext | None = None, *, device=None):
         import warp as wp
 
         if not bodies or not all(isinstance(b, LatticeBody) for b in bodies):
@@ -355,16 +369,49 @@ class SolverLattice:
         spf = {b.steps_per_frame for b in bodies}
         if len(spf) != 1:
             raise ParameterError("steps_per_frame", sorted(spf), "the same value for every lattice body of a scene")
+        if context is None:
+            context = SolverContext(device="cpu" if device is None else device, origin=_bounds_centre(bodies))
+        self.check_features(bodies, context)
+        self.context = context
         self.bodies = list(bodies)
         self.steps_per_frame = spf.pop()
-        self.device = wp.get_device(device)
-        self._runtimes = [_LatticeRuntime(b, self.device) for b in self.bodies]
-        self._handles = []
+        self.device = wp.get_device(context.device if device is None else device)
+        self.origin = np.asarray(context.origin, dtype=np.float64).reshape(3)
+        if not np.all(np.isfinite(self.origin)):
+            raise ParameterError("origin", context.origin, "3 finite numbers [m]")
+        self._runtimes = [_LatticeRuntime(b, self.device, self.origin) for b in self.bodies]
+        self.time = 0.0
         self.features = {"lattice"}
         if any(b.fracture is not None for b in self.bodies):
             self.features.add("fracture")
         if any(b.frame_count for b in self.bodies):
             self.features.add("frame")
+
+    # -- features --------------------------------------------------------------------------------------------------
+    @classmethod
+    def requested_features(cls, bodies, context: SolverContext) -> dict:
+        """{feature: who asks for it}: a ground plane, colliders, contact switched on explicitly (True or an options
+        dict; None is the scene's automatic setting and asks nothing) and a gravity the scene was given explicitly and
+        that is not zero (``context.gravity_is_default`` False; the scene's default gravity asks nothing)."""
+        asked = {}
+        if context.ground is not None:
+            asked["ground_plane"] = "the scene's ground plane (Scene.add_ground_plane)"
+        if context.colliders:
+            asked["colliders"] = "the scene's colliders (Scene.add_collider)"
+        if context.contact:
+            asked["contact"] = "the scene's particle contact (Scene.enable_contact)"
+        explicit = not getattr(context, "gravity_is_default", True)
+        if explicit and any(float(g) != 0.0 for g in context.gravity):
+            asked["gravity"] = "the scene's gravity (Scene(gravity=...))"
+        return asked
+
+    @classmethod
+    def instead(cls, feature: str) -> str:
+        return (
+            "a lattice body is massless and position-based: its motion comes from its leaders "
+            "(LatticeBody.add_leaders, clamp, change_kind), while gravity, ground planes, colliders and contact act on "
+            f"peridynamic and FEM bodies; {_INSTEAD.get(feature, 'remove the setting')}"
+        )
 
     # -- stepping --------------------------------------------------------------------------------------------------
     @property
@@ -385,9 +432,10 @@ class SolverLattice:
             r.run(int(steps))
 
     def simulate(self, dt: float, steps: int):
-        """One frame of a scene: ``steps_per_frame`` lattice steps (``dt`` and ``steps`` are not used: a lattice is
-        step-based)."""
+        """One frame of a scene: ``steps_per_frame`` lattice steps (``dt`` and ``steps`` only advance ``time`` [s] by
+        dt x steps: a lattice is step-based)."""
         self.run_steps(self.steps_per_frame)
+        self.time += float(dt) * int(steps)
 
     def stable_time_step(self) -> float:
         """math.inf: a lattice step has no stability limit and does not constrain the scene's time step."""
@@ -399,10 +447,10 @@ class SolverLattice:
 
     def check_state(self, speed_limit: float):
         """Raises InstabilityError when a displacement is not finite or exceeds 1000 times the body's size (possible
-        with a large mixed-coordinate K or relaxation near 2)."""
+        with a large mixed-coordinate K or relaxation near 2). ``speed_limit`` is not used (no velocities)."""
         for r in self._runtimes:
             umax, bad = r.check()
-            ext = r.rest_host.max(axis=0) - r.rest_host.min(axis=0)
+            ext = r.rest_local.max(axis=0) - r.rest_local.min(axis=0)
             size = float(np.linalg.norm(ext)) + r.body.spacing
             if bad or umax > 1.0e3 * size:
                 what = "non-finite displacements" if bad else f"a displacement of {umax:.3g} m"
@@ -413,50 +461,55 @@ class SolverLattice:
 
     # -- scene integration -----------------------------------------------------------------------------------------
     @property
-    def particle_count(self) -> int:
+    def point_count(self) -> int:
         """All points of all bodies (frame points included)."""
         return sum(b.particle_count for b in self.bodies)
+
+    @property
+    def particle_count(self) -> int:
+        """Same as point_count."""
+        return self.point_count
 
     @property
     def bond_count(self) -> int:
         """Directed neighbour links of all bodies."""
         return sum(b.link_count for b in self.bodies)
 
-    def add_outputs(self, cache):
-        """One UsdGeom.Points per body with primvars kind (0 follower, 1 leader, 2 frame), pe1, pe1_intact [m^2],
-        pe2, displacement [m], broken_links and, for bodies with fracture, fragment (-1 for frame points)."""
-        self._handles = []
-        for b in self.bodies:
-            primvars = {
-                "kind": "int",
-                "pe1": "float",
-                "pe1_intact": "float",
-                "pe2": "float",
-                "displacement": "float",
-                "broken_links": "int",
-            }
-            if b.fracture is not None:
-                primvars["fragment"] = "int"
-            self._handles.append(
-                cache.add_points(b.name, widths=np.full(b.particle_count, b.point_width, np.float32), primvars=primvars)
-            )
+    def summary(self) -> str:
+        frame = sum(b.frame_count for b in self.bodies)
+        return f"{self.point_count} lattice points ({frame} frame), {self.bond_count} links"
 
-    def write_outputs(self, cache, frame: int):
-        """Writes positions and primvars of every body at ``frame``."""
-        for i, (r, handle) in enumerate(zip(self._runtimes, self._handles, strict=True)):
+    def views(self) -> list:
+        """One PointsView per body: name = body name, positions = world positions [m] (float64 [n, 3]),
+        velocities = zeros (float64 [n, 3]: a lattice has steps, not time, so its particles have no velocity),
+        widths = the body's point_width [m] ([n]), and the shared attributes ``displacement`` (u [m], float64 [n, 3]),
+        ``kind`` (LatticeKind values: 0 follower, 1 leader, 2 frame), ``pe1`` and ``pe1_intact`` [m^2], ``pe2`` [m],
+        ``broken_links`` and, for bodies with fracture, ``fragment`` (connected pieces over intact links, 0, 1, ...
+        by smallest particle index; -1 for frame points)."""
+        out = []
+        for r in self._runtimes:
             u = r.displacements()
             pe1, pe1_intact, broken = r.pseudo_energy()
-            primvars = {
-                "kind": self.kinds(i),
+            attributes = {
+                "displacement": u,
+                "kind": r.kind_host.astype(np.int32),
                 "pe1": pe1,
                 "pe1_intact": pe1_intact,
-                "pe2": self.pe2(i),
-                "displacement": np.linalg.norm(u, axis=1),
+                "pe2": np.linalg.norm(u - r.u_prev.numpy().astype(np.float64), axis=1),
                 "broken_links": broken,
             }
             if r.fracture:
-                primvars["fragment"] = r.fragments()
-            cache.write_points(handle, frame, r.rest_host + u, primvars=primvars)
+                attributes["fragment"] = r.fragments()
+            out.append(
+                PointsView(
+                    name=r.body.name,
+                    positions=r.rest_world + u,
+                    velocities=np.zeros((r.n, 3), dtype=np.float64),
+                    widths=np.full(r.n, r.body.point_width, dtype=np.float64),
+                    attributes=attributes,
+                )
+            )
+        return out
 
     # -- host views ------------------------------------------------------------------------------------------------
     def _rt(self, body) -> _LatticeRuntime:
@@ -470,9 +523,9 @@ class SolverLattice:
         return self._runtimes[int(body)]
 
     def positions(self, body=0) -> np.ndarray:
-        """Current positions X + u [m], shape [particle_count, 3], float64."""
+        """Current world positions X + u [m], shape [particle_count, 3], float64."""
         r = self._rt(body)
-        return r.rest_host + r.displacements()
+        return r.rest_world + r.displacements()
 
     def displacements(self, body=0) -> np.ndarray:
         """Current displacements u [m], shape [particle_count, 3]."""
@@ -547,4 +600,11 @@ class SolverLattice:
         u = np.concatenate(r.track_host_u)
         pe1 = np.concatenate(r.track_host_pe1)
         r.track_host_u, r.track_host_pe1 = [u], [pe1]
-        return r.tracked.copy(), r.rest_host[r.tracked][None] + u, pe1
+        return r.tracked.copy(), r.rest_world[r.tracked][None] + u, pe1
+
+
+def _bounds_centre(bodies) -> np.ndarray:
+    """Centre of the rest bounding box of all points of ``bodies`` [m], float64 [3]."""
+    lo = np.min([b.rest_positions.min(axis=0) for b in bodies], axis=0)
+    hi = np.max([b.rest_positions.max(axis=0) for b in bodies], axis=0)
+    return 0.5 * (lo + hi)

@@ -32,7 +32,9 @@ def attribute_kind(name: str) -> str:
     try:
         return ATTRIBUTES[name][0]
     except KeyError:
-        raise KeyError(f"attribute {name!r} is not a shared output attribute ({', '.join(sorted(ATTRIBUTES))})") from None
+        raise KeyError(
+            f"attribute {name!r} is not a shared output attribute ({', '.join(sorted(ATTRIBUTES))})"
+        ) from None
 
 
 @dataclass

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..bodies import PointBody
 from ..errors import ParameterError
 from ..geometry import SolidShape
 from ..materials import Material
@@ -15,7 +16,7 @@ from ..validate import check_range
 SURFACE_CORRECTIONS = ("directional", "family", "none")
 
 
-class PeridynamicBody:
+class PeridynamicBody(PointBody):
     """A solid discretised into particles on a simple-cubic lattice, simulated with state-based peridynamics.
 
     Args:
@@ -70,57 +71,28 @@ class PeridynamicBody:
         self.rest_positions = positions[order]
         self.volumes = volumes[order]
         n = len(self.rest_positions)
-        self.kind = np.zeros(n, dtype=np.int32)
-        self.prescribed_velocity = np.zeros((n, 3), dtype=np.float64)
-        self.prescribed_axes = np.ones((n, 3), dtype=np.float64)
-        self.initial_velocity = np.zeros((n, 3), dtype=np.float64)
         self.unbreakable = np.zeros(n, dtype=bool)
+        self._init_points()
 
     @property
     def particle_count(self) -> int:
         return len(self.rest_positions)
 
-    @classmethod
-    def build_solver(cls, bodies, *, device, gravity, ground, contact=None, colliders=()):
-        """The scene's solver for all its peridynamic bodies."""
-        from .solver import SolverPeridynamics
+    method = "peridynamics"
 
-        return SolverPeridynamics(
-            bodies, device=device, gravity=gravity, ground=ground, contact=contact, colliders=colliders
-        )
+    @property
+    def point_count(self) -> int:
+        return len(self.rest_positions)
+
+    @property
+    def point_rest_positions(self) -> np.ndarray:
+        """Rest positions of the particles [m] (world), float64 [particle_count, 3]."""
+        return self.rest_positions
 
     @property
     def horizon(self) -> float:
         """delta = horizon_factor * spacing [m]."""
         return self.horizon_factor * self.spacing
-
-    def _select(self, region, field_name: str) -> np.ndarray:
-        mask = region_mask(region, self.rest_positions, field=field_name)
-        if not mask.any():
-            raise ParameterError(field_name, region, f"a region containing at least one particle of '{self.name}'")
-        return mask
-
-    def fix(self, region) -> int:
-        """Holds the particles whose reference position lies in ``region`` at rest; returns how many."""
-        mask = self._select(region, "region")
-        self.kind[mask] = 1
-        self.prescribed_velocity[mask] = 0.0
-        return int(mask.sum())
-
-    def set_velocity(self, region, velocity, *, axes: str = "xyz") -> int:
-        """Moves the particles in ``region`` at the constant ``velocity`` [m/s] (a displacement-driven boundary).
-        ``axes`` names the prescribed components ("xyz" by default; "x" makes a roller grip that pulls along x and
-        leaves y and z free)."""
-        v = np.asarray(velocity, dtype=np.float64)
-        if v.shape != (3,) or not np.all(np.isfinite(v)):
-            raise ParameterError("velocity", velocity, "a sequence of 3 finite numbers [m/s]")
-        if not axes or any(a not in "xyz" for a in axes) or len(set(axes)) != len(axes):
-            raise ParameterError("axes", axes, "a non-empty combination of 'x', 'y', 'z'")
-        mask = self._select(region, "region")
-        self.kind[mask] = 2
-        self.prescribed_velocity[mask] = v
-        self.prescribed_axes[mask] = [float(c in axes) for c in "xyz"]
-        return int(mask.sum())
 
     def add_notch(self, cut) -> None:
         """Pre-cut: every bond whose reference segment crosses ``cut`` (a BoxRegion, e.g. a thin slab; a SolidShape's
@@ -150,21 +122,32 @@ class PeridynamicBody:
         """True when this body's bonds can break or start broken."""
         return self.material.breaks or bool(self.notches)
 
-    def set_initial_velocity(self, velocity, region=None) -> int:
-        """Initial velocity [m/s]: a vector for all particles (or those in ``region``), or an array [n, 3]."""
-        v = np.asarray(velocity, dtype=np.float64)
-        if v.shape == (self.particle_count, 3) and region is None:
-            mask = np.ones(self.particle_count, dtype=bool)
-            values = v
-        elif v.shape == (3,):
-            mask = np.ones(self.particle_count, dtype=bool) if region is None else self._select(region, "region")
-            values = np.broadcast_to(v, (int(mask.sum()), 3))
-        else:
-            raise ParameterError("velocity", velocity, f"3 numbers or an array of shape ({self.particle_count}, 3)")
-        if not np.all(np.isfinite(values)):
-            raise ParameterError("velocity", velocity, "finite values")
-        self.initial_velocity[mask] = values
-        return int(mask.sum())
+    def _select(self, region, field_name: str = "region") -> np.ndarray:
+        mask = region_mask(region, self.rest_positions, field=field_name)
+        if not mask.any():
+            raise ParameterError(field_name, region, f"a region containing at least one particle of '{self.name}'")
+        return mask
+
+    def surface_point_forces(self, region, traction, pressure: float):
+        """Forces [N] of a surface load on the particles: each triangle of the body's input surface whose centroid
+        lies in ``region`` carries traction x area (minus pressure x area x outward normal), given to the particle
+        nearest to the triangle's centroid. Returns (particle indices int64 [k], forces float64 [k, 3])."""
+        from scipy.spatial import cKDTree
+
+        from ..loads import surface_forces_from_triangles
+
+        _, centroids, forces = surface_forces_from_triangles(
+            self.shape.vertices, self.shape.faces, region, np.asarray(traction, dtype=np.float64), float(pressure)
+        )
+        _, nearest = cKDTree(self.rest_positions).query(centroids)
+        points, inverse = np.unique(nearest, return_inverse=True)
+        total = np.zeros((len(points), 3))
+        np.add.at(total, inverse.ravel(), forces)
+        return points.astype(np.int64), total
+
+    def point_masses(self) -> np.ndarray:
+        """rho V per particle [kg]."""
+        return self.material.density * self.volumes
 
 
 def _rotation_matrix(value) -> np.ndarray:

@@ -21,16 +21,12 @@ class PeridynamicModel:
     particle_count: int
     bond_count: int
     body_offsets: np.ndarray  # first particle of each body, shape [body_count + 1]
-    rest_positions: object  # [m], vec3
+    rest_positions: object  # [m], vec3, in the local frame (world - origin)
     volumes: object  # [m^3]
     inv_density: object  # [m^3/kg]
     spacing: object  # h per particle [m]
     horizon: object  # delta per particle [m]
     radius: object  # collision radius h/2 [m]
-    damping: object  # [1/s]
-    kind: object  # 0 free, 1 fixed, 2 prescribed velocity
-    prescribed_velocity: object  # [m/s]
-    prescribed_axes: object  # 1 for each prescribed velocity component, 0 for a free one
     family_offsets: object  # CSR row starts, int32 [particle_count + 1]
     family_neighbors: object  # int32 [bond_count]
     bond_geom: object  # (xi / L, L), vec4 [bond_count]
@@ -61,13 +57,11 @@ class PeridynamicModel:
 
 @dataclass
 class PeridynamicState:
-    """Per-step data: positions [m], velocities [m/s], accelerations [m/s^2], dilatation theta [-],
+    """Per-step data of the bonds (displacements, velocities and accelerations live in the solver's PointKinematics):
+    dilatation theta [-],
     bp = (b_k, P_k) per particle, force density [N/m^3]; per bond the deformed (n, e) and Lambda cached by the
     dilatation pass for the force pass."""
 
-    positions: object
-    velocities: object
-    accelerations: object
     theta: object
     bp: object
     force_density: object
@@ -152,9 +146,10 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
     dev_cont = math.pi * delta_h**5 * zeta**2 * ((1.0 + nu) ** 2 / 5.0 - 2.0 * nu * (1.0 + nu) / 3.0 + nu**2)
 
     def elastic_sums(scale, theta_out):
-        """Writes sum_j w e Lambda V beta into theta_out and caches the bonds' (n, e) for positions rest * scale
+        """Writes sum_j w e Lambda V beta into theta_out and caches the bonds' (n, e) for the displacements
+        rest * (scale - 1) of a homogeneous deformation
         (the elastic kernels with d = 1, c0 = 0, b = 1)."""
-        pos = wp.array((rest_h * scale).astype(np.float32), dtype=wp.vec3, device=device)
+        pos = wp.array((rest_h * (scale - 1.0)).astype(np.float32), dtype=wp.vec3, device=device)
         inputs = [pos, offsets, neighbors, bond_geom, bond_wv, ones, zeros, zeros, u8]
         wp.launch(ks.dilatation, dim=n, device=device, inputs=[*inputs, theta_out, bp, bond_ne, bond_lambda, f1])
 
@@ -176,7 +171,7 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
     return f_dil, f_dev
 
 
-def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
+def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -> PeridynamicModel:
     """Concatenates the bodies, builds their families and per-bond / per-particle constants (all in kernels)."""
     import warp as wp
 
@@ -205,7 +200,8 @@ def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
         """A float32 Warp array on the model's device."""
         return wp.array(np.asarray(a, dtype=f32), dtype=float, device=device)
 
-    rest = wp.array(rest_h.astype(f32), dtype=wp.vec3, device=device)
+    local_h = rest_h - np.asarray(origin, dtype=np.float64)  # the local frame: float32 keeps the body's precision
+    rest = wp.array(local_h.astype(f32), dtype=wp.vec3, device=device)
     volumes = arr(vol_h)
     horizon = arr(delta_h)
     spacing = arr(h_h)
@@ -248,7 +244,7 @@ def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
     if np.any(correction == "directional"):
         directional = correction == "directional"
         nu_h = per_particle([b.material.poisson_ratio for b in bodies])
-        f_dil, f_dev = _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, bond_wv, device)
+        f_dil, f_dev = _directional_factors(local_h, delta_h, nu_h, offsets, neighbors, bond_geom, bond_wv, device)
         f_dil[~directional] = 1.0
         f_dev[~directional] = 1.0
         bond_wv_dil = wp.zeros_like(bond_wv)
@@ -319,7 +315,7 @@ def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
         alive = wp.array(np.ones(max(bond_count, 1), dtype=np.uint8), dtype=wp.uint8, device=device)
         for c, b, lo in zip(counts, bodies, body_offsets[:-1]):
             for cut in b.notches:
-                _cut_bonds(cut, int(lo), c, rest, offsets, neighbors, alive, device)
+                _cut_bonds(cut, int(lo), c, rest, offsets, neighbors, alive, device, origin)
         fail_h = np.concatenate(
             [np.full(c, b.material.failure_plastic_strain or 1.0e30) for c, b in zip(counts, bodies)]
         )
@@ -355,8 +351,6 @@ def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
             bond_reverse=reverse,
         )
 
-    kind_h = np.concatenate([b.kind for b in bodies]).astype(np.int32)
-    presc_h = np.concatenate([b.prescribed_velocity for b in bodies])
     return PeridynamicModel(
         particle_count=n,
         bond_count=bond_count,
@@ -367,12 +361,6 @@ def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
         spacing=spacing,
         horizon=horizon,
         radius=arr(0.5 * h_h),
-        damping=arr(per_particle([b.damping for b in bodies])),
-        kind=wp.array(kind_h, dtype=wp.int32, device=device),
-        prescribed_velocity=wp.array(presc_h.astype(f32), dtype=wp.vec3, device=device),
-        prescribed_axes=wp.array(
-            np.concatenate([b.prescribed_axes for b in bodies]).astype(f32), dtype=wp.vec3, device=device
-        ),
         family_offsets=offsets,
         family_neighbors=neighbors,
         bond_geom=bond_geom,
@@ -391,8 +379,10 @@ def build_model(bodies: list[PeridynamicBody], device) -> PeridynamicModel:
     )
 
 
-def _cut_bonds(cut, first: int, count: int, rest, offsets, neighbors, alive, device):
-    """Breaks the bonds of particles [first, first + count) whose reference segment crosses ``cut``."""
+def _cut_bonds(cut, first: int, count: int, rest, offsets, neighbors, alive, device, origin):
+    """Breaks the bonds of particles [first, first + count) whose reference segment crosses ``cut`` (world
+    coordinates; ``rest`` is in the local frame, world - ``origin``)."""
+    o = np.asarray(origin, dtype=np.float64)
     import warp as wp
 
     from ..kernels.peridynamics import step as ks
@@ -402,12 +392,20 @@ def _cut_bonds(cut, first: int, count: int, rest, offsets, neighbors, alive, dev
         wp.launch(
             ks.break_bonds_crossing_box,
             dim=count,
-            inputs=[first, rest, offsets, neighbors, wp.vec3(*cut.lo), wp.vec3(*cut.hi), alive],
+            inputs=[
+                first,
+                rest,
+                offsets,
+                neighbors,
+                wp.vec3(*(np.asarray(cut.lo) - o)),
+                wp.vec3(*(np.asarray(cut.hi) - o)),
+                alive,
+            ],
             device=device,
         )
     else:
         mesh = wp.Mesh(
-            points=wp.array(cut.vertices.astype(np.float32), dtype=wp.vec3, device=device),
+            points=wp.array((cut.vertices - o).astype(np.float32), dtype=wp.vec3, device=device),
             indices=wp.array(cut.faces.astype(np.int32).ravel(), dtype=wp.int32, device=device),
         )
         wp.launch(

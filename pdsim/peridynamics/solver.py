@@ -1,7 +1,7 @@
 """State-based peridynamic solid: bodies, the model built from them, and the explicit solver.
 
-The elastic model is the one derived in shared/seeds/pd_supplement.txt (kernels/peridynamics/bonds.py lists the formulas). Its
-three parameters come from matching two reference deformations, an isotropic expansion (theta = 3 zeta,
+The elastic model is the one derived in shared/seeds/pd_supplement.txt (kernels/peridynamics/bonds.py lists the
+formulas). Its three parameters come from matching two reference deformations, an isotropic expansion (theta = 3 zeta,
 W = 9/2 kappa zeta^2) and a shear (W = 1/2 mu zeta^2). The supplement evaluates the family sums as integrals over a
 full sphere, which gives the constants
 
@@ -32,61 +32,92 @@ import math
 
 import numpy as np
 
-from ..errors import InstabilityError, ParameterError
+from ..errors import ParameterError
+from ..kinematics import PointKinematics
+from ..output.views import PointsView
+from ..solver import PointSolver, SolverContext, register_solver
 from .body import PeridynamicBody
 from .model import PeridynamicState, build_model, make_step_kernels, placeholders
 
 
-class SolverPeridynamics:
+@register_solver
+class SolverPeridynamics(PointSolver):
     """Explicit velocity-Verlet solver for the peridynamic bodies of a scene.
 
     Args:
         bodies: the peridynamic bodies (concatenated into one model).
-        device: Warp device ("cpu", "cuda", "cuda:0", ...).
-        gravity: acceleration [m/s^2], 3 numbers.
-        ground: optional ground plane collider.
-        contact: short-range repulsion between particles that share no live bond (separate bodies, fragments):
-            None or False (off), True (defaults) or a dict of ParticleContact options (pdsim/contact.py).
-        colliders: static mesh colliders and kinematic projectiles (pdsim/contact.py).
+        context: the scene's SolverContext (device, gravity, ground, contact, colliders, origin of the local frame).
+        device, gravity, ground, contact, colliders, origin: override the context's fields (for scripts and tests
+            that build a solver directly). ``contact``: None or False (off), True (defaults) or a dict of
+            ParticleContact options (pdsim/contact.py).
+        surfaces: build renderable fragment surfaces for the output views (default True).
 
-    The step launches: kick-drift (+ ground plane), dilatation, force density, kick. No allocation happens per step.
-    ``features`` lists the optional parts that are live (and launched) for this scene.
+    State: displacements from the rest configuration, velocities and accelerations (pdsim/kinematics.py), so bond
+    deformation is computed from displacement differences and does not depend on where the body sits. The step
+    launches: conditions and kick-drift, colliders, dilatation, (plastic update), force density (with the breaking
+    test), contact, loads, kick. No allocation happens per step. ``features`` lists the optional parts that are live
+    (and launched) for this scene.
     """
+
+    method = "peridynamics"
+    supported_features = PointSolver.supported_features | frozenset({"contact"})
 
     def __init__(
         self,
         bodies: list[PeridynamicBody],
+        context: SolverContext | None = None,
         *,
-        device="cpu",
-        gravity=(0.0, 0.0, 0.0),
+        device=None,
+        gravity=None,
         ground=None,
         contact=None,
-        colliders=(),
+        colliders=None,
+        origin=None,
+        surfaces: bool = True,
     ):
         import warp as wp
 
-        if not bodies:
+        if not bodies or not all(isinstance(b, PeridynamicBody) for b in bodies):
             raise ParameterError("bodies", bodies, "at least one PeridynamicBody")
+        ctx = context or SolverContext()
+        device = ctx.device if device is None else device
+        gravity = ctx.gravity if gravity is None else gravity
+        ground = ctx.ground if ground is None else ground
+        contact = ctx.contact if contact is None else contact
+        colliders = list(ctx.colliders if colliders is None else colliders)
+        if origin is None:
+            origin = ctx.origin if context is not None else _bounds_centre(bodies)
+        self.origin = np.asarray(origin, dtype=np.float64)
         # yielding bodies first, so plastic state is a prefix of the particle and bond arrays (allocated only there)
         self.bodies = sorted(bodies, key=lambda b: not b.material.yields)
         self.device = wp.get_device(device)
-        self.gravity = wp.vec3(*[float(g) for g in gravity])
         self.ground = ground
-        self.model = build_model(self.bodies, self.device)
-        n = self.model.particle_count
+        self.model = build_model(self.bodies, self.device, self.origin)
+        m = self.model
+        n = m.particle_count
         d = self.device
-        init_v = np.concatenate([b.initial_velocity for b in self.bodies]).astype(np.float32)
+        damping = np.concatenate([np.full(b.particle_count, b.damping) for b in self.bodies])
+        self.kin = PointKinematics(
+            self.bodies,
+            m.body_offsets,
+            m.rest_host,
+            self.origin,
+            m.density_host * m.volumes_host,
+            m.volumes_host,
+            damping,
+            gravity,
+            d,
+            wp.float32,
+        )
         self.state = PeridynamicState(
-            positions=wp.clone(self.model.rest_positions),
-            velocities=wp.array(init_v, dtype=wp.vec3, device=d),
-            accelerations=wp.zeros(n, dtype=wp.vec3, device=d),
             theta=wp.zeros(n, dtype=float, device=d),
             bp=wp.zeros(n, dtype=wp.vec2, device=d),
             force_density=wp.zeros(n, dtype=wp.vec3, device=d),
-            bond_ne=wp.zeros(max(self.model.bond_count, 1), dtype=wp.vec4, device=d),
-            bond_lambda=wp.zeros(max(self.model.bond_count, 1), dtype=float, device=d),
+            bond_ne=wp.zeros(max(m.bond_count, 1), dtype=wp.vec4, device=d),
+            bond_lambda=wp.zeros(max(m.bond_count, 1), dtype=float, device=d),
         )
-        m = self.model
+        self.force = self.state.force_density
+        self.inv_mass = m.inv_density
         if m.fracture:
             self.state.bond_alive = wp.clone(m.bond_alive_initial)
             self.state.stretch_min = wp.zeros(n, dtype=float, device=d)
@@ -95,26 +126,27 @@ class SolverPeridynamics:
             self.state.bond_plastic = wp.zeros(max(m.plastic_bond_count, 1), dtype=float, device=d)
             self.state.eqps = wp.zeros(n, dtype=float, device=d)
         self._kernels = make_step_kernels(fracture=m.fracture, plastic=m.plastic)
-        self.colliders = list(colliders)
+        for c in colliders:
+            c.bind(self.origin)
+        if ground is not None:
+            ground.bind(self.origin)
+        self.colliders = colliders
+        self._colliders_all = ([ground] if ground is not None else []) + colliders
         self.contact = None
         if contact is not None and contact is not False:
             from ..contact import ParticleContact
 
             options = {} if contact is True else dict(contact)
-            self.contact = ParticleContact.from_bodies(self.bodies, device=self.device, **options)
+            self.contact = ParticleContact.from_bodies(self.bodies, device=self.device, origin=self.origin, **options)
+            self._positions = wp.zeros(n, dtype=wp.vec3, device=d)  # rest + u, the contact pass's positions
         self._dummy_u8, self._dummy_f, self._dummy_i = placeholders(d)
         self._energy_density = wp.zeros(n, dtype=float, device=d)
-        self._check = wp.zeros(2, dtype=float, device=d)
-        self._handles = []  # USD prims of the bodies, set by add_outputs
-        self._surfaces = []  # FragmentSurfaces per body, set by add_outputs
+        self.write_surfaces = bool(surfaces)
+        self._surfaces = None  # FragmentSurfaces per body, built on the first views() call
         self._fragments = None  # FragmentTracker, created on first use when some body can break
-        self.features = {"elastic"}
-        if any(gi != 0.0 for gi in gravity):
-            self.features.add("gravity")
+        self.features = {"elastic"} | self.kin.features
         if ground is not None:
             self.features.add("ground_plane")
-        if any(b.damping > 0 for b in self.bodies):
-            self.features.add("damping")
         if m.fracture:
             self.features.add("fracture")
         if m.plastic:
@@ -127,7 +159,7 @@ class SolverPeridynamics:
             self.features.add("colliders")
         self.time = 0.0
         self.step_count = 0
-        self._update_accelerations(0.0)
+        self._refresh_accelerations()
 
     # -- time step -----------------------------------------------------------------------------------------------
     def stable_time_step(self) -> float:
@@ -170,7 +202,9 @@ class SolverPeridynamics:
         reverse = m.bond_reverse if m.plastic else i1
         return alive, plastic, reverse
 
-    def _compute_force_density(self, positions):
+    def compute_forces(self):
+        """Force density [N/m^3] at the current displacements: bonds (with plasticity and the breaking test where
+        live), contact, then the loads at the end of the step being taken."""
         import warp as wp
 
         m, s, ks = self.model, self.state, self._kernels
@@ -181,7 +215,7 @@ class SolverPeridynamics:
             ks.dilatation,
             dim=m.particle_count,
             inputs=[
-                positions,
+                self.kin.u,
                 m.family_offsets,
                 m.family_neighbors,
                 m.bond_geom,
@@ -248,104 +282,38 @@ class SolverPeridynamics:
             device=self.device,
         )
         if self.contact is not None:
-            self.contact.apply(positions, s.velocities, s.force_density, m.kind)
+            from ..kernels.peridynamics import step as pd_step
 
-    def _update_accelerations(self, dt: float):
-        import warp as wp
-
-        from ..kernels import integration as ki
-
-        m, s = self.model, self.state
-        self._compute_force_density(s.positions)
-        wp.launch(
-            ki.integrate_kick,
-            dim=m.particle_count,
-            inputs=[
-                s.velocities,
-                s.force_density,
-                m.inv_density,
-                m.kind,
-                m.prescribed_axes,
-                self.gravity,
-                m.damping,
-                dt,
-                s.accelerations,
-            ],
-            device=self.device,
-        )
-
-    def step(self, dt: float):
-        """Advances all bodies by one velocity-Verlet step of ``dt`` [s]."""
-        import warp as wp
-
-        from ..kernels import colliders as kcol
-        from ..kernels import integration as ki
-
-        m, s = self.model, self.state
-        wp.launch(
-            ki.integrate_kick_drift,
-            dim=m.particle_count,
-            inputs=[
-                s.positions,
-                s.velocities,
-                s.accelerations,
-                m.rest_positions,
-                m.kind,
-                m.prescribed_velocity,
-                m.prescribed_axes,
-                dt,
-            ],
-            device=self.device,
-        )
-        if self.ground is not None:
-            g = self.ground
             wp.launch(
-                kcol.collide_ground_plane,
+                pd_step.compose_positions,
                 dim=m.particle_count,
-                inputs=[
-                    s.positions,
-                    s.velocities,
-                    m.kind,
-                    m.radius,
-                    wp.vec3(*g.normal),
-                    float(g.offset),
-                    float(g.friction),
-                ],
+                inputs=[m.rest_positions, self.kin.u, self._positions],
                 device=self.device,
             )
-        for collider in self.colliders:
-            collider.apply(s.positions, s.velocities, m.radius, m.kind, self.time + dt, dt)
-        self._update_accelerations(dt)
-        self.time += dt
-        self.step_count += 1
+            self.contact.apply(self._positions, self.kin.u, self.kin.v, s.force_density, self.kin.point_kind)
+        self.kin.add_loads(s.force_density, self._force_time)
 
-    def simulate(self, dt: float, steps: int):
-        """Runs ``steps`` steps of ``dt`` [s]."""
-        for _ in range(int(steps)):
-            self.step(dt)
+    def _refresh_accelerations(self):
+        """Forces and accelerations at the current state without advancing time (after a change of state)."""
+        self._force_time = self.time
+        self.compute_forces()
+        self.kin.end_step(self.force, self.inv_mass, 0.0)
+
+    def apply_colliders(self, time: float, dt: float):
+        """Ground plane and colliders on the free particles (spheres of radius h/2) at ``time`` [s]."""
+        m = self.model
+        for c in self._colliders_all:
+            c.apply(m.rest_positions, self.kin.u, self.kin.v, m.radius, self.kin.point_kind, time, dt)
 
     def check_state(self, speed_limit: float):
-        """Raises InstabilityError if a position or velocity is not finite or a speed exceeds ``speed_limit`` [m/s]."""
-        import warp as wp
-
-        from ..kernels import integration as ki
-
-        s = self.state
-        self._check.zero_()
-        wp.launch(
-            ki.max_speed_and_finite,
-            dim=self.model.particle_count,
-            inputs=[s.positions, s.velocities, self._check],
-            device=self.device,
+        """Raises InstabilityError if a displacement or velocity is not finite or a speed exceeds ``speed_limit``
+        [m/s]."""
+        self.kin.check(
+            speed_limit,
+            f"at t={self.time:.6g} s (step {self.step_count})",
+            hint=f"the time step is too large for this material and spacing (stable estimate "
+            f"{self.stable_time_step():.3g} s): use a smaller --dt or leave it automatic",
         )
-        vmax, bad = self._check.numpy()
-        if bad > 0 or vmax > speed_limit:
-            what = "non-finite positions or velocities" if bad > 0 else f"a particle speed of {vmax:.3g} m/s"
-            raise InstabilityError(
-                f"the simulation diverged at t={self.time:.6g} s (step {self.step_count}): {what}; the time step is "
-                f"too large for this material and spacing (stable estimate {self.stable_time_step():.3g} s): use a "
-                "smaller --dt or leave it automatic"
-            )
 
     # -- scene integration --------------------------------------------------------------------------------------------
     @property
@@ -356,51 +324,21 @@ class SolverPeridynamics:
     def bond_count(self) -> int:
         return self.model.bond_count
 
+    def summary(self) -> str:
+        return f"{self.particle_count} particles, {self.bond_count} bonds"
+
     def contact_energy(self) -> float:
         """Contact penalty energy [J] (0 without contact)."""
-        return 0.0 if self.contact is None else self.contact.potential_energy(self.state.positions)
+        if self.contact is None:
+            return 0.0
+        return self.contact.potential_energy(self._local_positions_wp())
 
     def speed_scale(self) -> float:
-        """Largest of the bodies' P-wave speeds, initial speeds, prescribed speeds and projectile speeds [m/s]."""
+        """Largest of the bodies' P-wave speeds, initial, prescribed and kick speeds and projectile speeds [m/s]."""
         speeds = [float(np.linalg.norm(getattr(c, "velocity", np.zeros(3)))) for c in self.colliders]
         for b in self.bodies:
-            speeds += [
-                b.material.p_wave_speed,
-                float(np.abs(b.initial_velocity).max(initial=0.0)),
-                float(np.abs(b.prescribed_velocity).max(initial=0.0)),
-            ]
+            speeds += [b.material.p_wave_speed, b.prescribed_speed()]
         return max(speeds)
-
-    def _primvar_kinds(self) -> dict:
-        kinds = {"displacement": "float", "dilatation": "float"}
-        if self.model.fracture:
-            kinds["damage"] = "float"
-            kinds["fragment"] = "int"
-        if self.model.plastic:
-            kinds["plastic_strain"] = "float"
-        return kinds
-
-    def add_outputs(self, cache, *, surfaces: bool = True):
-        """Declares one UsdGeom.Points per body, with widths = spacing and the primvars written per frame
-        (displacement [m], dilatation, and damage / fragment / plastic_strain when those features are live), and,
-        with ``surfaces``, the body's renderable surface ``/World/<body>_surface``: a closed triangle shell per
-        fragment (pdsim/peridynamics/surfaces.py), its topology rewritten only on frames where the fragments changed."""
-        from .surfaces import FragmentSurfaces
-
-        self._handles = [
-            cache.add_points(
-                b.name, widths=np.full(b.particle_count, b.spacing, dtype=np.float32), primvars=self._primvar_kinds()
-            )
-            for b in self.bodies
-        ]
-        self._surfaces = []
-        if surfaces:
-            self._surfaces = [
-                FragmentSurfaces(b.shape, b.rest_positions, b.spacing, b.name, device=str(self.device))
-                for b in self.bodies
-            ]
-            for surf in self._surfaces:
-                surf.add_outputs(cache)
 
     def fragment_ids(self) -> np.ndarray:
         """Fragment id per particle (connected components of live bonds, numbered per body by the body-local index
@@ -416,55 +354,85 @@ class SolverPeridynamics:
         self._fragments.update(self.state.bond_alive)
         return self._fragments.labels
 
-    def write_outputs(self, cache, frame: int):
-        """Writes positions, velocities and the primvars of every body at ``frame``, and the surfaces."""
+    def views(self) -> list:
+        """Per body: a PointsView (positions, velocities, widths = spacing; displacement, dilatation, and damage,
+        fragment and plastic_strain where those features are live) and, unless ``surfaces`` was turned off, the
+        renderable surface ``<body>_surface`` (a closed shell per fragment, pdsim/peridynamics/surfaces.py; face
+        attributes fragment and crack; its topology changes only on frames where fragments split)."""
         x = self.positions()
         v = self.velocities()
-        values = {
-            "displacement": np.linalg.norm(x.astype(np.float64) - self.model.rest_host, axis=1).astype(np.float32),
-            "dilatation": self.state.theta.numpy(),
-        }
+        u = self.kin.displacements()
+        values = {"displacement": u, "dilatation": self.state.theta.numpy()}
         if self.model.fracture:
-            values["damage"] = self.damage().astype(np.float32)
+            values["damage"] = self.damage()
             values["fragment"] = self.fragment_ids()
         if self.model.plastic:
-            values["plastic_strain"] = self.plastic_strain().astype(np.float32)
-        for i, handle in enumerate(self._handles):
+            values["plastic_strain"] = self.plastic_strain()
+        if self.write_surfaces and self._surfaces is None:
+            from .surfaces import FragmentSurfaces
+
+            self._surfaces = [
+                FragmentSurfaces(b.shape, b.rest_positions, b.spacing, b.name, device=str(self.device))
+                for b in self.bodies
+            ]
+        out = []
+        for i, b in enumerate(self.bodies):
             sl = self.body_slice(i)
-            cache.write_points(handle, frame, x[sl], velocities=v[sl], primvars={k: a[sl] for k, a in values.items()})
-        for i, surf in enumerate(self._surfaces):
-            sl = self.body_slice(i)
-            if self.model.fracture:
-                surf.update_topology(values["fragment"][sl])
-            surf.write(cache, frame, x[sl])
+            out.append(
+                PointsView(
+                    b.name,
+                    x[sl],
+                    v[sl],
+                    np.full(b.particle_count, b.spacing),
+                    {k: a[sl] for k, a in values.items()},
+                )
+            )
+            if self._surfaces is not None:
+                surf = self._surfaces[i]
+                if self.model.fracture:
+                    surf.update_topology(values["fragment"][sl])
+                out.append(surf.view(x[sl], v[sl]))
+        return out
 
     # -- host-side views and diagnostics (vectorised numpy) ---------------------------------------------------------
-    def positions(self) -> np.ndarray:
-        """Current positions [m], shape [particle_count, 3]."""
-        return self.state.positions.numpy()
-
-    def velocities(self) -> np.ndarray:
-        """Current velocities [m/s], shape [particle_count, 3]."""
-        return self.state.velocities.numpy()
-
-    def set_positions(self, positions: np.ndarray):
-        """Overwrites positions [m] (shape [particle_count, 3]) and recomputes forces and dilatation."""
+    def _local_positions_wp(self):
+        """rest + u in the local frame, as a Warp array (the contact pass's positions)."""
         import warp as wp
 
-        p = np.asarray(positions, dtype=np.float32)
+        from ..kernels.peridynamics import step as pd_step
+
+        out = wp.zeros(self.model.particle_count, dtype=wp.vec3, device=self.device)
+        wp.launch(
+            pd_step.compose_positions,
+            dim=self.model.particle_count,
+            inputs=[self.model.rest_positions, self.kin.u, out],
+            device=self.device,
+        )
+        return out
+
+    def set_positions(self, positions: np.ndarray):
+        """Sets world positions [m] (shape [particle_count, 3]; the displacements become positions - rest) and
+        recomputes forces, dilatation and accelerations."""
+        p = np.asarray(positions, dtype=np.float64)
         if p.shape != (self.model.particle_count, 3):
             raise ParameterError("positions", p.shape, f"shape ({self.model.particle_count}, 3)")
-        wp.copy(self.state.positions, wp.array(p, dtype=wp.vec3, device=self.device))
-        self._update_accelerations(0.0)
+        self.kin.set_displacements(p - self.model.rest_host)
+        self._refresh_accelerations()
+
+    def set_displacements(self, displacements: np.ndarray):
+        """Sets displacements [m] (shape [particle_count, 3]) and recomputes forces and accelerations."""
+        u = np.asarray(displacements, dtype=np.float64)
+        if u.shape != (self.model.particle_count, 3):
+            raise ParameterError("displacements", u.shape, f"shape ({self.model.particle_count}, 3)")
+        self.kin.set_displacements(u)
+        self._refresh_accelerations()
 
     def set_velocities(self, velocities: np.ndarray):
         """Overwrites velocities [m/s], shape [particle_count, 3]."""
-        import warp as wp
-
-        v = np.asarray(velocities, dtype=np.float32)
+        v = np.asarray(velocities, dtype=np.float64)
         if v.shape != (self.model.particle_count, 3):
             raise ParameterError("velocities", v.shape, f"shape ({self.model.particle_count}, 3)")
-        wp.copy(self.state.velocities, wp.array(v, dtype=wp.vec3, device=self.device))
+        self.kin.set_velocities(v)
 
     def dilatation(self) -> np.ndarray:
         """theta per particle at the current positions [-]."""
@@ -533,24 +501,6 @@ class SolverPeridynamics:
         """Total elastic energy sum_k V_k W_k [J]."""
         return float(np.dot(self.model.volumes_host, self.strain_energy_density()))
 
-    def masses(self) -> np.ndarray:
-        """Particle masses rho V [kg]."""
-        return self.model.density_host * self.model.volumes_host
-
-    def kinetic_energy(self) -> float:
-        """1/2 sum m v^2 [J]."""
-        v = self.velocities().astype(np.float64)
-        return float(0.5 * np.dot(self.masses(), np.einsum("ij,ij->i", v, v)))
-
-    def linear_momentum(self) -> np.ndarray:
-        """sum m v [kg m/s]."""
-        return self.masses() @ self.velocities().astype(np.float64)
-
-    def angular_momentum(self, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
-        """sum m (x - origin) x v [kg m^2/s]."""
-        x = self.positions().astype(np.float64) - np.asarray(origin, dtype=np.float64)
-        return self.masses() @ np.cross(x, self.velocities().astype(np.float64))
-
     def slice_of(self, body: PeridynamicBody) -> slice:
         """Rows of ``body`` in the concatenated particle arrays (yielding bodies are stored first)."""
         return self.body_slice(next(i for i, b in enumerate(self.bodies) if b is body))
@@ -558,3 +508,9 @@ class SolverPeridynamics:
     def body_slice(self, index: int) -> slice:
         """Rows of the solver's body ``index`` (in ``self.bodies`` order) in the concatenated particle arrays."""
         return slice(int(self.model.body_offsets[index]), int(self.model.body_offsets[index + 1]))
+
+
+def _bounds_centre(bodies) -> np.ndarray:
+    """Centre of the bodies' rest bounding box [m] (the local frame's origin of a solver built without a scene)."""
+    rest = np.concatenate([b.rest_positions for b in bodies])
+    return 0.5 * (rest.min(axis=0) + rest.max(axis=0))

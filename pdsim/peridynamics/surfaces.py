@@ -551,7 +551,6 @@ class FragmentSurfaces:
         self._manifold_mesh = None
         self._grid: LatticeGrid | None = None
         self.device = device
-        self._handle = None
         self._written_version: int | None = None
         self.rebuild_seconds = 0.0
         self._set_topology(np.zeros(rest.shape[0], dtype=np.int64))
@@ -737,34 +736,18 @@ class FragmentSurfaces:
         x = self.vertex_positions(positions)
         return [x[self._vertex_ranges[k] : self._vertex_ranges[k + 1]] for k in range(self.fragment_count)]
 
-    # ------------------------------------------------------------------ USD
+    # ------------------------------------------------------------------ output
+    def view(self, positions, velocities=None):
+        """The surface as a MeshView ``<body>_surface`` for particle ``positions`` [m] (shape [particle_count, 3]):
+        vertices moved by the particles, topology version, faces and the per-face ``fragment`` and ``crack``."""
+        from ..output.views import MeshView
 
-    def add_outputs(self, cache) -> None:
-        """Declares the body's surface mesh ``/World/<body_name>_surface`` in a pdsim.output.UsdCache, with the
-        uniform int primvars ``fragment`` and ``crack``."""
-        self._handle = cache.add_mesh(f"{self.body_name}_surface", face_primvars={"fragment": "int", "crack": "int"})
-        self._written_version = None
-
-    def write(self, cache, frame: int, positions) -> None:
-        """Writes the shells at ``frame``: points and extent always; topology and the per-face primvars on the first
-        frame and whenever it changed since the last write.
-
-        Args:
-            cache: the pdsim.output.UsdCache given to :meth:`add_outputs`.
-            frame: frame number (time code).
-            positions: particle positions [m], shape [particle_count, 3].
-        """
-        if self._handle is None:
-            raise RuntimeError("call add_outputs(cache) before write")
-        points = self.vertex_positions(positions)
-        if self._written_version == self.version:
-            cache.write_mesh(self._handle, frame, points)
-            return
-        cache.write_mesh(
-            self._handle,
-            frame,
-            points,
-            self.faces,
-            face_primvars={"fragment": self.face_fragment, "crack": self.face_crack},
+        _ = velocities  # vertex velocities: not interpolated yet (None)
+        return MeshView(
+            name=f"{self.body_name}_surface",
+            points=self.vertex_positions(positions),
+            velocities=None,
+            topology_version=self.version,
+            faces=self.faces,
+            face_attributes={"fragment": self.face_fragment, "crack": self.face_crack},
         )
-        self._written_version = self.version
