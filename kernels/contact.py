@@ -291,3 +291,83 @@ def apply_contact_projection(
     i = wp.tid()
     displacements[i] = displacements[i] + position_delta[i]
     velocities[i] = velocities[i] + velocity_delta[i]
+
+
+@wp.kernel
+def particle_mesh_contact(
+    p_points: wp.array(dtype=wp.int32),
+    p_rest: wp.array(dtype=wp.vec3),
+    p_u: wp.array(dtype=wp.vec3),
+    p_v: wp.array(dtype=wp.vec3),
+    p_mass: wp.array(dtype=float),
+    p_to_force: wp.array(dtype=float),
+    p_radius: wp.array(dtype=float),
+    mesh: wp.uint64,
+    m_points: wp.array(dtype=wp.int32),
+    m_faces: wp.array(dtype=wp.int32),
+    m_v: wp.array(dtype=wp.vec3),
+    m_mass: wp.array(dtype=float),
+    stiffness_rate: float,
+    damping_ratio: float,
+    p_force: wp.array(dtype=wp.vec3),
+    m_force: wp.array(dtype=wp.vec3),
+):
+    """Contact between the particles of one method and the closed surface mesh of another (cross-method contact).
+
+    A particle (sphere of radius r at rest + u) closer to the surface than r, or inside it by less than 2 r, is
+    pushed out along the outward normal n by F = k d - c v_n (never pulling), d = r - signed distance, v_n the normal
+    velocity of the particle relative to the surface point (barycentric velocity of the face); the face's three
+    vertices take -F in proportion to their barycentric weights, so the pair's momentum is conserved exactly. The
+    penalty k = stiffness_rate m_red and the dashpot c = 2 damping_ratio sqrt(k m_red) use the pair's reduced mass
+    m_red, with stiffness_rate = (0.25 / dt)^2: one contact oscillates at omega dt = 0.25, so even tens of
+    simultaneous contacts on one point stay inside velocity Verlet's stability limit (omega dt < 2).
+    ``p_to_force`` and the mesh's forces: multiply a force [N] into each solver's force unit (1 / V for a force
+    density, 1 for nodal forces); ``m_points`` maps the mesh's vertices to its solver's points."""
+    q = wp.tid()
+    i = p_points[q]
+    x = p_rest[i] + p_u[i]
+    r = p_radius[q]
+    hit = wp.mesh_query_point_sign_normal(mesh, x, 3.0 * r)
+    if not hit.result:
+        return
+    closest = wp.mesh_eval_position(mesh, hit.face, hit.u, hit.v)
+    d = x - closest
+    dist = wp.length(d)
+    sdf = hit.sign * dist
+    if sdf >= r:
+        return
+    n = wp.mesh_eval_face_normal(mesh, hit.face)
+    if dist > 1.0e-6 * r:
+        n = (hit.sign / dist) * d
+    a = m_points[m_faces[3 * hit.face + 0]]
+    b = m_points[m_faces[3 * hit.face + 1]]
+    c = m_points[m_faces[3 * hit.face + 2]]
+    wa = hit.u
+    wb = hit.v
+    wc = 1.0 - hit.u - hit.v
+    v_surface = wa * m_v[a] + wb * m_v[b] + wc * m_v[c]
+    m_surface = wa * m_mass[a] + wb * m_mass[b] + wc * m_mass[c]
+    mp = p_mass[i]
+    m_red = mp * m_surface / (mp + m_surface)
+    k = stiffness_rate * m_red
+    damper = 2.0 * damping_ratio * wp.sqrt(k * m_red)
+    vn = wp.dot(p_v[i] - v_surface, n)
+    f = wp.max(k * (r - sdf) - damper * vn, 0.0)
+    force = f * n
+    wp.atomic_add(p_force, i, force * p_to_force[i])
+    wp.atomic_sub(m_force, a, force * wa)
+    wp.atomic_sub(m_force, b, force * wb)
+    wp.atomic_sub(m_force, c, force * wc)
+
+
+@wp.kernel
+def gather_positions(
+    points: wp.array(dtype=wp.int32),
+    rest: wp.array(dtype=wp.vec3),
+    displacements: wp.array(dtype=wp.vec3),
+    out: wp.array(dtype=wp.vec3),
+):
+    """out[q] = rest + u of point points[q] (a surface mesh's current vertices)."""
+    q = wp.tid()
+    i = points[q]
+    out[q] = rest[i] + displacements[i]

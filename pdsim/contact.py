@@ -372,4 +372,102 @@ class ParticleContact:
         return float(np.sqrt(2.0 * self._density_host / s).min())
 
 
-__all__ = ["ContactDiagnostics", "ParticleContact", "bond_stiffness_row_sum"]
+class MethodContact:
+    """Contact between bodies of different methods within a step: the particles of each particle method (the
+    peridynamic solver's ``contact_particles()``) against the closed surface of each mesh method (the FEM solver's
+    ``contact_mesh()``), with a penalty and dashpot whose reaction goes to the face's vertices
+    (kernels/contact.py, particle_mesh_contact): the pair's momentum is conserved exactly.
+
+    The scene calls :meth:`apply` once per step, after every solver's ``compute_forces`` and before the kicks. The
+    surface mesh is rebuilt when its topology version changes (fracture) and refitted to the current positions
+    every step. Nothing is allocated per step otherwise.
+
+    Args:
+        particle_solvers: solvers offering ``contact_particles()`` -> (point indices int32, radii float32) Warp arrays.
+        mesh_solvers: solvers offering ``contact_mesh()`` -> (point indices int32 [v], triangles int32 [3 f] indexing
+            those points, topology version).
+        damping_ratio: the dashpot as a fraction of the pair's critical damping, >= 0 (default 0.1).
+    """
+
+    def __init__(self, particle_solvers, mesh_solvers, *, damping_ratio: float = 0.1):
+        self.particle_solvers = list(particle_solvers)
+        self.mesh_solvers = list(mesh_solvers)
+        self.damping_ratio = check_range("damping_ratio", damping_ratio, 0.0, None, lo_open=False)
+        self._meshes = {}  # id(solver) -> [version, points, faces, positions, wp.Mesh]
+        self._to_force = {}  # id(solver) -> 1 / force_to_newton per point (Warp array)
+
+    def _mesh(self, solver):
+        import warp as wp
+
+        from .kernels import contact as kc
+
+        points, faces, version = solver.contact_mesh()
+        entry = self._meshes.get(id(solver))
+        if entry is None or entry[0] != version:
+            positions = wp.zeros(points.shape[0], dtype=wp.vec3, device=points.device)
+            wp.launch(
+                kc.gather_positions,
+                dim=points.shape[0],
+                inputs=[points, solver.kin.rest, solver.kin.u, positions],
+                device=points.device,
+            )
+            entry = [version, points, faces, positions, wp.Mesh(points=positions, indices=faces)]
+            self._meshes[id(solver)] = entry
+        else:
+            wp.launch(
+                kc.gather_positions,
+                dim=points.shape[0],
+                inputs=[points, solver.kin.rest, solver.kin.u, entry[3]],
+                device=points.device,
+            )
+            entry[4].refit()
+        return entry
+
+    def _force_scale(self, solver):
+        import warp as wp
+
+        scale = self._to_force.get(id(solver))
+        if scale is None:
+            scale = wp.array(
+                (1.0 / solver.kin.force_to_newton_host).astype(np.float32), dtype=float, device=solver.kin.u.device
+            )
+            self._to_force[id(solver)] = scale
+        return scale
+
+    def apply(self, dt: float) -> None:
+        """Adds the contact forces of the current state into the solvers' force arrays (step length ``dt`` [s])."""
+        import warp as wp
+
+        from .kernels import contact as kc
+
+        rate = (0.25 / float(dt)) ** 2
+        for ms in self.mesh_solvers:
+            _, m_points, m_faces, _, mesh = self._mesh(ms)
+            for ps in self.particle_solvers:
+                p_points, p_radius = ps.contact_particles()
+                wp.launch(
+                    kc.particle_mesh_contact,
+                    dim=p_points.shape[0],
+                    inputs=[
+                        p_points,
+                        ps.kin.rest,
+                        ps.kin.u,
+                        ps.kin.v,
+                        ps.kin.mass,
+                        self._force_scale(ps),
+                        p_radius,
+                        mesh.id,
+                        m_points,
+                        m_faces,
+                        ms.kin.v,
+                        ms.kin.mass,
+                        rate,
+                        self.damping_ratio,
+                        ps.force,
+                        ms.force,
+                    ],
+                    device=ps.kin.u.device,
+                )
+
+
+__all__ = ["ContactDiagnostics", "MethodContact", "ParticleContact", "bond_stiffness_row_sum"]

@@ -30,18 +30,21 @@ def simple_cubic_lattice(shape: SolidShape, spacing: float) -> np.ndarray:
 
 
 def points_inside(shape: SolidShape, points: np.ndarray, *, device: str = "cpu") -> np.ndarray:
-    """Exact inside test (generalised winding number against the closed mesh, a Warp mesh query): bool mask [n]."""
+    """Exact inside test (generalised winding number against the closed mesh, a Warp mesh query): bool mask [n].
+    Mesh and points are taken relative to the shape's centre before they become float32, so the test is as exact
+    anywhere in the world as at the origin."""
     import warp as wp
 
     from .kernels import sampling as ks
 
+    centre = 0.5 * (shape.bounds[0] + shape.bounds[1])
     with wp.ScopedDevice(device):
         mesh = wp.Mesh(
-            points=wp.array(shape.vertices.astype(np.float32), dtype=wp.vec3),
+            points=wp.array((shape.vertices - centre).astype(np.float32), dtype=wp.vec3),
             indices=wp.array(shape.faces.astype(np.int32).ravel(), dtype=wp.int32),
             support_winding_number=True,
         )
-        pts = wp.array(points.astype(np.float32), dtype=wp.vec3)
+        pts = wp.array((points - centre).astype(np.float32), dtype=wp.vec3)
         inside = wp.zeros(len(points), dtype=wp.int32)
         max_dist = float(np.linalg.norm(shape.extent)) * 2.0 + 1.0
         wp.launch(ks.mark_points_inside_mesh, dim=len(points), inputs=[mesh.id, pts, max_dist, inside])
@@ -69,8 +72,10 @@ def fill_solid(shape: SolidShape, spacing: float, *, device: str = "cpu") -> tup
 
 
 def morton_order(points: np.ndarray, cell: float) -> np.ndarray:
-    """Permutation that sorts points [n, 3] along a Morton (Z-order) curve of cells of size ``cell`` [m]."""
-    q = np.floor((points - points.min(axis=0)) / cell).astype(np.uint64)
+    """Permutation that sorts points [n, 3] along a Morton (Z-order) curve of cells of size ``cell`` [m]. Lattice
+    points (spaced ``cell`` apart) sit on cell centres, so their cell does not depend on round-off: the order is the
+    same wherever the lattice lies in the world."""
+    q = np.floor((points - points.min(axis=0)) / cell + 0.5).astype(np.uint64)
     q = np.minimum(q, np.uint64(2**21 - 1))
 
     def spread(v):

@@ -248,11 +248,12 @@ class Scene:
 
         with UsdCache(out, fps=self.fps, start_frame=0, up_axis=self.up_axis, save_interval_s=save_interval_s) as cache:
             writer = ViewWriter(cache)
+            coupling = self.method_contact(solvers)
             self._write_frame(writer, cache, solvers, 0)
             bar = _progress(frame_count, enabled=progress, desc=f"pdsim {self.name}")
             try:
                 for frame in range(1, frame_count + 1):
-                    self._advance_frame(solvers, dt, substeps)
+                    self.advance_frame(solvers, dt, substeps, coupling)
                     for s in solvers:
                         s.check_state(speed_limit)
                     self._write_frame(writer, cache, solvers, frame)
@@ -272,17 +273,31 @@ class Scene:
             summary="; ".join(s.summary() for s in solvers),
         )
 
+    def method_contact(self, solvers):
+        """Contact between bodies of different methods (pdsim.contact.MethodContact): on when the scene holds a
+        particle method and a mesh method and contact is not switched off; None otherwise."""
+        from .contact import MethodContact
+
+        if self.contact is False:
+            return None
+        particles = [s for s in solvers if callable(getattr(s, "contact_particles", None))]
+        meshes = [s for s in solvers if callable(getattr(s, "contact_mesh", None))]
+        if not particles or not meshes:
+            return None
+        return MethodContact(particles, meshes)
+
     @staticmethod
-    def _advance_frame(solvers, dt: float, substeps: int) -> None:
-        """One frame: the solvers of methods with mass step together, phase by phase, so that forces between them
-        act within the step; the others (the lattice) advance by a frame."""
+    def advance_frame(solvers, dt: float, substeps: int, coupling=None) -> None:
+        """One frame of ``substeps`` steps of ``dt`` [s]: the solvers of methods with mass step together, phase by
+        phase, so that ``coupling`` (contact between methods) acts within each step; the others (the lattice)
+        advance by a frame."""
         from .solver import PointSolver
 
         coupled = [s for s in solvers if isinstance(s, PointSolver)]
         for s in solvers:
             if not isinstance(s, PointSolver):
                 s.simulate(dt, substeps)
-        if len(coupled) == 1:
+        if len(coupled) == 1 and coupling is None:
             coupled[0].simulate(dt, substeps)
             return
         for _ in range(substeps):
@@ -290,6 +305,8 @@ class Scene:
                 s.begin_step(dt)
             for s in coupled:
                 s.compute_forces()
+            if coupling is not None:
+                coupling.apply(dt)
             for s in coupled:
                 s.end_step(dt)
 

@@ -159,6 +159,13 @@ def test_run_writes_cache(tmp_path, scene_script):
     np.testing.assert_allclose(d, xs[frames] - rest, atol=1e-6)
     np.testing.assert_allclose(np.asarray(disp.Get(0)), 0.0, atol=1e-6)  # rest pose (float32 rounding only)
 
+    # the fixed end's reaction force [N] is written every frame, and it holds the beam up (positive z)
+    reaction = [a for a in points.GetPrim().GetAttributes() if a.GetName().startswith("pdsim:reaction:")]
+    assert len(reaction) == 1
+    assert reaction[0].GetTimeSamples() == [float(f) for f in range(frames + 1)]
+    assert np.all(np.isfinite([reaction[0].Get(f) for f in range(frames + 1)]))
+    assert reaction[0].Get(frames)[2] > 0.0
+
     assert validate_usd(out) == []
 
 

@@ -422,6 +422,23 @@ class UsdCache:
         samples.append((mesh.GetExtentAttr(), _extent(lo, hi)))
         self._pending.setdefault(frame, []).extend(samples)
 
+    def write_vector(self, handle, frame: int, name: str, value) -> None:
+        """Time-sample a custom double3 attribute ``pdsim:<name>`` (e.g. ``reaction:grip``, a boundary condition's
+        reaction force [N]) on the prim of ``handle`` at ``frame``."""
+        self._check_open()
+        frame = self._check_frame(frame)
+        from pxr import Gf, Sdf
+
+        v = np.asarray(value, dtype=np.float64)
+        if v.shape != (3,) or not np.all(np.isfinite(v)):
+            raise ValueError(f"{name!r}: a vector of 3 finite numbers, got {value!r}")
+        prim = self._stage.GetPrimAtPath(handle.path)
+        attr_name = "pdsim:" + ":".join(_identifier(part) for part in name.split(":"))
+        attr = prim.GetAttribute(attr_name)
+        if not attr:
+            attr = prim.CreateAttribute(attr_name, Sdf.ValueTypeNames.Double3, custom=True)
+        self._pending.setdefault(frame, []).append((attr, Gf.Vec3d(*v.tolist())))
+
     # ------------------------------------------------------------------ frames and saving
 
     def end_frame(self, frame: int) -> None:
@@ -508,6 +525,13 @@ class UsdCache:
         if self._last_finished is not None and frame <= self._last_finished:
             raise ValueError(f"frame {frame} is not after the last finished frame {self._last_finished}")
         return frame
+
+
+def _identifier(name: str) -> str:
+    """A valid USD identifier made of ``name``."""
+    from pxr import Tf
+
+    return Tf.MakeValidIdentifier(name)
 
 
 def validate_usd(path: str | os.PathLike) -> list[str]:

@@ -42,13 +42,16 @@ class PointsView:
     """Points of one body at one frame.
 
     name: the body's name (the prim name). positions: world positions [m], float64 [n, 3]. velocities: [m/s],
-    float64 [n, 3]. widths: point diameters [m], [n]. attributes: {shared name: values [n] or [n, 3]}."""
+    float64 [n, 3]. widths: point diameters [m], [n]. attributes: {shared name: values [n] or [n, 3]}.
+    reactions: {boundary condition name: force [N] it exerts on the body, float64 [3]} (written as the custom
+    attributes ``pdsim:reaction:<name>``)."""
 
     name: str
     positions: np.ndarray
     velocities: np.ndarray
     widths: np.ndarray
     attributes: dict = field(default_factory=dict)
+    reactions: dict = field(default_factory=dict)
 
 
 @dataclass

@@ -47,6 +47,8 @@ class ViewWriter:
             velocities=None if view.velocities is None else np.asarray(view.velocities, dtype=np.float32),
             primvars=values,
         )
+        for name, force in view.reactions.items():
+            self.cache.write_vector(handle, frame, f"reaction:{name}", force)
 
     def _write_mesh(self, frame: int, view: MeshView) -> None:
         entry = self._meshes.get(view.name)

@@ -340,6 +340,16 @@ class SolverPeridynamics(PointSolver):
             speeds += [b.material.p_wave_speed, b.prescribed_speed()]
         return max(speeds)
 
+    def contact_particles(self):
+        """The particles that take part in contact with bodies of other methods (all of them) and their contact
+        radii h/2 [m]: (int32 [n], float32 [n]) Warp arrays (pdsim.contact.MethodContact)."""
+        import warp as wp
+
+        if getattr(self, "_contact_points", None) is None:
+            n = self.model.particle_count
+            self._contact_points = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=self.device)
+        return self._contact_points, self.model.radius
+
     def fragment_ids(self) -> np.ndarray:
         """Fragment id per particle (connected components of live bonds, numbered per body by the body-local index
         of the fragment's first particle, so ids stay stable over an animation); recomputed only when bonds broke
@@ -375,6 +385,7 @@ class SolverPeridynamics(PointSolver):
                 FragmentSurfaces(b.shape, b.rest_positions, b.spacing, b.name, device=str(self.device))
                 for b in self.bodies
             ]
+        reactions = self.reaction_forces()
         out = []
         for i, b in enumerate(self.bodies):
             sl = self.body_slice(i)
@@ -385,6 +396,7 @@ class SolverPeridynamics(PointSolver):
                     v[sl],
                     np.full(b.particle_count, b.spacing),
                     {k: a[sl] for k, a in values.items()},
+                    {cond: r for (body, cond), r in reactions.items() if body == b.name},
                 )
             )
             if self._surfaces is not None:

@@ -209,12 +209,13 @@ def _points_near_solid(shape: SolidShape, points: np.ndarray, radius: float, dev
 
     from ..kernels.peridynamics import surfaces as kf
 
+    centre = 0.5 * (shape.bounds[0] + shape.bounds[1])  # float32 relative to the shape: exact anywhere in the world
     with wp.ScopedDevice(device):
         mesh = wp.Mesh(
-            points=wp.array(shape.vertices.astype(np.float32), dtype=wp.vec3),
+            points=wp.array((shape.vertices - centre).astype(np.float32), dtype=wp.vec3),
             indices=wp.array(shape.faces.astype(np.int32).ravel(), dtype=wp.int32),
         )
-        pts = wp.array(points.astype(np.float32), dtype=wp.vec3)
+        pts = wp.array((points - centre).astype(np.float32), dtype=wp.vec3)
         near = wp.zeros(len(points), dtype=wp.int32)
         lo, hi = np.minimum(points.min(axis=0), shape.bounds[0]), np.maximum(points.max(axis=0), shape.bounds[1])
         max_dist = 2.0 * float(np.linalg.norm(hi - lo)) + 1.0
