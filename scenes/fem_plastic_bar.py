@@ -34,7 +34,7 @@ def build_scene() -> pdsim.Scene:
         mesh_cache=MESH_CACHE,
     )
     body.fix(pdsim.BoxRegion(lo=(-1.0, -1.0, -1.0), hi=(1.0, 1.0, 0.05)))
-    body.set_velocity(pdsim.BoxRegion(lo=(-1.0, -1.0, 0.95), hi=(1.0, 1.0, 2.0)), (0.6, 0.0, 0.0), until=0.75)
+    body.set_velocity(pdsim.BoxRegion(lo=(-1.0, -1.0, 0.95), hi=(1.0, 1.0, 2.0)), (0.6, 0.0, 0.0), release=0.75)
     scene.add_body(body)
     scene.add_ground_plane(height=0.0, friction=0.5)
     return scene

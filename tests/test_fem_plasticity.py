@@ -59,7 +59,7 @@ def _bend(plasticity, integrator, device):
     mesh = box_tet_mesh((1.0, 0.1, 0.1), (20, 2, 2), center=(0.5, 0.0, 0.0))
     body = FemBody(mesh, MAT, integrator=integrator, plasticity=plasticity, damping=5.0)
     body.fix(pdsim.BoxRegion(lo=(-1, -1, -1), hi=(1e-6, 1, 1)))
-    body.set_velocity(pdsim.BoxRegion(lo=(1.0 - 1e-6, -1, -1), hi=(2, 1, 1)), (0.0, 0.0, 0.5), until=0.6)
+    body.set_velocity(pdsim.BoxRegion(lo=(1.0 - 1e-6, -1, -1), hi=(2, 1, 1)), (0.0, 0.0, 0.5), release=0.6)
     solver = SolverFem([body], device=device)
     dt = solver.stable_time_step()
     solver.simulate(dt, round(3.0 / dt))

@@ -33,6 +33,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 import pdsim
 from pdsim.fem import FemBody, SolverFem
 from pdsim.fem.mesh import box_tet_mesh
+from pdsim.kinematics import scene_origin
+from pdsim.solver import SolverContext
 
 MAT = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)
 SIZE = (1.0, 0.5, 0.25)
@@ -50,7 +52,8 @@ def _clamped(mesh):
 def _time_pdsim(mesh, *, integrator, measure, device, steps, warmup, stiffness="assembled"):
     body = FemBody(mesh, MAT, measure=measure, integrator=integrator)
     body.fix(pdsim.BoxRegion(lo=(-1, -1, -1), hi=(1e-9, 1, 1)))
-    solver = SolverFem([body], device=device, gravity=GRAVITY, stiffness=stiffness)
+    context = SolverContext(device=device, gravity=GRAVITY, origin=scene_origin([body.bounds()]))
+    solver = SolverFem([body], context, stiffness=stiffness)
     dt = solver.explicit_time_step() * (10.0 if integrator == "implicit" else 1.0)
     solver.simulate(dt, warmup)
     import warp as wp

@@ -1,15 +1,23 @@
 """Element kernels of the linear tetrahedral finite element solid (shared/seeds/fem_slides.txt, DESIGN.md section 3).
 
-Notation: a tetrahedron has corners 0..3 with rest positions X_a and current positions x_a; Dm = [X1-X0, X2-X0, X3-X0]
-(positive determinant after loading), rest volume V = det(Dm) / 6, Ds = [x1-x0, x2-x0, x3-x0], deformation gradient
-F = Ds Dm^-1. The shape-function gradients are g_a = row a of Dm^-1 (a = 1..3) and g_0 = -(g_1 + g_2 + g_3), so a
-displacement field u gives grad u = sum_a u_a g_a^T.
+Notation: a tetrahedron has corners 0..3 with rest positions X_a and displacements u_a (current positions
+x_a = X_a + u_a); Dm = [X1-X0, X2-X0, X3-X0] (positive determinant after loading; Dm^-1 is computed on the host in
+float64 from rest differences), rest volume V = det(Dm) / 6, Du = [u1-u0, u2-u0, u3-u0], displacement gradient
+G = Du Dm^-1 and deformation gradient F = I + G. The shape-function gradients are g_a = row a of Dm^-1 (a = 1..3) and
+g_0 = -(g_1 + g_2 + g_3), so a displacement field u gives grad u = sum_a u_a g_a^T.
+
+Precision: the kernels never see positions, only displacements (kernels/integration.py), and the strains are formed
+from G without adding and subtracting the identity, so a float32 solver resolves a strain to about 1e-7 of itself
+wherever the body sits in the world and however small the strain is.
 
 Strain measures (the element's strain is constant, slides "Linear Displacement Tetrahedron"):
 
-    linear      eps = sym(F) - I                      stress sigma = lambda tr(eps) I + 2 mu eps, P = sigma
-    corotated   R = polar rotation of F, eps = sym(R^T F) - I,  P = R sigma   (stiffness warping, Mueller & Gross 2004)
-    green       E = (F^T F - I) / 2 (Green-Saint-Venant),  S = lambda tr(E) I + 2 mu E,  P = F S
+    linear      eps = sym(G)                          stress sigma = lambda tr(eps) I + 2 mu eps, P = sigma
+    corotated   R = polar rotation of F, eps = sym(R^T F) - I = sym(R^T G) + sym(R) - I,  P = R sigma
+                (stiffness warping, Mueller & Gross 2004); sym(R) - I = 2 (v v^T - |v|^2 I) from the rotation's unit
+                quaternion (v, w), exact and free of cancellation for small rotations
+    green       E = (F^T F - I) / 2 = (G + G^T + G^T G) / 2 (Green-Saint-Venant),  S = lambda tr(E) I + 2 mu E,
+                P = F S
 
 P is the first Piola-Kirchhoff stress; the nodal forces are f_a = -V P g_a (so f_0 = -(f_1 + f_2 + f_3) and every
 element's forces sum to zero: linear momentum is conserved). For the corotated measure R^T F is symmetric, so P is the
@@ -63,12 +71,12 @@ def fem_funcs(dtype):
     vec3, mat33, vec4 = fem_types(dtype)
 
     @wp.func
-    def deformation_gradient(x0: vec3, x1: vec3, x2: vec3, x3: vec3, dm_inv: mat33):
-        """F = Ds Dm^-1 [-]."""
-        ds = mat33(x1[0] - x0[0], x2[0] - x0[0], x3[0] - x0[0],
-                   x1[1] - x0[1], x2[1] - x0[1], x3[1] - x0[1],
-                   x1[2] - x0[2], x2[2] - x0[2], x3[2] - x0[2])  # fmt: skip
-        return ds * dm_inv
+    def displacement_gradient(u0: vec3, u1: vec3, u2: vec3, u3: vec3, dm_inv: mat33):
+        """G = Du Dm^-1 [-] of corner vectors u_a (displacements [m]; or any nodal vector field, e.g. velocities)."""
+        du = mat33(u1[0] - u0[0], u2[0] - u0[0], u3[0] - u0[0],
+                   u1[1] - u0[1], u2[1] - u0[1], u3[1] - u0[1],
+                   u1[2] - u0[2], u2[2] - u0[2], u3[2] - u0[2])  # fmt: skip
+        return du * dm_inv
 
     @wp.func
     def polar_rotation(f: mat33):
@@ -132,13 +140,25 @@ def fem_funcs(dtype):
         return wp.quat_to_matrix(q), q
 
     @wp.func
+    def sym(a: mat33):
+        return dtype(0.5) * (a + wp.transpose(a))
+
+    @wp.func
+    def corotated_strain(g: mat33, r: mat33, q: quat):
+        """eps = sym(R^T F) - I = sym(R^T G) + 2 (v v^T - |v|^2 I) for F = I + G and R the rotation of the unit
+        quaternion q = (v, w) (sym(R) - I written without cancellation)."""
+        v = vec3(q[0], q[1], q[2])
+        return sym(wp.transpose(r) * g) + dtype(2.0) * (wp.outer(v, v) - wp.dot(v, v) * wp.identity(3, dtype))
+
+    @wp.func
+    def green_strain(g: mat33):
+        """E = (F^T F - I) / 2 = (G + G^T + G^T G) / 2 for F = I + G."""
+        return dtype(0.5) * (g + wp.transpose(g) + wp.transpose(g) * g)
+
+    @wp.func
     def hooke(eps: mat33, lam: dtype, mu: dtype):
         """Isotropic Hooke's law sigma = lambda tr(eps) I + 2 mu eps [Pa]."""
         return (lam * wp.trace(eps)) * wp.identity(3, dtype) + (dtype(2.0) * mu) * eps
-
-    @wp.func
-    def sym(a: mat33):
-        return dtype(0.5) * (a + wp.transpose(a))
 
     @wp.func
     def frobenius(a: mat33):
@@ -189,7 +209,9 @@ def fem_funcs(dtype):
         return d[k], vec3(q[0, k], q[1, k], q[2, k])
 
     return {
-        "deformation_gradient": deformation_gradient,
+        "displacement_gradient": displacement_gradient,
+        "corotated_strain": corotated_strain,
+        "green_strain": green_strain,
         "polar_rotation": polar_rotation,
         "rotation_iterative": rotation_iterative,
         "hooke": hooke,
@@ -206,7 +228,8 @@ def fem_funcs(dtype):
 def element_force_kernel(dtype, measure: int, plastic: bool, fracture: bool, store_rotation: bool):
     """Kernel over elements: corner forces f_a = -V P g_a [N] into ``corner_forces[4 e + a]``.
 
-    Inputs per element: ``tets`` (vec4i), ``dm_inv`` (Dm^-1 [1/m]), ``volume`` [m^3], ``lame`` = (lambda, mu) [Pa].
+    Inputs: ``displacements`` [m] per vertex; per element ``tets`` (vec4i), ``dm_inv`` (Dm^-1 [1/m]), ``volume``
+    [m^3], ``lame`` = (lambda, mu) [Pa].
     With ``plastic``: ``plastic_params`` = (yield [-], creep [1/s], max [-]) and ``plastic_strain`` (updated in place,
     once per call, with factor min(creep dt, 1); dt = 0 leaves it unchanged). With ``fracture``: ``strength`` [Pa],
     writes ``principal`` = (rest-frame unit direction, largest principal stress [Pa]; an upper bound and a zero
@@ -218,8 +241,10 @@ def element_force_kernel(dtype, measure: int, plastic: bool, fracture: bool, sto
     vec3, mat33, vec4 = fem_types(dtype)
     quat = wp.types.quaternion(dtype)
     fn = fem_funcs(dtype)
-    deformation_gradient = fn["deformation_gradient"]
+    displacement_gradient = fn["displacement_gradient"]
     rotation_iterative = fn["rotation_iterative"]
+    corotated_strain = fn["corotated_strain"]
+    green_strain = fn["green_strain"]
     hooke = fn["hooke"]
     sym = fn["sym"]
     frobenius = fn["frobenius"]
@@ -229,7 +254,7 @@ def element_force_kernel(dtype, measure: int, plastic: bool, fracture: bool, sto
 
     @wp.kernel(module="unique")
     def element_forces(
-        positions: wp.array(dtype=vec3),
+        displacements: wp.array(dtype=vec3),
         tets: wp.array(dtype=wp.vec4i),
         dm_inv: wp.array(dtype=mat33),
         volume: wp.array(dtype=dtype),
@@ -247,18 +272,20 @@ def element_force_kernel(dtype, measure: int, plastic: bool, fracture: bool, sto
         e = wp.tid()
         t = tets[e]
         dmi = dm_inv[e]
-        f = deformation_gradient(positions[t[0]], positions[t[1]], positions[t[2]], positions[t[3]], dmi)
+        g = displacement_gradient(
+            displacements[t[0]], displacements[t[1]], displacements[t[2]], displacements[t[3]], dmi
+        )
         lam = lame[e][0]
         mu = lame[e][1]
         r = wp.identity(3, dtype)
         if wp.static(measure == MEASURE_COROTATED):
-            r, q = rotation_iterative(f, rotation_q[e])
+            r, q = rotation_iterative(wp.identity(3, dtype) + g, rotation_q[e])
             rotation_q[e] = q
-            eps = sym(wp.transpose(r) * f) - wp.identity(3, dtype)
+            eps = corotated_strain(g, r, q)
         elif wp.static(measure == MEASURE_GREEN):
-            eps = dtype(0.5) * (wp.transpose(f) * f - wp.identity(3, dtype))
+            eps = green_strain(g)
         else:
-            eps = sym(f) - wp.identity(3, dtype)
+            eps = sym(g)
         if wp.static(plastic):
             pp = plastic_params[e]
             ep = plastic_update(eps, plastic_strain[e], pp[0], wp.min(pp[1] * dt, dtype(1.0)), pp[2])
@@ -282,7 +309,7 @@ def element_force_kernel(dtype, measure: int, plastic: bool, fracture: bool, sto
             if wp.static(store_rotation):
                 rotation[e] = r
         elif wp.static(measure == MEASURE_GREEN):
-            p = f * sigma
+            p = sigma + g * sigma  # F S
         else:
             p = sigma
         h = (-volume[e]) * (p * wp.transpose(dmi))  # columns are f_1, f_2, f_3
@@ -300,17 +327,20 @@ def element_force_kernel(dtype, measure: int, plastic: bool, fracture: bool, sto
 
 @functools.cache
 def element_energy_kernel(dtype, measure: int, plastic: bool):
-    """Kernel over elements: elastic energy V (mu |eps_el|^2 + lambda/2 tr(eps_el)^2) [J] into ``energy[e]``, with
-    eps_el = eps - eps_plastic in the element's strain measure (plastic strain read, not updated)."""
+    """Kernel over elements: elastic energy V (mu |eps_el|^2 + lambda/2 tr(eps_el)^2) [J] into ``energy[e]`` at the
+    vertex ``displacements`` [m], with eps_el = eps - eps_plastic in the element's strain measure (plastic strain read,
+    not updated)."""
     vec3, mat33, _ = fem_types(dtype)
     fn = fem_funcs(dtype)
-    deformation_gradient = fn["deformation_gradient"]
+    displacement_gradient = fn["displacement_gradient"]
     polar_rotation = fn["polar_rotation"]
+    corotated_strain = fn["corotated_strain"]
+    green_strain = fn["green_strain"]
     sym = fn["sym"]
 
     @wp.kernel(module="unique")
     def element_energy(
-        positions: wp.array(dtype=vec3),
+        displacements: wp.array(dtype=vec3),
         tets: wp.array(dtype=wp.vec4i),
         dm_inv: wp.array(dtype=mat33),
         volume: wp.array(dtype=dtype),
@@ -320,13 +350,16 @@ def element_energy_kernel(dtype, measure: int, plastic: bool):
     ):
         e = wp.tid()
         t = tets[e]
-        f = deformation_gradient(positions[t[0]], positions[t[1]], positions[t[2]], positions[t[3]], dm_inv[e])
+        g = displacement_gradient(
+            displacements[t[0]], displacements[t[1]], displacements[t[2]], displacements[t[3]], dm_inv[e]
+        )
         if wp.static(measure == MEASURE_COROTATED):
-            eps = sym(wp.transpose(polar_rotation(f)) * f) - wp.identity(3, dtype)
+            r = polar_rotation(wp.identity(3, dtype) + g)
+            eps = corotated_strain(g, r, wp.quat_from_matrix(r))
         elif wp.static(measure == MEASURE_GREEN):
-            eps = dtype(0.5) * (wp.transpose(f) * f - wp.identity(3, dtype))
+            eps = green_strain(g)
         else:
-            eps = sym(f) - wp.identity(3, dtype)
+            eps = sym(g)
         if wp.static(plastic):
             eps = eps - plastic_strain[e]
         tr = wp.trace(eps)
@@ -342,7 +375,7 @@ def element_stiffness_product_kernel(dtype, rotated: bool):
     assembling K_e: G = R^T Du Dm^-1, sigma = hooke(sym(G)), (K u)_a = V R sigma g_a."""
     vec3, mat33, _ = fem_types(dtype)
     fn = fem_funcs(dtype)
-    deformation_gradient = fn["deformation_gradient"]
+    displacement_gradient = fn["displacement_gradient"]
     hooke = fn["hooke"]
     sym = fn["sym"]
 
@@ -359,7 +392,7 @@ def element_stiffness_product_kernel(dtype, rotated: bool):
         e = wp.tid()
         t = tets[e]
         dmi = dm_inv[e]
-        g = deformation_gradient(u[t[0]], u[t[1]], u[t[2]], u[t[3]], dmi)
+        g = displacement_gradient(u[t[0]], u[t[1]], u[t[2]], u[t[3]], dmi)
         if wp.static(rotated):
             r = rotation[e]
             sigma = hooke(sym(wp.transpose(r) * g), lame[e][0], lame[e][1])
@@ -438,21 +471,27 @@ def plastic_update_kernel(dtype):
 
 @functools.cache
 def embed_points_kernel(dtype):
-    """Kernel over embedded points: x_p = sum_a w_pa x[tets[element_p][a]] [m] (barycentric render-mesh embedding)."""
+    """Kernel over embedded points (barycentric render-mesh embedding): the displacement u_p = sum_a w_pa u[t_a] [m]
+    and the velocity v_p = sum_a w_pa v[t_a] [m/s] of point p in element ``element[p]`` (t = its corners)."""
     vec3, _, vec4 = fem_types(dtype)
 
     @wp.kernel(module="unique")
     def embed_points(
-        positions: wp.array(dtype=vec3),
+        displacements: wp.array(dtype=vec3),
+        velocities: wp.array(dtype=vec3),
         tets: wp.array(dtype=wp.vec4i),
         element: wp.array(dtype=wp.int32),
         weights: wp.array(dtype=vec4),
-        out: wp.array(dtype=wp.vec3),
+        out_displacement: wp.array(dtype=vec3),
+        out_velocity: wp.array(dtype=vec3),
     ):
         p = wp.tid()
         t = tets[element[p]]
         w = weights[p]
-        x = w[0] * positions[t[0]] + w[1] * positions[t[1]] + w[2] * positions[t[2]] + w[3] * positions[t[3]]
-        out[p] = wp.vec3(float(x[0]), float(x[1]), float(x[2]))
+        u = w[0] * displacements[t[0]] + w[1] * displacements[t[1]]
+        u = u + w[2] * displacements[t[2]] + w[3] * displacements[t[3]]
+        v = w[0] * velocities[t[0]] + w[1] * velocities[t[1]] + w[2] * velocities[t[2]] + w[3] * velocities[t[3]]
+        out_displacement[p] = u
+        out_velocity[p] = v
 
     return embed_points

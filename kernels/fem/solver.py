@@ -1,25 +1,28 @@
-"""Vertex kernels of the tetrahedral FEM solver: force gathers, explicit and implicit integration, boundary conditions,
-the ground-plane collider, and a preconditioned conjugate-gradient solver built from Warp kernels.
+"""Vertex kernels of the tetrahedral FEM solver: force gathers (one fused with the shared velocity-Verlet kick), the
+implicit backward-Euler right-hand side and update, the quasi-static residual, and a preconditioned conjugate-gradient
+solver built from Warp kernels.
 
 Element kernels (kernels/fem/elements.py) write one vector per element corner ("slot" 4 e + a); the vertex kernels
 gather them over a CSR incidence list (``vertex_offsets``, ``vertex_slots``): one thread per vertex, no atomics, so the
 CPU and the GPU sum in the same order.
 
-Explicit step (velocity Verlet, as kernels/integration.py; a_n from the previous force evaluation):
-    kick_drift:   v <- v + dt/2 a_n ; x <- x + dt v       (boundary conditions, then the ground plane)
-    (element forces at the new positions)
-    gather_kick:  a = f / m + g - c v ; v <- v + dt/2 a    (free vertices)
+State: displacements u [m], velocities v [m/s], accelerations a [m/s^2] of the shared kinematics
+(kernels/integration.py, pdsim/kinematics.py); the force array starts each evaluation holding the loads [N]
+(``apply_loads``), and the gathers add the element forces onto it.
 
-Implicit step (linearly implicit backward Euler with the corotated stiffness, rotations frozen at x_n):
-    ((1 + dt c) M + (dt^2 + dt beta) K_R) v_{n+1} = M v_n + dt (f(x_n) + M g),   x_{n+1} = x_n + dt v_{n+1}
+Explicit step (velocity Verlet, kernels/integration.py's ``kick_drift``, then):
+    (element forces at the new displacements)
+    gather_kick:  f = loads + sum of corner forces ; a = f / m + g - c v ; v <- v + dt/2 a   (free axes; kick_point)
+
+Implicit step (linearly implicit backward Euler with the corotated stiffness, rotations frozen at u_n):
+    ((1 + dt c) M + dt^2 K_R) v_{n+1} = M v_n + dt (f(u_n) + f_ext + M g),   u_{n+1} = u_n + dt v_{n+1}
 solved by block-Jacobi preconditioned CG, the stiffness applied either matrix-free (the element kernels with the
 frozen rotations, every iteration) or as an assembled matrix of 3x3 blocks in CSR order, filled once per solve by a
-gather of the element blocks (faster on the CPU: docs/benchmarks.md). Constrained vertices (fixed or prescribed
-velocity) are filtered: their unknowns keep the prescribed value and their residual is zero.
+gather of the element blocks (faster on the CPU: docs/benchmarks.md).
 
-Vertex kinds: 0 free, 1 fixed (held at its rest position), 2 prescribed velocity (as kernels/integration.py).
-The ground plane follows kernels/integration.py's collider (projection onto the plane, approaching normal velocity
-removed, Coulomb friction on the tangential velocity) with zero radius: vertices lie on the body's surface.
+Constraints are per component: ``constrained[i]`` holds a bit mask (bit d set when axis d of vertex i is held by a
+boundary condition, 7 for a whole vertex). The CG works on the free components only: constrained components of the
+unknown keep their initial (prescribed) value, their residual, search direction and preconditioner rows are zero.
 
 Reductions (dot products) are chunked: thread c sums a contiguous range of vertices into ``partial[c]`` and a single
 thread adds the partial sums, so the result does not depend on thread scheduling.
@@ -29,11 +32,8 @@ import functools
 
 import warp as wp
 
+from ..integration import POINT_FREE, integration_kernels
 from .elements import fem_funcs, fem_types
-
-VERTEX_FREE = wp.constant(0)
-VERTEX_FIXED = wp.constant(1)
-VERTEX_PRESCRIBED = wp.constant(2)
 
 # cg_scalars slots
 CG_RZ = 0  # r . z
@@ -46,69 +46,71 @@ CG_SCALAR_COUNT = 8
 
 
 @functools.cache
-def explicit_kernels(dtype):
-    """(kick_drift, gather_kick) kernels of the explicit velocity-Verlet step for scalar ``dtype``."""
-    vec3, _, _ = fem_types(dtype)
+def constraint_funcs(dtype):
+    """Warp functions on the per-vertex constraint bit masks: axis_bits, free_components, filter_block (a dict)."""
+    vec3, mat33, _ = fem_types(dtype)
 
-    @wp.kernel(module="unique")
-    def kick_drift(
-        positions: wp.array(dtype=vec3),
-        velocities: wp.array(dtype=vec3),
-        accelerations: wp.array(dtype=vec3),
-        rest_positions: wp.array(dtype=vec3),
-        kind: wp.array(dtype=wp.int32),
-        prescribed_velocity: wp.array(dtype=vec3),
-        dt: dtype,
-    ):
-        """First half kick and drift; fixed vertices stay at rest, prescribed ones move at their velocity."""
-        i = wp.tid()
-        c = kind[i]
-        if c == VERTEX_FIXED:
-            positions[i] = rest_positions[i]
-            velocities[i] = vec3(dtype(0.0))
-        elif c == VERTEX_PRESCRIBED:
-            v = prescribed_velocity[i]
-            velocities[i] = v
-            positions[i] = positions[i] + dt * v
-        else:
-            v = velocities[i] + (dtype(0.5) * dt) * accelerations[i]
-            velocities[i] = v
-            positions[i] = positions[i] + dt * v
+    @wp.func
+    def axis_bits(axes: wp.vec3):
+        """Bit mask of the constrained axes of a condition (1 per constrained component of ``axes``)."""
+        bits = int(0)
+        for d in range(3):
+            if axes[d] > 0.5:
+                bits = bits | (1 << d)
+        return bits
 
-    @wp.kernel(module="unique")
-    def gather_kick(
-        vertex_offsets: wp.array(dtype=wp.int32),
-        vertex_slots: wp.array(dtype=wp.int32),
-        corner_forces: wp.array(dtype=vec3),
-        inv_mass: wp.array(dtype=dtype),
-        kind: wp.array(dtype=wp.int32),
-        gravity: vec3,
-        damping: wp.array(dtype=dtype),
-        dt: dtype,
-        velocities: wp.array(dtype=vec3),
-        accelerations: wp.array(dtype=vec3),
-        forces: wp.array(dtype=vec3),
-    ):
-        """f_i = sum of corner forces [N]; a = f / m + g - c v [m/s^2]; second half kick for free vertices."""
-        i = wp.tid()
-        f = vec3(dtype(0.0))
-        for q in range(vertex_offsets[i], vertex_offsets[i + 1]):
-            f += corner_forces[vertex_slots[q]]
-        forces[i] = f
-        v = velocities[i]
-        a = f * inv_mass[i] + gravity - damping[i] * v
-        accelerations[i] = a
-        if kind[i] == VERTEX_FREE:
-            velocities[i] = v + (dtype(0.5) * dt) * a
+    @wp.func
+    def free_components(x: vec3, bits: int):
+        """x with its constrained components zeroed."""
+        out = x
+        for d in range(3):
+            if ((bits >> d) & 1) != 0:
+                out[d] = dtype(0.0)
+        return out
 
-    return kick_drift, gather_kick
+    @wp.func
+    def filter_block(d: mat33, bits: int):
+        """The inverse of the 3x3 block ``d`` restricted to the free components (zero rows and columns on the
+        constrained ones); the identity's inverse on the free part when the block is not positive definite."""
+        b = d
+        for k in range(3):
+            if ((bits >> k) & 1) != 0:
+                for j in range(3):
+                    b[k, j] = dtype(0.0)
+                    b[j, k] = dtype(0.0)
+                b[k, k] = dtype(1.0)
+        p = wp.identity(3, dtype)
+        if wp.determinant(b) > dtype(0.0):
+            p = wp.inverse(b)
+        for k in range(3):
+            if ((bits >> k) & 1) != 0:
+                for j in range(3):
+                    p[k, j] = dtype(0.0)
+                    p[j, k] = dtype(0.0)
+        return p
+
+    return {"axis_bits": axis_bits, "free_components": free_components, "filter_block": filter_block}
 
 
 @functools.cache
 def vertex_kernels(dtype):
-    """Kernels shared by the integrators: gather_forces, advance_positions, collide_ground_plane, max_speed_and_finite,
-    residual_forces, apply_displacement (a dict)."""
+    """Kernels over vertices shared by the integrators and the static solve (a dict):
+
+    - gather_forces: f_i = sum of the corner vectors of vertex i (overwrites).
+    - gather_add: f_i += sum of the corner vectors of vertex i (onto the loads already in f).
+    - gather_kick: gather_add, then the shared second half kick (``kick_point``): a = f / m + g - c v,
+      v += dt/2 a on the free axes (dt = 0: accelerations only).
+    - advance_displacements: u += dt v (backward Euler; constrained components carry their prescribed velocity).
+    - constraint_bits: the bit mask of each vertex's active condition (0 when free) and its kind this step.
+    - residual_forces: r_i = f_i + m_i g [N] on the free components (static equilibrium residual).
+    - apply_increment: u += du.
+    """
     vec3, _, _ = fem_types(dtype)
+    ik = integration_kernels(dtype)
+    kick_point = ik.kick_point
+    cf = constraint_funcs(dtype)
+    axis_bits = cf["axis_bits"]
+    free_components = cf["free_components"]
 
     @wp.kernel(module="unique")
     def gather_forces(
@@ -117,7 +119,6 @@ def vertex_kernels(dtype):
         corner_forces: wp.array(dtype=vec3),
         forces: wp.array(dtype=vec3),
     ):
-        """f_i = sum of the corner vectors of vertex i."""
         i = wp.tid()
         f = vec3(dtype(0.0))
         for q in range(vertex_offsets[i], vertex_offsets[i + 1]):
@@ -125,62 +126,77 @@ def vertex_kernels(dtype):
         forces[i] = f
 
     @wp.kernel(module="unique")
-    def advance_positions(
-        positions: wp.array(dtype=vec3),
-        velocities: wp.array(dtype=vec3),
-        rest_positions: wp.array(dtype=vec3),
-        kind: wp.array(dtype=wp.int32),
+    def gather_add(
+        vertex_offsets: wp.array(dtype=wp.int32),
+        vertex_slots: wp.array(dtype=wp.int32),
+        corner_forces: wp.array(dtype=vec3),
+        forces: wp.array(dtype=vec3),
+    ):
+        i = wp.tid()
+        f = forces[i]
+        for q in range(vertex_offsets[i], vertex_offsets[i + 1]):
+            f += corner_forces[vertex_slots[q]]
+        forces[i] = f
+
+    @wp.kernel(module="unique")
+    def gather_kick(
+        vertex_offsets: wp.array(dtype=wp.int32),
+        vertex_slots: wp.array(dtype=wp.int32),
+        corner_forces: wp.array(dtype=vec3),
+        inv_mass: wp.array(dtype=dtype),
+        gravity: vec3,
+        damping: wp.array(dtype=dtype),
         dt: dtype,
+        point_condition: wp.array(dtype=wp.int32),
+        point_kind: wp.array(dtype=wp.int32),
+        cond_axes: wp.array(dtype=wp.vec3),
+        forces: wp.array(dtype=vec3),
+        velocities: wp.array(dtype=vec3),
+        accelerations: wp.array(dtype=vec3),
     ):
-        """x <- x + dt v (backward Euler position update); fixed vertices at rest with zero velocity."""
+        """f_i = loads + sum of corner forces [N]; then kick_point (kernels/integration.py)."""
         i = wp.tid()
-        if kind[i] == VERTEX_FIXED:
-            positions[i] = rest_positions[i]
-            velocities[i] = vec3(dtype(0.0))
-        else:
-            positions[i] = positions[i] + dt * velocities[i]
+        f = forces[i]
+        for q in range(vertex_offsets[i], vertex_offsets[i + 1]):
+            f += corner_forces[vertex_slots[q]]
+        forces[i] = f
+        kick_point(
+            i,
+            f,
+            inv_mass[i],
+            gravity,
+            damping[i],
+            dt,
+            point_condition,
+            point_kind,
+            cond_axes,
+            velocities,
+            accelerations,
+        )
 
     @wp.kernel(module="unique")
-    def collide_ground_plane(
-        positions: wp.array(dtype=vec3),
-        velocities: wp.array(dtype=vec3),
-        kind: wp.array(dtype=wp.int32),
-        normal: vec3,
-        offset: dtype,
-        friction: dtype,
-    ):
-        """Keeps free vertices above the plane n . x = offset (kernels/integration.py's rule with zero radius)."""
+    def advance_displacements(displacements: wp.array(dtype=vec3), velocities: wp.array(dtype=vec3), dt: dtype):
         i = wp.tid()
-        if kind[i] != VERTEX_FREE:
-            return
-        x = positions[i]
-        depth = offset - wp.dot(normal, x)
-        if depth > dtype(0.0):
-            positions[i] = x + depth * normal
-            v = velocities[i]
-            vn = wp.dot(v, normal)
-            if vn < dtype(0.0):
-                vt = v - vn * normal
-                vt_len = wp.length(vt)
-                scale = dtype(0.0)
-                if vt_len > dtype(0.0):
-                    scale = wp.max(dtype(0.0), dtype(1.0) - friction * (-vn) / vt_len)
-                velocities[i] = vt * scale
+        displacements[i] = displacements[i] + dt * velocities[i]
 
     @wp.kernel(module="unique")
-    def max_speed_and_finite(
-        positions: wp.array(dtype=vec3),
-        velocities: wp.array(dtype=vec3),
-        result: wp.array(dtype=float),
+    def constraint_bits(
+        point_condition: wp.array(dtype=wp.int32),
+        active_kind: wp.array(dtype=wp.int32),
+        cond_axes: wp.array(dtype=wp.vec3),
+        point_kind: wp.array(dtype=wp.int32),
+        constrained: wp.array(dtype=wp.int32),
     ):
-        """result[0] = max |v| [m/s]; result[1] = 1 when any position or velocity is not finite."""
         i = wp.tid()
-        s = float(wp.length(velocities[i]))
-        xl = float(wp.length(positions[i]))
-        if wp.isnan(s) or wp.isinf(s) or wp.isnan(xl) or wp.isinf(xl):
-            result[1] = 1.0
-        else:
-            wp.atomic_max(result, 0, s)
+        kind = POINT_FREE
+        bits = int(0)
+        c = point_condition[i]
+        if c >= 0:
+            kind = active_kind[c]
+            if kind != POINT_FREE:
+                bits = axis_bits(cond_axes[c])
+        point_kind[i] = kind
+        constrained[i] = bits
 
     @wp.kernel(module="unique")
     def residual_forces(
@@ -190,67 +206,66 @@ def vertex_kernels(dtype):
         constrained: wp.array(dtype=wp.int32),
         residual: wp.array(dtype=vec3),
     ):
-        """r_i = f_i + m_i g [N] for unconstrained vertices, 0 for constrained ones (static equilibrium residual)."""
         i = wp.tid()
-        if constrained[i] != 0:
-            residual[i] = vec3(dtype(0.0))
-        else:
-            residual[i] = forces[i] + mass[i] * gravity
+        residual[i] = free_components(forces[i] + mass[i] * gravity, constrained[i])
 
     @wp.kernel(module="unique")
-    def apply_displacement(positions: wp.array(dtype=vec3), du: wp.array(dtype=vec3)):
+    def apply_increment(displacements: wp.array(dtype=vec3), du: wp.array(dtype=vec3)):
         i = wp.tid()
-        positions[i] = positions[i] + du[i]
+        displacements[i] = displacements[i] + du[i]
 
     return {
         "gather_forces": gather_forces,
-        "advance_positions": advance_positions,
-        "collide_ground_plane": collide_ground_plane,
-        "max_speed_and_finite": max_speed_and_finite,
+        "gather_add": gather_add,
+        "gather_kick": gather_kick,
+        "advance_displacements": advance_displacements,
+        "constraint_bits": constraint_bits,
         "residual_forces": residual_forces,
-        "apply_displacement": apply_displacement,
+        "apply_increment": apply_increment,
     }
 
 
 @functools.cache
 def implicit_rhs_kernel(dtype):
-    """Kernel over vertices: the backward-Euler right-hand side b = m v + dt (f + m g) [N s] and the initial guess of
-    the new velocity (the old one; the prescribed one for constrained vertices)."""
+    """Kernel over vertices: the backward-Euler right-hand side b = m v + dt (f + m g) [N s] (f: internal forces plus
+    loads), the initial guess of the new velocity (the old one on free components, the condition's velocity at the
+    mid-step on constrained ones: zero for a fixed condition), the constraint bit mask and the kind of each vertex."""
     vec3, _, _ = fem_types(dtype)
+    ik = integration_kernels(dtype)
+    constrained_velocity = ik.constrained_velocity
+    axis_bits = constraint_funcs(dtype)["axis_bits"]
 
     @wp.kernel(module="unique")
     def implicit_rhs(
-        vertex_offsets: wp.array(dtype=wp.int32),
-        vertex_slots: wp.array(dtype=wp.int32),
-        corner_forces: wp.array(dtype=vec3),
+        forces: wp.array(dtype=vec3),
         mass: wp.array(dtype=dtype),
         velocities: wp.array(dtype=vec3),
-        kind: wp.array(dtype=wp.int32),
-        prescribed_velocity: wp.array(dtype=vec3),
+        point_condition: wp.array(dtype=wp.int32),
+        active_kind: wp.array(dtype=wp.int32),
+        cond_axes: wp.array(dtype=wp.vec3),
+        active_velocity: wp.array(dtype=wp.vec3),
         gravity: vec3,
         dt: dtype,
-        forces: wp.array(dtype=vec3),
         rhs: wp.array(dtype=vec3),
         guess: wp.array(dtype=vec3),
         constrained: wp.array(dtype=wp.int32),
+        point_kind: wp.array(dtype=wp.int32),
     ):
         i = wp.tid()
-        f = vec3(dtype(0.0))
-        for q in range(vertex_offsets[i], vertex_offsets[i + 1]):
-            f += corner_forces[vertex_slots[q]]
-        forces[i] = f
         m = mass[i]
-        c = kind[i]
-        rhs[i] = m * velocities[i] + dt * (f + m * gravity)
-        if c == VERTEX_FIXED:
-            guess[i] = vec3(dtype(0.0))
-            constrained[i] = 1
-        elif c == VERTEX_PRESCRIBED:
-            guess[i] = prescribed_velocity[i]
-            constrained[i] = 1
-        else:
-            guess[i] = velocities[i]
-            constrained[i] = 0
+        v = velocities[i]
+        rhs[i] = m * v + dt * (forces[i] + m * gravity)
+        kind = POINT_FREE
+        bits = int(0)
+        c = point_condition[i]
+        if c >= 0:
+            kind = active_kind[c]
+            if kind != POINT_FREE:
+                bits = axis_bits(cond_axes[c])
+                v = constrained_velocity(v, cond_axes[c], active_velocity[c])
+        guess[i] = v
+        constrained[i] = bits
+        point_kind[i] = kind
 
     return implicit_rhs
 
@@ -258,11 +273,11 @@ def implicit_rhs_kernel(dtype):
 @functools.cache
 def cg_kernels(dtype, rotated: bool):
     """Kernels of the preconditioned CG for A = c_mass M + c_stiff K_R (K_R = sum_e R K_e R^T, R frozen; identity when
-    not ``rotated``), as a dict:
+    not ``rotated``) on the free components (``constrained`` bit masks), as a dict:
 
     - block_jacobi (vertices): P_i = inverse of the 3x3 diagonal block c_mass m_i I + c_stiff sum R K_aa R^T
-      (zero for constrained vertices).
-    - operator_gather (chunks): q_i = c_mass m_i p_i + c_stiff sum of corner products, 0 when constrained;
+      restricted to the free components (zero rows and columns on constrained ones).
+    - operator_gather (chunks): q_i = c_mass m_i p_i + c_stiff sum of corner products, constrained components zeroed;
       partial[c] = sum p . q over the chunk.
     - residual_init (chunks): r = b - A x (filtered), z = P r, p = z; partials of r . z, r . r and b . b.
     - update_xr (chunks): x += alpha p, r -= alpha q, z = P r; partials of r . z and r . r.
@@ -274,6 +289,9 @@ def cg_kernels(dtype, rotated: bool):
     fn = fem_funcs(dtype)
     shape_gradient = fn["shape_gradient"]
     stiffness_block = fn["stiffness_block"]
+    cf = constraint_funcs(dtype)
+    free_components = cf["free_components"]
+    filter_block = cf["filter_block"]
 
     @wp.kernel(module="unique")
     def block_jacobi(
@@ -290,9 +308,6 @@ def cg_kernels(dtype, rotated: bool):
         precond: wp.array(dtype=mat33),
     ):
         i = wp.tid()
-        if constrained[i] != 0:
-            precond[i] = mat33(dtype(0.0))
-            return
         d = (c_mass * mass[i]) * wp.identity(3, dtype)
         for q in range(vertex_offsets[i], vertex_offsets[i + 1]):
             s = vertex_slots[q]
@@ -303,10 +318,7 @@ def cg_kernels(dtype, rotated: bool):
                 r = rotation[e]
                 k = r * k * wp.transpose(r)
             d += c_stiff * k
-        if wp.determinant(d) > dtype(0.0):
-            precond[i] = wp.inverse(d)
-        else:
-            precond[i] = wp.identity(3, dtype)
+        precond[i] = filter_block(d, constrained[i])
 
     @wp.kernel(module="unique")
     def operator_gather(
@@ -326,15 +338,12 @@ def cg_kernels(dtype, rotated: bool):
         n = p.shape[0]
         acc = dtype(0.0)
         for i in range(c * chunk, wp.min(n, (c + 1) * chunk)):
-            if constrained[i] != 0:
-                q_out[i] = vec3(dtype(0.0))
-            else:
-                k = vec3(dtype(0.0))
-                for s in range(vertex_offsets[i], vertex_offsets[i + 1]):
-                    k += corner_products[vertex_slots[s]]
-                q = (c_mass * mass[i]) * p[i] + c_stiff * k
-                q_out[i] = q
-                acc += wp.dot(p[i], q)
+            k = vec3(dtype(0.0))
+            for s in range(vertex_offsets[i], vertex_offsets[i + 1]):
+                k += corner_products[vertex_slots[s]]
+            q = free_components((c_mass * mass[i]) * p[i] + c_stiff * k, constrained[i])
+            q_out[i] = q
+            acc += wp.dot(p[i], q)
         partial[c] = acc
 
     @wp.kernel(module="unique")
@@ -355,10 +364,10 @@ def cg_kernels(dtype, rotated: bool):
         rr = dtype(0.0)
         bb = dtype(0.0)
         for i in range(c * chunk, wp.min(n, (c + 1) * chunk)):
-            ri = vec3(dtype(0.0))
-            if constrained[i] == 0:
-                ri = b[i] - ax[i]
-                bb += wp.dot(b[i], b[i])
+            bits = constrained[i]
+            bi = free_components(b[i], bits)
+            ri = free_components(b[i] - ax[i], bits)
+            bb += wp.dot(bi, bi)
             zi = precond[i] * ri
             r[i] = ri
             z[i] = zi
@@ -459,11 +468,15 @@ def assembled_kernels(dtype):
 
     - assemble_blocks (blocks): values[k] = sum of the element blocks R K_ab R^T that land on block k (a gather over a
       CSR list of contributions: no atomics).
-    - bsr_operator_gather (chunks): q_i = c_mass m_i p_i + c_stiff sum_k values[k] p[columns[k]] over row i, 0 for
-      constrained rows; partial[c] = sum p . q over the chunk.
-    - bsr_block_jacobi (vertices): P_i = inverse of c_mass m_i I + c_stiff values[diagonal block of row i].
+    - bsr_operator_gather (chunks): q_i = c_mass m_i p_i + c_stiff sum_k values[k] p[columns[k]] over row i, constrained
+      components zeroed; partial[c] = sum p . q over the chunk.
+    - bsr_block_jacobi (vertices): P_i = inverse of c_mass m_i I + c_stiff values[diagonal block of row i]
+      restricted to the free components.
     """
     vec3, mat33, _ = fem_types(dtype)
+    cf = constraint_funcs(dtype)
+    free_components = cf["free_components"]
+    filter_block = cf["filter_block"]
 
     @wp.kernel(module="unique")
     def assemble_blocks(
@@ -496,15 +509,12 @@ def assembled_kernels(dtype):
         n = p.shape[0]
         acc = dtype(0.0)
         for i in range(c * chunk, wp.min(n, (c + 1) * chunk)):
-            if constrained[i] != 0:
-                q_out[i] = vec3(dtype(0.0))
-            else:
-                k = vec3(dtype(0.0))
-                for s in range(row_offsets[i], row_offsets[i + 1]):
-                    k += values[s] * p[columns[s]]
-                q = (c_mass * mass[i]) * p[i] + c_stiff * k
-                q_out[i] = q
-                acc += wp.dot(p[i], q)
+            k = vec3(dtype(0.0))
+            for s in range(row_offsets[i], row_offsets[i + 1]):
+                k += values[s] * p[columns[s]]
+            q = free_components((c_mass * mass[i]) * p[i] + c_stiff * k, constrained[i])
+            q_out[i] = q
+            acc += wp.dot(p[i], q)
         partial[c] = acc
 
     @wp.kernel(module="unique")
@@ -518,14 +528,8 @@ def assembled_kernels(dtype):
         precond: wp.array(dtype=mat33),
     ):
         i = wp.tid()
-        if constrained[i] != 0:
-            precond[i] = mat33(dtype(0.0))
-            return
         d = (c_mass * mass[i]) * wp.identity(3, dtype) + c_stiff * values[diagonal[i]]
-        if wp.determinant(d) > dtype(0.0):
-            precond[i] = wp.inverse(d)
-        else:
-            precond[i] = wp.identity(3, dtype)
+        precond[i] = filter_block(d, constrained[i])
 
     return {
         "assemble_blocks": assemble_blocks,

@@ -1,5 +1,6 @@
 """Tetrahedral FEM bodies: a linear-tetrahedron mesh of a solid, its material, strain measure, integrator,
-plasticity and fracture settings, and its boundary conditions (the scene-facing part of the FEM method)."""
+plasticity and fracture settings (the scene-facing part of the FEM method). Boundary conditions, loads and initial
+velocities are the shared point-body API (pdsim/bodies.py, pdsim/loads.py) acting on the mesh vertices."""
 
 from __future__ import annotations
 
@@ -7,12 +8,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..bodies import PointBody
 from ..errors import ParameterError
 from ..geometry import SolidShape
+from ..loads import surface_forces_from_triangles
 from ..materials import Material
 from ..regions import region_mask
 from ..validate import check_range
-from .mesh import DEFAULT_MIN_QUALITY, TetMesh, tetrahedralize
+from .mesh import DEFAULT_MIN_QUALITY, TetMesh, signed_volumes, tetrahedralize
 
 MEASURES = ("linear", "corotated", "green")
 INTEGRATORS = ("explicit", "implicit")
@@ -41,8 +44,13 @@ class FemPlasticity:
         object.__setattr__(self, "max_strain", check_range("max_strain", self.max_strain, 0.0, None))
 
 
-class FemBody:
-    """A solid meshed with linear tetrahedra, simulated with the finite element method.
+class FemBody(PointBody):
+    """A solid meshed with linear tetrahedra, simulated with the finite element method (``method = "fem"``).
+
+    Its points are the mesh vertices: ``fix``, ``set_velocity``, ``set_initial_velocity`` and the loads
+    (``add_traction``, ``add_pressure``, ``add_body_force``, ``add_force``, ``add_point_force``,
+    ``add_velocity_kick``) select vertices by their rest position (pdsim/bodies.py); a surface load acts on the boundary
+    faces of the mesh whose centroid lies in its region (:meth:`surface_point_forces`).
 
     Args:
         shape: a closed surface (:class:`pdsim.SolidShape`, meshed with fTetWild at ``edge_length``) or a ready
@@ -55,14 +63,16 @@ class FemBody:
         tensile_strength: largest principal stress before an element cracks [Pa], > 0; None: no fracture.
         damping: mass-proportional damping c [1/s], >= 0 (a = f / m + g - c v).
         implicit_step_ratio: implicit integrator: the step the scene uses, as a multiple of the explicit limit, >= 1.
-        render_mesh: a high-resolution surface embedded in the tetrahedra (barycentric) and written as its own
-            UsdGeom.Mesh ("<name>_render") that follows them; True embeds ``shape`` itself (surfaces only). It is not
-            cut by cracks: where the body fractures, its triangles stretch across the gap. Default None.
-        name: label in the USD cache; defaults to the shape's name.
+        render_mesh: a high-resolution surface embedded in the tetrahedra (barycentric) and output as its own mesh
+            view ("<name>_render") that follows them; True embeds ``shape`` itself (surfaces only). It is not cut by
+            cracks: where the body fractures, its triangles stretch across the gap. Default None.
+        name: label of the body in outputs; defaults to the shape's name.
         min_quality: element quality check of the mesh (see pdsim.fem.mesh), in [0, 1).
         mesh_cache: folder where meshes made by fTetWild are kept and reused (its output varies from run to run;
             see pdsim.fem.mesh.tetrahedralize), or None.
     """
+
+    method = "fem"
 
     def __init__(
         self,
@@ -118,11 +128,7 @@ class FemBody:
         self.damping = check_range("damping", damping, 0.0, None, lo_open=False)
         self.implicit_step_ratio = check_range("implicit_step_ratio", implicit_step_ratio, 1.0, None, lo_open=False)
         self.name = name or shape.name
-        n = self.mesh.vertex_count
-        self.kind = np.zeros(n, dtype=np.int32)
-        self.prescribed_velocity = np.zeros((n, 3), dtype=np.float64)
-        self.initial_velocity = np.zeros((n, 3), dtype=np.float64)
-        self.release_time = np.full(n, np.inf)  # prescribed vertices become free at this time [s]
+        self._init_points()
 
     @property
     def vertex_count(self) -> int:
@@ -142,14 +148,23 @@ class FemBody:
         """True when the body can crack (a tensile strength is set)."""
         return self.tensile_strength is not None
 
-    @classmethod
-    def build_solver(cls, bodies, *, device, gravity, ground, contact=None, colliders=()):
-        """The scene's solver for all its FEM bodies. ``colliders`` (static meshes, kinematic projectiles) act on the
-        vertices; ``contact`` (particle contact between unbonded particles) has no FEM counterpart yet: FEM pieces and
-        bodies pass through each other, and the setting is ignored."""
-        from .solver import SolverFem
+    @property
+    def point_count(self) -> int:
+        """Vertex count (the body's points)."""
+        return self.mesh.vertex_count
 
-        return SolverFem(bodies, device=device, gravity=gravity, ground=ground, colliders=colliders)
+    @property
+    def point_rest_positions(self) -> np.ndarray:
+        """Rest positions of the vertices [m] (world), float64 [vertex_count, 3]."""
+        return self.mesh.vertices
+
+    def point_masses(self) -> np.ndarray:
+        """Lumped vertex masses [kg]: a quarter of rho V of each incident element, float64 [vertex_count]."""
+        return lumped_masses(self.mesh.vertices, self.mesh.tets, self.material.density)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """World bounding box (lo, hi) [m] of the rest vertices, float64 [3] each."""
+        return self.mesh.vertices.min(axis=0), self.mesh.vertices.max(axis=0)
 
     def _select(self, region) -> np.ndarray:
         mask = region_mask(region, self.mesh.vertices, field="region")
@@ -157,39 +172,31 @@ class FemBody:
             raise ParameterError("region", region, f"a region containing at least one vertex of '{self.name}'")
         return mask
 
-    def fix(self, region) -> int:
-        """Holds the vertices whose rest position lies in ``region`` at rest; returns how many."""
-        mask = self._select(region)
-        self.kind[mask] = 1
-        self.prescribed_velocity[mask] = 0.0
-        self.release_time[mask] = np.inf
-        return int(mask.sum())
+    def surface_point_forces(self, region, traction, pressure: float):
+        """Forces [N] of a traction [Pa] (3 numbers) and a pressure [Pa] on the boundary faces of the mesh whose
+        centroid lies in ``region``, each face's force shared equally by its three vertices: (vertex indices int64
+        [k], forces float64 [k, 3]). ParameterError when the region holds no boundary face."""
+        return face_point_forces(self.mesh.vertices, self.mesh.boundary_faces(), region, traction, pressure)
 
-    def set_velocity(self, region, velocity, *, until: float | None = None) -> int:
-        """Moves the vertices in ``region`` at the constant ``velocity`` [m/s] (a displacement-driven boundary); with
-        ``until`` [s] (> 0) they are released (become free, keeping their velocity) at that time."""
-        v = np.asarray(velocity, dtype=np.float64)
-        if v.shape != (3,) or not np.all(np.isfinite(v)):
-            raise ParameterError("velocity", velocity, "a sequence of 3 finite numbers [m/s]")
-        release = np.inf if until is None else check_range("until", until, 0.0, None)
-        mask = self._select(region)
-        self.kind[mask] = 2
-        self.prescribed_velocity[mask] = v
-        self.release_time[mask] = release
-        return int(mask.sum())
 
-    def set_initial_velocity(self, velocity, region=None) -> int:
-        """Initial velocity [m/s]: a vector for all vertices (or those in ``region``), or an array [vertex_count, 3]."""
-        v = np.asarray(velocity, dtype=np.float64)
-        n = self.vertex_count
-        if v.shape == (n, 3) and region is None:
-            mask, values = np.ones(n, dtype=bool), v
-        elif v.shape == (3,):
-            mask = np.ones(n, dtype=bool) if region is None else self._select(region)
-            values = np.broadcast_to(v, (int(mask.sum()), 3))
-        else:
-            raise ParameterError("velocity", velocity, f"3 numbers or an array of shape ({n}, 3)")
-        if not np.all(np.isfinite(values)):
-            raise ParameterError("velocity", velocity, "finite values")
-        self.initial_velocity[mask] = values
-        return int(mask.sum())
+def lumped_masses(vertices: np.ndarray, tets: np.ndarray, density) -> np.ndarray:
+    """Lumped vertex masses [kg], float64 [vertex_count]: each element gives rho V / 4 to its four corners
+    (``density`` [kg/m^3] a number or per element)."""
+    share = np.broadcast_to(np.asarray(density, dtype=np.float64), (len(tets),)) * signed_volumes(vertices, tets) / 4.0
+    return np.bincount(np.asarray(tets).ravel(), weights=np.repeat(share, 4), minlength=len(vertices))
+
+
+def face_point_forces(vertices: np.ndarray, faces: np.ndarray, region, traction, pressure: float):
+    """Surface-load forces on the vertices of outward ``faces`` [f, 3] (indices into ``vertices`` [m], float64
+    [n, 3]) whose centroid lies in ``region``: (vertex indices int64 [k], forces [N] float64 [k, 3]); each face's
+    force (pdsim.loads.surface_forces_from_triangles: traction times area minus pressure times area times the outward
+    normal) is shared equally by its three vertices and summed per vertex."""
+    idx, _, forces = surface_forces_from_triangles(
+        vertices, np.asarray(faces), region, np.asarray(traction, dtype=np.float64), float(pressure)
+    )
+    corners = np.asarray(faces)[idx].ravel().astype(np.int64)
+    share = np.repeat(forces / 3.0, 3, axis=0)
+    pts, inverse = np.unique(corners, return_inverse=True)
+    inverse = inverse.ravel()
+    out = np.stack([np.bincount(inverse, weights=share[:, d], minlength=len(pts)) for d in range(3)], axis=1)
+    return pts, out

@@ -20,8 +20,8 @@ After the splits, :func:`separate_pieces` duplicates every vertex whose incident
 through faces that contain it (vertex "stars" split into several face-connected groups). This separates pieces that
 only touch at an edge or a point, and keeps every piece's boundary a closed surface in which each edge has exactly
 two faces. It is the same slot-graph construction for the whole mesh (nodes: element corners, edges: corners of one
-vertex in two elements sharing a face), solved with scipy's connected components: O(element_count) per event, run
-only on steps where some element exceeded its strength.
+vertex in two elements sharing a face), labelled by pdsim.graph.connected_components (the one labeller of pdsim):
+O(element_count) per event, run only on steps where some element exceeded its strength.
 """
 
 from __future__ import annotations
@@ -145,8 +145,7 @@ def separate_pieces(tets: np.ndarray, vertex_count: int, relabel: np.ndarray | N
 
     Returns (new tets, parent) with parent[i] the original vertex of vertex i; vertex ids below ``vertex_count`` keep
     the group holding their lowest slot, new copies are numbered from ``vertex_count`` in (vertex, slot) order."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    from ..graph import connected_components
 
     tets = np.asarray(tets, dtype=np.int64)
     m = tets.shape[0]
@@ -163,8 +162,7 @@ def separate_pieces(tets: np.ndarray, vertex_count: int, relabel: np.ndarray | N
         b = (4 * e[:, 1, None] + corners[:, 1]).ravel()
     else:
         a = b = np.zeros(0, dtype=np.int64)
-    graph = coo_matrix((np.ones(len(a), dtype=np.int8), (a, b)), shape=(4 * m, 4 * m))
-    _, labels = connected_components(graph, directed=False)
+    labels = connected_components(4 * m, a, b)
     # one representative (lowest slot) per component
     comp_first = np.full(labels.max() + 1, 4 * m, dtype=np.int64)
     np.minimum.at(comp_first, labels, np.arange(4 * m))
@@ -186,9 +184,7 @@ def separate_pieces(tets: np.ndarray, vertex_count: int, relabel: np.ndarray | N
 def _edge_fans(tets: np.ndarray):
     """Edge slots (6 e + k, edge k of TET_EDGES in element e) grouped into fans: two slots of one edge are joined when
     their elements share a face containing the edge. Returns (edge key per slot [6m], fan label per slot [6m])."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
+    from ..graph import connected_components
     from .mesh import TET_EDGES
 
     m = tets.shape[0]
@@ -211,9 +207,7 @@ def _edge_fans(tets: np.ndarray):
         b = (6 * e[:, 1, None] + np.take_along_axis(le[:, 1], ob, axis=1)).ravel()
     else:
         a = b = np.zeros(0, dtype=np.int64)
-    graph = coo_matrix((np.ones(len(a), dtype=np.int8), (a, b)), shape=(6 * m, 6 * m))
-    _, labels = connected_components(graph, directed=False)
-    return key, labels
+    return key, connected_components(6 * m, a, b)
 
 
 def _local_edge(a: int, b: int) -> int:
@@ -301,14 +295,14 @@ def make_manifold(tets: np.ndarray, vertex_count: int, dirty_vertices=None, *, m
 
 
 def element_pieces(tets: np.ndarray):
-    """Face-connected pieces: (piece count, piece label per element [element_count])."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    """Face-connected pieces: (piece count, piece label per element int64 [element_count]); pieces are numbered 0,
+    1, ... in the order of their smallest element (pdsim.graph.connected_components)."""
+    from ..graph import connected_components
 
     m = len(tets)
     pairs = interior_face_pairs(tets) // 4
-    graph = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(m, m))
-    return connected_components(graph, directed=False)
+    labels = connected_components(m, pairs[:, 0], pairs[:, 1])
+    return (int(labels.max()) + 1 if m else 0), labels
 
 
 def closed_surface_defects(faces: np.ndarray) -> int:

@@ -141,13 +141,14 @@ def _group_faces(sorted_faces: np.ndarray):
     return order, new
 
 
-def boundary_faces(tets: np.ndarray, *, return_elements: bool = False):
+def boundary_faces(tets: np.ndarray, *, return_elements: bool = False, return_face_ids: bool = False):
     """Faces used by exactly one element, wound outward for positively oriented elements, shape [k, 3], int32; with
-    ``return_elements`` also the element of each face, shape [k]."""
+    ``return_elements`` also the element of each face, shape [k]; with ``return_face_ids`` instead the face id
+    4 e + k of each (element e, local face k of TET_FACES), int64 [k] (stable while elements keep their index)."""
     tets = np.asarray(tets, dtype=np.int64)
     if tets.shape[0] == 0:
         empty = np.zeros((0, 3), dtype=np.int32)
-        return (empty, np.zeros(0, dtype=np.int64)) if return_elements else empty
+        return (empty, np.zeros(0, dtype=np.int64)) if (return_elements or return_face_ids) else empty
     sorted_faces, elem, local = _face_keys(tets)
     order, new = _group_faces(sorted_faces)
     group = np.cumsum(new) - 1
@@ -155,6 +156,8 @@ def boundary_faces(tets: np.ndarray, *, return_elements: bool = False):
     single = counts[group] == 1
     idx = np.sort(order[single])
     faces = tets[elem[idx]][np.arange(len(idx))[:, None], TET_FACES[local[idx]]].astype(np.int32)
+    if return_face_ids:
+        return faces, idx.astype(np.int64)  # faces are numbered 4 e + k by _face_keys
     return (faces, elem[idx]) if return_elements else faces
 
 

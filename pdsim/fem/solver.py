@@ -3,12 +3,19 @@
 A :class:`FemBody` is a linear-tetrahedron mesh of a solid (meshed from a closed surface by fTetWild, or loaded ready)
 with a :class:`pdsim.Material`, a strain measure ("linear", "corotated" or "green", see kernels/fem/elements.py), an
 integrator ("explicit" or "implicit"), and optional plasticity (:class:`FemPlasticity`) and fracture
-(``tensile_strength``). :class:`SolverFem` steps all FEM bodies of a scene together; the scene layer, colliders and USD
-output are shared with the peridynamic solid (``Scene.add_body(FemBody(...))``).
+(``tensile_strength``). :class:`SolverFem` steps all FEM bodies of a scene together on the method-neutral core
+(pdsim/solver.py): its state is the shared :class:`pdsim.kinematics.PointKinematics` on the mesh vertices
+(displacements u from the rest positions, velocities, accelerations; boundary conditions per axis with time windows
+and curves; loads; reactions; the watchdog), the rest positions stored relative to the scene's origin.
+
+Precision: element strains come from displacement differences, G = [u1-u0, u2-u0, u3-u0] Dm^-1 with Dm^-1 computed
+on the host in float64 from rest differences (kernels/fem/elements.py), so a float32 solver gives the same answer
+wherever the scene sits in the world.
 
 Integrators:
 
-- explicit: velocity Verlet with lumped masses m_i = sum over the vertex's elements of rho V / 4. The stable step is
+- explicit: velocity Verlet (kernels/integration.py's kick-drift, then a fused gather of the element forces and the
+  shared second half kick) with lumped masses m_i = sum over the vertex's elements of rho V / 4. The stable step is
   dt_stable = 0.5 h_min / c_p with h_min the smallest element height (3 V / largest face area) and
   c_p = sqrt((lambda + 2 mu) / rho) the dilatational wave speed. The factor 0.5 makes the estimate safe: the
   element-by-element bound 2 / sqrt(max eig(M_e^-1 K_e)), a lower bound of the true critical step, measured at least
@@ -16,39 +23,47 @@ Integrators:
   of whole meshes (largest eigenvalue of M^-1 K) measured 0.88-0.95 h_min / c_p on structured box meshes and
   1.4-3.0 h_min / c_p on fTetWild and jittered meshes (tests/test_fem_dynamics.py: 1.8-1.9 and 5.0-5.2 times the
   automatic step). :meth:`SolverFem.step` refuses a larger step (ParameterError);
-  :meth:`SolverFem.simulate` (what the Scene calls) splits each requested step into equal substeps no longer than
-  dt_stable instead (automatic substepping).
+  :meth:`SolverFem.simulate` splits each requested step into equal substeps no longer than dt_stable instead.
 - implicit: linearly implicit backward Euler with the corotated stiffness (kernels/fem/solver.py), one CG solve per
   step, at any step size; :meth:`SolverFem.stable_time_step` then reports ``implicit_step_ratio`` (default 10) times the
   explicit limit as the step the scene should use. The linear measure uses the constant stiffness, the Green measure
-  has no implicit integrator here (ParameterError).
+  has no implicit integrator here (ParameterError). Constrained components (boundary conditions, per axis) carry the
+  condition's mid-step velocity; the CG works on the free components.
 
-A quasi-static solve (:meth:`SolverFem.solve_static`, Newton iterations with the same CG) verifies the elements
-(patch test, cantilever).
+A quasi-static solve (:meth:`SolverFem.solve_static`, Newton iterations with the same CG) takes the same loads
+(gravity, body forces, tractions, pressures, forces) and the per-axis boundary conditions.
 
 Plasticity is compiled into the element force kernel and its state (a plastic strain tensor per element) allocated
 only when some body yields. Fracture (pdsim/fem/fracture.py) costs one eigen-decomposition per element whose
 Samuelson bound exceeds its strength, a counter read per step, and host topology work (vectorised numpy/scipy, local to
-the split vertices) only on steps where some element exceeded its strength; vertex arrays are then reallocated.
+the split vertices) only on steps where some element exceeded its strength; the vertex arrays and the kinematics are
+then rebuilt from host arrays (displacements, velocities, accelerations and boundary conditions carried over to the
+new vertex numbering, copies inheriting their parent's; loads resolved again on the split mesh).
 
-Colliders: the ground plane and the scene's colliders (pdsim/contact.py) act on the free vertices with zero radius.
-Contact between FEM pieces or bodies is not implemented: pieces of a cracked body pass through each other.
+Colliders: the ground plane and the scene's colliders (pdsim/colliders.py) act on the free vertices with zero radius
+(float32 only). Contact between FEM pieces or bodies is not implemented: pieces of a cracked body pass through each
+other.
 
-Output: per body one ``UsdGeom.Mesh`` holding the boundary surface of every piece (each a closed shell with its own
-vertices), topology time-sampled on frames where fracture changed it; optionally an embedded render mesh.
+Output (:meth:`SolverFem.views`): per body a PointsView of its vertices and a MeshView "<name>_surface" of the
+boundary of every piece (each a closed shell with its own vertices), whose topology version changes when fracture
+changes it; optionally an embedded render mesh "<name>_render".
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
-from ..errors import InstabilityError, ParameterError
+from ..errors import FeatureNotAvailableError, ParameterError
+from ..loads import PointLoads
+from ..regions import region_mask
+from ..solver import PointSolver, SolverContext, register_solver
 from ..validate import check_range
-from .body import PRECISIONS, STIFFNESS_MODES, FemBody
-from .mesh import boundary_faces, element_heights
+from .body import PRECISIONS, STIFFNESS_MODES, FemBody, face_point_forces, lumped_masses
+from .mesh import TET_EDGES, boundary_faces, element_heights
 
 EXPLICIT_STEP_FACTOR = 0.5  # dt_stable = 0.5 h_min / c_p (see the module docstring)
 CG_CHUNK = 256  # vertices per partial sum of the CG reductions
@@ -66,7 +81,7 @@ class CgReport:
 @dataclass
 class StaticSolveReport:
     """Outcome of :meth:`SolverFem.solve_static`: Newton iterations, CG iterations in total, the final equilibrium
-    residual |f_int + f_ext| over free vertices [N] and relative to the external load."""
+    residual |f_int + f_ext| over the free components [N] and relative to the external load."""
 
     newton_iterations: int
     cg_iterations: int
@@ -93,35 +108,76 @@ def _embed(rest: np.ndarray, tets: np.ndarray, points: np.ndarray, *, candidates
     return idx[rows, best], w[rows, best]
 
 
-class SolverFem:
+def _mean_edge_length(vertices: np.ndarray, tets: np.ndarray) -> float:
+    """Mean length of the distinct edges of a tet mesh [m]."""
+    e = np.sort(np.asarray(tets, dtype=np.int64)[:, TET_EDGES].reshape(-1, 2), axis=1)
+    e = np.unique(e, axis=0)
+    return float(np.linalg.norm(vertices[e[:, 1]] - vertices[e[:, 0]], axis=1).mean())
+
+
+class _SplitBody(PointLoads):
+    """A FemBody's boundary conditions, loads and kicks on its vertices after fracture split them (what
+    PointKinematics reads from a body): ``point_condition`` carried to the new numbering, regions selected on the split
+    vertices, surface loads resolved on the faces of the original surface (crack faces carry none)."""
+
+    def __init__(self, body: FemBody, rest: np.ndarray, faces: np.ndarray, point_condition: np.ndarray):
+        self.name = body.name
+        self.conditions = body.conditions
+        self.loads = body.loads
+        self.kicks = body.kicks
+        self.point_condition = point_condition
+        self.point_count = len(rest)
+        self.initial_velocity = np.zeros((len(rest), 3))
+        self._rest = rest
+        self._faces = faces
+
+    def _select(self, region) -> np.ndarray:
+        mask = region_mask(region, self._rest, field="region")
+        if not mask.any():
+            raise ParameterError("region", region, f"a region containing at least one vertex of '{self.name}'")
+        return mask
+
+    def surface_point_forces(self, region, traction, pressure: float):
+        return face_point_forces(self._rest, self._faces, region, traction, pressure)
+
+
+@register_solver
+class SolverFem(PointSolver):
     """Solver for the FEM bodies of a scene (concatenated into one mesh; elements never join two bodies).
 
     Args:
         bodies: the FEM bodies; they must share the strain measure and the integrator.
-        device: Warp device ("cpu", "cuda", ...).
-        gravity: acceleration [m/s^2], 3 numbers.
-        ground: optional :class:`pdsim.GroundPlane` collider (applied to free vertices).
-        colliders: pdsim colliders (MeshCollider, SphereProjectile, ...; pdsim/contact.py) applied to the free vertices
-            after each step's drift with zero collision radius (float32 only).
-        precision: "float32" (default) or "float64" (verification).
+        context: the scene's SolverContext (device, gravity [m/s^2], ground plane, colliders, origin [m] of the local
+            frame; the ground plane and the colliders are bound to it). None: built from ``device``, ``gravity``,
+            ``ground`` and ``colliders`` with the origin at the centre of the bodies' bounding box.
+        device, gravity, ground, colliders: shortcuts for a solver built without a context (ParameterError with one).
+        precision: "float32" (default) or "float64" (verification; no colliders or ground plane).
         cg_tolerance: relative residual |r| / |b| at which CG stops; default 1e-5 (float32) or 1e-10 (float64).
         cg_max_iterations: CG iterations per solve, >= 1 (default 2000).
         stiffness: how CG applies K_R: "matrix_free" (the element kernels with the frozen rotations, per
             iteration) or "assembled" (default; a 3x3-block sparse matrix filled once per solve from the element
             stiffness blocks: about 2x faster per implicit step on the CPU, docs/benchmarks.md).
 
-    ``features`` lists the live optional parts (plasticity, fracture, gravity, ground_plane, damping, render_mesh);
-    kernels are compiled with the dead ones removed, and no state is allocated for them.
+    State: ``kin`` (the shared PointKinematics on the vertices), ``force`` (nodal forces [N]: internal plus loads at
+    the last evaluation), ``inv_mass`` (1 / lumped mass [1/kg]). ``features`` lists the live optional parts
+    (plasticity, fracture, gravity, ground_plane, colliders, damping, render_mesh, boundary_conditions, loads,
+    velocity_kicks); kernels are compiled with the dead ones removed, and no state is allocated for them.
     """
+
+    method: ClassVar[str] = "fem"
+    supported_features: ClassVar[frozenset] = frozenset(
+        {"gravity", "ground_plane", "colliders", "loads", "plasticity", "fracture"}
+    )
 
     def __init__(
         self,
         bodies: list[FemBody],
+        context: SolverContext | None = None,
         *,
-        device="cpu",
-        gravity=(0.0, 0.0, 0.0),
+        device=None,
+        gravity=None,
         ground=None,
-        colliders=(),
+        colliders=None,
         precision: str = "float32",
         cg_tolerance: float | None = None,
         cg_max_iterations: int = 2000,
@@ -134,22 +190,35 @@ class SolverFem:
         bodies = list(bodies)
         if not bodies or not all(isinstance(b, FemBody) for b in bodies):
             raise ParameterError("bodies", bodies, "a non-empty list of pdsim.fem.FemBody")
+        context = self._context(bodies, context, device, gravity, ground, colliders)
         for attr in ("measure", "integrator"):
             values = sorted({getattr(b, attr) for b in bodies})
             if len(values) > 1:
                 raise ParameterError(attr, values, f"one {attr} shared by all FEM bodies of a scene")
         if precision not in PRECISIONS:
             raise ParameterError("precision", precision, " or ".join(map(repr, PRECISIONS)))
-        g = np.asarray(gravity, dtype=np.float64)
+        g = np.asarray(context.gravity, dtype=np.float64)
         if g.shape != (3,) or not np.all(np.isfinite(g)):
-            raise ParameterError("gravity", gravity, "3 finite numbers [m/s^2]")
+            raise ParameterError("gravity", context.gravity, "3 finite numbers [m/s^2]")
         if stiffness not in STIFFNESS_MODES:
             raise ParameterError("stiffness", stiffness, " or ".join(map(repr, STIFFNESS_MODES)))
-        self.stiffness = stiffness
         if int(cg_max_iterations) != cg_max_iterations or cg_max_iterations < 1:
             raise ParameterError("cg_max_iterations", cg_max_iterations, "an integer >= 1")
+        self.check_features(bodies, context)
+        self.colliders = [c for c in [context.ground, *list(context.colliders)] if c is not None]
+        if self.colliders and precision != "float32":
+            names = ", ".join(f"'{b.name}'" for b in bodies)
+            raise FeatureNotAvailableError(
+                f"fem bodies ({names}) with precision={precision!r} cannot use the scene's ground plane or colliders "
+                "(their kernels are float32 only); use precision='float32'"
+            )
+        self.context = context
+        self.stiffness = stiffness
         self.bodies = bodies
-        self.device = wp.get_device(device)
+        self.device = wp.get_device(context.device)
+        self.origin = np.asarray(context.origin, dtype=np.float64).reshape(3)
+        for c in self.colliders:
+            c.bind(self.origin)  # the colliders act in this solver's local frame (world = origin + local)
         self.precision = precision
         self.dtype = wp.float64 if precision == "float64" else wp.float32
         self.np_dtype = np.float64 if precision == "float64" else np.float32
@@ -157,10 +226,6 @@ class SolverFem:
         self.vec2 = wp.types.vector(2, self.dtype)
         self.gravity_host = g
         self.gravity = self.vec3(*g)
-        self.ground = ground
-        self.colliders = list(colliders)
-        if self.colliders and precision != "float32":
-            raise ParameterError("precision", precision, "'float32' in a scene with colliders")
         self.measure = bodies[0].measure
         self.integrator = bodies[0].integrator
         default_tol = 1.0e-10 if precision == "float64" else 1.0e-5
@@ -169,6 +234,8 @@ class SolverFem:
         self.cg_reports: list[CgReport] = []  # of the last step / static solve
         self.time = 0.0
         self.step_count = 0
+        self._dt = 0.0
+        self._force_time = 0.0
         self.topology_version = 0
         self.split_count = 0  # vertex splits performed by fracture
         self.last_splits = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)))  # (vertices, rest-frame normals)
@@ -179,21 +246,73 @@ class SolverFem:
             self.features.add("plasticity")
         if self.fracture:
             self.features.add("fracture")
-        if np.any(g != 0.0):
-            self.features.add("gravity")
-        if ground is not None:
+        if context.ground is not None:
             self.features.add("ground_plane")
-        if self.colliders:
+        if context.colliders:
             self.features.add("colliders")
-        if np.any(self._vertex_damping_h > 0.0):
-            self.features.add("damping")
         if self._render:
             self.features.add("render_mesh")
-        self._handles = []
-        self._collision_radius = None
-        self._written_version: dict[int, int] = {}
+        self.features |= self.kin.features
         if self.integrator == "explicit":
             self._update_accelerations()
+
+    @staticmethod
+    def _context(bodies, context, device, gravity, ground, colliders) -> SolverContext:
+        """The given context, or one built from the shortcuts (origin: the bodies' bounding-box centre)."""
+        from ..kinematics import scene_origin
+
+        shortcuts = {"device": device, "gravity": gravity, "ground": ground, "colliders": colliders}
+        if context is not None:
+            for name, value in shortcuts.items():
+                if value is not None:
+                    raise ParameterError(name, value, "None when a SolverContext is given (set it in the context)")
+            if not isinstance(context, SolverContext):
+                raise ParameterError("context", context, "a pdsim.solver.SolverContext or None")
+            return context
+        origin = scene_origin([b.bounds() for b in bodies])
+        colliders = list(colliders or [])
+        return SolverContext(
+            device="cpu" if device is None else device,
+            gravity=(0.0, 0.0, 0.0) if gravity is None else tuple(np.asarray(gravity, dtype=np.float64).ravel()),
+            ground=ground,
+            colliders=colliders,
+            origin=origin,
+        )
+
+    # -- features -------------------------------------------------------------------------------------------------
+    @classmethod
+    def requested_features(cls, bodies, context: SolverContext) -> dict:
+        """The scene-level requests, plus per body: plasticity (FemPlasticity), fracture (tensile_strength), loads,
+        and the Material fields the FEM does not read (yield_stress, failure_plastic_strain, fracture_energy,
+        critical_stretch, anisotropy: peridynamic settings with FEM counterparts named by :meth:`instead`)."""
+        asked = super().requested_features(bodies, context)
+        for b in bodies:
+            m = b.material
+            if getattr(b, "plasticity", None) is not None:
+                asked.setdefault("plasticity", f"body '{b.name}' plasticity")
+            if getattr(b, "tensile_strength", None) is not None:
+                asked.setdefault("fracture", f"body '{b.name}' tensile_strength")
+            if getattr(b, "loads", None):
+                asked.setdefault("loads", f"body '{b.name}' loads")
+            for field in ("yield_stress", "failure_plastic_strain"):
+                if getattr(m, field, None) is not None:
+                    asked.setdefault("material_plasticity", f"body '{b.name}': Material.{field}={getattr(m, field)!r}")
+            for field in ("fracture_energy", "critical_stretch"):
+                if getattr(m, field, None) is not None:
+                    asked.setdefault("material_fracture", f"body '{b.name}': Material.{field}={getattr(m, field)!r}")
+            if getattr(m, "anisotropy", None) is not None:
+                asked.setdefault("anisotropy", f"body '{b.name}': Material.anisotropy")
+        return asked
+
+    @classmethod
+    def instead(cls, feature: str) -> str:
+        return {
+            "material_plasticity": "FEM plasticity is set on the body: FemBody(..., plasticity=FemPlasticity("
+            "yield_strain=..., creep=..., max_strain=...)); remove the Material field",
+            "material_fracture": "FEM fracture is set on the body: FemBody(..., tensile_strength=...) [Pa]; remove the "
+            "Material field",
+            "anisotropy": "the FEM material is isotropic; remove Material.anisotropy or use a PeridynamicBody",
+        }.get(feature, super().instead(feature))
 
     # -- model ----------------------------------------------------------------------------------------------------
     def _build_model(self):
@@ -206,7 +325,7 @@ class SolverFem:
         e_counts = [b.element_count for b in bodies]
         v_off = np.concatenate([[0], np.cumsum(v_counts)]).astype(np.int64)
         self.element_offsets = np.concatenate([[0], np.cumsum(e_counts)]).astype(np.int64)
-        rest = np.concatenate([b.mesh.vertices for b in bodies])
+        rest = np.concatenate([b.mesh.vertices for b in bodies]).astype(np.float64)
         tets = np.concatenate([b.mesh.tets.astype(np.int64) + v_off[i] for i, b in enumerate(bodies)])
         self.element_body = np.repeat(np.arange(len(bodies)), e_counts)
         mats = [b.material for b in bodies]
@@ -214,7 +333,16 @@ class SolverFem:
         def per_element(values):
             return np.asarray(values, dtype=np.float64)[self.element_body]
 
-        x = rest[tets]
+        # the element geometry (Dm^-1, volumes, crack planes) is that of the local rest positions exactly as the
+        # solver stores them (kin.rest: float32-rounded in a float32 solver), differenced in float64: the same digits
+        # wherever the scene sits in the world, so a translated scene computes and decides (crack planes) bit for bit
+        # the same; the stable step and the lumped masses use the float64 local rest positions
+        self._rest_local64_h = rest - self.origin
+        local = self._rest_local64_h
+        if self.np_dtype == np.float32:
+            local = local.astype(np.float32).astype(np.float64)
+        self._rest_local_h = local
+        x = local[tets]
         dm = np.stack([x[:, 1] - x[:, 0], x[:, 2] - x[:, 0], x[:, 3] - x[:, 0]], axis=-1)  # columns
         self._volume_h = np.linalg.det(dm) / 6.0
         dm_inv = np.linalg.inv(dm)
@@ -222,9 +350,9 @@ class SolverFem:
         lam = per_element([m.lame_lambda for m in mats])
         mu = per_element([m.shear_modulus for m in mats])
         cp = per_element([m.p_wave_speed for m in mats])
-        heights = element_heights(rest, tets)
+        heights = element_heights(self._rest_local64_h, tets)
         self._explicit_dt = float(EXPLICIT_STEP_FACTOR * np.min(heights / cp))
-        self._centroids_h = x.mean(axis=1)
+        self._centroids_h = x.mean(axis=1)  # local frame (fracture's crack planes)
         self.plastic = any(b.plasticity is not None for b in bodies)
         self.fracture = any(b.tensile_strength is not None for b in bodies)
         dev, f = self.device, self.np_dtype
@@ -265,7 +393,10 @@ class SolverFem:
         self._measure_id = ke.MEASURES[self.measure]
         self._rotated = self.measure == "corotated"
         self._force_kernel = ke.element_force_kernel(self.dtype, self._measure_id, self.plastic, self.fracture, True)
-        self._check = wp.zeros(2, dtype=float, device=dev)
+        # faces of the input surfaces (4 e + k): every other boundary face is a crack face
+        self._surface_face_ids = boundary_faces(tets, return_face_ids=True)[1]
+        self._widths = [0.5 * _mean_edge_length(b.mesh.vertices, b.mesh.tets) for b in bodies]
+        self._body_topology_version = [0] * len(bodies)
 
         # render meshes: barycentric embedding in the body's own elements (global element ids)
         self._render = []
@@ -274,61 +405,74 @@ class SolverFem:
                 continue
             lo, hi = self.element_offsets[i], self.element_offsets[i + 1]
             elem, w = _embed(rest, tets[lo:hi], np.asarray(b.render_mesh.vertices, dtype=np.float64))
+            elem = elem + lo
+            rest_points = np.einsum("pa,paj->pj", w, rest[tets[elem]])  # float64 world rest of the embedded points
             self._render.append(
                 (
                     i,
-                    wp.array((elem + lo).astype(np.int32), dtype=wp.int32, device=dev),
+                    wp.array(elem.astype(np.int32), dtype=wp.int32, device=dev),
                     wp.array(w.astype(f), dtype=self.vec4, device=dev),
                     np.asarray(b.render_mesh.faces, dtype=np.int32),
-                    wp.zeros(len(w), dtype=wp.vec3, device=dev),
+                    rest_points,
+                    wp.zeros(len(w), dtype=self.vec3, device=dev),
+                    wp.zeros(len(w), dtype=self.vec3, device=dev),
                 )
             )
 
         # vertex data (rebuilt when fracture changes the topology)
         self._rest_h = rest
         self._tets_h = tets
-        self._kind_h = np.concatenate([b.kind for b in bodies]).astype(np.int32)
-        self._presc_h = np.concatenate([b.prescribed_velocity for b in bodies])
-        self._release_h = np.concatenate([b.release_time for b in bodies])
         self._vertex_body_h = np.repeat(np.arange(len(bodies)), v_counts)
-        self._vertex_damping_h = np.asarray([b.damping for b in bodies], dtype=np.float64)[self._vertex_body_h]
+        self._point_condition_h = np.concatenate([b.point_condition for b in bodies]).astype(np.int32)  # body-local
         self._crack_vertex_h = np.zeros(len(rest), dtype=bool)
-        init_v = np.concatenate([b.initial_velocity for b in bodies])
-        self._upload_vertices(rest, init_v, np.zeros_like(rest))
+        self._build_vertex_data(bodies)
 
-    def _upload_vertices(self, positions, velocities, accelerations):
-        """(Re)allocates every per-vertex array from host data and the current topology ``self._tets_h``."""
+    def _build_vertex_data(self, kin_bodies, state=None):
+        """(Re)allocates every per-vertex array and the kinematics from the host arrays and the current topology
+        ``self._tets_h``; ``state`` = (u, v, a) [n, 3] to carry over (None: rest, initial velocities)."""
         import warp as wp
 
+        from ..kinematics import PointKinematics
         from .fracture import vertex_incidence
 
         dev, f = self.device, self.np_dtype
         n = len(self._rest_h)
-        self.vertex_count = n
         tets = self._tets_h
         self._tets = wp.array(tets.astype(np.int32), dtype=wp.vec4i, device=dev)
         offsets, slots = vertex_incidence(tets, n)
         self._vertex_offsets = wp.array(offsets.astype(np.int32), dtype=wp.int32, device=dev)
         self._vertex_slots = wp.array(slots.astype(np.int32), dtype=wp.int32, device=dev)
-        mass = np.bincount(tets.ravel(), weights=np.repeat(self._density_h * self._volume_h / 4.0, 4), minlength=n)
+        mass = lumped_masses(self._rest_local64_h, tets, self._density_h)
         self._mass_h = mass
+        self._vertex_damping_h = np.asarray([b.damping for b in self.bodies], dtype=np.float64)[self._vertex_body_h]
+        body_offsets = np.concatenate([[0], np.cumsum(np.bincount(self._vertex_body_h, minlength=len(self.bodies)))])
+        self.body_offsets = body_offsets.astype(np.int64)
+        old = getattr(self, "kin", None)
+        self.kin = PointKinematics(
+            kin_bodies,
+            self.body_offsets,
+            self._rest_h,
+            self.origin,
+            mass,
+            np.ones(n),
+            self._vertex_damping_h,
+            self.gravity_host,
+            dev,
+            self.dtype,
+        )
+        if old is not None:
+            self.kin._next_kick = old._next_kick
+            self.kin.time = old.time
+        if state is not None:
+            u, v, a = state
+            self.kin.set_displacements(u)
+            self.kin.set_velocities(v)
+            wp.copy(self.kin.a, wp.array(np.asarray(a, dtype=f), dtype=self.vec3, device=dev))
 
-        def vec(a):
-            return wp.array(np.asarray(a, dtype=f), dtype=self.vec3, device=dev)
-
-        def scal(a):
-            return wp.array(np.asarray(a, dtype=f), dtype=self.dtype, device=dev)
-
-        self.positions_wp = vec(positions)
-        self.velocities_wp = vec(velocities)
-        self._accelerations = vec(accelerations)
-        self._forces = wp.zeros(n, dtype=self.vec3, device=dev)
-        self._rest = vec(self._rest_h)
-        self._kind = wp.array(self._kind_h, dtype=wp.int32, device=dev)
-        self._prescribed = vec(self._presc_h)
-        self._mass = scal(mass)
-        self._inv_mass = scal(1.0 / mass)
-        self._damping = scal(self._vertex_damping_h)
+        self._mass = wp.array(mass.astype(f), dtype=self.dtype, device=dev)
+        self.inv_mass = wp.array((1.0 / mass).astype(f), dtype=self.dtype, device=dev)
+        self.force = wp.zeros(n, dtype=self.vec3, device=dev)
+        self._zero_radius = wp.zeros(n, dtype=float, device=dev)
         self._op_mass = None
         self._op_mass_dt = None
         # CG work arrays
@@ -341,14 +485,15 @@ class SolverFem:
         self._cg_p = wp.zeros(n, dtype=self.vec3, device=dev)
         self._cg_q = wp.zeros(n, dtype=self.vec3, device=dev)
         self._cg_precond = wp.zeros(n, dtype=self.mat33, device=dev)
-        self._constrained = wp.array((self._kind_h != 0).astype(np.int32), dtype=wp.int32, device=dev)
+        self._constrained = wp.zeros(n, dtype=wp.int32, device=dev)  # bit mask of the constrained axes
         self._cg_partial = wp.zeros(chunks, dtype=self.dtype, device=dev)
         self._cg_partial2 = wp.zeros(chunks, dtype=self.vec2, device=dev)
         self._cg_partial3 = wp.zeros(chunks, dtype=self.vec3, device=dev)
         self._cg_scalars = wp.zeros(8, dtype=self.dtype, device=dev)
         self._cg_chunks = chunks
-        self._next_release = float(self._release_h[self._kind_h == 2].min(initial=np.inf))
-        self._surfaces = None  # per body (vertex ids, faces), rebuilt lazily
+        self._surfaces = None  # per body (vertex ids, faces, fragment, crack), rebuilt lazily
+        self._contact_mesh = None  # (vertex ids, triangles) Warp arrays for MethodContact, rebuilt lazily
+        self._fragments = None
         self._bsr = None  # assembled stiffness pattern, rebuilt lazily
 
     # -- time step ------------------------------------------------------------------------------------------------
@@ -363,8 +508,9 @@ class SolverFem:
         return self._explicit_dt
 
     # -- kernels ----------------------------------------------------------------------------------------------------
-    def _compute_element_forces(self, dt: float, positions=None):
-        """Corner forces of every element at ``positions`` (default: current), with the plastic update of step dt."""
+    def _compute_element_forces(self, dt: float, displacements=None):
+        """Corner forces of every element at ``displacements`` (default: the current ones), with the plastic update
+        of step dt."""
         import warp as wp
 
         if self.fracture:
@@ -373,7 +519,7 @@ class SolverFem:
             self._force_kernel,
             dim=self.element_count,
             inputs=[
-                self.positions_wp if positions is None else positions,
+                self.kin.u if displacements is None else displacements,
                 self._tets,
                 self._dm_inv,
                 self._volume,
@@ -391,74 +537,106 @@ class SolverFem:
             device=self.device,
         )
 
-    def _update_accelerations(self):
-        """a = f / m + g - c v at the current state, without a kick or a plastic update (after init and splits)."""
-        self._compute_element_forces(0.0)
-        self._gather_kick(0.0)
-        if self.fracture:
-            self._over_count.zero_()
+    def _loads_into_force(self, t: float):
+        """``force`` <- the loads at time ``t`` [s] (zero without loads); the gathers add the element forces."""
+        self.force.zero_()
+        self.kin.add_loads(self.force, t)
 
-    def _collide(self, dt: float):
-        """Ground plane, then the scene's colliders, on the positions at the end of the step (time + dt), as the
-        peridynamic solver does."""
+    def _gather(self, kernel: str, dt: float = 0.0):
         import warp as wp
 
         from ..kernels.fem import solver as ks
 
-        if self.ground is not None:
-            g = self.ground
-            wp.launch(
-                ks.vertex_kernels(self.dtype)["collide_ground_plane"],
-                dim=self.vertex_count,
-                inputs=[
-                    self.positions_wp,
-                    self.velocities_wp,
-                    self._kind,
-                    self.vec3(*g.normal),
-                    self.dtype(g.offset),
-                    self.dtype(g.friction),
-                ],
-                device=self.device,
-            )
-        if self.colliders:
-            if self._collision_radius is None or self._collision_radius.shape[0] != self.vertex_count:
-                self._collision_radius = wp.zeros(self.vertex_count, dtype=float, device=self.device)
-            for c in self.colliders:
-                c.apply(self.positions_wp, self.velocities_wp, self._collision_radius, self._kind, self.time + dt, dt)
+        vk = ks.vertex_kernels(self.dtype)
+        if kernel == "gather_add":
+            inputs = [self._vertex_offsets, self._vertex_slots, self._corner, self.force]
+        else:
+            kin = self.kin
+            inputs = [
+                self._vertex_offsets,
+                self._vertex_slots,
+                self._corner,
+                self.inv_mass,
+                self.gravity,
+                kin.damping,
+                self.dtype(dt),
+                kin.point_condition,
+                kin.point_kind,
+                kin.cond_axes,
+                self.force,
+                kin.v,
+                kin.a,
+            ]
+        wp.launch(vk[kernel], dim=self.point_count, inputs=inputs, device=self.device)
+
+    def _update_accelerations(self):
+        """a = f / m + g - c v at the current state, without a kick or a plastic update (after init, splits and
+        state changes)."""
+        self._compute_element_forces(0.0)
+        self._loads_into_force(self.time)
+        self._gather("gather_kick", 0.0)
+        if self.fracture:
+            self._over_count.zero_()
+
+    def apply_colliders(self, time: float, dt: float) -> None:
+        """Ground plane, then the scene's colliders, on the free vertices (zero radius) at ``time`` [s]."""
+        kin = self.kin
+        for c in self.colliders:
+            c.apply(kin.rest, kin.u, kin.v, self._zero_radius, kin.point_kind, time, dt)
 
     # -- stepping ---------------------------------------------------------------------------------------------------
+    def begin_step(self, dt: float) -> None:
+        """Explicit: the shared kick-drift and the colliders (PointSolver). Implicit: the whole backward-Euler step
+        (forces at the start of the step, CG solve, displacement update, colliders); forces added to ``force`` after
+        it are not used."""
+        self._dt = float(dt)
+        if self.integrator == "implicit":
+            self._force_time = self.time + dt
+            self._step_implicit(dt)
+        else:
+            super().begin_step(dt)
+
+    def compute_forces(self) -> None:
+        """Explicit: element forces at the current displacements (plastic update of the step begun) plus the loads at
+        the end of the step into ``force``. Implicit: nothing (``force`` holds the forces the step used)."""
+        if self.integrator == "implicit":
+            return
+        self._compute_element_forces(self._dt)
+        self._loads_into_force(self._force_time)
+        self._gather("gather_add")
+
+    def end_step(self, dt: float) -> None:
+        """Explicit: the shared second half kick. Both: time advances, then fracture splits over-stressed elements."""
+        if self.integrator == "implicit":
+            self.time += dt
+            self.step_count += 1
+        else:
+            super().end_step(dt)
+        if self.fracture:
+            self._fracture_event()
+
     def step(self, dt: float):
         """Advances all bodies by one step of ``dt`` [s]. The explicit integrator refuses dt above its stable limit
         (ParameterError); use :meth:`simulate` for automatic substepping."""
         dt = check_range("dt", dt, 0.0, None)
-        if self.integrator == "explicit":
-            limit = self._explicit_dt
-            if dt > limit * (1.0 + 1.0e-9):
-                raise ParameterError(
-                    "dt", dt, f"(0, {limit:.6g}] s: the explicit stable limit 0.5 h_min / c_p (simulate() substeps)"
-                )
-            self._step_explicit(dt)
-        else:
-            self._step_implicit(dt)
+        if self.integrator == "implicit":
+            self.begin_step(dt)
+            self.end_step(dt)
+            return
+        limit = self._explicit_dt
+        if dt > limit * (1.0 + 1.0e-9):
+            raise ParameterError(
+                "dt", dt, f"(0, {limit:.6g}] s: the explicit stable limit 0.5 h_min / c_p (simulate() substeps)"
+            )
+        self.begin_step(dt)
+        # compute_forces and the kick fused: one gather-and-kick launch
+        self._compute_element_forces(dt)
+        self._loads_into_force(self._force_time)
+        self._gather("gather_kick", dt)
         self.time += dt
         self.step_count += 1
         if self.fracture:
             self._fracture_event()
-        if self.time >= self._next_release:
-            self._release_vertices()
-
-    def _release_vertices(self):
-        """Prescribed vertices whose release time has passed become free (they keep their current velocity)."""
-        import warp as wp
-
-        due = (self._kind_h == 2) & (self._release_h <= self.time)
-        self._kind_h = np.where(due, 0, self._kind_h).astype(np.int32)
-        self._release_h = np.where(due, np.inf, self._release_h)
-        self._next_release = float(self._release_h[self._kind_h == 2].min(initial=np.inf))
-        self._kind = wp.array(self._kind_h, dtype=wp.int32, device=self.device)
-        self._constrained = wp.array((self._kind_h != 0).astype(np.int32), dtype=wp.int32, device=self.device)
-        if self.integrator == "explicit":
-            self._update_accelerations()
 
     def simulate(self, dt: float, steps: int):
         """Runs ``steps`` steps of ``dt`` [s]; the explicit integrator splits each into ceil(dt / dt_stable) equal
@@ -470,57 +648,16 @@ class SolverFem:
         for _ in range(int(steps) * sub):
             self.step(dt / sub)
 
-    def _step_explicit(self, dt: float):
+    def _apply_velocity_kicks(self, t: float, dt: float):
+        """The bodies' velocity kicks due in [t, t + dt) (as PointKinematics.begin_step does for the explicit
+        integrator)."""
         import warp as wp
 
-        from ..kernels.fem import solver as ks
-
-        kick_drift, _ = ks.explicit_kernels(self.dtype)
-        d = self.device
-        wp.launch(
-            kick_drift,
-            dim=self.vertex_count,
-            inputs=[
-                self.positions_wp,
-                self.velocities_wp,
-                self._accelerations,
-                self._rest,
-                self._kind,
-                self._prescribed,
-                self.dtype(dt),
-            ],
-            device=d,
-        )
-        self._collide(dt)
-        self._compute_element_forces(dt)
-        self._gather_kick(dt)
-
-    def _gather_kick(self, dt: float):
-        """Gathers the element corner forces into vertex forces, a = f / m + g - c v, and kicks free vertices by
-        dt / 2 (dt = 0: accelerations only)."""
-        import warp as wp
-
-        from ..kernels.fem import solver as ks
-
-        _, gather_kick = ks.explicit_kernels(self.dtype)
-        wp.launch(
-            gather_kick,
-            dim=self.vertex_count,
-            inputs=[
-                self._vertex_offsets,
-                self._vertex_slots,
-                self._corner,
-                self._inv_mass,
-                self._kind,
-                self.gravity,
-                self._damping,
-                self.dtype(dt),
-                self.velocities_wp,
-                self._accelerations,
-                self._forces,
-            ],
-            device=self.device,
-        )
+        kin = self.kin
+        while kin._next_kick < len(kin.kicks) and kin.kicks[kin._next_kick][0] < t + dt:
+            _, pts, dv = kin.kicks[kin._next_kick]
+            wp.launch(kin.k.add_velocity, dim=pts.shape[0], inputs=[pts, wp.vec3(*dv), kin.v], device=self.device)
+            kin._next_kick += 1
 
     def _operator_mass(self, dt: float):
         """(1 + dt c) m per vertex (the mass term of the backward-Euler operator), cached per dt and topology."""
@@ -533,42 +670,49 @@ class SolverFem:
         return self._op_mass
 
     def _step_implicit(self, dt: float):
+        """Backward Euler: kicks, conditions at the mid-step, forces at u_n with the loads at t + dt, the CG solve
+        for v_{n+1} (constrained components at the condition's velocity), u += dt v, colliders at t + dt."""
         import warp as wp
 
         from ..kernels.fem import solver as ks
 
-        d = self.device
+        d, kin, t = self.device, self.kin, self.time
+        self._apply_velocity_kicks(t, dt)
+        if kin.condition_count:
+            kin._evaluate_conditions(t + 0.5 * dt)
         self._compute_element_forces(dt)
+        self._loads_into_force(t + dt)
+        self._gather("gather_add")
         wp.launch(
             ks.implicit_rhs_kernel(self.dtype),
-            dim=self.vertex_count,
+            dim=self.point_count,
             inputs=[
-                self._vertex_offsets,
-                self._vertex_slots,
-                self._corner,
+                self.force,
                 self._mass,
-                self.velocities_wp,
-                self._kind,
-                self._prescribed,
+                kin.v,
+                kin.point_condition,
+                kin.active_kind,
+                kin.cond_axes,
+                kin.active_velocity,
                 self.gravity,
                 self.dtype(dt),
-                self._forces,
                 self._cg_rhs,
                 self._cg_x,
                 self._constrained,
+                kin.point_kind,
             ],
             device=d,
         )
         report = self._cg_solve(self._operator_mass(dt), 1.0, dt * dt)
         self.cg_reports = [report]
-        wp.copy(self.velocities_wp, self._cg_x)
+        wp.copy(kin.v, self._cg_x)
         wp.launch(
-            ks.vertex_kernels(self.dtype)["advance_positions"],
-            dim=self.vertex_count,
-            inputs=[self.positions_wp, self.velocities_wp, self._rest, self._kind, self.dtype(dt)],
+            ks.vertex_kernels(self.dtype)["advance_displacements"],
+            dim=self.point_count,
+            inputs=[kin.u, kin.v, self.dtype(dt)],
             device=d,
         )
-        self._collide(dt)
+        self.apply_colliders(t + dt, dt)
 
     def _apply_stiffness(self, u, out_corner):
         import warp as wp
@@ -583,14 +727,15 @@ class SolverFem:
         )
 
     def _cg_solve(self, op_mass, c_mass: float, c_stiff: float, *, tolerance=None, max_iterations=None) -> CgReport:
-        """Solves (c_mass diag(op_mass) + c_stiff K_R) x = rhs on the unconstrained vertices by block-Jacobi
-        preconditioned CG; ``self._cg_x`` holds the initial guess (kept on constrained vertices) and the result."""
+        """Solves (c_mass diag(op_mass) + c_stiff K_R) x = rhs on the free components (``self._constrained`` bit
+        masks) by block-Jacobi preconditioned CG; ``self._cg_x`` holds the initial guess (kept on the constrained
+        components) and the result."""
         import warp as wp
 
         from ..kernels.fem import solver as ks
 
         k = ks.cg_kernels(self.dtype, self._rotated)
-        d, n, ch, chunks = self.device, self.vertex_count, self._chunk, self._cg_chunks
+        d, n, ch, chunks = self.device, self.point_count, self._chunk, self._cg_chunks
         tol = self.cg_tolerance if tolerance is None else tolerance
         max_it = self.cg_max_iterations if max_iterations is None else int(max_iterations)
         c_mass, c_stiff = self.dtype(c_mass), self.dtype(c_stiff)
@@ -627,7 +772,7 @@ class SolverFem:
             )
             op_kernel = k["operator_gather"]
             op_inputs = [self._vertex_offsets, self._vertex_slots, self._corner_product, op_mass, c_mass, c_stiff]
-        # q = A x0 (constrained rows zeroed), r = b - q, z = P r, p = z
+        # q = A x0 (constrained components zeroed), r = b - q, z = P r, p = z
         if not assembled:
             self._apply_stiffness(self._cg_x, self._corner_product)
         wp.launch(
@@ -703,12 +848,13 @@ class SolverFem:
 
         d = self.device
         if self._bsr is None:
-            n, m = self.vertex_count, self.element_count
+            n, m = self.point_count, self.element_count
             tets = self._tets_h
             rows = np.repeat(tets, 4, axis=1).ravel()  # (e, a, b) in 16 e + 4 a + b order
             cols = np.tile(tets, (1, 4)).ravel()
             key = rows * n + cols
             uniq, block_of = np.unique(key, return_inverse=True)
+            block_of = block_of.ravel()
             row_of_block = uniq // n
             row_offsets = np.zeros(n + 1, dtype=np.int64)
             np.cumsum(np.bincount(row_of_block, minlength=n), out=row_offsets[1:])
@@ -748,19 +894,25 @@ class SolverFem:
         self,
         *,
         constrained=None,
+        time: float | None = None,
         tolerance: float = 1.0e-6,
         max_newton_iterations: int = 30,
         cg_tolerance: float | None = None,
         cg_max_iterations: int = 20000,
     ) -> StaticSolveReport:
-        """Quasi-static equilibrium f_int(x) + M g = 0 on the unconstrained vertices, by Newton iterations with the
-        tangent K_R (rotations frozen per iteration; the constant K for the linear and the Green measure), each solved
-        by CG. Constrained vertices keep their current positions. The plastic strain is not updated.
+        """Quasi-static equilibrium f_int(u) + f_ext(t) + M g = 0 on the free components, by Newton iterations with
+        the tangent K_R (rotations frozen per iteration; the constant K for the linear and the Green measure), each
+        solved by CG. The loads are those of the bodies (body forces, tractions, pressures, forces) scaled by their
+        curves at ``time``; the constrained components keep their current displacement. The plastic strain is not
+        updated. Afterwards ``force`` holds the internal forces plus the loads at the solution (reaction_forces()).
 
         Args:
-            constrained: bool mask [vertex_count] of vertices held in place; default: the fixed and prescribed ones.
-            tolerance: stop when |residual| <= tolerance * |M g| (or * the first residual without gravity), or when a
-                Newton update is below max(tolerance, 1000 eps) times the displacement so far (the float32 floor).
+            constrained: bool mask [vertex_count] of vertices held in place on all axes; default: the boundary
+                conditions active at ``time``, each on its own axes (a roller holds only its axes).
+            time: the time [s] of the loads' curves and of the conditions' windows; default: the solver's time.
+            tolerance: stop when |residual| <= tolerance * |f_ext + M g| over the free components (or * the first
+                residual without external load), or when a Newton update is below max(tolerance, 1000 eps) times the
+                displacement change so far (the float32 floor).
             max_newton_iterations: Newton iterations at most (the linear measure needs one).
             cg_tolerance: relative CG residual per Newton iteration (default: the solver's).
             cg_max_iterations: CG iterations per Newton iteration.
@@ -769,35 +921,45 @@ class SolverFem:
 
         from ..kernels.fem import solver as ks
 
-        n = self.vertex_count
-        mask = self._kind_h != 0 if constrained is None else np.asarray(constrained)
-        if mask.shape != (n,) or mask.dtype != np.bool_:
-            raise ParameterError("constrained", constrained, f"a bool mask of shape ({n},) or None")
+        n = self.point_count
+        kin = self.kin
+        t = self.time if time is None else float(time)
         tolerance = check_range("tolerance", tolerance, 0.0, None)
         vk = ks.vertex_kernels(self.dtype)
         d = self.device
-        constrained_wp = wp.array(mask.astype(np.int32), dtype=wp.int32, device=d)
-        saved = self._constrained
-        self._constrained = constrained_wp
+        if constrained is None:
+            if kin.condition_count:
+                kin._evaluate_conditions(t)
+            wp.launch(
+                vk["constraint_bits"],
+                dim=n,
+                inputs=[kin.point_condition, kin.active_kind, kin.cond_axes, kin.point_kind, self._constrained],
+                device=d,
+            )
+            bits = self._constrained.numpy()
+        else:
+            mask = np.asarray(constrained)
+            if mask.shape != (n,) or mask.dtype != np.bool_:
+                raise ParameterError("constrained", constrained, f"a bool mask of shape ({n},) or None")
+            bits = np.where(mask, 7, 0).astype(np.int32)
+            wp.copy(self._constrained, wp.array(bits, dtype=wp.int32, device=d))
+        free = ((bits[:, None] >> np.arange(3)) & 1) == 0  # [n, 3]
+        self._loads_into_force(t)
+        external = self.force.numpy().astype(np.float64) + self._mass_h[:, None] * self.gravity_host
+        load = float(np.linalg.norm(external[free]))
         zero_mass = wp.zeros(n, dtype=self.dtype, device=d)
-        free = ~mask
-        load = float(np.linalg.norm(self._mass_h[free]) * np.linalg.norm(self.gravity_host))
         reports = []
-        x_start = self.positions()
+        u_start = kin.displacements()
         step_tol = max(tolerance, 1000.0 * float(np.finfo(self.np_dtype).eps))
 
         def residual_norm() -> float:
             self._compute_element_forces(0.0)
-            wp.launch(
-                vk["gather_forces"],
-                dim=n,
-                inputs=[self._vertex_offsets, self._vertex_slots, self._corner, self._forces],
-                device=d,
-            )
+            self._loads_into_force(t)
+            self._gather("gather_add")
             wp.launch(
                 vk["residual_forces"],
                 dim=n,
-                inputs=[self._forces, self._mass, self.gravity, constrained_wp, self._cg_rhs],
+                inputs=[self.force, self._mass, self.gravity, self._constrained, self._cg_rhs],
                 device=d,
             )
             return float(np.linalg.norm(self._cg_rhs.numpy().astype(np.float64)))
@@ -812,16 +974,15 @@ class SolverFem:
                 reports.append(
                     self._cg_solve(zero_mass, 0.0, 1.0, tolerance=cg_tolerance, max_iterations=cg_max_iterations)
                 )
-                wp.launch(vk["apply_displacement"], dim=n, inputs=[self.positions_wp, self._cg_x], device=d)
+                wp.launch(vk["apply_increment"], dim=n, inputs=[kin.u, self._cg_x], device=d)
                 du = float(np.linalg.norm(self._cg_x.numpy().astype(np.float64)))
-                u = float(np.linalg.norm(self.positions() - x_start))
+                u = float(np.linalg.norm(kin.displacements() - u_start))
                 res = residual_norm()
                 if self.measure == "linear":
                     break  # the linear problem is solved by one iteration (to the CG tolerance)
                 if newton > 0 and du <= step_tol * u:
                     break  # converged in the increment (float32 round-off bounds the residual)
         finally:
-            self._constrained = saved
             if self.fracture:
                 self._over_count.zero_()
         self.cg_reports = reports
@@ -836,7 +997,7 @@ class SolverFem:
 
     # -- fracture -----------------------------------------------------------------------------------------------
     def apply_fracture(self) -> int:
-        """Evaluates the stresses at the current positions (no plastic update) and performs the crack splits of
+        """Evaluates the stresses at the current displacements (no plastic update) and performs the crack splits of
         every element over its strength, as a step does; returns the number of vertex splits."""
         if not self.fracture:
             raise ParameterError("tensile_strength", None, "a value > 0 on some body to use fracture")
@@ -858,10 +1019,10 @@ class SolverFem:
         over = np.flatnonzero(principal[:, 3] > self._strength_h)
         if over.size == 0:
             return False
-        nv = self.vertex_count
+        nv = self.point_count
         verts, normals, sources = choose_splits(
             self._tets_h,
-            self._rest_h,
+            self._rest_local_h,
             self._centroids_h,
             over,
             principal[over, :3],
@@ -870,7 +1031,7 @@ class SolverFem:
         )
         if len(verts) == 0:
             return False
-        tets1, parent1 = split_vertices(self._tets_h, self._rest_h, self._centroids_h, verts, normals)
+        tets1, parent1 = split_vertices(self._tets_h, self._rest_local_h, self._centroids_h, verts, normals)
         copies = np.arange(nv, len(parent1))
         tets2, parent2 = make_manifold(tets1, len(parent1), np.concatenate([verts, copies]))
         parent = parent1[parent2]
@@ -879,6 +1040,8 @@ class SolverFem:
         crack[nv:] = True
         self.split_count += len(verts)
         self.last_splits = (verts.copy(), normals.copy())
+        for b in np.unique(self._vertex_body_h[verts]):
+            self._body_topology_version[int(b)] += 1
         # an element splits at most once (pdsim/fem/fracture.py): retire the sources from the strength test
         self._strength_h[sources] = np.inf
         self._strength = wp.array(self._strength_h.astype(self.np_dtype), dtype=self.dtype, device=self.device)
@@ -886,132 +1049,195 @@ class SolverFem:
         return True
 
     def _apply_topology(self, tets: np.ndarray, parent: np.ndarray, crack: np.ndarray):
-        """Installs new element corners; vertex i of the new numbering copies the state of old vertex parent[i]."""
-        x = self.positions_wp.numpy()[parent]
-        v = self.velocities_wp.numpy()[parent]
-        a = self._accelerations.numpy()[parent]
-        self._rest_h = self._rest_h[parent]
-        self._kind_h = self._kind_h[parent]
-        self._presc_h = self._presc_h[parent]
-        self._release_h = self._release_h[parent]
-        self._vertex_body_h = self._vertex_body_h[parent]
-        self._vertex_damping_h = self._vertex_damping_h[parent]
-        self._crack_vertex_h = crack
-        self._tets_h = np.asarray(tets, dtype=np.int64)
-        self._upload_vertices(x, v, a)
+        """Installs new element corners; vertex i of the new numbering copies the state of old vertex parent[i]
+        (displacement, velocity, acceleration, boundary condition). Vertices are then renumbered body by body (stable:
+        a single body keeps the numbering of the split), and the kinematics rebuilt from host arrays. The split keeps
+        the old numbering as a prefix and appends the copies, so each body's first vertex_count vertices remain its
+        input vertices (views() relies on it)."""
+        body = self._vertex_body_h[parent]
+        perm = np.argsort(body, kind="stable")  # new vertex k is the split's vertex perm[k]
+        inverse = np.empty_like(perm)
+        inverse[perm] = np.arange(len(perm))
+        source = parent[perm]
+        kin = self.kin
+        state = (kin.u.numpy()[source], kin.v.numpy()[source], kin.a.numpy()[source])
+        self._rest_h = self._rest_h[source]
+        self._rest_local_h = self._rest_local_h[source]
+        self._rest_local64_h = self._rest_local64_h[source]
+        self._vertex_body_h = self._vertex_body_h[source]
+        self._point_condition_h = self._point_condition_h[source]
+        self._crack_vertex_h = crack[perm]
+        self._tets_h = inverse[np.asarray(tets, dtype=np.int64)]
+        faces, fid = boundary_faces(self._tets_h, return_face_ids=True)
+        original = np.isin(fid, self._surface_face_ids)
+        face_body = self.element_body[fid // 4]
+        proxies = []
+        for i, b in enumerate(self.bodies):
+            lo, hi = np.searchsorted(self._vertex_body_h, [i, i + 1])
+            mine = original & (face_body == i)
+            proxies.append(_SplitBody(b, self._rest_h[lo:hi], faces[mine] - lo, self._point_condition_h[lo:hi].copy()))
+        self._build_vertex_data(proxies, state)
         self.topology_version += 1
         if self.integrator == "explicit":
             self._update_accelerations()
 
-    # -- checks ---------------------------------------------------------------------------------------------------
-    def check_state(self, speed_limit: float):
-        """Raises InstabilityError if a position or velocity is not finite or a speed exceeds ``speed_limit`` [m/s]."""
-        import warp as wp
-
-        from ..kernels.fem import solver as ks
-
-        self._check.zero_()
-        wp.launch(
-            ks.vertex_kernels(self.dtype)["max_speed_and_finite"],
-            dim=self.vertex_count,
-            inputs=[self.positions_wp, self.velocities_wp, self._check],
-            device=self.device,
-        )
-        vmax, bad = self._check.numpy()
-        if bad > 0 or vmax > speed_limit:
-            what = "non-finite positions or velocities" if bad > 0 else f"a vertex speed of {vmax:.3g} m/s"
-            raise InstabilityError(
-                f"the FEM simulation diverged at t={self.time:.6g} s (step {self.step_count}): {what}; "
-                f"explicit stable limit {self._explicit_dt:.3g} s"
-            )
-
     # -- scene integration ------------------------------------------------------------------------------------------
     @property
-    def particle_count(self) -> int:
-        """Vertex count (the Scene's report calls it particle_count)."""
-        return self.vertex_count
-
-    @property
-    def bond_count(self) -> int:
-        """Element count (the Scene's report calls it bond_count)."""
-        return self.element_count
+    def vertex_count(self) -> int:
+        """Current vertex count (grows when fracture splits vertices)."""
+        return self.kin.point_count
 
     def speed_scale(self) -> float:
-        """Largest of the bodies' P-wave speeds, initial speeds and prescribed speeds [m/s]."""
-        return max(
-            max(
-                b.material.p_wave_speed,
-                float(np.abs(b.initial_velocity).max(initial=0.0)),
-                float(np.abs(b.prescribed_velocity).max(initial=0.0)),
-            )
-            for b in self.bodies
+        """Largest of the bodies' P-wave speeds and the speeds their initial velocities, boundary conditions and
+        velocity kicks give [m/s]."""
+        return max(max(b.material.p_wave_speed, b.prescribed_speed()) for b in self.bodies)
+
+    def check_state(self, speed_limit: float) -> None:
+        """Raises InstabilityError when a displacement or velocity is not finite or a speed exceeds ``speed_limit``
+        [m/s]."""
+        self.kin.check(
+            speed_limit,
+            f"at t={self.time:.6g} s (step {self.step_count}) in {self.summary()}",
+            hint=f"explicit stable limit {self._explicit_dt:.3g} s (0.5 h_min / c_p)",
         )
 
-    def surfaces(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Per body: (vertex ids [k] into the solver's vertices, outward triangles [f, 3] indexing those ids). Each
-        connected piece of a body is a closed surface with its own vertices."""
-        return [(ids, faces) for ids, faces, _ in self._surface_data()]
+    def contact_mesh(self):
+        """The closed surface of every piece of every body, for contact with particle methods
+        (pdsim.contact.MethodContact): (vertex ids int32 [v], triangles int32 [3 f] indexing those ids, both Warp
+        arrays; topology version, which changes when fracture changes the surface). float32 solvers only."""
+        import warp as wp
 
-    def _surface_data(self):
-        """Per body: (vertex ids, triangles, piece label per triangle), rebuilt when the topology changed."""
+        if self.precision != "float32":
+            names = ", ".join(f"'{b.name}'" for b in self.bodies)
+            raise FeatureNotAvailableError(
+                f"fem bodies ({names}) with precision={self.precision!r} cannot take part in contact between methods "
+                "(its kernels are float32 only); use precision='float32'"
+            )
+        if self._contact_mesh is None:
+            faces = boundary_faces(self._tets_h)
+            ids, local = np.unique(faces, return_inverse=True)
+            self._contact_mesh = (
+                wp.array(ids.astype(np.int32), dtype=wp.int32, device=self.device),
+                wp.array(local.ravel().astype(np.int32), dtype=wp.int32, device=self.device),
+            )
+        return (*self._contact_mesh, self.topology_version)
+
+    def summary(self) -> str:
+        """One line for run reports: vertices and elements simulated."""
+        return f"{self.point_count} FEM vertices, {self.element_count} tetrahedra"
+
+    def _element_fragments(self) -> np.ndarray:
+        """Piece id of every element, int64 [element_count]: the body-local index of the smallest element of its
+        face-connected piece (0 for an intact body; a piece keeps its id when another splits off it)."""
         from .fracture import element_pieces
 
+        if self._fragments is None:
+            _, labels = element_pieces(self._tets_h)
+            _, first = np.unique(labels, return_index=True)
+            self._fragments = first[labels] - self.element_offsets[self.element_body]
+        return self._fragments
+
+    def _surface_data(self):
+        """Per body: (vertex ids [k], triangles [f, 3] into those ids, fragment per face, crack flag per face),
+        rebuilt when the topology changed."""
         if self._surfaces is None:
-            faces, elem = boundary_faces(self._tets_h, return_elements=True)
+            faces, fid = boundary_faces(self._tets_h, return_face_ids=True)
+            elem = fid // 4
             face_body = self.element_body[elem]
-            piece_of_element = element_pieces(self._tets_h)[1]
+            fragment = self._element_fragments()[elem]
+            crack = (~np.isin(fid, self._surface_face_ids)).astype(np.int32)
             out = []
             for i in range(len(self.bodies)):
                 mine = face_body == i
                 ids, local = np.unique(faces[mine], return_inverse=True)
-                out.append((ids, local.reshape(-1, 3).astype(np.int32), piece_of_element[elem[mine]].astype(np.int32)))
+                out.append((ids, local.reshape(-1, 3).astype(np.int32), fragment[mine], crack[mine]))
             self._surfaces = out
         return self._surfaces
 
-    def add_outputs(self, cache):
-        """Declares one UsdGeom.Mesh per body (its boundary surface: one closed shell per piece, with the per-face
-        int primvar ``piece``) and one per render mesh ("<name>_render")."""
-        self._handles = [cache.add_mesh(b.name, face_primvars={"piece": "int"}) for b in self.bodies]
-        self._render_handles = [cache.add_mesh(f"{self.bodies[r[0]].name}_render") for r in self._render]
-        self._written_version = {}
+    def surfaces(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per body: (vertex ids [k] into the solver's vertices, outward triangles [f, 3] indexing those ids). Each
+        connected piece of a body is a closed surface with its own vertices."""
+        return [(ids, faces) for ids, faces, _, _ in self._surface_data()]
 
-    def write_outputs(self, cache, frame: int):
-        """Writes each body's boundary surface at ``frame`` (topology only on frames where it changed) and the render
-        meshes (topology on their first frame)."""
+    def views(self) -> list:
+        """Per body: a PointsView of its input mesh vertices (a fixed count over an animation: the copies that
+        fracture adds along cracks appear only in the surface; world positions [m], velocities [m/s], widths = half
+        the mean edge length [m]; attributes displacement [m], fragment, plastic_strain when plastic; the reactions
+        [N] of its boundary conditions) and a MeshView
+        "<name>_surface" of its piece surfaces (face attributes fragment, crack); a MeshView "<name>_render" per
+        embedded render mesh."""
         import warp as wp
 
         from ..kernels.fem import elements as ke
+        from ..output.views import MeshView, PointsView
 
-        x = self.positions()
-        for i, (handle, (ids, faces, piece)) in enumerate(zip(self._handles, self._surface_data(), strict=True)):
-            if self._written_version.get(i) != self.topology_version:
-                cache.write_mesh(handle, frame, x[ids], faces, face_primvars={"piece": piece})
-            else:
-                cache.write_mesh(handle, frame, x[ids])
-            self._written_version[i] = self.topology_version
-        for handle, (_, elem, w, faces, out) in zip(self._render_handles, self._render, strict=True):
+        u = self.kin.displacements()
+        x = self._rest_h + u
+        v = self.kin.velocities()
+        frag_e = self._element_fragments()
+        frag_v = np.zeros(self.point_count, dtype=np.int64)
+        frag_v[self._tets_h.ravel()] = np.repeat(frag_e, 4)
+        eq_v = None
+        if self.plastic:
+            ep = self._plastic_strain.numpy().astype(np.float64)
+            eq = np.sqrt(2.0 / 3.0 * np.einsum("eij,eij->e", ep, ep))  # equivalent plastic strain per element
+            vol = np.repeat(np.abs(self._volume_h), 4)
+            flat = self._tets_h.ravel()
+            eq_v = np.bincount(flat, weights=np.repeat(eq, 4) * vol, minlength=self.point_count) / np.maximum(
+                np.bincount(flat, weights=vol, minlength=self.point_count), 1.0e-300
+            )
+        reactions = self.reaction_forces()
+        out = []
+        for i, (b, (ids, faces, frag_f, crack_f)) in enumerate(zip(self.bodies, self._surface_data(), strict=True)):
+            # the body's input vertices: always the first vertex_count of its range (fracture appends the copies,
+            # _apply_topology), so the points keep their count and identity over an animation
+            lo = int(self.body_offsets[i])
+            hi = lo + b.vertex_count
+            attributes = {"displacement": u[lo:hi], "fragment": frag_v[lo:hi]}
+            if eq_v is not None:
+                attributes["plastic_strain"] = eq_v[lo:hi]
+            out.append(
+                PointsView(
+                    name=b.name,
+                    positions=x[lo:hi],
+                    velocities=v[lo:hi],
+                    widths=np.full(hi - lo, self._widths[i]),
+                    attributes=attributes,
+                    reactions={cond: r for (body, cond), r in reactions.items() if body == b.name},
+                )
+            )
+            out.append(
+                MeshView(
+                    name=f"{b.name}_surface",
+                    points=x[ids],
+                    velocities=v[ids],
+                    topology_version=self._body_topology_version[i],
+                    faces=faces,
+                    face_attributes={"fragment": frag_f, "crack": crack_f},
+                )
+            )
+        for body_index, elem, w, faces, rest_points, out_u, out_v in self._render:
             wp.launch(
                 ke.embed_points_kernel(self.dtype),
                 dim=len(w),
-                inputs=[self.positions_wp, self._tets, elem, w, out],
+                inputs=[self.kin.u, self.kin.v, self._tets, elem, w, out_u, out_v],
                 device=self.device,
             )
-            cache.write_mesh(handle, frame, out.numpy(), faces if not handle._has_topology else None)
+            out.append(
+                MeshView(
+                    name=f"{self.bodies[body_index].name}_render",
+                    points=rest_points + out_u.numpy().astype(np.float64),
+                    velocities=out_v.numpy().astype(np.float64),
+                    topology_version=0,
+                    faces=faces,
+                )
+            )
+        return out
 
     def render_points(self, index: int = 0) -> np.ndarray:
-        """Current vertices of the ``index``-th render mesh [m], shape [render_vertex_count, 3]."""
-        import warp as wp
-
-        from ..kernels.fem import elements as ke
-
-        _, elem, w, _, out = self._render[index]
-        wp.launch(
-            ke.embed_points_kernel(self.dtype),
-            dim=len(w),
-            inputs=[self.positions_wp, self._tets, elem, w, out],
-            device=self.device,
-        )
-        return out.numpy().astype(np.float64)
+        """Current world vertices of the ``index``-th render mesh [m], float64 [render_vertex_count, 3]."""
+        name = f"{self.bodies[self._render[index][0]].name}_render"
+        return next(v.points for v in self.views() if v.name == name)
 
     # -- host-side views and diagnostics (vectorised numpy) -----------------------------------------------------
     @property
@@ -1021,7 +1247,7 @@ class SolverFem:
 
     @property
     def rest_positions(self) -> np.ndarray:
-        """Rest positions of the current vertices [m], shape [vertex_count, 3]."""
+        """World rest positions of the current vertices [m], float64 [vertex_count, 3]."""
         return self._rest_h
 
     @property
@@ -1029,54 +1255,57 @@ class SolverFem:
         """Body index of each vertex, shape [vertex_count]."""
         return self._vertex_body_h
 
-    def positions(self) -> np.ndarray:
-        """Current positions [m], shape [vertex_count, 3], float64."""
-        return self.positions_wp.numpy().astype(np.float64)
-
-    def velocities(self) -> np.ndarray:
-        """Current velocities [m/s], shape [vertex_count, 3], float64."""
-        return self.velocities_wp.numpy().astype(np.float64)
+    def _host_displacements(self, positions, name: str):
+        """World positions [m] [vertex_count, 3] -> displacements (float64 difference, then the solver's dtype)."""
+        p = np.asarray(positions, dtype=np.float64)
+        if p.shape != (self.point_count, 3):
+            raise ParameterError(name, p.shape, f"shape ({self.point_count}, 3)")
+        return p - self._rest_h
 
     def set_positions(self, positions):
-        """Overwrites positions [m] (shape [vertex_count, 3]); recomputes the accelerations (explicit)."""
-        import warp as wp
+        """Sets the displacements so that the vertices are at world ``positions`` [m] (shape [vertex_count, 3]);
+        recomputes the accelerations (explicit)."""
+        self.kin.set_displacements(self._host_displacements(positions, "positions"))
+        if self.integrator == "explicit":
+            self._update_accelerations()
 
-        p = np.asarray(positions, dtype=self.np_dtype)
-        if p.shape != (self.vertex_count, 3):
-            raise ParameterError("positions", p.shape, f"shape ({self.vertex_count}, 3)")
-        wp.copy(self.positions_wp, wp.array(p, dtype=self.vec3, device=self.device))
+    def set_displacements(self, displacements):
+        """Overwrites the displacements [m] (shape [vertex_count, 3]); recomputes the accelerations (explicit)."""
+        u = np.asarray(displacements, dtype=np.float64)
+        if u.shape != (self.point_count, 3):
+            raise ParameterError("displacements", u.shape, f"shape ({self.point_count}, 3)")
+        self.kin.set_displacements(u)
         if self.integrator == "explicit":
             self._update_accelerations()
 
     def set_velocities(self, velocities):
         """Overwrites velocities [m/s], shape [vertex_count, 3]."""
-        import warp as wp
-
-        v = np.asarray(velocities, dtype=self.np_dtype)
-        if v.shape != (self.vertex_count, 3):
-            raise ParameterError("velocities", v.shape, f"shape ({self.vertex_count}, 3)")
-        wp.copy(self.velocities_wp, wp.array(v, dtype=self.vec3, device=self.device))
+        v = np.asarray(velocities, dtype=np.float64)
+        if v.shape != (self.point_count, 3):
+            raise ParameterError("velocities", v.shape, f"shape ({self.point_count}, 3)")
+        self.kin.set_velocities(v)
         if self.integrator == "explicit":
             self._update_accelerations()
 
     def nodal_forces(self, positions=None) -> np.ndarray:
-        """Internal elastic forces [N] at the current (or given) positions, shape [vertex_count, 3] (no plastic
-        update)."""
+        """Internal elastic forces [N] at the current (or given world) positions, shape [vertex_count, 3] (no loads,
+        no plastic update)."""
         import warp as wp
 
         from ..kernels.fem import solver as ks
 
-        pos = None
+        u = None
         if positions is not None:
-            p = np.asarray(positions, dtype=self.np_dtype)
-            if p.shape != (self.vertex_count, 3):
-                raise ParameterError("positions", p.shape, f"shape ({self.vertex_count}, 3)")
-            pos = wp.array(p, dtype=self.vec3, device=self.device)
-        self._compute_element_forces(0.0, pos)
-        out = wp.zeros(self.vertex_count, dtype=self.vec3, device=self.device)
+            u = wp.array(
+                self._host_displacements(positions, "positions").astype(self.np_dtype),
+                dtype=self.vec3,
+                device=self.device,
+            )
+        self._compute_element_forces(0.0, u)
+        out = wp.zeros(self.point_count, dtype=self.vec3, device=self.device)
         wp.launch(
             ks.vertex_kernels(self.dtype)["gather_forces"],
-            dim=self.vertex_count,
+            dim=self.point_count,
             inputs=[self._vertex_offsets, self._vertex_slots, self._corner, out],
             device=self.device,
         )
@@ -1115,7 +1344,7 @@ class SolverFem:
         return self._plastic_strain.numpy().astype(np.float64)
 
     def strain_energy(self) -> float:
-        """Elastic energy sum_e V (mu |eps_el|^2 + lambda/2 tr(eps_el)^2) [J] at the current positions."""
+        """Elastic energy sum_e V (mu |eps_el|^2 + lambda/2 tr(eps_el)^2) [J] at the current displacements."""
         import warp as wp
 
         from ..kernels.fem import elements as ke
@@ -1124,7 +1353,7 @@ class SolverFem:
             ke.element_energy_kernel(self.dtype, self._measure_id, self.plastic),
             dim=self.element_count,
             inputs=[
-                self.positions_wp,
+                self.kin.u,
                 self._tets,
                 self._dm_inv,
                 self._volume,
@@ -1136,31 +1365,9 @@ class SolverFem:
         )
         return float(self._energy.numpy().astype(np.float64).sum())
 
-    def masses(self) -> np.ndarray:
-        """Lumped vertex masses [kg], shape [vertex_count]."""
-        return self._mass_h
-
-    def kinetic_energy(self) -> float:
-        """1/2 sum m v^2 [J]."""
-        v = self.velocities()
-        return float(0.5 * np.dot(self._mass_h, np.einsum("ij,ij->i", v, v)))
-
     def gravity_potential(self) -> float:
-        """-sum m g . x [J]."""
+        """-sum m g . x [J] (world positions)."""
         return float(-np.dot(self._mass_h, self.positions() @ self.gravity_host))
-
-    def linear_momentum(self) -> np.ndarray:
-        """sum m v [kg m/s]."""
-        return self._mass_h @ self.velocities()
-
-    def angular_momentum(self, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
-        """sum m (x - origin) x v [kg m^2/s]."""
-        x = self.positions() - np.asarray(origin, dtype=np.float64)
-        return self._mass_h @ np.cross(x, self.velocities())
-
-    def summary(self) -> str:
-        """One line for run reports: vertices and elements simulated."""
-        return f"{self.particle_count} FEM vertices, {self.bond_count} tetrahedra"
 
     def piece_count(self) -> int:
         """Number of face-connected pieces of all bodies together."""
