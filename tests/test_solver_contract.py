@@ -55,7 +55,11 @@ def _lattice_block(offset, **_):
     scene = pdsim.Scene(fps=24.0, frames=1, name="lattice")
     h = 0.01
     body = LatticeBody.block(
-        Lattice.simple_cubic(h), (12, 5, 3), origin=np.asarray(offset), name="block", fracture=LatticeFracture((1.6 * h,))
+        Lattice.simple_cubic(h),
+        (12, 5, 3),
+        origin=np.asarray(offset),
+        name="block",
+        fracture=LatticeFracture((1.6 * h,)),
     )
     x = body.rest_positions[: body.body_count, 0]
     body.clamp(x < x.min() + 0.5 * h)
@@ -221,3 +225,20 @@ def test_feature_gate_of_each_method():
     with pytest.raises(pdsim.FeatureNotAvailableError) as ei:
         explicit.build_solvers(device="cpu")
     assert "gravity" in str(ei.value)
+
+
+def test_only_the_output_package_imports_pxr():
+    """Solvers expose views and one writer makes USD: no module of pdsim/ outside pdsim/output/, and no kernel,
+    imports pxr (the USD input reader of tetrahedral meshes lives in pdsim/output/usd.py too)."""
+    import pathlib
+    import re
+
+    root = pathlib.Path(__file__).resolve().parents[1]
+    pattern = re.compile(r"^\s*(import pxr|from pxr)", re.MULTILINE)
+    offenders = [
+        str(p.relative_to(root))
+        for folder in ("pdsim", "kernels")
+        for p in (root / folder).rglob("*.py")
+        if pattern.search(p.read_text()) and "output" not in p.relative_to(root).parts
+    ]
+    assert offenders == []

@@ -417,7 +417,9 @@ def load_tet_mesh(
     if not os.path.isfile(path):
         raise GeometryError(f"{path}: no such file")
     if suffix in (".usd", ".usda", ".usdc"):
-        v, t = _read_usd_tet_mesh(path, prim_path)
+        from ..output.usd import read_tet_mesh
+
+        v, t = read_tet_mesh(path, prim_path)
     else:
         try:
             import meshio
@@ -436,30 +438,6 @@ def load_tet_mesh(
             raise GeometryError(f"{path}: the file holds 2D points; a tetrahedral mesh needs 3D points")
     mesh = tet_mesh_from_arrays(v, t, name=label, min_quality=min_quality)
     return mesh.transformed(scale=scale, translate=translate)
-
-
-def _read_usd_tet_mesh(path: str, prim_path: str | None):
-    from pxr import Usd, UsdGeom
-
-    try:
-        stage = Usd.Stage.Open(path)
-    except Exception as exc:  # noqa: BLE001 (pxr raises Tf errors)
-        raise GeometryError(f"{path}: cannot open USD stage ({exc})") from None
-    if prim_path is not None:
-        prim = stage.GetPrimAtPath(prim_path)
-        if not prim or not prim.IsA(UsdGeom.TetMesh):
-            raise GeometryError(f"{path}: no UsdGeom.TetMesh at {prim_path}")
-    else:
-        prim = next((p for p in stage.Traverse() if p.IsA(UsdGeom.TetMesh)), None)
-        if prim is None:
-            raise GeometryError(f"{path}: the stage holds no UsdGeom.TetMesh")
-    tm = UsdGeom.TetMesh(prim)
-    time = Usd.TimeCode.Default()
-    pts = np.asarray(tm.GetPointsAttr().Get(time) or [], dtype=np.float64).reshape(-1, 3)
-    idx = np.asarray(tm.GetTetVertexIndicesAttr().Get(time) or [], dtype=np.int64).reshape(-1, 4)
-    xf = np.asarray(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time), dtype=np.float64)
-    pts = pts @ xf[:3, :3] + xf[3, :3]  # USD matrices act on row vectors
-    return pts, idx
 
 
 def box_tet_mesh(size, cells, *, center=(0.0, 0.0, 0.0), name: str = "box", jitter: float = 0.0, seed: int = 0):

@@ -37,7 +37,7 @@ import numpy as np
 if TYPE_CHECKING:
     from typing import Self
 
-__all__ = ["MeshHandle", "PointsHandle", "UsdCache", "validate_usd"]
+__all__ = ["MeshHandle", "PointsHandle", "UsdCache", "read_tet_mesh", "validate_usd"]
 
 _SUFFIXES = (".usdc", ".usda", ".usd")
 _PRIMVAR_KINDS = ("float", "int", "vector3f")
@@ -525,6 +525,35 @@ class UsdCache:
         if self._last_finished is not None and frame <= self._last_finished:
             raise ValueError(f"frame {frame} is not after the last finished frame {self._last_finished}")
         return frame
+
+
+def read_tet_mesh(path: str, prim_path: str | None):
+    """Vertices [m] (float64 [v, 3], world space) and tetrahedra (int64 [t, 4]) of a ``UsdGeom.TetMesh`` in the
+    stage at ``path`` (the prim at ``prim_path``, or the first TetMesh); GeometryError when there is none. The USD
+    input reader of pdsim.fem.load_tet_mesh (this module holds every use of pxr)."""
+    from pxr import Usd, UsdGeom
+
+    from ..errors import GeometryError
+
+    try:
+        stage = Usd.Stage.Open(path)
+    except Exception as exc:  # noqa: BLE001 (pxr raises Tf errors)
+        raise GeometryError(f"{path}: cannot open USD stage ({exc})") from None
+    if prim_path is not None:
+        prim = stage.GetPrimAtPath(prim_path)
+        if not prim or not prim.IsA(UsdGeom.TetMesh):
+            raise GeometryError(f"{path}: no UsdGeom.TetMesh at {prim_path}")
+    else:
+        prim = next((p for p in stage.Traverse() if p.IsA(UsdGeom.TetMesh)), None)
+        if prim is None:
+            raise GeometryError(f"{path}: the stage holds no UsdGeom.TetMesh")
+    tm = UsdGeom.TetMesh(prim)
+    time = Usd.TimeCode.Default()
+    pts = np.asarray(tm.GetPointsAttr().Get(time) or [], dtype=np.float64).reshape(-1, 3)
+    idx = np.asarray(tm.GetTetVertexIndicesAttr().Get(time) or [], dtype=np.int64).reshape(-1, 4)
+    xf = np.asarray(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time), dtype=np.float64)
+    pts = pts @ xf[:3, :3] + xf[3, :3]  # USD matrices act on row vectors
+    return pts, idx
 
 
 def _identifier(name: str) -> str:
