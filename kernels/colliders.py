@@ -22,11 +22,14 @@ def collide_ground_plane(
     normal: wp.vec3,
     offset: float,
     friction: float,
+    mass: wp.array(dtype=float),
+    impulse: wp.array(dtype=wp.vec3d),
 ):
     """Keeps free points (spheres of the given radius, at rest + displacement in the solver's local frame) above the
     plane n . x = offset (local frame): a penetrating point is projected back onto the plane, its approaching normal
     velocity removed (inelastic) and its tangential velocity reduced by Coulomb friction (friction * removed normal
-    speed, never reversing it)."""
+    speed, never reversing it). The impulse the plane gives, m (v_new - v_old) [N s], is added to ``impulse[0]``
+    (points of mass ``mass`` [kg]; pass an empty ``mass`` to skip it)."""
     i = wp.tid()
     if kind[i] != PARTICLE_FREE:
         return
@@ -42,7 +45,11 @@ def collide_ground_plane(
             scale = float(0.0)
             if vt_len > 0.0:
                 scale = wp.max(0.0, 1.0 - friction * (-vn) / vt_len)
-            velocities[i] = vt * scale
+            v_new = vt * scale
+            velocities[i] = v_new
+            if mass.shape[0] > 0:
+                dp = mass[i] * (v_new - v)
+                wp.atomic_add(impulse, 0, wp.vec3d(wp.float64(dp[0]), wp.float64(dp[1]), wp.float64(dp[2])))
 
 
 @wp.func

@@ -30,7 +30,7 @@ class Collider:
         """Sets the origin [m] of the solvers' local frame (world = origin + local)."""
         self.origin = np.asarray(origin, dtype=np.float64)
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
         raise NotImplementedError
 
 
@@ -43,11 +43,25 @@ class GroundPlane(Collider):
     offset: float = 0.0
     friction: float = 0.5
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float):
+    @property
+    def impulse(self) -> np.ndarray:
+        """Total impulse the plane has given the points it stopped [N s], float64 [3] (summed over the solvers that
+        passed their point masses)."""
+        arrays = getattr(self, "_impulse", {})
+        return np.sum([a.numpy()[0] for a in arrays.values()], axis=0) if arrays else np.zeros(3)
+
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
         import warp as wp
 
         from .kernels import colliders as kc
 
+        if not hasattr(self, "_impulse"):
+            self._impulse = {}
+        key = (str(rest.device), id(rest))
+        if key not in self._impulse:
+            self._impulse[key] = wp.zeros(1, dtype=wp.vec3d, device=rest.device)
+        if mass is None:
+            mass = wp.zeros(0, dtype=float, device=rest.device)
         n = np.asarray(self.normal, dtype=np.float64)
         wp.launch(
             kc.collide_ground_plane,
@@ -61,6 +75,8 @@ class GroundPlane(Collider):
                 wp.vec3(*n),
                 float(self.offset - n @ self.origin),
                 float(self.friction),
+                mass,
+                self._impulse[key],
             ],
             device=rest.device,
         )
@@ -214,7 +230,7 @@ class MeshCollider(Collider):
         super().bind(origin)
         self._band_written = None
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
         import warp as wp
 
         from .kernels import colliders as kc
@@ -330,7 +346,7 @@ class SphereProjectile(RigidProjectile):
     def _bounding_radius(self) -> float:
         return self.sphere_radius
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
         import warp as wp
 
         from .kernels import colliders as kc
@@ -367,7 +383,7 @@ class BoxProjectile(RigidProjectile):
     def _bounding_radius(self) -> float:
         return float(np.linalg.norm(self.half_extents))
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
         import warp as wp
 
         from .kernels import colliders as kc
@@ -412,7 +428,7 @@ class MeshProjectile(RigidProjectile):
     def _bounding_radius(self) -> float:
         return self._mesh.bounding_radius
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
         import warp as wp
 
         from .kernels import colliders as kc

@@ -157,7 +157,7 @@ class PointKinematics:
                 pts = wp.array((b.kick_points(kick) + lo).astype(np.int32), dtype=wp.int32, device=d)
                 self.kicks.append((kick.time, pts, kick.velocity))
         self.kicks.sort(key=lambda k: k[0])
-        self._next_kick = 0
+        self.next_kick = 0  # index of the first kick not yet applied
 
     @property
     def features(self) -> set[str]:
@@ -181,12 +181,9 @@ class PointKinematics:
         import warp as wp
 
         d = self.device
-        while self._next_kick < len(self.kicks) and self.kicks[self._next_kick][0] < t + dt:
-            _, pts, dv = self.kicks[self._next_kick]
-            wp.launch(self.k.add_velocity, dim=pts.shape[0], inputs=[pts, wp.vec3(*dv), self.v], device=d)
-            self._next_kick += 1
+        self.apply_kicks(t, dt)
         if self.condition_count:
-            self._evaluate_conditions(t + 0.5 * dt)
+            self.evaluate_conditions(t + 0.5 * dt)
         wp.launch(
             self.k.kick_drift,
             dim=self.point_count,
@@ -204,7 +201,17 @@ class PointKinematics:
             device=d,
         )
 
-    def _evaluate_conditions(self, t: float):
+    def apply_kicks(self, t: float, dt: float):
+        """The velocity kicks due in [t, t + dt), each applied once."""
+        import warp as wp
+
+        while self.next_kick < len(self.kicks) and self.kicks[self.next_kick][0] < t + dt:
+            _, pts, dv = self.kicks[self.next_kick]
+            wp.launch(self.k.add_velocity, dim=pts.shape[0], inputs=[pts, wp.vec3(*dv), self.v], device=self.device)
+            self.next_kick += 1
+
+    def evaluate_conditions(self, t: float):
+        """Each boundary condition's state at time ``t`` [s] (active kind and velocity), on the device."""
         import warp as wp
 
         from .kernels import integration as ki
@@ -279,7 +286,7 @@ class PointKinematics:
 
         if not self.condition_count:
             return {}
-        self._evaluate_conditions(t)
+        self.evaluate_conditions(t)
         self._reaction.zero_()
         wp.launch(
             self.k.condition_reactions,

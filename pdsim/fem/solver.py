@@ -461,7 +461,7 @@ class SolverFem(PointSolver):
             self.dtype,
         )
         if old is not None:
-            self.kin._next_kick = old._next_kick
+            self.kin.next_kick = old.next_kick
             self.kin.time = old.time
         if state is not None:
             u, v, a = state
@@ -582,7 +582,7 @@ class SolverFem(PointSolver):
         """Ground plane, then the scene's colliders, on the free vertices (zero radius) at ``time`` [s]."""
         kin = self.kin
         for c in self.colliders:
-            c.apply(kin.rest, kin.u, kin.v, self._zero_radius, kin.point_kind, time, dt)
+            c.apply(kin.rest, kin.u, kin.v, self._zero_radius, kin.point_kind, time, dt, mass=kin.mass)
 
     # -- stepping ---------------------------------------------------------------------------------------------------
     def begin_step(self, dt: float) -> None:
@@ -648,17 +648,6 @@ class SolverFem(PointSolver):
         for _ in range(int(steps) * sub):
             self.step(dt / sub)
 
-    def _apply_velocity_kicks(self, t: float, dt: float):
-        """The bodies' velocity kicks due in [t, t + dt) (as PointKinematics.begin_step does for the explicit
-        integrator)."""
-        import warp as wp
-
-        kin = self.kin
-        while kin._next_kick < len(kin.kicks) and kin.kicks[kin._next_kick][0] < t + dt:
-            _, pts, dv = kin.kicks[kin._next_kick]
-            wp.launch(kin.k.add_velocity, dim=pts.shape[0], inputs=[pts, wp.vec3(*dv), kin.v], device=self.device)
-            kin._next_kick += 1
-
     def _operator_mass(self, dt: float):
         """(1 + dt c) m per vertex (the mass term of the backward-Euler operator), cached per dt and topology."""
         import warp as wp
@@ -677,9 +666,9 @@ class SolverFem(PointSolver):
         from ..kernels.fem import solver as ks
 
         d, kin, t = self.device, self.kin, self.time
-        self._apply_velocity_kicks(t, dt)
+        kin.apply_kicks(t, dt)
         if kin.condition_count:
-            kin._evaluate_conditions(t + 0.5 * dt)
+            kin.evaluate_conditions(t + 0.5 * dt)
         self._compute_element_forces(dt)
         self._loads_into_force(t + dt)
         self._gather("gather_add")
@@ -929,7 +918,7 @@ class SolverFem(PointSolver):
         d = self.device
         if constrained is None:
             if kin.condition_count:
-                kin._evaluate_conditions(t)
+                kin.evaluate_conditions(t)
             wp.launch(
                 vk["constraint_bits"],
                 dim=n,
@@ -1112,6 +1101,13 @@ class SolverFem(PointSolver):
             raise FeatureNotAvailableError(
                 f"fem bodies ({names}) with precision={self.precision!r} cannot take part in contact between methods "
                 "(its kernels are float32 only); use precision='float32'"
+            )
+        if self.integrator != "explicit":
+            names = ", ".join(f"'{b.name}'" for b in self.bodies)
+            raise FeatureNotAvailableError(
+                f"fem bodies ({names}) with integrator={self.integrator!r} cannot take part in contact between methods "
+                "(the implicit step solves before contact forces are known); use integrator='explicit' or "
+                "scene.enable_contact(False)"
             )
         if self._contact_mesh is None:
             faces = boundary_faces(self._tets_h)
