@@ -26,11 +26,11 @@ def _pd_plate(offset, *, gravity=(0.0, 0.0, 0.0)):
     mat = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.25, critical_stretch=5.0e-3)
     o = np.asarray(offset, dtype=np.float64)
     body = scene.add_peridynamic_body(pdsim.box((24 * h, 10 * h, 2 * h), center=o), mat, h, name="plate")
-    body.add_notch(pdsim.BoxRegion(lo=o + (-1.0e-4, -1.0, -1.0), hi=o + (1.0e-4, 0.0, 1.0)))
+    body.add_notch(pdsim.BoxRegion(lo=o + np.array([-1.0e-4, -1.0, -1.0]), hi=o + np.array([1.0e-4, 0.0, 1.0])))
     ramp = pdsim.TimeCurve.ramp(2.0e-4)
     x = body.rest_positions[:, 0] - o[0]
-    left = pdsim.BoxRegion(lo=o + (-1.0, -1.0, -1.0), hi=o + (x.min() + 0.5 * h, 1.0, 1.0))
-    right = pdsim.BoxRegion(lo=o + (x.max() - 0.5 * h, -1.0, -1.0), hi=o + (1.0, 1.0, 1.0))
+    left = pdsim.BoxRegion(lo=o + np.array([-1.0, -1.0, -1.0]), hi=o + np.array([x.min() + 0.5 * h, 1.0, 1.0]))
+    right = pdsim.BoxRegion(lo=o + np.array([x.max() - 0.5 * h, -1.0, -1.0]), hi=o + np.array([1.0, 1.0, 1.0]))
     body.set_velocity(left, (-0.5, 0.0, 0.0), axes="x", curve=ramp, name="left")
     body.set_velocity(right, (0.5, 0.0, 0.0), axes="x", curve=ramp, name="right")
     return scene
@@ -44,8 +44,12 @@ def _fem_bar(offset, *, gravity=(0.0, 0.0, 0.0)):
     o = np.asarray(offset, dtype=np.float64)
     mesh = pdsim.box_tet_mesh((0.08, 0.02, 0.02), (8, 2, 2), center=o)
     body = scene.add_body(pdsim.FemBody(mesh, mat, tensile_strength=2.0e3, name="bar"))
-    body.set_velocity(pdsim.BoxRegion(lo=o + (-1.0, -1.0, -1.0), hi=o + (-0.0399, 1.0, 1.0)), (-0.5, 0.0, 0.0))
-    body.set_velocity(pdsim.BoxRegion(lo=o + (0.0399, -1.0, -1.0), hi=o + (1.0, 1.0, 1.0)), (0.5, 0.0, 0.0))
+    body.set_velocity(
+        pdsim.BoxRegion(lo=o + np.array([-1.0, -1.0, -1.0]), hi=o + np.array([-0.0399, 1.0, 1.0])), (-0.5, 0.0, 0.0)
+    )
+    body.set_velocity(
+        pdsim.BoxRegion(lo=o + np.array([0.0399, -1.0, -1.0]), hi=o + np.array([1.0, 1.0, 1.0])), (0.5, 0.0, 0.0)
+    )
     return scene
 
 
