@@ -395,8 +395,11 @@ class MethodContact:
         self.damping_ratio = check_range("damping_ratio", damping_ratio, 0.0, None, lo_open=False)
         self._meshes = {}  # id(solver) -> [version, points, faces, positions, wp.Mesh]
         self._to_force = {}  # id(solver) -> 1 / force_to_newton per point (Warp array)
-        for ms in self.mesh_solvers:
-            ms.contact_mesh()  # raises FeatureNotAvailableError now, before the run, for a setting it cannot honour
+        for ms in self.mesh_solvers:  # raise FeatureNotAvailableError now, before the run, for what they cannot honour
+            check = getattr(ms, "check_method_contact", None)
+            if check is not None:
+                check()
+            ms.contact_mesh()
 
     def _mesh(self, solver):
         import warp as wp

@@ -3,7 +3,9 @@ vertex splitting."""
 
 from .body import FemBody, FemPlasticity
 from .mesh import TetMesh, box_tet_mesh, load_tet_mesh, tet_mesh_from_arrays, tetrahedralize, write_tet_mesh
-from .solver import CgReport, SolverFem, StaticSolveReport
+from .cg import CgReport
+from .solver import SolverFem
+from .static import StaticSolveReport
 
 __all__ = [
     "CgReport",

@@ -8,9 +8,15 @@ integrator ("explicit" or "implicit"), and optional plasticity (:class:`FemPlast
 (displacements u from the rest positions, velocities, accelerations; boundary conditions per axis with time windows
 and curves; loads; reactions; the watchdog), the rest positions stored relative to the scene's origin.
 
-Precision: element strains come from displacement differences, G = [u1-u0, u2-u0, u3-u0] Dm^-1 with Dm^-1 computed
-on the host in float64 from rest differences (kernels/fem/elements.py), so a float32 solver gives the same answer
-wherever the scene sits in the world.
+The solver is split by concern: this module holds :class:`SolverFem` (construction, the explicit step, fracture
+events, views and diagnostics) and delegates to
+
+- pdsim/fem/model.py: the element data built once (rest geometry, Dm^-1, volumes, materials, the explicit stable step,
+  render-mesh embeddings), and the precision argument: element strains come from displacement differences with Dm^-1
+  computed on the host in float64, so a float32 solver gives the same answer wherever the scene sits in the world;
+- pdsim/fem/cg.py: the block-Jacobi preconditioned conjugate gradient on the stiffness (matrix-free or assembled);
+- pdsim/fem/implicit.py: the backward-Euler step;
+- pdsim/fem/static.py: the quasi-static solve.
 
 Integrators:
 
@@ -24,14 +30,12 @@ Integrators:
   1.4-3.0 h_min / c_p on fTetWild and jittered meshes (tests/test_fem_dynamics.py: 1.8-1.9 and 5.0-5.2 times the
   automatic step). :meth:`SolverFem.step` refuses a larger step (ParameterError);
   :meth:`SolverFem.simulate` splits each requested step into equal substeps no longer than dt_stable instead.
-- implicit: linearly implicit backward Euler with the corotated stiffness (kernels/fem/solver.py), one CG solve per
-  step, at any step size; :meth:`SolverFem.stable_time_step` then reports ``implicit_step_ratio`` (default 10) times the
-  explicit limit as the step the scene should use. The linear measure uses the constant stiffness, the Green measure
-  has no implicit integrator here (ParameterError). Constrained components (boundary conditions, per axis) carry the
-  condition's mid-step velocity; the CG works on the free components.
+- implicit (pdsim/fem/implicit.py): linearly implicit backward Euler with the corotated stiffness, one CG solve per
+  step, at any step size; :meth:`SolverFem.stable_time_step` then reports ``implicit_step_ratio`` (default 10) times
+  the explicit limit as the step the scene should use.
 
-A quasi-static solve (:meth:`SolverFem.solve_static`, Newton iterations with the same CG) takes the same loads
-(gravity, body forces, tractions, pressures, forces) and the per-axis boundary conditions.
+A quasi-static solve (:meth:`SolverFem.solve_static`, pdsim/fem/static.py: Newton iterations with the same CG) takes
+the same loads (gravity, body forces, tractions, pressures, forces) and the per-axis boundary conditions.
 
 Plasticity is compiled into the element force kernel and its state (a plastic strain tensor per element) allocated
 only when some body yields. Fracture (pdsim/fem/fracture.py) costs one eigen-decomposition per element whose
@@ -52,7 +56,6 @@ changes it; optionally an embedded render mesh "<name>_render".
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -63,56 +66,11 @@ from ..regions import region_mask
 from ..solver import PointSolver, SolverContext, register_solver
 from ..validate import check_range
 from .body import PRECISIONS, STIFFNESS_MODES, FemBody, face_point_forces, lumped_masses
-from .mesh import TET_EDGES, boundary_faces, element_heights
-
-EXPLICIT_STEP_FACTOR = 0.5  # dt_stable = 0.5 h_min / c_p (see the module docstring)
-CG_CHUNK = 256  # vertices per partial sum of the CG reductions
-
-
-@dataclass
-class CgReport:
-    """Outcome of one CG solve: iterations, final relative residual |r| / |b|, and whether it reached the tolerance."""
-
-    iterations: int
-    relative_residual: float
-    converged: bool
-
-
-@dataclass
-class StaticSolveReport:
-    """Outcome of :meth:`SolverFem.solve_static`: Newton iterations, CG iterations in total, the final equilibrium
-    residual |f_int + f_ext| over the free components [N] and relative to the external load."""
-
-    newton_iterations: int
-    cg_iterations: int
-    residual: float
-    relative_residual: float
-
-
-def _embed(rest: np.ndarray, tets: np.ndarray, points: np.ndarray, *, candidates: int = 16):
-    """Barycentric embedding of ``points`` [p, 3] in a tet mesh: (element [p], weights [p, 4]); each point takes, among
-    the ``candidates`` elements with the nearest centroids, the one it is deepest inside (largest smallest weight);
-    points slightly outside the mesh (fTetWild's envelope) get slightly negative weights (linear extrapolation)."""
-    from scipy.spatial import cKDTree
-
-    cent = rest[tets].mean(axis=1)
-    k = min(candidates, len(tets))
-    _, idx = cKDTree(cent).query(points, k=k)
-    idx = idx.reshape(len(points), k)
-    x = rest[tets[idx]]  # [p, k, 4, 3]
-    dm = np.stack([x[..., 1, :] - x[..., 0, :], x[..., 2, :] - x[..., 0, :], x[..., 3, :] - x[..., 0, :]], axis=-1)
-    lam = np.linalg.solve(dm, (points[:, None, :] - x[..., 0, :])[..., None])[..., 0]  # [p, k, 3]
-    w = np.concatenate([1.0 - lam.sum(axis=-1, keepdims=True), lam], axis=-1)
-    best = np.argmax(w.min(axis=-1), axis=1)
-    rows = np.arange(len(points))
-    return idx[rows, best], w[rows, best]
-
-
-def _mean_edge_length(vertices: np.ndarray, tets: np.ndarray) -> float:
-    """Mean length of the distinct edges of a tet mesh [m]."""
-    e = np.sort(np.asarray(tets, dtype=np.int64)[:, TET_EDGES].reshape(-1, 2), axis=1)
-    e = np.unique(e, axis=0)
-    return float(np.linalg.norm(vertices[e[:, 1]] - vertices[e[:, 0]], axis=1).mean())
+from .cg import CgReport, FemCg
+from .implicit import BackwardEuler
+from .mesh import boundary_faces
+from .model import FemModel
+from .static import StaticSolveReport, solve_static
 
 
 class _SplitBody(PointLoads):
@@ -250,7 +208,7 @@ class SolverFem(PointSolver):
             self.features.add("ground_plane")
         if context.colliders:
             self.features.add("colliders")
-        if self._render:
+        if self.model.render:
             self.features.add("render_mesh")
         self.features |= self.kin.features
         if self.integrator == "explicit":
@@ -316,116 +274,55 @@ class SolverFem(PointSolver):
 
     # -- model ----------------------------------------------------------------------------------------------------
     def _build_model(self):
+        """The element data (pdsim/fem/model.py), the element state (rotations, corner forces, plastic strains,
+        fracture's strengths and principal stresses) and the vertex data of the input meshes."""
         import warp as wp
 
         from ..kernels.fem import elements as ke
 
         bodies = self.bodies
-        v_counts = [b.vertex_count for b in bodies]
-        e_counts = [b.element_count for b in bodies]
-        v_off = np.concatenate([[0], np.cumsum(v_counts)]).astype(np.int64)
-        self.element_offsets = np.concatenate([[0], np.cumsum(e_counts)]).astype(np.int64)
-        rest = np.concatenate([b.mesh.vertices for b in bodies]).astype(np.float64)
-        tets = np.concatenate([b.mesh.tets.astype(np.int64) + v_off[i] for i, b in enumerate(bodies)])
-        self.element_body = np.repeat(np.arange(len(bodies)), e_counts)
-        mats = [b.material for b in bodies]
-
-        def per_element(values):
-            return np.asarray(values, dtype=np.float64)[self.element_body]
-
-        # the element geometry (Dm^-1, volumes, crack planes) is that of the local rest positions exactly as the
-        # solver stores them (kin.rest: float32-rounded in a float32 solver), differenced in float64: the same digits
-        # wherever the scene sits in the world, so a translated scene computes and decides (crack planes) bit for bit
-        # the same; the stable step and the lumped masses use the float64 local rest positions
-        self._rest_local64_h = rest - self.origin
-        local = self._rest_local64_h
-        if self.np_dtype == np.float32:
-            local = local.astype(np.float32).astype(np.float64)
-        self._rest_local_h = local
-        x = local[tets]
-        dm = np.stack([x[:, 1] - x[:, 0], x[:, 2] - x[:, 0], x[:, 3] - x[:, 0]], axis=-1)  # columns
-        self._volume_h = np.linalg.det(dm) / 6.0
-        dm_inv = np.linalg.inv(dm)
-        self._density_h = per_element([m.density for m in mats])
-        lam = per_element([m.lame_lambda for m in mats])
-        mu = per_element([m.shear_modulus for m in mats])
-        cp = per_element([m.p_wave_speed for m in mats])
-        heights = element_heights(self._rest_local64_h, tets)
-        self._explicit_dt = float(EXPLICIT_STEP_FACTOR * np.min(heights / cp))
-        self._centroids_h = x.mean(axis=1)  # local frame (fracture's crack planes)
-        self.plastic = any(b.plasticity is not None for b in bodies)
-        self.fracture = any(b.tensile_strength is not None for b in bodies)
+        model = self.model = FemModel(bodies, self.origin, self.dtype, self.np_dtype, self.device)
+        self.element_offsets = model.element_offsets
+        self.element_body = model.element_body
+        self.plastic = model.plastic
+        self.fracture = model.fracture
         dev, f = self.device, self.np_dtype
-        m = len(tets)
+        m = model.element_count
         self.element_count = m
-        self._dm_inv = wp.array(dm_inv.astype(f), dtype=self.mat33, device=dev)
-        self._volume = wp.array(self._volume_h.astype(f), dtype=self.dtype, device=dev)
-        self._lame = wp.array(np.stack([lam, mu], axis=1).astype(f), dtype=self.vec2, device=dev)
         self._corner = wp.zeros(4 * m, dtype=self.vec3, device=dev)
-        self._corner_product = wp.zeros(4 * m, dtype=self.vec3, device=dev)
         self._rotation = wp.array(np.tile(np.eye(3), (m, 1, 1)).astype(f), dtype=self.mat33, device=dev)
         self._rotation_q = wp.array(
             np.tile([0.0, 0.0, 0.0, 1.0], (m, 1)).astype(f), dtype=wp.types.quaternion(self.dtype), device=dev
         )
         self._energy = wp.zeros(m, dtype=self.dtype, device=dev)
-        self._plastic_params = self._plastic_strain = None
+        self._plastic_strain = None
         if self.plastic:
-            inf = np.inf
-            pp = np.array(
-                [
-                    (b.plasticity.yield_strain, b.plasticity.creep, b.plasticity.max_strain)
-                    if b.plasticity is not None
-                    else (inf, 0.0, inf)
-                    for b in bodies
-                ],
-                dtype=np.float64,
-            )[self.element_body]
-            self._plastic_params = wp.array(pp.astype(f), dtype=self.vec3, device=dev)
             self._plastic_strain = wp.zeros(m, dtype=self.mat33, device=dev)
         self._strength = self._principal = self._over_count = None
         if self.fracture:
-            self._strength_h = per_element(
-                [np.inf if b.tensile_strength is None else b.tensile_strength for b in bodies]
-            )
+            self._strength_h = model.strength_h.copy()  # fracture retires the elements it split
             self._strength = wp.array(self._strength_h.astype(f), dtype=self.dtype, device=dev)
             self._principal = wp.zeros(m, dtype=self.vec4, device=dev)
             self._over_count = wp.zeros(1, dtype=wp.int32, device=dev)
         self._measure_id = ke.MEASURES[self.measure]
         self._rotated = self.measure == "corotated"
         self._force_kernel = ke.element_force_kernel(self.dtype, self._measure_id, self.plastic, self.fracture, True)
-        # faces of the input surfaces (4 e + k): every other boundary face is a crack face
-        self._surface_face_ids = boundary_faces(tets, return_face_ids=True)[1]
-        self._widths = [0.5 * _mean_edge_length(b.mesh.vertices, b.mesh.tets) for b in bodies]
         self._body_topology_version = [0] * len(bodies)
 
-        # render meshes: barycentric embedding in the body's own elements (global element ids)
-        self._render = []
-        for i, b in enumerate(bodies):
-            if b.render_mesh is None:
-                continue
-            lo, hi = self.element_offsets[i], self.element_offsets[i + 1]
-            elem, w = _embed(rest, tets[lo:hi], np.asarray(b.render_mesh.vertices, dtype=np.float64))
-            elem = elem + lo
-            rest_points = np.einsum("pa,paj->pj", w, rest[tets[elem]])  # float64 world rest of the embedded points
-            self._render.append(
-                (
-                    i,
-                    wp.array(elem.astype(np.int32), dtype=wp.int32, device=dev),
-                    wp.array(w.astype(f), dtype=self.vec4, device=dev),
-                    np.asarray(b.render_mesh.faces, dtype=np.int32),
-                    rest_points,
-                    wp.zeros(len(w), dtype=self.vec3, device=dev),
-                    wp.zeros(len(w), dtype=self.vec3, device=dev),
-                )
-            )
-
         # vertex data (rebuilt when fracture changes the topology)
-        self._rest_h = rest
-        self._tets_h = tets
-        self._vertex_body_h = np.repeat(np.arange(len(bodies)), v_counts)
-        self._point_condition_h = np.concatenate([b.point_condition for b in bodies]).astype(np.int32)  # body-local
-        self._crack_vertex_h = np.zeros(len(rest), dtype=bool)
+        self._rest_h = model.rest
+        self._rest_local_h = model.rest_local
+        self._rest_local64_h = model.rest_local64
+        self._tets_h = model.tets
+        self._vertex_body_h = model.vertex_body
+        self._point_condition_h = model.point_condition  # body-local
+        self._crack_vertex_h = np.zeros(len(model.rest), dtype=bool)
         self._build_vertex_data(bodies)
+
+    @property
+    def _dm_inv(self):
+        """Dm^-1 per element (the model's Warp array)."""
+        return self.model.dm_inv
 
     def _build_vertex_data(self, kin_bodies, state=None):
         """(Re)allocates every per-vertex array and the kinematics from the host arrays and the current topology
@@ -442,7 +339,7 @@ class SolverFem(PointSolver):
         offsets, slots = vertex_incidence(tets, n)
         self._vertex_offsets = wp.array(offsets.astype(np.int32), dtype=wp.int32, device=dev)
         self._vertex_slots = wp.array(slots.astype(np.int32), dtype=wp.int32, device=dev)
-        mass = lumped_masses(self._rest_local64_h, tets, self._density_h)
+        mass = lumped_masses(self._rest_local64_h, tets, self.model.density_h)
         self._mass_h = mass
         self._vertex_damping_h = np.asarray([b.damping for b in self.bodies], dtype=np.float64)[self._vertex_body_h]
         body_offsets = np.concatenate([[0], np.cumsum(np.bincount(self._vertex_body_h, minlength=len(self.bodies)))])
@@ -473,39 +370,31 @@ class SolverFem(PointSolver):
         self.inv_mass = wp.array((1.0 / mass).astype(f), dtype=self.dtype, device=dev)
         self.force = wp.zeros(n, dtype=self.vec3, device=dev)
         self._zero_radius = wp.zeros(n, dtype=float, device=dev)
-        self._op_mass = None
-        self._op_mass_dt = None
-        # CG work arrays
-        self._chunk = CG_CHUNK
-        chunks = max(1, math.ceil(n / CG_CHUNK))
-        self._cg_rhs = wp.zeros(n, dtype=self.vec3, device=dev)
-        self._cg_x = wp.zeros(n, dtype=self.vec3, device=dev)
-        self._cg_r = wp.zeros(n, dtype=self.vec3, device=dev)
-        self._cg_z = wp.zeros(n, dtype=self.vec3, device=dev)
-        self._cg_p = wp.zeros(n, dtype=self.vec3, device=dev)
-        self._cg_q = wp.zeros(n, dtype=self.vec3, device=dev)
-        self._cg_precond = wp.zeros(n, dtype=self.mat33, device=dev)
-        self._constrained = wp.zeros(n, dtype=wp.int32, device=dev)  # bit mask of the constrained axes
-        self._cg_partial = wp.zeros(chunks, dtype=self.dtype, device=dev)
-        self._cg_partial2 = wp.zeros(chunks, dtype=self.vec2, device=dev)
-        self._cg_partial3 = wp.zeros(chunks, dtype=self.vec3, device=dev)
-        self._cg_scalars = wp.zeros(8, dtype=self.dtype, device=dev)
-        self._cg_chunks = chunks
+        self.cg = FemCg(
+            self.model,
+            self._rotation,
+            self._rotated,
+            tets,
+            self._tets,
+            self._vertex_offsets,
+            self._vertex_slots,
+            n,
+        )  # CG work arrays and the assembled stiffness pattern
+        self._implicit = BackwardEuler(self)  # its operator mass is cached per topology
         self._surfaces = None  # per body (vertex ids, faces, fragment, crack), rebuilt lazily
         self._contact_mesh = None  # (vertex ids, triangles) Warp arrays for MethodContact, rebuilt lazily
         self._fragments = None
-        self._bsr = None  # assembled stiffness pattern, rebuilt lazily
 
     # -- time step ------------------------------------------------------------------------------------------------
     def explicit_time_step(self) -> float:
         """Stable explicit step 0.5 h_min / c_p [s] (see the module docstring)."""
-        return self._explicit_dt
+        return self.model.explicit_dt
 
     def stable_time_step(self) -> float:
         """The step the scene should use [s]: the explicit limit, or ``implicit_step_ratio`` times it (implicit)."""
         if self.integrator == "implicit":
-            return min(b.implicit_step_ratio for b in self.bodies) * self._explicit_dt
-        return self._explicit_dt
+            return min(b.implicit_step_ratio for b in self.bodies) * self.model.explicit_dt
+        return self.model.explicit_dt
 
     # -- kernels ----------------------------------------------------------------------------------------------------
     def _compute_element_forces(self, dt: float, displacements=None):
@@ -513,6 +402,7 @@ class SolverFem(PointSolver):
         of step dt."""
         import warp as wp
 
+        m = self.model
         if self.fracture:
             self._over_count.zero_()
         wp.launch(
@@ -521,10 +411,10 @@ class SolverFem(PointSolver):
             inputs=[
                 self.kin.u if displacements is None else displacements,
                 self._tets,
-                self._dm_inv,
-                self._volume,
-                self._lame,
-                self._plastic_params,
+                m.dm_inv,
+                m.volume,
+                m.lame,
+                m.plastic_params,
                 self._plastic_strain,
                 self.dtype(dt),
                 self._strength,
@@ -592,7 +482,7 @@ class SolverFem(PointSolver):
         self._dt = float(dt)
         if self.integrator == "implicit":
             self._force_time = self.time + dt
-            self._step_implicit(dt)
+            self._implicit.step(dt)
         else:
             super().begin_step(dt)
 
@@ -623,7 +513,7 @@ class SolverFem(PointSolver):
             self.begin_step(dt)
             self.end_step(dt)
             return
-        limit = self._explicit_dt
+        limit = self.model.explicit_dt
         if dt > limit * (1.0 + 1.0e-9):
             raise ParameterError(
                 "dt", dt, f"(0, {limit:.6g}] s: the explicit stable limit 0.5 h_min / c_p (simulate() substeps)"
@@ -644,240 +534,23 @@ class SolverFem(PointSolver):
         dt = check_range("dt", dt, 0.0, None)
         sub = 1
         if self.integrator == "explicit":
-            sub = max(1, math.ceil(dt / self._explicit_dt - 1.0e-9))
+            sub = max(1, math.ceil(dt / self.model.explicit_dt - 1.0e-9))
         for _ in range(int(steps) * sub):
             self.step(dt / sub)
 
-    def _operator_mass(self, dt: float):
-        """(1 + dt c) m per vertex (the mass term of the backward-Euler operator), cached per dt and topology."""
-        import warp as wp
-
-        if self._op_mass is None or self._op_mass_dt != dt:
-            om = self._mass_h * (1.0 + dt * self._vertex_damping_h)
-            self._op_mass = wp.array(om.astype(self.np_dtype), dtype=self.dtype, device=self.device)
-            self._op_mass_dt = dt
-        return self._op_mass
-
-    def _step_implicit(self, dt: float):
-        """Backward Euler: kicks, conditions at the mid-step, forces at u_n with the loads at t + dt, the CG solve
-        for v_{n+1} (constrained components at the condition's velocity), u += dt v, colliders at t + dt."""
-        import warp as wp
-
-        from ..kernels.fem import solver as ks
-
-        d, kin, t = self.device, self.kin, self.time
-        kin.apply_kicks(t, dt)
-        if kin.condition_count:
-            kin.evaluate_conditions(t + 0.5 * dt)
-        self._compute_element_forces(dt)
-        self._loads_into_force(t + dt)
-        self._gather("gather_add")
-        wp.launch(
-            ks.implicit_rhs_kernel(self.dtype),
-            dim=self.point_count,
-            inputs=[
-                self.force,
-                self._mass,
-                kin.v,
-                kin.point_condition,
-                kin.active_kind,
-                kin.cond_axes,
-                kin.active_velocity,
-                self.gravity,
-                self.dtype(dt),
-                self._cg_rhs,
-                self._cg_x,
-                self._constrained,
-                kin.point_kind,
-            ],
-            device=d,
-        )
-        report = self._cg_solve(self._operator_mass(dt), 1.0, dt * dt)
-        self.cg_reports = [report]
-        wp.copy(kin.v, self._cg_x)
-        wp.launch(
-            ks.vertex_kernels(self.dtype)["advance_displacements"],
-            dim=self.point_count,
-            inputs=[kin.u, kin.v, self.dtype(dt)],
-            device=d,
-        )
-        self.apply_colliders(t + dt, dt)
-
-    def _apply_stiffness(self, u, out_corner):
-        import warp as wp
-
-        from ..kernels.fem import elements as ke
-
-        wp.launch(
-            ke.element_stiffness_product_kernel(self.dtype, self._rotated),
-            dim=self.element_count,
-            inputs=[u, self._tets, self._dm_inv, self._volume, self._lame, self._rotation, out_corner],
-            device=self.device,
-        )
-
+    # -- implicit and static solves (pdsim/fem/implicit.py, pdsim/fem/static.py, pdsim/fem/cg.py) ------------------
     def _cg_solve(self, op_mass, c_mass: float, c_stiff: float, *, tolerance=None, max_iterations=None) -> CgReport:
-        """Solves (c_mass diag(op_mass) + c_stiff K_R) x = rhs on the free components (``self._constrained`` bit
-        masks) by block-Jacobi preconditioned CG; ``self._cg_x`` holds the initial guess (kept on the constrained
-        components) and the result."""
-        import warp as wp
-
-        from ..kernels.fem import solver as ks
-
-        k = ks.cg_kernels(self.dtype, self._rotated)
-        d, n, ch, chunks = self.device, self.point_count, self._chunk, self._cg_chunks
-        tol = self.cg_tolerance if tolerance is None else tolerance
-        max_it = self.cg_max_iterations if max_iterations is None else int(max_iterations)
-        c_mass, c_stiff = self.dtype(c_mass), self.dtype(c_stiff)
-        assembled = self.stiffness == "assembled"
-        if assembled:
-            ka = ks.assembled_kernels(self.dtype)
-            bsr = self._assemble_stiffness()
-            wp.launch(
-                ka["bsr_block_jacobi"],
-                dim=n,
-                inputs=[bsr["diagonal"], bsr["values"], op_mass, c_mass, c_stiff, self._constrained, self._cg_precond],
-                device=d,
-            )
-            op_kernel = ka["bsr_operator_gather"]
-            op_inputs = [bsr["row_offsets"], bsr["columns"], bsr["values"], op_mass, c_mass, c_stiff]
-        else:
-            wp.launch(
-                k["block_jacobi"],
-                dim=n,
-                inputs=[
-                    self._vertex_offsets,
-                    self._vertex_slots,
-                    self._dm_inv,
-                    self._volume,
-                    self._lame,
-                    self._rotation,
-                    op_mass,
-                    c_mass,
-                    c_stiff,
-                    self._constrained,
-                    self._cg_precond,
-                ],
-                device=d,
-            )
-            op_kernel = k["operator_gather"]
-            op_inputs = [self._vertex_offsets, self._vertex_slots, self._corner_product, op_mass, c_mass, c_stiff]
-        # q = A x0 (constrained components zeroed), r = b - q, z = P r, p = z
-        if not assembled:
-            self._apply_stiffness(self._cg_x, self._corner_product)
-        wp.launch(
-            op_kernel,
-            dim=chunks,
-            inputs=[*op_inputs, self._constrained, self._cg_x, ch, self._cg_q, self._cg_partial],
-            device=d,
+        """Solves (c_mass diag(op_mass) + c_stiff K_R) x = rhs on the free components with the CG of the current
+        topology (``self.cg``: its ``constrained`` bit masks, ``x`` the initial guess and the result), to the solver's
+        ``cg_tolerance`` and ``cg_max_iterations`` unless given, the stiffness as set by ``stiffness``."""
+        return self.cg.solve(
+            op_mass,
+            c_mass,
+            c_stiff,
+            tolerance=self.cg_tolerance if tolerance is None else tolerance,
+            max_iterations=self.cg_max_iterations if max_iterations is None else int(max_iterations),
+            assembled=self.stiffness == "assembled",
         )
-        wp.launch(
-            k["residual_init"],
-            dim=chunks,
-            inputs=[
-                self._cg_rhs,
-                self._cg_q,
-                self._constrained,
-                self._cg_precond,
-                ch,
-                self._cg_r,
-                self._cg_z,
-                self._cg_p,
-                self._cg_partial3,
-            ],
-            device=d,
-        )
-        wp.launch(k["reduce_init"], dim=1, inputs=[self._cg_partial3, self._cg_scalars], device=d)
-        s = self._cg_scalars.numpy()
-        bb = float(s[5])
-        if bb == 0.0:
-            return CgReport(0, 0.0, True)
-        target = tol * tol * bb
-        it = 0
-        rr = float(s[4])
-        while rr > target and it < max_it:
-            if not assembled:
-                self._apply_stiffness(self._cg_p, self._corner_product)
-            wp.launch(
-                op_kernel,
-                dim=chunks,
-                inputs=[*op_inputs, self._constrained, self._cg_p, ch, self._cg_q, self._cg_partial],
-                device=d,
-            )
-            wp.launch(k["reduce_alpha"], dim=1, inputs=[self._cg_partial, self._cg_scalars], device=d)
-            wp.launch(
-                k["update_xr"],
-                dim=chunks,
-                inputs=[
-                    self._cg_p,
-                    self._cg_q,
-                    self._cg_precond,
-                    self._cg_scalars,
-                    ch,
-                    self._cg_x,
-                    self._cg_r,
-                    self._cg_z,
-                    self._cg_partial2,
-                ],
-                device=d,
-            )
-            wp.launch(k["reduce_beta"], dim=1, inputs=[self._cg_partial2, self._cg_scalars], device=d)
-            wp.launch(k["update_p"], dim=chunks, inputs=[self._cg_z, self._cg_scalars, ch, self._cg_p], device=d)
-            it += 1
-            rr = float(self._cg_scalars.numpy()[4])
-        rel = math.sqrt(max(rr, 0.0) / bb)
-        return CgReport(it, rel, rr <= target)
-
-    def _assemble_stiffness(self) -> dict:
-        """The assembled K_R as 3x3 blocks in CSR order (pattern cached per topology; values filled per call from the
-        element blocks by a gather over the precomputed contribution lists)."""
-        import warp as wp
-
-        from ..kernels.fem import elements as ke
-        from ..kernels.fem import solver as ks
-
-        d = self.device
-        if self._bsr is None:
-            n, m = self.point_count, self.element_count
-            tets = self._tets_h
-            rows = np.repeat(tets, 4, axis=1).ravel()  # (e, a, b) in 16 e + 4 a + b order
-            cols = np.tile(tets, (1, 4)).ravel()
-            key = rows * n + cols
-            uniq, block_of = np.unique(key, return_inverse=True)
-            block_of = block_of.ravel()
-            row_of_block = uniq // n
-            row_offsets = np.zeros(n + 1, dtype=np.int64)
-            np.cumsum(np.bincount(row_of_block, minlength=n), out=row_offsets[1:])
-            order = np.argsort(block_of, kind="stable")
-            contrib_offsets = np.zeros(len(uniq) + 1, dtype=np.int64)
-            np.cumsum(np.bincount(block_of, minlength=len(uniq)), out=contrib_offsets[1:])
-            diagonal = np.searchsorted(uniq, np.arange(n) * n + np.arange(n))
-
-            def i32(a):
-                return wp.array(np.asarray(a, dtype=np.int32), dtype=wp.int32, device=d)
-
-            self._bsr = {
-                "row_offsets": i32(row_offsets),
-                "columns": i32(uniq % n),
-                "diagonal": i32(diagonal),
-                "contrib_offsets": i32(contrib_offsets),
-                "contrib_ids": i32(order),
-                "values": wp.zeros(len(uniq), dtype=self.mat33, device=d),
-                "element_blocks": wp.zeros(16 * m, dtype=self.mat33, device=d),
-            }
-        bsr = self._bsr
-        wp.launch(
-            ke.element_stiffness_blocks_kernel(self.dtype, self._rotated),
-            dim=self.element_count,
-            inputs=[self._dm_inv, self._volume, self._lame, self._rotation, bsr["element_blocks"]],
-            device=d,
-        )
-        wp.launch(
-            ks.assembled_kernels(self.dtype)["assemble_blocks"],
-            dim=bsr["values"].shape[0],
-            inputs=[bsr["contrib_offsets"], bsr["contrib_ids"], bsr["element_blocks"], bsr["values"]],
-            device=d,
-        )
-        return bsr
 
     def solve_static(
         self,
@@ -906,82 +579,14 @@ class SolverFem(PointSolver):
             cg_tolerance: relative CG residual per Newton iteration (default: the solver's).
             cg_max_iterations: CG iterations per Newton iteration.
         """
-        import warp as wp
-
-        from ..kernels.fem import solver as ks
-
-        n = self.point_count
-        kin = self.kin
-        t = self.time if time is None else float(time)
-        tolerance = check_range("tolerance", tolerance, 0.0, None)
-        vk = ks.vertex_kernels(self.dtype)
-        d = self.device
-        if constrained is None:
-            if kin.condition_count:
-                kin.evaluate_conditions(t)
-            wp.launch(
-                vk["constraint_bits"],
-                dim=n,
-                inputs=[kin.point_condition, kin.active_kind, kin.cond_axes, kin.point_kind, self._constrained],
-                device=d,
-            )
-            bits = self._constrained.numpy()
-        else:
-            mask = np.asarray(constrained)
-            if mask.shape != (n,) or mask.dtype != np.bool_:
-                raise ParameterError("constrained", constrained, f"a bool mask of shape ({n},) or None")
-            bits = np.where(mask, 7, 0).astype(np.int32)
-            wp.copy(self._constrained, wp.array(bits, dtype=wp.int32, device=d))
-        free = ((bits[:, None] >> np.arange(3)) & 1) == 0  # [n, 3]
-        self._loads_into_force(t)
-        external = self.force.numpy().astype(np.float64) + self._mass_h[:, None] * self.gravity_host
-        load = float(np.linalg.norm(external[free]))
-        zero_mass = wp.zeros(n, dtype=self.dtype, device=d)
-        reports = []
-        u_start = kin.displacements()
-        step_tol = max(tolerance, 1000.0 * float(np.finfo(self.np_dtype).eps))
-
-        def residual_norm() -> float:
-            self._compute_element_forces(0.0)
-            self._loads_into_force(t)
-            self._gather("gather_add")
-            wp.launch(
-                vk["residual_forces"],
-                dim=n,
-                inputs=[self.force, self._mass, self.gravity, self._constrained, self._cg_rhs],
-                device=d,
-            )
-            return float(np.linalg.norm(self._cg_rhs.numpy().astype(np.float64)))
-
-        try:
-            res = residual_norm()
-            ref = load if load > 0.0 else max(res, 1.0e-300)
-            for newton in range(int(max_newton_iterations)):
-                if res <= tolerance * ref:
-                    break
-                self._cg_x.zero_()
-                reports.append(
-                    self._cg_solve(zero_mass, 0.0, 1.0, tolerance=cg_tolerance, max_iterations=cg_max_iterations)
-                )
-                wp.launch(vk["apply_increment"], dim=n, inputs=[kin.u, self._cg_x], device=d)
-                du = float(np.linalg.norm(self._cg_x.numpy().astype(np.float64)))
-                u = float(np.linalg.norm(kin.displacements() - u_start))
-                res = residual_norm()
-                if self.measure == "linear":
-                    break  # the linear problem is solved by one iteration (to the CG tolerance)
-                if newton > 0 and du <= step_tol * u:
-                    break  # converged in the increment (float32 round-off bounds the residual)
-        finally:
-            if self.fracture:
-                self._over_count.zero_()
-        self.cg_reports = reports
-        if self.integrator == "explicit":
-            self._update_accelerations()
-        return StaticSolveReport(
-            newton_iterations=len(reports),
-            cg_iterations=sum(r.iterations for r in reports),
-            residual=res,
-            relative_residual=res / ref if ref else 0.0,
+        return solve_static(
+            self,
+            constrained=constrained,
+            time=time,
+            tolerance=tolerance,
+            max_newton_iterations=max_newton_iterations,
+            cg_tolerance=cg_tolerance,
+            cg_max_iterations=cg_max_iterations,
         )
 
     # -- fracture -----------------------------------------------------------------------------------------------
@@ -1012,7 +617,7 @@ class SolverFem(PointSolver):
         verts, normals, sources = choose_splits(
             self._tets_h,
             self._rest_local_h,
-            self._centroids_h,
+            self.model.centroids_h,
             over,
             principal[over, :3],
             principal[over, 3],
@@ -1020,7 +625,7 @@ class SolverFem(PointSolver):
         )
         if len(verts) == 0:
             return False
-        tets1, parent1 = split_vertices(self._tets_h, self._rest_local_h, self._centroids_h, verts, normals)
+        tets1, parent1 = split_vertices(self._tets_h, self._rest_local_h, self.model.centroids_h, verts, normals)
         copies = np.arange(nv, len(parent1))
         tets2, parent2 = make_manifold(tets1, len(parent1), np.concatenate([verts, copies]))
         parent = parent1[parent2]
@@ -1058,7 +663,7 @@ class SolverFem(PointSolver):
         self._crack_vertex_h = crack[perm]
         self._tets_h = inverse[np.asarray(tets, dtype=np.int64)]
         faces, fid = boundary_faces(self._tets_h, return_face_ids=True)
-        original = np.isin(fid, self._surface_face_ids)
+        original = np.isin(fid, self.model.surface_face_ids)
         face_body = self.element_body[fid // 4]
         proxies = []
         for i, b in enumerate(self.bodies):
@@ -1087,8 +692,19 @@ class SolverFem(PointSolver):
         self.kin.check(
             speed_limit,
             f"at t={self.time:.6g} s (step {self.step_count}) in {self.summary()}",
-            hint=f"explicit stable limit {self._explicit_dt:.3g} s (0.5 h_min / c_p)",
+            hint=f"explicit stable limit {self.model.explicit_dt:.3g} s (0.5 h_min / c_p)",
         )
+
+    def check_method_contact(self) -> None:
+        """Raises FeatureNotAvailableError when these bodies cannot take part in contact between methods (the
+        implicit step solves before contact forces are known)."""
+        if self.integrator != "explicit":
+            names = ", ".join(f"'{b.name}'" for b in self.bodies)
+            raise FeatureNotAvailableError(
+                f"fem bodies ({names}) with integrator={self.integrator!r} cannot take part in contact between methods "
+                "(the implicit step solves before contact forces are known); use integrator='explicit' or "
+                "scene.enable_contact(False)"
+            )
 
     def contact_mesh(self):
         """The closed surface of every piece of every body, for contact with particle methods
@@ -1101,13 +717,6 @@ class SolverFem(PointSolver):
             raise FeatureNotAvailableError(
                 f"fem bodies ({names}) with precision={self.precision!r} cannot take part in contact between methods "
                 "(its kernels are float32 only); use precision='float32'"
-            )
-        if self.integrator != "explicit":
-            names = ", ".join(f"'{b.name}'" for b in self.bodies)
-            raise FeatureNotAvailableError(
-                f"fem bodies ({names}) with integrator={self.integrator!r} cannot take part in contact between methods "
-                "(the implicit step solves before contact forces are known); use integrator='explicit' or "
-                "scene.enable_contact(False)"
             )
         if self._contact_mesh is None:
             faces = boundary_faces(self._tets_h)
@@ -1141,7 +750,7 @@ class SolverFem(PointSolver):
             elem = fid // 4
             face_body = self.element_body[elem]
             fragment = self._element_fragments()[elem]
-            crack = (~np.isin(fid, self._surface_face_ids)).astype(np.int32)
+            crack = (~np.isin(fid, self.model.surface_face_ids)).astype(np.int32)
             out = []
             for i in range(len(self.bodies)):
                 mine = face_body == i
@@ -1177,7 +786,7 @@ class SolverFem(PointSolver):
         if self.plastic:
             ep = self._plastic_strain.numpy().astype(np.float64)
             eq = np.sqrt(2.0 / 3.0 * np.einsum("eij,eij->e", ep, ep))  # equivalent plastic strain per element
-            vol = np.repeat(np.abs(self._volume_h), 4)
+            vol = np.repeat(np.abs(self.model.volume_h), 4)
             flat = self._tets_h.ravel()
             eq_v = np.bincount(flat, weights=np.repeat(eq, 4) * vol, minlength=self.point_count) / np.maximum(
                 np.bincount(flat, weights=vol, minlength=self.point_count), 1.0e-300
@@ -1197,7 +806,7 @@ class SolverFem(PointSolver):
                     name=b.name,
                     positions=x[lo:hi],
                     velocities=v[lo:hi],
-                    widths=np.full(hi - lo, self._widths[i]),
+                    widths=np.full(hi - lo, self.model.widths[i]),
                     attributes=attributes,
                     reactions={cond: r for (body, cond), r in reactions.items() if body == b.name},
                 )
@@ -1212,7 +821,7 @@ class SolverFem(PointSolver):
                     face_attributes={"fragment": frag_f, "crack": crack_f},
                 )
             )
-        for body_index, elem, w, faces, rest_points, out_u, out_v in self._render:
+        for body_index, elem, w, faces, rest_points, out_u, out_v in self.model.render:
             wp.launch(
                 ke.embed_points_kernel(self.dtype),
                 dim=len(w),
@@ -1232,7 +841,7 @@ class SolverFem(PointSolver):
 
     def render_points(self, index: int = 0) -> np.ndarray:
         """Current world vertices of the ``index``-th render mesh [m], float64 [render_vertex_count, 3]."""
-        name = f"{self.bodies[self._render[index][0]].name}_render"
+        name = f"{self.bodies[self.model.render[index].body].name}_render"
         return next(v.points for v in self.views() if v.name == name)
 
     # -- host-side views and diagnostics (vectorised numpy) -----------------------------------------------------
@@ -1316,11 +925,12 @@ class SolverFem(PointSolver):
 
         from ..kernels.fem import elements as ke
 
+        m = self.model
         blocks = wp.zeros(16 * self.element_count, dtype=self.mat33, device=self.device)
         wp.launch(
             ke.element_stiffness_blocks_kernel(self.dtype, self._rotated),
             dim=self.element_count,
-            inputs=[self._dm_inv, self._volume, self._lame, self._rotation, blocks],
+            inputs=[m.dm_inv, m.volume, m.lame, self._rotation, blocks],
             device=self.device,
         )
         b = blocks.numpy().astype(np.float64).reshape(self.element_count, 4, 4, 3, 3)
@@ -1345,15 +955,16 @@ class SolverFem(PointSolver):
 
         from ..kernels.fem import elements as ke
 
+        m = self.model
         wp.launch(
             ke.element_energy_kernel(self.dtype, self._measure_id, self.plastic),
             dim=self.element_count,
             inputs=[
                 self.kin.u,
                 self._tets,
-                self._dm_inv,
-                self._volume,
-                self._lame,
+                m.dm_inv,
+                m.volume,
+                m.lame,
                 self._plastic_strain,
                 self._energy,
             ],
