@@ -232,9 +232,10 @@ def test_usd_cache_topology_only_where_fragments_change(tmp_path):
         for fid in np.unique(fragment):
             shell = trimesh.Trimesh(pts, faces[fragment == fid], process=False)
             assert shell.is_watertight and shell.is_winding_consistent and shell.volume > 0.0
-        if frame == 0:
-            np.testing.assert_array_equal(faces, shape.faces)
-            assert np.abs(trimesh.proximity.closest_point(solid, pts)[1]).max() < h
+        if frame == 0:  # the intact surface: the input box refined to the spacing, its vertices on the box
+            np.testing.assert_array_equal(faces, FragmentSurfaces(shape, x0, h, "bar").faces)
+            assert len(faces) > len(shape.faces)
+            assert np.abs(trimesh.proximity.closest_point(solid, pts)[1]).max() < 1e-6  # float32 points
 
 
 def test_topology_rebuild_time_sphere_20k_particles():
@@ -290,8 +291,9 @@ def test_simplified_shells_stay_closed_with_fewer_triangles():
 def test_scene_cache_surfaces_closed_and_topology_only_when_fragments_change(tmp_path):
     """End to end through Scene.run: a notched brittle bar pulled apart. Read back from the cache: the surface mesh is
     closed (watertight, consistently wound) at every frame, frame 0 lies within one spacing of the input box,
-    topology time samples exist exactly at frame 0 and the frames where the points' fragment primvar changed, the
-    bar ends in two or more pieces, and the cache passes UsdValidation."""
+    topology time samples exist exactly at frame 0 and the frames where the points' fragment primvar or the set of
+    particles whose damage reached the surfaces' threshold (chips, see FragmentSurfaces.update_topology) changed,
+    the bar ends in two or more pieces, and the cache passes UsdValidation."""
     import trimesh
     from pxr import Usd, UsdGeom
 
@@ -313,8 +315,15 @@ def test_scene_cache_surfaces_closed_and_topology_only_when_fragments_change(tmp
     points = UsdGeom.Points(stage.GetPrimAtPath("/World/bar"))
     mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/World/bar_surface"))
     fragment = UsdGeom.PrimvarsAPI(points).GetPrimvar("fragment")
+    damage = UsdGeom.PrimvarsAPI(points).GetPrimvar("damage")
+    threshold = FragmentSurfaces.__init__.__kwdefaults__["damage_threshold"]
     labels = [np.array(fragment.Get(f)) for f in range(9)]
-    changed = [0] + [f for f in range(1, 9) if not np.array_equal(labels[f], labels[f - 1])]
+    chips = [np.array(damage.Get(f)) >= threshold for f in range(9)]
+    changed = [0] + [
+        f
+        for f in range(1, 9)
+        if not (np.array_equal(labels[f], labels[f - 1]) and np.array_equal(chips[f], chips[f - 1]))
+    ]
     assert [int(t) for t in mesh.GetFaceVertexIndicesAttr().GetTimeSamples()] == changed
     assert len(np.unique(labels[-1])) >= 2
     for f in range(9):

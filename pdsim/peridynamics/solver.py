@@ -367,8 +367,9 @@ class SolverPeridynamics(PointSolver):
     def views(self) -> list:
         """Per body: a PointsView (positions, velocities, widths = spacing; displacement, dilatation, and damage,
         fragment and plastic_strain where those features are live) and, unless ``surfaces`` was turned off, the
-        renderable surface ``<body>_surface`` (a closed shell per fragment, pdsim/peridynamics/surfaces.py; face
-        attributes fragment and crack; its topology changes only on frames where fragments split)."""
+        renderable surface ``<body>_surface`` (a closed shell per fragment and per particle whose damage reached the
+        surfaces' threshold, pdsim/peridynamics/surfaces.py; vertex velocities [m/s]; face attributes fragment and
+        crack; its topology changes only on frames where those regions change)."""
         x = self.positions()
         v = self.velocities()
         u = self.kin.displacements()
@@ -402,7 +403,7 @@ class SolverPeridynamics(PointSolver):
             if self._surfaces is not None:
                 surf = self._surfaces[i]
                 if self.model.fracture:
-                    surf.update_topology(values["fragment"][sl])
+                    surf.update_topology(values["fragment"][sl], values["damage"][sl])
                 out.append(surf.view(x[sl], v[sl]))
         return out
 

@@ -35,28 +35,53 @@ triangles (same positions) and crack faces are pieces of the region boundaries:
    of a plane away from the surface (0.33 h rms with midpoints). Voronoi cracks away from junctions are within
    0.06 h rms (0.24 h with midpoints). The rim, within about one spacing of the outer surface, is rougher (about 0.1 h
    rms).
-4. **Clip.** ``region ∩ input mesh`` (manifold3d) gives the fragment's shell. Faces from the input mesh are outer
-   faces, the rest are crack faces (told apart by manifold3d's original ids). A single-particle fragment becomes a
-   small closed chip of about one lattice cell (its share of space intersected with the input mesh). A body with a
-   single fragment is the input mesh itself, with the same vertices and triangles.
-5. **Motion.** Each shell vertex follows the particles of its own fragment only:
-   ``x_v = T_F(X_v) + sum_k phi_vk r_k``. Here ``T_F`` is the fragment's best-fit rigid motion (Kabsch, from its
-   particles' rest and current positions; the minimal rotation for collinear fragments, a translation for single
+3a. **Refined input.** Before the clip, the input surface is refined to edges of about h with manifold3d's
+    ``refine_to_length`` (planar subdivision: planes stay planes, box edges and corners stay sharp; an input whose
+    edges are all at most h is kept as it is). An unbroken body is this refined surface, so it bends with the particles
+    everywhere, not only at the input's vertices.
+4. **Clip.** ``region ∩ input surface`` (manifold3d, every triangle of both meshes its own face id so that manifold3d
+   keeps the triangulations) gives each region's shell. Faces from the input are outer faces, the rest are crack
+   faces (told apart by manifold3d's original ids; the source triangle tells the region across a crack face and the
+   input plane of an outer face).
+5. **Shared complex.** All shells' vertices that coincide (within 1e-9 h) become one vertex, and each crack is
+   triangulated once: the lower region's crack triangles, reversed, replace the higher region's (a shell whose sides
+   do not match keeps its own, checked). The two sides of a crack thus use the very same triangles.
+6. **Slivers** (:func:`clean_complex`). The booleans cut triangles near their corners and marching tetrahedra puts
+   crack points near grid vertices, which leaves needles and caps. Rounds of edge collapses (edges shorter than 0.3 h
+   and the shortest side of every triangle with an angle under 5 degrees) and edge flips (the longest side of such a
+   triangle, inside one patch) remove them on the shared complex, so both sides of a crack change alike. A collapse
+   moves a vertex onto a neighbour only if every patch of the vertex (its input planes and cracks) is a patch of the
+   neighbour, so outer faces stay exactly on the input surface, sharp edges and corners stay put and the volumes still
+   add up exactly; the link condition keeps every shell a closed 2-manifold. Measured on the brittle wall of
+   tests/test_pd_render_surfaces.py (h = 1 cm): 0-16 crack triangles per frame keep an angle under 5 degrees (of up
+   to 27k; up to 1 % on the early frames), no triangle is longer than 2.7 h at rest. Faceted curved inputs (a sphere
+   whose facets are smaller than h) keep more slivers, since no vertex may leave its facet.
+7. **Damage.** Regions are the fragments (connected components of live bonds), except that a particle whose damage
+   reaches ``damage_threshold`` (default 0.5: about 0.38 next to a clean crack through the bulk, so clean cracks
+   still show through the fragments) becomes a chip of its own. Its cell separates from its neighbours' in the frame
+   it loses that share of its bonds, so a hole through a wall shows as soon as the damage crosses the wall, not when
+   the last bond joining the debris breaks.
+8. **Motion.** Each shell vertex follows the particles of its own region only:
+   ``x_v = T_F(X_v) + sum_k phi_vk r_k``. Here ``T_F`` is the region's best-fit rigid motion (Kabsch, from its
+   particles' rest and current positions; the minimal rotation for collinear regions, a translation for single
    particles), and ``r_k`` is the k-th neighbour particle's deviation from ``T_F``. The ``phi_vk`` are
    moving-least-squares shape functions (linear basis, weights ``exp(-(d / 1.25 h)^2)`` over the 20 nearest
-   particles of the same fragment): a partition of unity, exact for affine fields up to a 1e-3 ridge. They are
-   precomputed at each topology change as a [vertex_count, 20] index/weight table. Rigidly moving fragments move
-   their shells exactly rigidly, and an affine deformation is reproduced to about 1e-3 h.
+   particles of the same region): a partition of unity, exact for affine fields up to a 1e-3 ridge. They are
+   precomputed at each topology change as a sparse matrix [vertex_count, particle_count], so a frame is a rigid fit
+   per shell and one sparse product. Rigidly moving regions move their shells exactly rigidly, an affine deformation
+   is reproduced to about 1e-3 h, and vertices next to clamped particles stay put (default cantilever: 0.0015 h).
+   Vertex velocities are the time derivative of this map, ``v_v = c' + w x R (X_v - Xc) + sum_k phi_vk (v_k - c' -
+   w x R (X_k - Xc))`` with the mean velocity c' and the best-fit angular velocity w of the region's particles.
 
-USD: one ``UsdGeom.Mesh`` per body at ``/World/<body>_surface`` holds every fragment as a separate closed shell. It
-carries the uniform (per-face) int primvars ``fragment`` (the fragment label) and ``crack`` (1 on crack faces, 0 on
-faces of the input surface, e.g. for an interior material). Points and extent are written every frame.
-``faceVertexCounts``, ``faceVertexIndices`` and the two primvars are written only on the first frame and on frames
-where the fragments changed.
+USD: one ``UsdGeom.Mesh`` per body at ``/World/<body>_surface`` holds every shell. It carries the uniform (per-face)
+int primvars ``fragment`` (the fragment label; chips carry their particle's fragment) and ``crack`` (1 on crack
+faces, 0 on faces of the input surface). Points, vertex velocities and extent are written every frame;
+``faceVertexCounts``, ``faceVertexIndices`` and the two primvars only on the first frame and on frames where the
+regions changed.
 
-Cost (2-core CPU, numbers from ``tests/test_pd_surfaces.py``): rebuilding a sphere of 20k particles into 10
-fragments takes about 0.5-1.5 s; a frame's vertex update is a few vectorised gathers (about 10-20 ms for 38k
-vertices).
+Cost (2-core CPU): a rebuild is one boolean per region plus the clean-up, about 0.1-0.3 s for a few fragments of
+a 5k-particle body and about 0.5-2 s for the wall above with 200-260 chips; a frame's vertex update is a rigid fit
+and a sparse product (a few ms for 20k vertices).
 """
 
 from __future__ import annotations
@@ -304,7 +329,7 @@ def grid_labels(grid: LatticeGrid, fragment: np.ndarray) -> np.ndarray:
 
 def partition_regions(
     grid: LatticeGrid, fragment: np.ndarray, *, crack_smoothing: float = 0.45
-) -> list[tuple[np.ndarray, np.ndarray]]:
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Closed regions, one per fragment, that partition a neighbourhood of the solid (steps 2-3 of the method).
 
     Args:
@@ -313,8 +338,9 @@ def partition_regions(
         crack_smoothing: edge points lie at t in [0.5 - s, 0.5 + s] along grid edges, s in [0, 0.45].
 
     Returns:
-        K pairs (vertices [m] float64 shape [v, 3], triangles int64 shape [f, 3]), outward oriented; region k is
-        empty (zero arrays) if no grid vertex carries fragment k. The union of the regions contains the solid, and
+        K triples (vertices [m] float64 shape [v, 3], triangles int64 shape [f, 3], the fragment on the other side
+        of each triangle int64 shape [f], -1 for "outside"), outward oriented; region k is empty (zero arrays) if
+        no grid vertex carries fragment k. The union of the regions contains the solid, and
         two regions share only boundary triangles.
     """
     fragment = np.asarray(fragment, dtype=np.int64)
@@ -426,18 +452,365 @@ def partition_regions(
     tri[flip] = tri[flip][:, [0, 2, 1]]
 
     owner = np.concatenate([ref[:, 2], ref[:, 3]])
+    across = np.concatenate([ref[:, 3], ref[:, 2]])
     owned = np.concatenate([tri, tri[:, [0, 2, 1]]])
     inside = owner >= 0
-    owner, owned = owner[inside], owned[inside]
+    owner, owned, across = owner[inside], owned[inside], across[inside]
     order = np.argsort(owner, kind="stable")
-    owner, owned = owner[order], owned[order]
+    owner, owned, across = owner[order], owned[order], across[order]
     starts = np.searchsorted(owner, np.arange(k_count + 1))
     regions = []
     for k in range(k_count):
         f = owned[starts[k] : starts[k + 1]]
         used, local = np.unique(f, return_inverse=True)
-        regions.append((upos[used], local.reshape(-1, 3).astype(np.int64)))
+        regions.append((upos[used], local.reshape(-1, 3).astype(np.int64), across[starts[k] : starts[k + 1]]))
     return regions
+
+
+# ---------------------------------------------------------------------------------------------------- the shell complex
+# All fragments' shells as one complex: vertices shared between shells where they coincide, so the two sides of a crack
+# use the same vertices (and, after _share_crack_faces, the same triangles). Patches: an outer face's patch is the plane
+# of its input triangle (coplanar input triangles share one); a crack face's patch is its pair of regions.
+
+SLIVER_ANGLE = 5.0  # triangles with a smaller angle [degrees] are slivers
+SHORT_EDGE = 0.3  # edges shorter than this many spacings are collapsed
+_MAX_CLEAN_ROUNDS = 40
+
+
+def plane_groups(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Plane id of each triangle, int64 shape [f]: triangles of vertices [m] [v, 3] / faces [f, 3] share an id when
+    their planes agree (unit normal to 1e-9, offset to 1e-9 of the mesh size). Degenerate triangles get their own."""
+    t = vertices[faces]
+    n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    norm = np.linalg.norm(n, axis=1)
+    ok = norm > 0.0
+    n = n / np.where(ok, norm, 1.0)[:, None]
+    size = float(np.ptp(vertices, axis=0).max()) or 1.0
+    offset = np.einsum("ij,ij->i", n, t[:, 0]) / size
+    key = np.round(np.concatenate([n, offset[:, None]], axis=1) * 1e9).astype(np.int64)
+    key[~ok] = np.stack([np.arange(len(faces))[~ok]] * 4, axis=1) + (1 << 40)
+    return np.unique(key, axis=0, return_inverse=True)[1].reshape(-1).astype(np.int64)
+
+
+def refine_surface(vertices: np.ndarray, faces: np.ndarray, spacing: float):
+    """The input surface refined to edges of about ``spacing`` h [m] with manifold3d's ``refine_to_length``: every
+    edge longer than h is split into equal pieces and each triangle is filled by planar subdivision, so planes stay
+    planes and sharp edges stay sharp (the surface is unchanged, only the triangles are smaller).
+
+    Returns:
+        (vertices [m] float64 [v, 3], triangles int64 [f, 3], plane id of each triangle int64 [f] (see
+        :func:`plane_groups`, computed on the input triangles and inherited by their pieces)).
+    """
+    import manifold3d
+
+    groups = plane_groups(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64))
+    t = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
+    if np.linalg.norm(t - np.roll(t, 1, axis=1), axis=2).max() <= spacing:  # fine already: the input itself
+        return np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64), groups
+    f0 = np.ascontiguousarray(faces, dtype=np.uint64)
+    solid = manifold3d.Manifold(
+        manifold3d.Mesh64(
+            np.ascontiguousarray(vertices, dtype=np.float64), f0, face_id=np.arange(len(f0), dtype=np.uint64)
+        )
+    )
+    if solid.status() != manifold3d.Error.NoError:
+        raise ValueError(f"manifold3d rejects the input mesh ({solid.status()})")
+    mesh = solid.refine_to_length(float(spacing)).to_mesh64()
+    v = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3].copy()
+    f = np.asarray(mesh.tri_verts, dtype=np.int64).reshape(-1, 3)
+    origin = np.asarray(mesh.face_id, dtype=np.int64)
+    return v, f, groups[origin]
+
+
+def triangle_angles(points: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """Interior angles [degrees], float64 shape [f, 3] (angle at corner i of each triangle of ``tri`` [f, 3])."""
+    t = points[tri]
+    out = np.empty(tri.shape, dtype=np.float64)
+    for i in range(3):
+        a = t[:, (i + 1) % 3] - t[:, i]
+        b = t[:, (i + 2) % 3] - t[:, i]
+        cos = np.einsum("ij,ij->i", a, b) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300)
+        out[:, i] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return out
+
+
+def _merge_coincident(points: np.ndarray, owner: np.ndarray, tol: float) -> np.ndarray:
+    """Global vertex id of each point [m] [p, 3]: points of different shells (``owner`` [p]) closer than ``tol`` [m]
+    are one vertex; points of the same shell stay apart. Returns int64 [p]."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(points).query_pairs(tol, output_type="ndarray")
+    pairs = pairs[owner[pairs[:, 0]] != owner[pairs[:, 1]]] if len(pairs) else pairs.reshape(0, 2)
+    n = points.shape[0]
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    return label.astype(np.int64)
+
+
+def shells_closed(tri: np.ndarray, shell: np.ndarray, vertex_count: int) -> np.ndarray:
+    """Per shell, whether its triangles form a closed, consistently oriented surface: every directed edge occurs
+    once and its reverse once. ``tri`` [f, 3] global vertex ids, ``shell`` [f] shell index; returns bool
+    [shell.max() + 1] (True for shells without triangles)."""
+    count = int(shell.max()) + 1 if len(shell) else 0
+    a = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
+    b = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
+    s = np.tile(shell, 3)
+    key = (s * vertex_count + a) * vertex_count + b
+    rev = (s * vertex_count + b) * vertex_count + a
+    uk, counts = np.unique(key, return_counts=True)
+    bad_edge = (counts[np.searchsorted(uk, key)] != 1) | ~np.isin(rev, uk)
+    bad = np.zeros(count, dtype=bool)
+    bad[s[bad_edge]] = True
+    return ~bad
+
+
+def _undirected_edges(tri: np.ndarray, vertex_count: int):
+    """Unique undirected edges of ``tri`` [f, 3]: (low ends [e], high ends [e], edge of each triangle side [f, 3]);
+    side j of a triangle joins its corners j and j + 1."""
+    a = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
+    b = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
+    key = np.minimum(a, b) * vertex_count + np.maximum(a, b)
+    uk, inverse = np.unique(key, return_inverse=True)
+    return uk // vertex_count, uk % vertex_count, inverse.reshape(3, -1).T
+
+
+def _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle):
+    """One round of edge collapses on the complex (see :func:`clean_complex`). Returns (triangles after the round
+    [f, 3], mask [f] of the triangles that keep an area, number of collapses; 0: nothing left to do)."""
+    from scipy.sparse import csr_matrix
+
+    n_v = points.shape[0]
+    lo, hi, side_edge = _undirected_edges(tri, n_v)
+    length = np.linalg.norm(points[lo] - points[hi], axis=1)
+    cand = length < short_edge * spacing
+    angles = triangle_angles(points, tri)
+    sliver = angles.min(axis=1) < sliver_angle
+    if sliver.any():  # the shortest side of every sliver (needles and caps), up to one spacing
+        side_len = length[side_edge[sliver]]
+        shortest = side_edge[sliver][np.arange(sliver.sum()), np.argmin(side_len, axis=1)]
+        cand[shortest[length[shortest] < spacing]] = True
+    if not cand.any():
+        return tri, np.ones(len(tri), dtype=bool), 0
+    e_idx = np.flatnonzero(cand)
+    # Direction: u -> v only if every patch of u is a patch of v (u then moves within its own patches).
+    p_count = int(patch.max()) + 1
+    inc = csr_matrix((np.ones(3 * len(tri)), (tri.T.ravel(), np.tile(patch, 3))), shape=(n_v, p_count))
+    inc.data[:] = 1.0
+    inc.sum_duplicates()
+    inc.data[:] = 1.0
+    n_patch = np.asarray(inc.sum(axis=1)).ravel()
+    eu, ev = lo[e_idx], hi[e_idx]
+    common = np.asarray(inc[eu].multiply(inc[ev]).sum(axis=1)).ravel()
+    u_into_v = common == n_patch[eu]
+    v_into_u = common == n_patch[ev]
+    ok = u_into_v | v_into_u
+    src = np.where(u_into_v, eu, ev)[ok]
+    dst = np.where(u_into_v, ev, eu)[ok]
+    prio = length[e_idx][ok] + 1e-12 * spacing * np.arange(ok.sum()) / max(ok.sum(), 1)
+    if src.size == 0:
+        return tri, np.ones(len(tri), dtype=bool), 0
+    # Independent collapses: the zones (source and its neighbours) of two chosen collapses never meet.
+    adj = csr_matrix((np.ones(2 * len(lo)), (np.concatenate([lo, hi]), np.concatenate([hi, lo]))), shape=(n_v, n_v))
+    zone = adj[src].tocoo()
+    rows = np.concatenate([zone.row, np.arange(len(src))])
+    cols = np.concatenate([zone.col, src])
+    chosen = np.zeros(len(src), dtype=bool)
+    open_ = np.ones(len(src), dtype=bool)
+    blocked = np.zeros(n_v, dtype=bool)
+    while open_.any():  # Luby-style passes: local minima win, their zones block their rivals
+        live = open_[rows]
+        best = np.full(n_v, np.inf)
+        np.minimum.at(best, cols[live], prio[rows[live]])
+        win = open_.copy()
+        np.logical_and.at(win, rows, best[cols] == prio[rows])
+        chosen |= win
+        blocked[cols[win[rows]]] = True
+        hit = np.zeros(len(src), dtype=bool)
+        np.logical_or.at(hit, rows, blocked[cols])
+        open_ &= ~hit
+    src, dst = src[chosen], dst[chosen]
+    # Link condition in every shell that holds the source.
+    sv = np.unique(shell[:, None] * n_v + tri)  # (shell, vertex) pairs present
+    s_of, v_of = sv // n_v, sv % n_v
+    order = np.argsort(v_of, kind="stable")
+    starts = np.searchsorted(v_of[order], np.arange(n_v + 1))
+    per = starts[src + 1] - starts[src]
+    c_rep = np.repeat(np.arange(len(src)), per)
+    pos_in = np.arange(per.sum()) - np.repeat(np.cumsum(per) - per, per)
+    shells_c = s_of[order][starts[src][c_rep] + pos_in]
+    a_dir = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
+    b_dir = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
+    s_dir = np.tile(shell, 3)
+    row_key = np.searchsorted(sv, s_dir * n_v + a_dir)
+    nbr = csr_matrix((np.ones(len(a_dir)), (row_key, b_dir)), shape=(len(sv), n_v))
+    nbr.data[:] = 1.0
+    nbr.sum_duplicates()
+    nbr.data[:] = 1.0
+    su = np.searchsorted(sv, shells_c * n_v + src[c_rep])
+    dst_key = shells_c * n_v + dst[c_rep]
+    sd = np.minimum(np.searchsorted(sv, dst_key), len(sv) - 1)
+    dst_in_shell = sv[sd] == dst_key
+    edge_in_shell = np.asarray(nbr[su, dst[c_rep]]).ravel() > 0
+    common_nbrs = np.asarray(nbr[su].multiply(nbr[sd]).sum(axis=1)).ravel()
+    shell_size = np.bincount(s_of, minlength=int(shell.max()) + 1)[shells_c]
+    good = np.where(dst_in_shell, edge_in_shell & (common_nbrs == 2) & (shell_size > 6), True)
+    link_ok = np.ones(len(src), dtype=bool)
+    np.logical_and.at(link_ok, c_rep, good)
+    src, dst = src[link_ok], dst[link_ok]
+    if src.size == 0:
+        return tri, np.ones(len(tri), dtype=bool), 0
+    # Geometry: no triangle that keeps its area may turn by more than 60 degrees (slivers and triangles of short
+    # edges only, whose normals mean little, may).
+    moved = np.arange(n_v)
+    moved[src] = dst
+    new = moved[tri]
+    touched = np.any(new != tri, axis=1)
+    degenerate = (new[:, 0] == new[:, 1]) | (new[:, 1] == new[:, 2]) | (new[:, 2] == new[:, 0])
+    check = np.flatnonzero(touched & ~degenerate)
+    t_old, t_new = points[tri[check]], points[new[check]]
+    n_old = np.cross(t_old[:, 1] - t_old[:, 0], t_old[:, 2] - t_old[:, 0])
+    n_new = np.cross(t_new[:, 1] - t_new[:, 0], t_new[:, 2] - t_new[:, 0])
+    dot = np.einsum("ij,ij->i", n_old, n_new)
+    significant = ~sliver[check] & (length[side_edge[check]].max(axis=1) >= short_edge * spacing)
+    turned = (dot <= 0.5 * np.linalg.norm(n_old, axis=1) * np.linalg.norm(n_new, axis=1)) & significant
+    if turned.any():
+        which = np.full(n_v, -1)
+        which[src] = np.arange(len(src))
+        bad_src = which[tri[check[turned]]]
+        keep = np.ones(len(src), dtype=bool)
+        keep[bad_src[bad_src >= 0]] = False
+        src, dst = src[keep], dst[keep]
+        moved = np.arange(n_v)
+        moved[src] = dst
+        new = moved[tri]
+        degenerate = (new[:, 0] == new[:, 1]) | (new[:, 1] == new[:, 2]) | (new[:, 2] == new[:, 0])
+    return new, ~degenerate, len(src)
+
+
+def _flip_round(points, tri, shell, patch, sliver_angle):
+    """One round of edge flips (see :func:`clean_complex`): the longest side ab of a sliver (a, b, c) whose twin
+    (b, a, d) in the same shell lies in the same patch becomes cd, giving (c, a, d) and (d, b, c), when cd is not an
+    edge of that shell yet, both new triangles keep the old orientation and the smaller angle grows. A flip is done in
+    every shell holding the pair (both sides of a crack) or in none. Returns (triangles [f, 3], number of flips)."""
+    n_v = points.shape[0]
+    f_count = len(tri)
+    angles = triangle_angles(points, tri)
+    amin = angles.min(axis=1)
+    sliver = np.flatnonzero(amin < sliver_angle)
+    if sliver.size == 0:
+        return tri, 0
+    # The longest side of a sliver is opposite its largest angle: corner j's opposite side joins j + 1 and j + 2.
+    j = np.argmax(angles[sliver], axis=1)
+    a = tri[sliver, (j + 1) % 3]
+    b = tri[sliver, (j + 2) % 3]
+    c = tri[sliver, j]
+    # Twin: the triangle of the same shell holding the directed edge b -> a.
+    da = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
+    db = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
+    dapex = np.concatenate([tri[:, 2], tri[:, 0], tri[:, 1]])
+    dface = np.tile(np.arange(f_count), 3)
+    dkey = (np.tile(shell, 3) * n_v + da) * n_v + db
+    order = np.argsort(dkey)
+    skey = dkey[order]
+    want = (shell[sliver] * n_v + b) * n_v + a
+    pos = np.minimum(np.searchsorted(skey, want), len(skey) - 1)
+    found = skey[pos] == want
+    t2 = np.where(found, dface[order][pos], 0)
+    d = np.where(found, dapex[order][pos], 0)
+    ok = found & (patch[t2] == patch[sliver]) & (c != d)
+    # cd must not be an edge of the shell already.
+    ekey = (shell[sliver] * n_v + c) * n_v + d
+    pos2 = np.minimum(np.searchsorted(skey, ekey), len(skey) - 1)
+    ok &= skey[pos2] != ekey
+    # Geometry: orientation kept and the smaller angle grows.
+    t_new1 = np.stack([c, a, d], axis=1)
+    t_new2 = np.stack([d, b, c], axis=1)
+    n_old = np.cross(points[b] - points[a], points[c] - points[a]) + np.cross(
+        points[a] - points[b], points[d] - points[b]
+    )
+    for tn in (t_new1, t_new2):
+        p = points[tn]
+        n_new = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        ok &= np.einsum("ij,ij->i", n_new, n_old) > 0.0
+    new_min = np.minimum(triangle_angles(points, t_new1).min(axis=1), triangle_angles(points, t_new2).min(axis=1))
+    ok &= new_min > np.minimum(amin[sliver], amin[t2]) + 1e-6
+    # All shells or none: group the candidates by (edge, patch).
+    group_key = (np.minimum(a, b) * n_v + np.maximum(a, b)) * (int(patch.max()) + 1) + patch[sliver]
+    _, group = np.unique(group_key, return_inverse=True)
+    group = group.reshape(-1)
+    all_ok = np.ones(group.max() + 1, dtype=bool)
+    np.logical_and.at(all_ok, group, ok)
+    ok &= all_ok[group]
+    cand = np.flatnonzero(ok)
+    if cand.size == 0:
+        return tri, 0
+    # Each triangle in at most one flip (smallest angle first; the copies of one flip win together).
+    prio = amin[sliver][cand] + 1e-9 * group[cand] / max(group.max(), 1)
+    faces = np.concatenate([sliver[cand], t2[cand]])
+    rows = np.tile(np.arange(len(cand)), 2)
+    chosen = np.zeros(len(cand), dtype=bool)
+    open_ = np.ones(len(cand), dtype=bool)
+    blocked = np.zeros(f_count, dtype=bool)
+    while open_.any():
+        live = open_[rows]
+        best = np.full(f_count, np.inf)
+        np.minimum.at(best, faces[live], prio[rows[live]])
+        win = open_.copy()
+        np.logical_and.at(win, rows, best[faces] == prio[rows])
+        chosen |= win
+        blocked[faces[win[rows]]] = True
+        hit = np.zeros(len(cand), dtype=bool)
+        np.logical_or.at(hit, rows, blocked[faces])
+        open_ &= ~hit
+    pick = cand[chosen]
+    g_ok = np.zeros(group.max() + 1, dtype=bool)
+    g_ok[group[pick]] = True
+    g_cnt = np.bincount(group[cand], minlength=group.max() + 1)
+    g_pick = np.bincount(group[pick], minlength=group.max() + 1)
+    pick = pick[g_pick[group[pick]] == g_cnt[group[pick]]]  # every copy of the flip was chosen
+    out = tri.copy()
+    out[sliver[pick]] = t_new1[pick]
+    out[t2[pick]] = t_new2[pick]
+    return out, len(pick)
+
+
+def clean_complex(points, tri, shell, patch, spacing, *, short_edge=SHORT_EDGE, sliver_angle=SLIVER_ANGLE):
+    """Removes slivers from the shell complex by edge collapses that keep every shell a closed 2-manifold.
+
+    Candidates are edges shorter than ``short_edge`` spacings and the shortest side (up to one spacing) of every
+    triangle with an angle below ``sliver_angle`` [degrees]. A collapse moves one end u onto the other end v (no new
+    positions: outer faces stay exactly on the input surface, sharp edges and corners stay put) and is allowed when
+
+    - every patch of u is a patch of v (u stays on its planes and cracks: interior points may move onto rims,
+      creases and junctions, never the reverse),
+    - in every shell holding u and v, the edge uv exists and u and v share exactly two neighbours (the link
+      condition, which keeps the shell a 2-manifold), and the shell has more than 6 vertices,
+    - no remaining triangle turns by more than 60 degrees.
+
+    Collapses of one round have disjoint neighbourhoods (chosen shortest first), so they are checked and applied
+    together, vectorised; the two sides of a crack share vertices and triangles, so both sides collapse alike.
+
+    Args:
+        points: vertex positions [m], float64 [v, 3].
+        tri: triangles (global vertex ids), int64 [f, 3]; shell: shell of each triangle, int [f];
+        patch: patch id of each triangle, int [f].
+        spacing: particle spacing h [m].
+
+    Returns:
+        (tri, shell, patch) after the collapses (triangles that became degenerate removed).
+    """
+    for _ in range(_MAX_CLEAN_ROUNDS):
+        new, keep, collapsed = _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle)
+        t1, s1, p1 = new[keep], shell[keep], patch[keep]
+        t1, flipped = _flip_round(points, t1, s1, p1, sliver_angle)
+        if collapsed == 0 and flipped == 0:
+            break
+        if not shells_closed(t1, s1, len(points)).all():  # a rare configuration the checks missed: stop here
+            break
+        tri, shell, patch = t1, s1, p1
+    return tri, shell, patch
 
 
 def _rigid_fit(rest: np.ndarray, current: np.ndarray, group: np.ndarray, group_count: int):
@@ -492,6 +865,9 @@ def _rigid_fit(rest: np.ndarray, current: np.ndarray, group: np.ndarray, group_c
     return rest_c, cur_c, rot
 
 
+DAMAGE_THRESHOLD = 0.5  # particles with at least this damage become chips of their own (step 6 of the method)
+
+
 class FragmentSurfaces:
     """Closed, outward-oriented triangle shells of the fragments of one body, and their motion with the particles.
 
@@ -507,18 +883,25 @@ class FragmentSurfaces:
             smoothing, lattice-stepped cracks).
         simplify: if > 0, each clipped shell is simplified by manifold3d (edge collapses that move the surface by at
             most ``simplify * spacing``); about 0.05 halves the triangle count of crack-rich shells. The two sides of
-            a crack are simplified independently, so they then match only within that tolerance; 0 (default) keeps
-            the exact partition.
+            a crack are then simplified independently and match only within that tolerance, and the sliver clean-up
+            is skipped; 0 (default) keeps the shared, cleaned complex.
+        refine: refine the input surface to edges of about one spacing, so that an unbroken surface bends with
+            the particles (default: True, unless ``simplify`` is set; False keeps the input triangles).
+        damage_threshold: particles whose damage reaches this value become chips of their own, in (0, 1]; see
+            :meth:`update_topology`.
+        clean: remove slivers by edge collapses (default True).
         device: Warp device of the one-off grid-near-mesh query.
 
     Attributes:
-        fragment_ids: label of each shell's fragment, int shape [fragment_count].
+        fragment_ids: fragment label of each shell (chips carry their particle's fragment label; several shells
+            may share one), int shape [shell_count].
         rest_vertices: all shells' vertices in rest space [m], float64 shape [vertex_count, 3], shell after shell.
         faces: all shells' triangles, int32 shape [face_count, 3], indices into ``rest_vertices``.
         face_fragment: fragment label of each face, int32 shape [face_count].
         face_crack: 1 for crack faces, 0 for faces from the input surface, int32 shape [face_count].
-        vertex_fragment: shell index (0..fragment_count-1) of each vertex, int shape [vertex_count].
+        vertex_fragment: shell index (0..shell_count-1) of each vertex, int shape [vertex_count].
         version: number of topology rebuilds (0: the intact input mesh).
+        rebuild_seconds: wall time of the last rebuild [s].
     """
 
     def __init__(
@@ -530,6 +913,9 @@ class FragmentSurfaces:
         *,
         crack_smoothing: float = 0.45,
         simplify: float = 0.0,
+        refine: bool | None = None,
+        damage_threshold: float = DAMAGE_THRESHOLD,
+        clean: bool = True,
         device: str = "cpu",
     ):
         rest = np.asarray(rest_positions, dtype=np.float64)
@@ -541,20 +927,32 @@ class FragmentSurfaces:
             raise ValueError(f"crack_smoothing={crack_smoothing!r} must lie in [0, 0.45]")
         if not (np.isfinite(simplify) and 0.0 <= simplify <= 0.5):
             raise ValueError(f"simplify={simplify!r} must lie in [0, 0.5] (a fraction of the spacing)")
+        if not (np.isfinite(damage_threshold) and 0.0 < damage_threshold <= 1.0):
+            raise ValueError(f"damage_threshold={damage_threshold!r} must lie in (0, 1]")
         self.shape = shape
         self.rest_positions = rest
         self.spacing = float(spacing)
         self.body_name = body_name
         self.crack_smoothing = float(crack_smoothing)
         self.simplify = float(simplify)
+        self.damage_threshold = float(damage_threshold)
+        self.clean = bool(clean)
         self.version = 0
-        self._labels: np.ndarray | None = None
+        self._key: np.ndarray | None = None
         self._manifold_mesh = None
         self._grid: LatticeGrid | None = None
         self.device = device
-        self._written_version: int | None = None
         self.rebuild_seconds = 0.0
-        self._set_topology(np.zeros(rest.shape[0], dtype=np.int64))
+        self.clean_failed = False
+        v, f = np.asarray(shape.vertices, np.float64), np.asarray(shape.faces, np.int64)
+        if refine is None:
+            refine = self.simplify == 0.0
+        if refine:
+            self._surface = refine_surface(v, f, self.spacing)
+        else:
+            self._surface = (v, f, plane_groups(v, f))
+        n = rest.shape[0]
+        self._set_topology(np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64))
 
     @property
     def particle_count(self) -> int:
@@ -562,11 +960,12 @@ class FragmentSurfaces:
 
     @property
     def fragment_count(self) -> int:
+        """Number of shells (fragments, and chips of damaged particles)."""
         return int(self.fragment_ids.shape[0])
 
     @property
     def meshes(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Per fragment: (rest vertices [m] float64 [v_i, 3], triangles int32 [f_i, 3] indexing those vertices)."""
+        """Per shell: (rest vertices [m] float64 [v_i, 3], triangles int32 [f_i, 3] indexing those vertices)."""
         out = []
         for k in range(self.fragment_count):
             v0, v1 = self._vertex_ranges[k], self._vertex_ranges[k + 1]
@@ -576,25 +975,43 @@ class FragmentSurfaces:
 
     # ------------------------------------------------------------------ topology
 
-    def update_topology(self, labels) -> bool:
-        """Rebuilds the shells if the fragment labels changed since the last call.
+    def region_keys(self, labels, damage=None) -> np.ndarray:
+        """Region of each particle, int64 [particle_count]: its fragment label, or ``-1 - index`` (a chip of its
+        own) where ``damage`` reaches ``damage_threshold``."""
+        labels = np.asarray(labels)
+        if labels.shape != (self.particle_count,) or not np.issubdtype(labels.dtype, np.integer):
+            raise ValueError(f"labels must be ints of shape [{self.particle_count}], got {labels.dtype} {labels.shape}")
+        key = labels.astype(np.int64)
+        if damage is not None:
+            damage = np.asarray(damage, dtype=np.float64)
+            if damage.shape != (self.particle_count,):
+                raise ValueError(f"damage must have shape [{self.particle_count}], got {list(damage.shape)}")
+            chip = damage >= self.damage_threshold
+            key = np.where(chip, -1 - np.arange(self.particle_count), key)
+        return key
+
+    def update_topology(self, labels, damage=None) -> bool:
+        """Rebuilds the shells if the regions changed since the last call.
+
+        Regions are the fragments, except that every particle whose damage reaches ``damage_threshold`` is a region
+        (a chip) of its own: its cell separates from its neighbours' as soon as it loses that share of its bonds,
+        before the fragment splits, so a hole through a wall shows as soon as damage crosses the wall.
 
         Args:
             labels: fragment label per particle, int shape [particle_count] (any non-negative ints; equal labels
                 mean the same fragment), e.g. ``FragmentTracker.body_labels(b)``.
+            damage: damage per particle [-], shape [particle_count], or None (fragments only).
 
         Returns:
             True when the shells were rebuilt.
         """
         import time
 
-        labels = np.asarray(labels)
-        if labels.shape != (self.particle_count,) or not np.issubdtype(labels.dtype, np.integer):
-            raise ValueError(f"labels must be ints of shape [{self.particle_count}], got {labels.dtype} {labels.shape}")
-        if self._labels is not None and np.array_equal(labels, self._labels):
+        key = self.region_keys(labels, damage)
+        if self._key is not None and np.array_equal(key, self._key):
             return False
         t0 = time.perf_counter()
-        self._set_topology(labels)
+        self._set_topology(key, np.asarray(labels, dtype=np.int64))
         self.rebuild_seconds = time.perf_counter() - t0
         self.version += 1
         return True
@@ -603,9 +1020,11 @@ class FragmentSurfaces:
         import manifold3d
 
         if self._manifold_mesh is None:
+            v, f, _ = self._surface
             mesh = manifold3d.Mesh64(
-                np.ascontiguousarray(self.shape.vertices, dtype=np.float64),
-                np.ascontiguousarray(self.shape.faces, dtype=np.uint64),
+                np.ascontiguousarray(v, dtype=np.float64),
+                np.ascontiguousarray(f, dtype=np.uint64),
+                face_id=np.arange(len(f), dtype=np.uint64),
             )
             solid = manifold3d.Manifold(mesh)
             if solid.status() != manifold3d.Error.NoError:
@@ -613,73 +1032,157 @@ class FragmentSurfaces:
             self._manifold_mesh = solid.as_original()
         return self._manifold_mesh
 
-    def _set_topology(self, labels: np.ndarray) -> None:
-        ids, fragment = np.unique(labels, return_inverse=True)
-        self._labels = labels.copy()
-        if ids.shape[0] == 1:  # intact: the input mesh itself
-            shells = [(self.shape.vertices.astype(np.float64), self.shape.faces.astype(np.int64), None)]
+    def _set_topology(self, key: np.ndarray, labels: np.ndarray) -> None:
+        ids, first, region = np.unique(key, return_index=True, return_inverse=True)
+        region = region.reshape(-1)
+        self._key = key.copy()
+        k_count = ids.shape[0]
+        if k_count == 1:  # intact: the (refined) input surface
+            v, f, _ = self._surface
+            points, tri = v, f
+            tri_shell = np.zeros(len(f), dtype=np.int64)
+            tri_crack = np.zeros(len(f), dtype=np.int32)
+            shared = True
         else:
-            shells = self._clipped_shells(fragment.reshape(-1), ids.shape[0])
-        kept = [k for k, s in enumerate(shells) if s[1].shape[0] > 0]
-        self.fragment_ids = ids[kept].astype(np.int32)
-        verts = [shells[k][0] for k in kept]
-        faces = [shells[k][1] for k in kept]
-        vcounts = np.array([v.shape[0] for v in verts], dtype=np.int64)
-        fcounts = np.array([f.shape[0] for f in faces], dtype=np.int64)
-        self._vertex_ranges = np.concatenate([[0], np.cumsum(vcounts)])
-        self._face_ranges = np.concatenate([[0], np.cumsum(fcounts)])
-        self.rest_vertices = np.concatenate(verts)
-        self.faces = (np.concatenate(faces) + np.repeat(self._vertex_ranges[:-1], fcounts)[:, None]).astype(np.int32)
-        self.face_fragment = np.repeat(self.fragment_ids, fcounts).astype(np.int32)
-        self.face_crack = np.concatenate(
-            [
-                np.zeros(f.shape[0], np.int32) if shells[k][2] is None else shells[k][2]
-                for k, f in zip(kept, faces, strict=True)
-            ]
-        ).astype(np.int32)
-        self.vertex_fragment = np.repeat(np.arange(len(kept)), vcounts)
-        # Particles of each kept shell's fragment (shell index), -1 for particles of dropped fragments.
-        shell_of_fragment = -np.ones(ids.shape[0], dtype=np.int64)
-        shell_of_fragment[kept] = np.arange(len(kept))
-        self._particle_shell = shell_of_fragment[fragment.reshape(-1)]
+            points, tri, tri_shell, tri_crack, shared = self._clipped_complex(region, k_count)
+        self._split_shells(points, tri, tri_shell, tri_crack, labels[first], region, k_count, shared)
         self._build_interpolation()
 
-    def _clipped_shells(self, fragment: np.ndarray, k_count: int):
-        """Region ∩ input mesh for every fragment: list of (vertices, triangles, crack flag per triangle)."""
+    def _clipped_pieces(self, region: np.ndarray, k_count: int):
+        """Region ∩ input surface for every region (manifold3d). Returns per region (vertices [v, 3], triangles
+        [f, 3], region across each triangle [f] (-1 on outer faces), plane id of each triangle [f] (-1 on crack
+        faces))."""
         import manifold3d
 
         solid = self._input_manifold()
         solid_id = solid.original_id()
+        plane = self._surface[2]
         if self._grid is None:
             self._grid = build_lattice_grid(self.rest_positions, self.shape, self.spacing, device=self.device)
-        regions = partition_regions(self._grid, fragment, crack_smoothing=self.crack_smoothing)
-        shells = []
-        for k, (rv, rf) in enumerate(regions):
+        regions = partition_regions(self._grid, region, crack_smoothing=self.crack_smoothing)
+        empty = (np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64))
+        pieces = []
+        for k, (rv, rf, racross) in enumerate(regions):
             if rf.shape[0] == 0:
-                shells.append((np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int32)))
+                pieces.append(empty)
                 continue
-            region = manifold3d.Manifold(manifold3d.Mesh64(rv, rf.astype(np.uint64)))
-            if region.status() != manifold3d.Error.NoError:
-                raise RuntimeError(f"fragment region {k} of '{self.body_name}' is not a manifold ({region.status()})")
-            piece = region ^ solid
+            mesh = manifold3d.Mesh64(rv, rf.astype(np.uint64), face_id=np.arange(len(rf), dtype=np.uint64))
+            region_solid = manifold3d.Manifold(mesh)
+            if region_solid.status() != manifold3d.Error.NoError:
+                raise RuntimeError(f"region {k} of '{self.body_name}' is not a manifold ({region_solid.status()})")
+            piece = region_solid ^ solid
             if self.simplify > 0.0:
                 piece = piece.simplify(self.simplify * self.spacing)
             piece = piece.to_mesh64()
             tri = np.asarray(piece.tri_verts, dtype=np.int64).reshape(-1, 3)
+            if tri.size == 0:
+                pieces.append(empty)
+                continue
             run_start = np.asarray(piece.run_index, dtype=np.int64) // 3
             run_id = np.asarray(piece.run_original_id, dtype=np.int64)
-            crack = np.repeat(run_id != solid_id, np.diff(run_start)).astype(np.int32) if tri.size else np.zeros(0)
-            shells.append((np.asarray(piece.vert_properties, dtype=np.float64)[:, :3], tri, crack))
-        return shells
+            outer = np.repeat(run_id == solid_id, np.diff(run_start))
+            src = np.asarray(piece.face_id, dtype=np.int64)
+            across = np.where(outer, -1, racross[np.where(outer, 0, np.minimum(src, len(racross) - 1))])
+            planes = np.where(outer, plane[np.where(outer, np.minimum(src, len(plane) - 1), 0)], -1)
+            pieces.append((np.asarray(piece.vert_properties, dtype=np.float64)[:, :3], tri, across, planes))
+        return pieces
+
+    def _clipped_complex(self, region: np.ndarray, k_count: int):
+        """All regions' shells as one complex (vertices shared between shells), crack faces shared by both sides
+        and slivers removed. Returns (points [p, 3], tri [f, 3], shell [f], crack flag [f], shared)."""
+        pieces = self._clipped_pieces(region, k_count)
+        vcount = np.array([p[0].shape[0] for p in pieces], dtype=np.int64)
+        fcount = np.array([p[1].shape[0] for p in pieces], dtype=np.int64)
+        voff = np.concatenate([[0], np.cumsum(vcount)])
+        points = np.concatenate([p[0] for p in pieces])
+        tri = np.concatenate([p[1] for p in pieces]) + np.repeat(voff[:-1], fcount)[:, None]
+        shell = np.repeat(np.arange(k_count), fcount)
+        across = np.concatenate([p[2] for p in pieces])
+        planes = np.concatenate([p[3] for p in pieces])
+        crack = (across >= 0).astype(np.int32)
+        if self.simplify > 0.0:  # independent sides: no sharing, no clean-up
+            return points, tri, shell, crack, False
+        gid = _merge_coincident(points, np.repeat(np.arange(k_count), vcount), 1e-9 * self.spacing)
+        used, gid = np.unique(gid, return_inverse=True)
+        first = np.zeros(len(used), dtype=np.int64)
+        first[gid[::-1]] = np.arange(len(gid))[::-1]
+        points = points[first]
+        tri = gid[tri]
+        # One triangulation per crack: the lower region's triangles, reversed, replace the higher region's.
+        primary = (across >= 0) & (shell < across)
+        secondary = (across >= 0) & (shell > across)
+        copies = tri[primary][:, [0, 2, 1]]
+        tri2 = np.concatenate([tri[~secondary], copies])
+        shell2 = np.concatenate([shell[~secondary], across[primary]])
+        across2 = np.concatenate([across[~secondary], shell[primary]])
+        planes2 = np.concatenate([planes[~secondary], planes[primary]])
+        closed = shells_closed(tri2, shell2, len(points))
+        if not closed.all():  # sides that do not match: those shells keep their own crack triangles
+            bad = ~closed
+            drop_copy = np.concatenate([np.zeros((~secondary).sum(), bool), bad[across[primary]]])
+            restore = secondary & bad[shell]
+            tri2 = np.concatenate([tri2[~drop_copy], tri[restore]])
+            shell2 = np.concatenate([shell2[~drop_copy], shell[restore]])
+            across2 = np.concatenate([across2[~drop_copy], across[restore]])
+            planes2 = np.concatenate([planes2[~drop_copy], planes[restore]])
+            if not shells_closed(tri2, shell2, len(points)).all():
+                return (
+                    np.concatenate([p[0] for p in pieces]),
+                    np.concatenate([p[1] for p in pieces]) + np.repeat(voff[:-1], fcount)[:, None],
+                    shell,
+                    crack,
+                    False,
+                )
+        plane_count = int(self._surface[2].max()) + 1
+        lo, hi = np.minimum(shell2, across2), np.maximum(shell2, across2)
+        patch = np.where(across2 >= 0, plane_count + lo * k_count + hi, planes2)
+        patch = np.unique(patch, return_inverse=True)[1].reshape(-1)
+        if self.clean:
+            tri3, shell3, patch3 = clean_complex(points, tri2, shell2, patch, self.spacing)
+            if shells_closed(tri3, shell3, len(points)).all():
+                # crack flag of each surviving triangle: look it up through its patch
+                is_crack_patch = np.zeros(int(patch.max()) + 1, dtype=bool)
+                is_crack_patch[patch[across2 >= 0]] = True
+                crack3 = is_crack_patch[patch3].astype(np.int32)
+                self.clean_failed = False
+                return points, tri3, shell3, crack3, True
+            self.clean_failed = True
+        return points, tri2, shell2, (across2 >= 0).astype(np.int32), True
+
+    def _split_shells(self, points, tri, tri_shell, tri_crack, region_fragment, region, k_count, shared) -> None:
+        """Per-shell vertex copies (shell after shell), faces, attributes and the particle -> shell map."""
+        n_p = points.shape[0]
+        order = np.argsort(tri_shell, kind="stable")
+        tri, tri_shell, tri_crack = tri[order], tri_shell[order], tri_crack[order]
+        pair = np.unique(tri_shell[:, None] * n_p + tri)  # (shell, vertex), sorted by shell
+        faces = np.searchsorted(pair, tri_shell[:, None] * n_p + tri)
+        pair_shell = pair // n_p
+        kept = np.unique(tri_shell)
+        shell_index = -np.ones(k_count, dtype=np.int64)
+        shell_index[kept] = np.arange(len(kept))
+        self.fragment_ids = region_fragment[kept].astype(np.int32)
+        self.rest_vertices = points[pair % n_p]
+        self.faces = faces.astype(np.int32)
+        self.face_fragment = region_fragment[tri_shell].astype(np.int32)
+        self.face_crack = tri_crack.astype(np.int32)
+        self.vertex_fragment = shell_index[pair_shell]
+        self.shared = bool(shared)
+        fcounts = np.bincount(shell_index[tri_shell], minlength=len(kept))
+        vcounts = np.bincount(self.vertex_fragment, minlength=len(kept))
+        self._vertex_ranges = np.concatenate([[0], np.cumsum(vcounts)])
+        self._face_ranges = np.concatenate([[0], np.cumsum(fcounts)])
+        self._particle_shell = shell_index[region]
 
     def _build_interpolation(self) -> None:
-        """MLS shape functions of every vertex over the NEIGHBOR_COUNT nearest particles of its own fragment."""
+        """MLS shape functions of every vertex over the NEIGHBOR_COUNT nearest particles of its own shell, as a
+        sparse matrix [vertex_count, particle_count]."""
+        from scipy.sparse import csr_matrix
         from scipy.spatial import cKDTree
 
         h = self.spacing
         shell = self._particle_shell
         particles = np.flatnonzero(shell >= 0)
-        # A fourth coordinate far apart per fragment keeps every query inside the vertex's own fragment.
+        # A fourth coordinate far apart per shell keeps every query inside the vertex's own shell.
         span = float(np.ptp(np.concatenate([self.rest_positions, self.shape.vertices]), axis=0).max())
         lift = 10.0 * (span + h)
         pts = np.concatenate([self.rest_positions[particles], (shell[particles] * lift)[:, None]], axis=1)
@@ -701,13 +1204,26 @@ class FragmentSurfaces:
         rhs = np.zeros((len(vtx), 4, 1))
         rhs[:, 0, 0] = 1.0
         y = np.linalg.solve(moment, rhs)[..., 0]
-        self._nbr_index = idx
-        self._nbr_weight = w * np.einsum("vki,vi->vk", p, y)
+        phi = w * np.einsum("vki,vi->vk", p, y)
+        rows = np.repeat(np.arange(len(vtx)), k)
+        self._phi = csr_matrix((phi.ravel(), (rows, idx.ravel())), shape=(len(vtx), self.particle_count))
+        self._phi.sum_duplicates()
 
     # ------------------------------------------------------------------ motion
 
+    def _fit(self, x: np.ndarray):
+        """Rigid fit per shell at particle positions x [m] [particle_count, 3]: (selected particles [s], their shell
+        [s], rest centroids [g, 3], current centroids [g, 3], rotations [g, 3, 3])."""
+        if x.shape != (self.particle_count, 3):
+            raise ValueError(f"positions must have shape [{self.particle_count}, 3], got {list(x.shape)}")
+        shell = self._particle_shell
+        sel = np.flatnonzero(shell >= 0)
+        rest_c, cur_c, rot = _rigid_fit(self.rest_positions[sel], x[sel], shell[sel], self.fragment_count)
+        return sel, shell[sel], rest_c, cur_c, rot
+
     def vertex_positions(self, positions) -> np.ndarray:
-        """All shells' vertices at the current particle positions.
+        """All shells' vertices at the current particle positions: ``x_v = T(X_v) + sum_k phi_vk r_k`` (rigid fit
+        of the shell's particles plus the MLS-interpolated residuals, a sparse product).
 
         Args:
             positions: particle positions [m], shape [particle_count, 3].
@@ -716,21 +1232,45 @@ class FragmentSurfaces:
             Vertex positions [m], float64 shape [vertex_count, 3] (shell after shell, as ``rest_vertices``).
         """
         x = np.asarray(positions, dtype=np.float64)
-        if x.shape != (self.particle_count, 3):
-            raise ValueError(f"positions must have shape [{self.particle_count}, 3], got {list(x.shape)}")
-        shell = self._particle_shell
-        sel = np.flatnonzero(shell >= 0)
-        count = self.fragment_count
-        rest_c, cur_c, rot = _rigid_fit(self.rest_positions[sel], x[sel], shell[sel], count)
-
-        def rigid(points, group):
-            return cur_c[group] + np.einsum("nij,nj->ni", rot[group], points - rest_c[group])
-
+        sel, group, rest_c, cur_c, rot = self._fit(x)
+        rigid_p = cur_c[group] + np.einsum("nij,nj->ni", rot[group], self.rest_positions[sel] - rest_c[group])
         residual = np.zeros_like(x)
-        residual[sel] = x[sel] - rigid(self.rest_positions[sel], shell[sel])
-        out = rigid(self.rest_vertices, self.vertex_fragment)
-        out += np.einsum("vk,vki->vi", self._nbr_weight, residual[self._nbr_index])
-        return out
+        residual[sel] = x[sel] - rigid_p
+        g = self.vertex_fragment
+        out = cur_c[g] + np.einsum("nij,nj->ni", rot[g], self.rest_vertices - rest_c[g])
+        return out + self._phi @ residual
+
+    def vertex_velocities(self, positions, velocities) -> np.ndarray:
+        """Vertex velocities [m/s], float64 [vertex_count, 3]: the time derivative of :meth:`vertex_positions`,
+        ``v_v = c' + w x R (X_v - Xc) + sum_k phi_vk (v_k - c' - w x R (X_k - Xc))``, where c' is the mean velocity
+        of the shell's particles and w their best-fit angular velocity (least squares, exact for a rigid motion).
+
+        Args:
+            positions: particle positions [m], [particle_count, 3]; velocities: particle velocities [m/s], same shape.
+        """
+        x = np.asarray(positions, dtype=np.float64)
+        v = np.asarray(velocities, dtype=np.float64)
+        if v.shape != x.shape:
+            raise ValueError(f"velocities must have shape {list(x.shape)}, got {list(v.shape)}")
+        sel, group, rest_c, cur_c, rot = self._fit(x)
+        count = self.fragment_count
+        n = np.maximum(np.bincount(group, minlength=count), 1).astype(np.float64)
+        v_c = np.stack([np.bincount(group, v[sel, a], count) for a in range(3)], axis=1) / n[:, None]
+        r = x[sel] - cur_c[group]
+        dv = v[sel] - v_c[group]
+        ang = np.cross(r, dv)
+        ang_mom = np.stack([np.bincount(group, ang[:, a], count) for a in range(3)], axis=1)
+        rr = np.einsum("ni,nj->nij", r, r).reshape(-1, 9)
+        outer = np.stack([np.bincount(group, rr[:, j], count) for j in range(9)], axis=1).reshape(-1, 3, 3)
+        inertia = np.trace(outer, axis1=1, axis2=2)[:, None, None] * np.eye(3) - outer
+        scale = np.maximum(np.trace(inertia, axis1=1, axis2=2), 1e-300)[:, None, None]
+        omega = np.einsum("gij,gj->gi", np.linalg.pinv(inertia / scale, rcond=1e-9), ang_mom / scale[:, :, 0])
+        arm_p = np.einsum("nij,nj->ni", rot[group], self.rest_positions[sel] - rest_c[group])
+        residual = np.zeros_like(v)
+        residual[sel] = v[sel] - v_c[group] - np.cross(omega[group], arm_p)
+        g = self.vertex_fragment
+        arm_v = np.einsum("nij,nj->ni", rot[g], self.rest_vertices - rest_c[g])
+        return v_c[g] + np.cross(omega[g], arm_v) + self._phi @ residual
 
     def fragment_vertex_positions(self, positions) -> list[np.ndarray]:
         """Per shell, its vertices at the current particle positions: list of [v_i, 3] arrays [m]."""
@@ -739,15 +1279,15 @@ class FragmentSurfaces:
 
     # ------------------------------------------------------------------ output
     def view(self, positions, velocities=None):
-        """The surface as a MeshView ``<body>_surface`` for particle ``positions`` [m] (shape [particle_count, 3]):
-        vertices moved by the particles, topology version, faces and the per-face ``fragment`` and ``crack``."""
+        """The surface as a MeshView ``<body>_surface`` for particle ``positions`` [m] (shape [particle_count, 3])
+        and ``velocities`` [m/s] (same shape; None: no vertex velocities): vertices moved by the particles, vertex
+        velocities, topology version, faces and the per-face ``fragment`` and ``crack``."""
         from ..output.views import MeshView
 
-        _ = velocities  # vertex velocities: not interpolated yet (None)
         return MeshView(
             name=f"{self.body_name}_surface",
             points=self.vertex_positions(positions),
-            velocities=None,
+            velocities=None if velocities is None else self.vertex_velocities(positions, velocities),
             topology_version=self.version,
             faces=self.faces,
             face_attributes={"fragment": self.face_fragment, "crack": self.face_crack},
