@@ -25,6 +25,13 @@ class Collider:
 
     friction: float = 0.0
     origin: np.ndarray = np.zeros(3)
+    name: str | None = None  # prim name in the cache; None: the scene names it <class name>_<index>
+
+    def view(self, time: float, *, bounds=None):
+        """The collider for the output: a pdsim.output.views.RigidView (mesh in the body frame [m] and the pose at
+        ``time`` [s]). ``bounds`` ((lo, hi) world corners [m] of the scene) sizes unbounded colliders (the ground
+        plane)."""
+        raise NotImplementedError
 
     def bind(self, origin) -> None:
         """Sets the origin [m] of the solvers' local frame (world = origin + local)."""
@@ -42,6 +49,31 @@ class GroundPlane(Collider):
     normal: tuple = (0.0, 0.0, 1.0)
     offset: float = 0.0
     friction: float = 0.5
+    name: str | None = "ground"
+
+    def view(self, time: float = 0.0, *, bounds=None):
+        """The plane for the output: a square of the plane centred under the scene, 10 x the half-diagonal of
+        ``bounds`` ((lo, hi) world corners [m]; default a 2 m square at the origin's foot), as the static RigidView
+        ``ground`` directly under /World; its faces look along ``normal``."""
+        from .output.views import RigidView
+
+        n = np.asarray(self.normal, dtype=np.float64)
+        n = n / np.linalg.norm(n)
+        if bounds is None:
+            centre, half = np.zeros(3), 1.0
+        else:
+            lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+            centre = 0.5 * (lo + hi)
+            half = 5.0 * max(0.5 * float(np.linalg.norm(hi - lo)), 1.0e-3)
+        centre = centre - (n @ centre - float(self.offset)) * n  # its foot on the plane
+        t1 = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+        t1 /= np.linalg.norm(t1)
+        t2 = np.cross(n, t1)  # t1 x t2 = n: counter-clockwise seen from the side n points to
+        corners = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]) * half
+        points = corners[:, :1] * t1 + corners[:, 1:] * t2
+        faces = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int32)
+        name = self.name or "ground"
+        return RigidView(name, points, faces, centre, np.array([0.0, 0.0, 0.0, 1.0]), static=True, group=None)
 
     @property
     def impulse(self) -> np.ndarray:
@@ -128,6 +160,25 @@ def _quat(name: str, value) -> np.ndarray:
     return q / np.linalg.norm(q)
 
 
+def _check_name(name):
+    """A collider name: None (the scene names it) or a non-empty string."""
+    if name is not None and not (isinstance(name, str) and name.strip()):
+        raise ParameterError("name", name, "a non-empty string or None")
+    return name
+
+
+def collider_names(colliders) -> list[str]:
+    """The output names of a scene's colliders: each one's ``name``, or ``<class name>_<index in the list>``;
+    ParameterError when two are the same (the cache makes them prims /World/colliders/<name>)."""
+    names = []
+    for i, c in enumerate(colliders):
+        name = getattr(c, "name", None) or f"{type(c).__name__}_{i}"
+        if name in names:
+            raise ParameterError("name", name, "a collider name not already used in this scene")
+        names.append(name)
+    return names
+
+
 def _mesh_arrays(shape, name: str):
     """Vertices [m] (float64 [v, 3]) and triangles (int32 [f, 3]) of a SolidShape or trimesh.Trimesh."""
     v = np.asarray(getattr(shape, "vertices", None), dtype=np.float64)
@@ -210,11 +261,13 @@ class MeshCollider(Collider):
         friction: Coulomb coefficient, >= 0.
         band: detection depth below the surface [m] (> 0) or None.
         device: Warp device.
+        name: prim name in the cache (``/World/colliders/<name>``); None: ``<class name>_<index>`` in the scene.
     """
 
-    def __init__(self, shape, *, friction: float = 0.5, band: float | None = None, device="cpu"):
+    def __init__(self, shape, *, friction: float = 0.5, band: float | None = None, device="cpu", name=None):
         import warp as wp
 
+        self.name = _check_name(name)
         self.friction = check_range("friction", friction, 0.0, None, lo_open=False)
         self.band = None if band is None else check_range("band", band, 0.0, None)
         self.device = wp.get_device(device)
@@ -229,6 +282,19 @@ class MeshCollider(Collider):
     def bind(self, origin) -> None:
         super().bind(origin)
         self._band_written = None
+
+    def view(self, time: float = 0.0, *, bounds=None):
+        """The static mesh for the output: vertices relative to the centre of its bounding box, placed at it."""
+        from .output.views import RigidView
+
+        return RigidView(
+            self.name or type(self).__name__,
+            self.vertices - self.center,
+            self.faces,
+            self.center.copy(),
+            IDENTITY_ROTATION.copy(),
+            static=True,
+        )
 
     def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
         import warp as wp
@@ -272,6 +338,7 @@ class RigidProjectile(Collider):
         path: callable t -> position or (position, quaternion), or None.
         friction: Coulomb coefficient between the body and particles, >= 0.
         device: Warp device.
+        name: prim name in the cache (``/World/colliders/<name>``); None: ``<class name>_<index>`` in the scene.
     """
 
     def __init__(
@@ -285,9 +352,11 @@ class RigidProjectile(Collider):
         path: Callable | None = None,
         friction: float = 0.0,
         device="cpu",
+        name: str | None = None,
     ):
         import warp as wp
 
+        self.name = _check_name(name)
         if path is not None and not callable(path):
             raise ParameterError("path", path, "a callable t -> position or (position, quaternion)")
         self.center = _vec3("center", center)
@@ -312,6 +381,20 @@ class RigidProjectile(Collider):
         if isinstance(value, tuple) and len(value) == 2:
             return _vec3("path(t) position", value[0]), _quat("path(t) rotation", value[1])
         return _vec3("path(t)", value), IDENTITY_ROTATION.copy()
+
+    def body_mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """The body's surface in its body frame: vertices [m] (float64 [v, 3]) and triangles (int32 [f, 3])."""
+        raise NotImplementedError
+
+    def view(self, time: float, *, bounds=None):
+        """The projectile for the output at ``time`` [s]: its body-frame mesh and ``pose(time)``."""
+        from .output.views import RigidView
+
+        if not hasattr(self, "_body_mesh_cache"):
+            self._body_mesh_cache = self.body_mesh()
+        points, faces = self._body_mesh_cache
+        p, q = self.pose(time)
+        return RigidView(self.name or type(self).__name__, points, faces, p, q, static=False)
 
     def _update_motion(self, time: float, dt: float, band: float = 0.0):
         """Writes the pose at ``time`` and the rigid motion over [time - dt, time] to the device; the pose at the
@@ -345,6 +428,13 @@ class SphereProjectile(RigidProjectile):
 
     def _bounding_radius(self) -> float:
         return self.sphere_radius
+
+    def body_mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """An icosphere of 1280 triangles (3 subdivisions) of the sphere's radius."""
+        import trimesh
+
+        m = trimesh.creation.icosphere(subdivisions=3, radius=self.sphere_radius)
+        return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int32)
 
     def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
         import warp as wp
@@ -382,6 +472,13 @@ class BoxProjectile(RigidProjectile):
 
     def _bounding_radius(self) -> float:
         return float(np.linalg.norm(self.half_extents))
+
+    def body_mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """The box's 8 corners and 12 triangles."""
+        import trimesh
+
+        m = trimesh.creation.box(extents=2.0 * self.half_extents)
+        return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int32)
 
     def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
         import warp as wp
@@ -422,11 +519,16 @@ class MeshProjectile(RigidProjectile):
         self.band = None if band is None else check_range("band", band, 0.0, None)
         # body frame: vertices relative to the origin, un-rotated by the initial rotation
         q_inv = self.rotation * np.array([-1.0, -1.0, -1.0, 1.0])
-        self._mesh = _MeshData(_rotate(q_inv, v - c), f, self.device)
+        self._body = (_rotate(q_inv, v - c), f)
+        self._mesh = _MeshData(self._body[0], f, self.device)
         self._radius_bound = _RadiusBound()
 
     def _bounding_radius(self) -> float:
         return self._mesh.bounding_radius
+
+    def body_mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """The mesh in its body frame (relative to ``center``, un-rotated by the initial rotation)."""
+        return self._body
 
     def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
         import warp as wp
@@ -466,4 +568,5 @@ __all__ = [
     "MeshProjectile",
     "RigidProjectile",
     "SphereProjectile",
+    "collider_names",
 ]

@@ -56,9 +56,16 @@ class RunReport:
 class Scene:
     """A simulation scene.
 
+    Time: the cache plays at ``fps`` frames per second (timeCodesPerSecond = framesPerSecond = fps); each frame
+    advances the simulation by ``frame_time`` simulated seconds, 1/fps unless slow motion (or fast motion) is asked
+    for with one of ``time_scale`` or ``frame_time``. A 50 us impact written over 48 frames played at 24 fps:
+    ``Scene(fps=24, frames=48, frame_time=50e-6 / 48)``; 5x slow motion: ``Scene(fps=24, time_scale=0.2)``.
+
     Args:
-        fps: frames per second of the cache, > 0.
+        fps: playback frames per second of the cache, in (0, 1000].
         frames: number of frames to simulate and write after frame 0 (the rest pose), integer >= 1.
+        time_scale: simulated seconds per played second, > 0 (0.2: 5x slow motion); frame_time = time_scale / fps.
+        frame_time: simulated seconds per frame [s], > 0. Give at most one of time_scale and frame_time.
         gravity: gravitational acceleration [m/s^2]; default 9.81 m/s^2 down the up axis.
         up_axis: "Z" (default) or "Y"; written to the stage and used for the default gravity and ground plane.
         time_step_safety: automatic dt = safety * Silling-Askari estimate, in (0, 1]; default 0.7.
@@ -74,10 +81,24 @@ class Scene:
         up_axis: str = "Z",
         time_step_safety: float = 0.7,
         name: str = "scene",
+        time_scale: float | None = None,
+        frame_time: float | None = None,
     ):
         if up_axis not in UP_AXES:
             raise ParameterError("up_axis", up_axis, "'Y' or 'Z'")
         self.fps = check_range("fps", fps, 0.0, 1000.0, hi_open=False)
+        if time_scale is not None and frame_time is not None:
+            raise ParameterError(
+                "time_scale", time_scale, f"None when frame_time={frame_time!r} is given (give one of the two)"
+            )
+        if time_scale is not None:
+            self.frame_time = check_range("time_scale", time_scale, 0.0, None) / self.fps
+        elif frame_time is not None:
+            self.frame_time = check_range("frame_time", frame_time, 0.0, None)
+        else:
+            self.frame_time = 1.0 / self.fps
+        if not self.frame_time > 0.0 or not math.isfinite(self.frame_time):
+            raise ParameterError("frame_time", self.frame_time, "a finite time > 0 [s]")
         self.frames = check_frames(frames)
         self.up_axis = up_axis
         up = np.asarray(UP_AXES[up_axis])
@@ -208,21 +229,36 @@ class Scene:
         device: str | None = None,
         dt: float | None = None,
         progress: bool = True,
-        save_interval_s: float = 2.0,
+        save_interval_s: float = 0.0,
+        color_attribute: str | None = None,
+        color_range=None,
+        fragments_as_prims: bool = False,
     ) -> RunReport:
-        """Simulates the scene and writes a USD animation cache to ``out`` (.usdc, .usda or .usd).
+        """Simulates the scene and writes a USD animation cache to ``out`` (.usdc, .usda or .usd) and the folder of its
+        frame layers ``<stem>.frames/`` beside it (docs/cache_format.md).
 
-        Frame 0 is the rest pose; frames 1..frames follow at 1/fps. The cache on disk always holds the finished frames,
-        also after an error or Ctrl-C (it is rewritten atomically at least every ``save_interval_s`` seconds and at the
-        end).
+        Frame 0 is the rest pose; frames 1..frames follow, each ``frame_time`` simulated seconds after the previous
+        one, played at ``fps``; each frame's simulated time is written to ``/World.pdsim:time``. The cache is streamed:
+        each finished frame is on disk (a crash loses at most the frame being written). When ``out`` already holds a
+        cache, this run replaces it only when it finishes; a run that fails leaves the earlier cache as it was and its
+        own finished frames in ``<stem>.partial<suffix>``. Colliders are written as meshes under
+        ``/World/colliders/<name>`` (projectiles with their pose at each frame's time) and the ground plane as
+        ``/World/ground``.
 
         Args:
             out: output path.
             frames: overrides the scene's frame count (integer >= 1).
             device: Warp device; CUDA when present unless given.
             dt: time step [s]; automatic (safety * stable estimate) when None. Substeps per frame are
-                ceil(frame time / dt), so the step used is at most dt.
+                ceil(frame_time / dt), so the step used is at most dt.
+            save_interval_s: minimum wall time between rewrites of the top-level layer [s]; 0 (default): every frame.
+            color_attribute: attribute to colour points and meshes by (``primvars:displayColor``), e.g. "damage";
+                None (default): no colours.
+            color_range: (lo, hi) of real values mapped onto the colour ramp; default (0, 1).
+            fragments_as_prims: write each fragment of a fracturing surface as its own Mesh
+                ``/World/<surface>/fragment_<id>`` (invisible before it appears).
         """
+        from .colliders import collider_names
         from .output import UsdCache
         from .output.writer import ViewWriter
 
@@ -231,13 +267,18 @@ class Scene:
             raise ParameterError("out", out, "a path ending in .usdc, .usda or .usd")
         if not os.path.isdir(os.path.dirname(os.path.abspath(out))):
             raise ParameterError("out", out, "a path in an existing folder")
+        if os.path.isdir(out):
+            raise ParameterError("out", out, "a file path, not a folder")
         frame_count = self.frames if frames is None else check_frames(frames)
         if dt is not None:
             dt = check_time_step(dt)
+        if color_attribute is not None and not isinstance(color_attribute, str):
+            raise ParameterError("color_attribute", color_attribute, "an attribute name such as 'damage', or None")
+        names = collider_names(self.colliders)
         wall0 = time.perf_counter()
         solvers = self.build_solvers(device=device)
         stable_dt = min(s.stable_time_step() for s in solvers)
-        frame_dt = 1.0 / self.fps
+        frame_dt = self.frame_time
         if dt is None:
             dt = min(self.time_step_safety * stable_dt, frame_dt)
         else:
@@ -246,17 +287,50 @@ class Scene:
         dt = frame_dt / substeps
         speed_limit = self._speed_limit(solvers)
 
-        with UsdCache(out, fps=self.fps, start_frame=0, up_axis=self.up_axis, save_interval_s=save_interval_s) as cache:
-            writer = ViewWriter(cache)
+        # world bounds of the bodies at rest and of the projectiles' start: they size the ground's quad
+        corners = []
+        for b in self.bodies:
+            x = np.asarray(
+                getattr(b, "point_rest_positions", None) if hasattr(b, "point_rest_positions") else b.rest_positions
+            )
+            corners += [x.min(axis=0), x.max(axis=0)]
+        corners += [np.asarray(c.pose(0.0)[0]) for c in self.colliders if hasattr(c, "pose")]
+        bounds = (np.min(corners, axis=0), np.max(corners, axis=0))
+        rigid = [(c, n) for c, n in zip(self.colliders, names)]
+        if self.ground is not None:
+            rigid.append((self.ground, None))
+
+        def write_frame(frame: int) -> None:
+            t = frame * frame_dt
+            views = [v for s in solvers for v in s.views()]
+            for collider, name in rigid:
+                view = collider.view(t, bounds=bounds)
+                if name is not None:
+                    view.name = name
+                views.append(view)
+            writer.write(frame, views)
+            cache.end_frame(frame, time=t)
+
+        metadata = {"frameTime": frame_dt, "timeScale": frame_dt * self.fps, "scene": str(self.name)}
+        with UsdCache(
+            out, fps=self.fps, start_frame=0, up_axis=self.up_axis, save_interval_s=save_interval_s, metadata=metadata
+        ) as cache:
+            writer = ViewWriter(
+                cache,
+                color_attribute=color_attribute,
+                color_range=color_range,
+                fragments_as_prims=fragments_as_prims,
+                velocity_scale=frame_dt * self.fps,  # velocities per played second (USD's time codes per second)
+            )
             coupling = self.method_contact(solvers)
-            self._write_frame(writer, cache, solvers, 0)
+            write_frame(0)
             bar = _progress(frame_count, enabled=progress, desc=f"pdsim {self.name}")
             try:
                 for frame in range(1, frame_count + 1):
                     self.advance_frame(solvers, dt, substeps, coupling)
                     for s in solvers:
                         s.check_state(speed_limit)
-                    self._write_frame(writer, cache, solvers, frame)
+                    write_frame(frame)
                     bar.update(1)
             finally:
                 bar.close()

@@ -64,7 +64,8 @@ def add_walls(scene, materials, *, spacing=0.01):
 def build_scene(*, spacing=0.01, materials=None, frames=40, speed=3.0) -> pdsim.Scene:
     """The four walls and a rigid ball of radius 5 cm flying along +x at ``speed`` [m/s] (10 % of the walls' wave
     speed: a hard hit); ``materials`` replaces the walls (any number), ``spacing`` is the particle spacing [m]."""
-    scene = pdsim.Scene(fps=120, frames=frames, gravity=(0.0, 0.0, 0.0), name="four_walls")
+    # 5x slow motion: 1/120 s of simulated time per frame, played at 24 frames per second
+    scene = pdsim.Scene(fps=24, time_scale=0.2, frames=frames, gravity=(0.0, 0.0, 0.0), name="four_walls")
     add_walls(scene, materials or wall_materials(), spacing=spacing)
     scene.add_collider(pdsim.SphereProjectile(0.05, center=(-0.15, 0.0, 0.0), velocity=(speed, 0.0, 0.0)))
     return scene

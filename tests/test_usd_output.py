@@ -70,7 +70,7 @@ def test_stage_metadata(tmp_path):
     assert stage.GetDefaultPrim().IsA(UsdGeom.Xform)
     # The file really is binary crate (the temporary file kept the extension, so Export chose the format).
     assert path.read_bytes()[:8] == b"PXR-USDC"
-    assert not list(tmp_path.glob(".*tmp*")), "temporary file left behind"
+    assert not list(tmp_path.rglob(".*tmp*")), "temporary file left behind"
 
 
 @pytest.mark.parametrize("suffix", [".usda", ".usd"])
@@ -211,26 +211,42 @@ def test_keyboard_interrupt_saves(tmp_path):
     assert stage.GetPrimAtPath("/World/particles").GetAttribute("points").GetTimeSamples() == [0.0]
 
 
+def _fresh_stage(path):
+    """The stage at ``path`` as it is on disk now (layers reloaded, not taken stale from the layer registry)."""
+    from pxr import Usd
+
+    stage = Usd.Stage.Open(str(path))
+    stage.Reload()
+    return stage
+
+
 def test_file_complete_after_every_end_frame(tmp_path):
-    """With save_interval_s=0 the file at path holds every finished frame right after each end_frame."""
+    """With save_interval_s=0 (the default) the cache at path plays every finished frame right after each end_frame:
+    the top-level layer names the frame layers written so far, each frame layer holds its own frame only."""
     from pxr import Sdf
 
     path = tmp_path / "live.usdc"
-    cache = UsdCache(path, fps=24.0, start_frame=10, save_interval_s=0)
+    cache = UsdCache(path, fps=24.0, start_frame=10)
     pts = cache.add_points("particles", widths=np.ones(N), primvars={"damage": "float"})
     assert not path.exists()  # nothing on disk before the first finished frame
     for i, f in enumerate(range(10, 15)):
         cache.write_points(pts, f, _positions(f), primvars={"damage": np.full(N, i)})
-        cache.end_frame(f)
-        # Read the file fresh (not from the layer registry) to see what is on disk.
+        cache.end_frame(f, time=0.5 * i)
         layer = Sdf.Layer.OpenAsAnonymous(str(path))
         assert layer.startTimeCode == 10
         assert layer.endTimeCode == f
-        assert layer.ListTimeSamplesForPath("/World/particles.points") == list(range(10, f + 1))
+        frame_layer = Sdf.Layer.OpenAsAnonymous(str(cache.run_dir / f"frame.{f:06d}.usdc"))
+        assert frame_layer.ListTimeSamplesForPath("/World/particles.points") == [f]
+        stage = _fresh_stage(path)
+        attr = stage.GetPrimAtPath("/World/particles").GetAttribute("points")
+        assert attr.GetTimeSamples() == list(range(10, f + 1))
+        np.testing.assert_array_equal(np.asarray(attr.Get(f)), _positions(f))
+        assert stage.GetPrimAtPath("/World").GetAttribute("pdsim:time").Get(f) == 0.5 * i
+        del stage
         assert cache.frames_written == i + 1
     cache.close()
     cache.close()
-    assert not list(tmp_path.glob(".*tmp*"))
+    assert not list(tmp_path.rglob(".*tmp*"))
 
 
 def test_save_throttled_by_interval(tmp_path):
@@ -320,3 +336,310 @@ def test_import_is_light():
 
     code = "import sys, pdsim.output; assert 'pxr' not in sys.modules, 'pxr imported'"
     subprocess.run([sys.executable, "-c", code], check=True, cwd=Path(__file__).resolve().parents[1])
+
+
+# ------------------------------------------------------------------------------------------- streamed layout on disk
+
+
+def test_layout_on_disk_and_clip_metadata(tmp_path):
+    """The cache is a top-level layer plus ``<stem>.frames/<run>/``: one frame layer per finished frame (holding that
+    frame's samples only), the manifest, and one topology clip set per mesh whose clips sit at the frames where its
+    faces changed. The top-level layer holds no time samples of the clip attributes; its customLayerData names the
+    run and the frames folder; cache_files lists every file; flatten_cache bakes it into one self-contained layer with
+    the same samples."""
+    from pxr import Sdf, Usd
+
+    from pdsim.output.usd import cache_files, flatten_cache
+
+    path = tmp_path / "layout.usdc"
+    points, faces = _tetra()
+    with UsdCache(path, fps=24.0, metadata={"frameTime": 0.01}) as cache:
+        mesh = cache.add_mesh("shell", normals="vertex")
+        for f in range(4):
+            if f in (0, 2):
+                cache.write_mesh(mesh, f, points + f, faces, normals=np.tile([0.0, 0.0, 1.0], (4, 1)))
+            else:
+                cache.write_mesh(mesh, f, points + f, normals=np.tile([0.0, 0.0, 1.0], (4, 1)))
+            cache.end_frame(f, time=0.01 * f)
+        run_dir = cache.run_dir
+    assert run_dir.parent == tmp_path / "layout.frames"
+    names = sorted(p.name for p in run_dir.iterdir())
+    assert names == [
+        "frame.000000.usdc",
+        "frame.000001.usdc",
+        "frame.000002.usdc",
+        "frame.000003.usdc",
+        "manifest.usdc",
+        "topology_shell.000000.usdc",
+        "topology_shell.000002.usdc",
+        "topology_shell.manifest.usdc",
+    ]
+    top = Sdf.Layer.OpenAsAnonymous(str(path))
+    assert top.ListTimeSamplesForPath("/World/shell.points") == []
+    info = dict(top.customLayerData["pdsim"])
+    assert info["run"] == run_dir.name and info["frames"] == f"./layout.frames/{run_dir.name}"
+    assert info["frameTime"] == 0.01 and info["cacheFormat"] == 2
+    clips = top.GetPrimAtPath("/World").GetInfo("clips")
+    assert clips["default"]["templateAssetPath"] == f"./layout.frames/{run_dir.name}/frame.######.usdc"
+    assert (clips["default"]["templateStartTime"], clips["default"]["templateEndTime"]) == (0.0, 3.0)
+    assert list(clips["topology_shell"]["active"]) == [(0.0, 0.0), (2.0, 1.0)]
+    frame1 = Sdf.Layer.OpenAsAnonymous(str(run_dir / "frame.000001.usdc"))
+    assert frame1.ListTimeSamplesForPath("/World/shell.points") == [1.0]
+    assert frame1.ListTimeSamplesForPath("/World/shell.faceVertexIndices") == []
+
+    files = cache_files(path)
+    assert files[0].name == "layout.usdc" and len(files) == 9
+    stage = Usd.Stage.Open(str(path))
+    m = stage.GetPrimAtPath("/World/shell")
+    assert m.GetAttribute("faceVertexIndices").GetTimeSamples() == [0.0, 2.0]
+    assert m.GetAttribute("points").GetTimeSamples() == [0.0, 1.0, 2.0, 3.0]
+    flat = tmp_path / "flat.usdc"
+    flatten_cache(path, flat)
+    flat_layer = Sdf.Layer.OpenAsAnonymous(str(flat))
+    assert flat_layer.ListTimeSamplesForPath("/World/shell.points") == [0.0, 1.0, 2.0, 3.0]
+    np.testing.assert_array_equal(np.asarray(flat_layer.QueryTimeSample("/World/shell.points", 3.0)), points + 3)
+    assert validate_usd(path) == [] and validate_usd(flat) == []
+
+
+def test_memory_of_the_writer_does_not_hold_frames(tmp_path):
+    """After a frame is finished, its samples are on disk and gone from memory: the writer keeps no pending frame and
+    its top-level layer holds declarations only (its size does not grow with the frames)."""
+    path = tmp_path / "mem.usdc"
+    sizes = []
+    with UsdCache(path, fps=24.0) as cache:
+        pts = cache.add_points("particles", widths=np.ones(N), primvars={"damage": "float"})
+        for f in range(30):
+            cache.write_points(pts, f, _positions(f), velocities=np.zeros((N, 3)), primvars={"damage": np.zeros(N)})
+            cache.end_frame(f)
+            assert cache._pending == {}
+            sizes.append(len(cache.stage.GetRootLayer().ExportToString()))
+    assert sizes[-1] == sizes[0]
+
+
+# ------------------------------------------------------------------------------------------------ normals and views
+
+
+def _box_mesh():
+    import trimesh
+
+    box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
+    return np.asarray(box.vertices), np.asarray(box.faces)
+
+
+def _sphere_mesh():
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.5)
+    return np.asarray(sphere.vertices), np.asarray(sphere.faces)
+
+
+def test_normals_crisp_box_smooth_sphere():
+    """Normals: on a box every face corner gets its face's normal (edges of 90 degrees split the fans: crisp edges,
+    and a box needs faceVarying normals); on an icosphere (dihedral angles about 12 degrees) the fans are whole vertex
+    stars, vertex normals suffice and point radially (within 1 degree); a sharp_angle of 5 degrees makes the sphere
+    faceted."""
+    from pdsim.output.writer import _groups_are_per_vertex, _Shading, corner_normals, smoothing_groups
+
+    v, f = _box_mesh()
+    labels, count = smoothing_groups(v, f)
+    assert not _groups_are_per_vertex(f, labels)
+    n = corner_normals(v, f, labels, count).reshape(-1, 3, 3)
+    face_n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    face_n /= np.linalg.norm(face_n, axis=1, keepdims=True)
+    np.testing.assert_allclose(n, np.repeat(face_n[:, None], 3, axis=1), atol=1e-12)
+    assert _Shading(v, f, 30.0, None).interpolation == "faceVarying"
+
+    v, f = _sphere_mesh()
+    shading = _Shading(v, f, 30.0, None)
+    assert shading.interpolation == "vertex"
+    vn = shading.normals(v)
+    radial = v / np.linalg.norm(v, axis=1, keepdims=True)
+    assert np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", vn, radial), -1, 1))).max() < 1.0
+    assert _Shading(v, f, 5.0, None).interpolation == "faceVarying"
+
+
+def test_normals_follow_deformation_with_fixed_fans():
+    """The fans are fixed per topology: a box sheared so that two faces meet at 25 degrees keeps its crisp edge (the
+    fan split at the topology change stays); the normals themselves follow the deformed faces."""
+    from pdsim.output.writer import _Shading
+
+    v, f = _box_mesh()
+    shading = _Shading(v, f, 30.0, None)
+    rot = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    n = shading.normals(v @ rot.T).reshape(-1, 3, 3)
+    np.testing.assert_allclose(n, (shading.normals(v).reshape(-1, 3) @ rot.T).reshape(-1, 3, 3), atol=1e-12)
+
+
+def test_writer_mesh_normals_velocities_subsets_and_colors(tmp_path):
+    """A fracturing surface (crack and fragment face attributes) through the ViewWriter: faceVarying normals on every
+    frame (one per face corner), velocities on every frame, the materialBind subsets "surface" and "crack" (indices
+    written with the topology, family type nonOverlapping), and with color_attribute="damage" a per-vertex
+    displayColor from the damage vertex attribute and a per-point one on the points."""
+    from pxr import UsdGeom
+
+    from pdsim.output.views import MeshView, PointsView
+    from pdsim.output.writer import ViewWriter, color_ramp
+
+    v, f = _box_mesh()
+    path = tmp_path / "surface.usdc"
+    with UsdCache(path, fps=24.0) as cache:
+        writer = ViewWriter(cache, color_attribute="damage")
+        for frame in range(4):
+            if frame < 2:
+                pts, faces, crack, version = v, f, np.zeros(len(f), int), 0
+            else:  # split: a second box whose faces are crack faces
+                pts, faces, version = np.r_[v, v + 3.0], np.r_[f, f + 8], 1
+                crack = np.r_[np.zeros(len(f), int), np.ones(len(f), int)]
+            damage = np.linspace(0.0, 1.0, len(pts))
+            mesh = MeshView(
+                "bar_surface",
+                pts + frame,
+                np.full_like(pts, 0.5),
+                version,
+                faces,
+                {"fragment": (crack > 0).astype(int), "crack": crack},
+                {"damage": damage},
+            )
+            x = np.zeros((3, 3)) + frame
+            points = PointsView("bar", x, np.ones((3, 3)), np.full(3, 0.1), {"damage": np.array([0.0, 0.5, 1.0])})
+            writer.write(frame, [points, mesh])
+            cache.end_frame(frame)
+    assert validate_usd(path) == []
+    stage = _open(path)
+    m = UsdGeom.Mesh(stage.GetPrimAtPath("/World/bar_surface"))
+    assert m.GetNormalsInterpolation() == UsdGeom.Tokens.faceVarying
+    for frame in range(4):
+        nf = len(m.GetFaceVertexIndicesAttr().Get(frame))
+        assert len(m.GetNormalsAttr().Get(frame)) == nf
+        assert len(m.GetVelocitiesAttr().Get(frame)) == len(m.GetPointsAttr().Get(frame))
+    assert m.GetFaceVertexIndicesAttr().GetTimeSamples() == [0.0, 2.0]
+    subsets = {s.GetPrim().GetName(): s for s in UsdGeom.Subset.GetAllGeomSubsets(m)}
+    assert set(subsets) == {"surface", "crack"}
+    crack = subsets["crack"]
+    assert crack.GetFamilyNameAttr().Get() == "materialBind"
+    assert crack.GetElementTypeAttr().Get() == UsdGeom.Tokens.face
+    assert crack.GetIndicesAttr().GetTimeSamples() == [0.0, 2.0]
+    assert list(crack.GetIndicesAttr().Get(1)) == []
+    assert list(crack.GetIndicesAttr().Get(3)) == list(range(12, 24))
+    assert list(subsets["surface"].GetIndicesAttr().Get(3)) == list(range(12))
+    assert UsdGeom.Subset.GetFamilyType(m, "materialBind") == UsdGeom.Tokens.nonOverlapping
+    color = UsdGeom.PrimvarsAPI(m).GetPrimvar("displayColor")
+    assert color.GetInterpolation() == UsdGeom.Tokens.vertex
+    np.testing.assert_allclose(np.asarray(color.Get(3)), color_ramp(np.linspace(0, 1, 16), 0.0, 1.0), atol=1e-6)
+    pcolor = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/World/bar")).GetPrimvar("displayColor")
+    np.testing.assert_allclose(np.asarray(pcolor.Get(0))[[0, 2]], color_ramp([0.0, 1.0], 0.0, 1.0), atol=1e-6)
+
+
+def test_fragments_as_prims_have_stable_names_and_visibility(tmp_path):
+    """fragments_as_prims: /World/<surface> is an Xform and each fragment a Mesh fragment_<id> with its own closed
+    vertex set; a fragment that appears at frame 2 is invisible before (visibility time samples) and its points start
+    there (empty before); fragment ids keep their prim over the animation; a fragment that vanishes is hidden from then
+    on."""
+    from pxr import UsdGeom
+
+    from pdsim.output.views import MeshView
+    from pdsim.output.writer import ViewWriter
+
+    v, f = _box_mesh()
+    path = tmp_path / "frags.usdc"
+    with UsdCache(path, fps=24.0) as cache:
+        writer = ViewWriter(cache, fragments_as_prims=True)
+        for frame in range(5):
+            if frame < 2:
+                pts, faces, frag, version = v, f, np.zeros(len(f), int), 0
+            elif frame < 4:
+                pts, faces, version = np.r_[v, v + 3.0], np.r_[f, f + 8], 1
+                frag = np.r_[np.zeros(len(f), int), np.full(len(f), 7)]
+            else:  # fragment 0 is gone (say it left the scene), 7 stays
+                pts, faces, frag, version = v + 3.0, f, np.full(len(f), 7), 2
+            crack = (frag > 0).astype(int)
+            writer.write(frame, [MeshView("s", pts + frame, None, version, faces, {"fragment": frag, "crack": crack})])
+            cache.end_frame(frame)
+    assert validate_usd(path) == []
+    stage = _open(path)
+    assert stage.GetPrimAtPath("/World/s").IsA(UsdGeom.Xform)
+    f0 = UsdGeom.Mesh(stage.GetPrimAtPath("/World/s/fragment_0"))
+    f7 = UsdGeom.Mesh(stage.GetPrimAtPath("/World/s/fragment_7"))
+    assert [f0.ComputeVisibility(t) for t in range(5)] == ["inherited"] * 4 + ["invisible"]
+    assert [f7.ComputeVisibility(t) for t in range(5)] == ["invisible"] * 2 + ["inherited"] * 3
+    np.testing.assert_allclose(np.asarray(f7.GetPointsAttr().Get(2)), v + 5.0, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(f7.GetPointsAttr().Get(4)), v + 7.0, atol=1e-6)
+    assert len(f7.GetPointsAttr().Get(1)) == 0 and len(f7.GetFaceVertexIndicesAttr().Get(1)) == 0  # no geometry yet
+    np.testing.assert_array_equal(np.asarray(f7.GetFaceVertexIndicesAttr().Get(3)).reshape(-1, 3), f)
+    assert len(f7.GetNormalsAttr().Get(3)) == 3 * len(f)
+    crack = UsdGeom.Subset(stage.GetPrimAtPath("/World/s/fragment_7/crack"))
+    assert list(crack.GetIndicesAttr().Get(2)) == list(range(12))
+
+
+def test_rigid_views_static_and_animated(tmp_path):
+    """RigidViews: a static one (the ground, directly under /World) has its geometry and transform as default values
+    (no time samples); a moving one under /World/colliders has its geometry once and xformOp:translate/orient
+    sampled every frame; the points in world space are translation + rotate(orientation, body point)."""
+    from pxr import Gf, UsdGeom
+
+    from pdsim.output.views import RigidView
+    from pdsim.output.writer import ViewWriter
+
+    v, f = _box_mesh()
+    path = tmp_path / "rigid.usdc"
+    ground = RigidView(
+        "ground", np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0.0]]), np.array([[0, 1, 2], [0, 2, 3]]),
+        np.zeros(3), np.array([0, 0, 0, 1.0]), static=True, group=None,
+    )  # fmt: skip
+    q90 = np.array([0.0, 0.0, np.sin(np.pi / 4), np.cos(np.pi / 4)])  # 90 degrees about z
+    with UsdCache(path, fps=24.0) as cache:
+        writer = ViewWriter(cache)
+        for frame in range(3):
+            box = RigidView("box", v, f, np.array([frame, 0.0, 1.0]), q90 if frame == 2 else np.array([0, 0, 0, 1.0]))
+            writer.write(frame, [ground, box])
+            cache.end_frame(frame)
+    assert validate_usd(path) == []
+    stage = _open(path)
+    g = UsdGeom.Mesh(stage.GetPrimAtPath("/World/ground"))
+    assert g.GetPointsAttr().GetNumTimeSamples() == 0 and len(g.GetPointsAttr().Get()) == 4
+    assert g.GetPrim().GetAttribute("xformOp:translate").GetNumTimeSamples() == 0
+    b = UsdGeom.Mesh(stage.GetPrimAtPath("/World/colliders/box"))
+    assert b.GetPointsAttr().GetNumTimeSamples() == 0
+    assert b.GetPrim().GetAttribute("xformOp:translate").GetTimeSamples() == [0.0, 1.0, 2.0]
+    assert b.GetNormalsInterpolation() == UsdGeom.Tokens.faceVarying
+    local = np.asarray(b.GetPointsAttr().Get(), dtype=np.float64)
+    m = np.asarray(b.ComputeLocalToWorldTransform(2.0))
+    world = local @ m[:3, :3] + m[3, :3]
+    expected = v @ np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]).T + [2.0, 0.0, 1.0]
+    np.testing.assert_allclose(world, expected, atol=1e-6)
+    assert isinstance(b.GetPrim().GetAttribute("xformOp:orient").Get(2), Gf.Quatf)
+
+
+def test_failed_run_keeps_earlier_cache_unit(tmp_path):
+    """UsdCache at a path that holds a cache: the new run writes <stem>.partial.usdc and replaces the cache only when
+    it closes successfully; an exception leaves the earlier cache untouched (same frames, same data), the failed
+    run's finished frames in the partial file, and a note on the exception naming both; a later successful run
+    replaces the cache and removes the partial file and every frame folder no layer refers to."""
+    path = tmp_path / "keep.usdc"
+    _write_cache(path, frames=4)
+    stage = _fresh_stage(path)
+    before = np.asarray(stage.GetPrimAtPath("/World/particles").GetAttribute("points").Get(3))
+    del stage
+    with pytest.raises(RuntimeError, match="boom") as info, UsdCache(path, fps=24.0) as cache:
+        pts = cache.add_points("particles", widths=np.ones(N))
+        for f in range(2):
+            cache.write_points(pts, f, _positions(f) + 100.0)
+            cache.end_frame(f)
+        assert cache.top_level_path == tmp_path / "keep.partial.usdc"
+        raise RuntimeError("boom")
+    assert any("keep.partial.usdc" in note for note in info.value.__notes__)
+    stage = _fresh_stage(path)
+    assert stage.GetEndTimeCode() == 3
+    np.testing.assert_array_equal(stage.GetPrimAtPath("/World/particles").GetAttribute("points").Get(3), before)
+    partial = _fresh_stage(tmp_path / "keep.partial.usdc")
+    assert partial.GetEndTimeCode() == 1
+    np.testing.assert_array_equal(
+        partial.GetPrimAtPath("/World/particles").GetAttribute("points").Get(1), _positions(1) + 100.0
+    )
+    del stage, partial
+    assert len(list((tmp_path / "keep.frames").iterdir())) == 2
+    _write_cache(path, frames=2)
+    assert not (tmp_path / "keep.partial.usdc").exists()
+    assert len(list((tmp_path / "keep.frames").iterdir())) == 1
+    assert _fresh_stage(path).GetEndTimeCode() == 1
+    assert validate_usd(path) == []

@@ -2,7 +2,8 @@
 
 Every solver returns, once a frame, a list of views: :class:`PointsView` (points with named per-point attributes) and
 :class:`MeshView` (a triangle surface with a topology version and per-face attributes). Attribute names mean the
-same in every method (``ATTRIBUTES``); a solver writes the ones its live features define and no others.
+same in every method (``ATTRIBUTES``); a solver writes the ones its live features define and no others. Colliders
+(the ground plane, static meshes, projectiles) give a :class:`RigidView` each: a mesh in its body frame and a pose.
 """
 
 from __future__ import annotations
@@ -60,7 +61,10 @@ class MeshView:
 
     name: prim name (``<body>_surface`` for a body's surface). points: world vertex positions [m], float64 [v, 3].
     velocities: vertex velocities [m/s], float64 [v, 3], or None. topology_version: an integer that changes exactly
-    when ``faces`` or the vertex count changes. faces: triangles, int [f, 3]. face_attributes: {shared name: [f]}."""
+    when ``faces`` or the vertex count changes. faces: triangles, int [f, 3], wound counter-clockwise seen from
+    outside. face_attributes: {shared name: [f]} (``crack`` marks the faces made by fracture, ``fragment`` the piece
+    of each face). vertex_attributes: {shared name: [v] or [v, 3]}, optional per-vertex values (e.g. the damage of the
+    particle a vertex follows), written as vertex primvars."""
 
     name: str
     points: np.ndarray
@@ -68,6 +72,27 @@ class MeshView:
     topology_version: int
     faces: np.ndarray
     face_attributes: dict = field(default_factory=dict)
+    vertex_attributes: dict = field(default_factory=dict)
 
 
-__all__ = ["ATTRIBUTES", "MeshView", "PointsView", "attribute_kind"]
+@dataclass
+class RigidView:
+    """A rigid body of the scene (ground plane, static mesh collider, projectile) at one frame.
+
+    name: prim name. points: vertices in the body frame [m], float64 [v, 3]. faces: triangles, int [f, 3], wound
+    counter-clockwise seen from outside. translation: world position of the body frame's origin [m], float64 [3].
+    orientation: rotation of the body frame, unit quaternion (x, y, z, w), float64 [4]; a world point is
+    ``translation + rotate(orientation, point)``. static: True when the pose never changes (written once).
+    group: the prim under ``/World`` that holds the body (``"colliders"``), or None for ``/World`` itself (the
+    ground). The geometry (points, faces) must be the same on every frame."""
+
+    name: str
+    points: np.ndarray
+    faces: np.ndarray
+    translation: np.ndarray
+    orientation: np.ndarray
+    static: bool = False
+    group: str | None = "colliders"
+
+
+__all__ = ["ATTRIBUTES", "MeshView", "PointsView", "RigidView", "attribute_kind"]

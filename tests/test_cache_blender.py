@@ -1,0 +1,227 @@
+"""A real consumer of the caches: Blender (the ``bpy`` module) imports a small cache of each method with
+``bpy.ops.wm.usd_import`` and renders a fracturing frame with Cycles and motion blur.
+
+Needs ``pip install -e ".[blender]"`` (bpy: about 370 MB to download, 820 MB installed, and it pins numpy 1.26), so it
+is not in the ``test`` extra; without bpy every test here is skipped. Blender runs in subprocesses: bpy ships its own
+USD libraries, which are kept out of the process that has usd-core's pxr loaded.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import subprocess
+import sys
+import textwrap
+
+import pytest
+from test_cache_schema import _collider_scene, _fem_scene, _lattice_scene, _pd_scene
+
+pytestmark = pytest.mark.skipif(
+    importlib.util.find_spec("bpy") is None,
+    reason='bpy (Blender as a Python module) is not installed: pip install -e ".[blender]"',
+)
+
+FRAMES = 4
+
+IMPORT = textwrap.dedent(
+    """
+    import json, sys
+    import bpy
+
+    result = {}
+    for path in sys.argv[1:]:
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        assert bpy.ops.wm.usd_import(filepath=path) == {"FINISHED"}
+        scene = bpy.context.scene
+        info = {"range": [scene.frame_start, scene.frame_end], "fps": scene.render.fps / scene.render.fps_base}
+        objects = {}
+        for frame in range(scene.frame_start, scene.frame_end + 1):
+            scene.frame_set(frame)
+            depsgraph = bpy.context.evaluated_depsgraph_get()
+            for ob in scene.objects:
+                if ob.type not in ("MESH", "POINTCLOUD"):
+                    continue
+                data = ob.evaluated_get(depsgraph).data
+                entry = objects.setdefault(ob.name, {"type": ob.type, "counts": [], "attributes": [], "location": []})
+                entry["counts"].append(len(data.vertices) if ob.type == "MESH" else len(data.points))
+                entry["attributes"] = sorted(a.name for a in data.attributes)
+                entry["location"].append(list(ob.evaluated_get(depsgraph).matrix_world.translation))
+                if ob.type == "MESH":
+                    entry["custom_normals"] = bool(data.has_custom_normals)
+        info["objects"] = objects
+        result[path] = info
+    print("RESULT " + json.dumps(result))
+    """
+)
+
+RENDER = textwrap.dedent(
+    """
+    import sys
+    import bpy
+
+    path, frame = sys.argv[1], int(sys.argv[2])
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.wm.usd_import(filepath=path)
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = 1
+    scene.render.resolution_x = scene.render.resolution_y = 16
+    scene.render.use_motion_blur = True
+    camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    camera.location = (0.3, -0.3, 0.2)
+    camera.rotation_euler = (1.2, 0.0, 0.8)
+    scene.frame_set(frame)
+    scene.render.filepath = sys.argv[3]
+    bpy.ops.render.render(write_still=True)
+    print("RENDERED", flush=True)
+    """
+)
+
+
+def _blender(script: str, *args, timeout=300) -> str:
+    proc = subprocess.run(
+        [sys.executable, "-c", script, *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    return proc.stdout + proc.stderr
+
+
+def _usd_counts(path) -> dict:
+    """{prim name: [point count per frame]} of the Points and Mesh prims of a cache, read with usd-core."""
+    from pxr import Usd, UsdGeom
+
+    stage = Usd.Stage.Open(str(path))
+    out = {}
+    for prim in stage.Traverse():
+        if prim.IsA(UsdGeom.Points) or prim.IsA(UsdGeom.Mesh):
+            attr = UsdGeom.PointBased(prim).GetPointsAttr()
+            out[prim.GetName()] = [len(attr.Get(f)) for f in range(int(stage.GetEndTimeCode()) + 1)]
+    return out
+
+
+@pytest.fixture(scope="module")
+def blender_caches(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("blender")
+    paths = {}
+    for name, build in (("pd", _pd_scene), ("fem", _fem_scene), ("lattice", _lattice_scene), ("hit", _collider_scene)):
+        scene = build()
+        scene.frames = FRAMES if name != "lattice" else 2
+        paths[name] = folder / f"{name}.usdc"
+        scene.run(paths[name], device="cpu", progress=False)
+    return paths
+
+
+def test_blender_imports_each_method(blender_caches):
+    """Blender's USD importer reads each cache: frame range 0..end and fps 24 from the stage; one object per Points
+    and Mesh prim, with the point count of every frame equal to the cache's (the fracturing peridynamic surface gains
+    vertices); the velocity attribute on every mesh and point cloud; meshes use the cache's normals (custom normals);
+    projectiles move (their transforms follow the cache)."""
+    paths = list(blender_caches.values())
+    out = _blender(IMPORT, *paths)
+    result = json.loads(next(ln for ln in out.splitlines() if ln.startswith("RESULT "))[len("RESULT ") :])
+    for name, path in blender_caches.items():
+        info = result[str(path)]
+        counts = _usd_counts(path)
+        end = len(next(iter(counts.values()))) - 1
+        assert info["range"] == [0, end], name
+        assert info["fps"] == 24.0
+        objects = info["objects"]
+        assert set(counts) <= set(objects), (name, set(counts) - set(objects))
+        for prim, per_frame in counts.items():
+            assert objects[prim]["counts"] == per_frame, (name, prim)
+            assert "velocity" in objects[prim]["attributes"], (name, prim)
+            if objects[prim]["type"] == "MESH":
+                assert objects[prim]["custom_normals"], (name, prim)
+    pd_surface = result[str(blender_caches["pd"])]["objects"]["block_surface"]["counts"]
+    assert len(set(pd_surface)) > 1, "the peridynamic block did not fracture: nothing shows topology changes"
+    sphere = result[str(blender_caches["hit"])]["objects"]["SphereProjectile_0"]["location"]
+    assert sphere[0][2] - sphere[-1][2] == pytest.approx(FRAMES / 24.0, rel=1e-5)
+
+
+def _first_topology_change(path) -> int:
+    from pxr import Usd
+
+    stage = Usd.Stage.Open(str(path))
+    samples = stage.GetPrimAtPath("/World/block_surface").GetAttribute("faceVertexIndices").GetTimeSamples()
+    return int(samples[1])
+
+
+def test_cycles_motion_blur_across_fracture(blender_caches, tmp_path, monkeypatch):
+    """Cycles renders the frame where the peridynamic block first breaks (its surface changes topology between the
+    motion-blur steps) with motion blur and without "Topology differs, disabling motion blur": the cached vertex
+    velocities drive the blur. Control: the same scene cached without surface velocities makes Cycles print that
+    line, so the log is really captured."""
+    from pdsim.output import writer as output_writer
+
+    path = blender_caches["pd"]
+    frame = _first_topology_change(path)
+    assert 0 < frame <= FRAMES
+    log = _blender(RENDER, path, frame, tmp_path / "blur.png")
+    assert "RENDERED" in log
+    assert "Topology differs" not in log, log[-2000:]
+    assert (tmp_path / "blur.png").stat().st_size > 0
+
+    real = output_writer.ViewWriter._velocities
+    monkeypatch.setattr(
+        output_writer.ViewWriter, "_write_whole_mesh", _without_velocities(output_writer.ViewWriter._write_whole_mesh)
+    )
+    control = tmp_path / "control.usdc"
+    scene = _pd_scene()
+    scene.frames = frame
+    scene.run(control, device="cpu", progress=False)
+    monkeypatch.setattr(output_writer.ViewWriter, "_velocities", real)
+    log = _blender(RENDER, control, frame, tmp_path / "control.png")
+    assert "Topology differs, disabling motion blur" in log
+
+
+def _without_velocities(write):
+    def write_without(self, frame, view, *args, **kwargs):
+        view.velocities = None
+        return write(self, frame, view, *args, **kwargs)
+
+    return write_without
+
+
+def test_blender_gets_crack_faces_per_frame(blender_caches):
+    """The crack hooks reach Blender: the surface and crack placeholder materials become the surface's material slots,
+    and the per-face ``crack`` attribute (domain FACE, updated every frame by the mesh cache) marks as many faces on
+    the last frame as the cache's crack subset holds, for an Attribute node to switch to the crack material. (Blender
+    5.0 reads the material indices of time-sampled GeomSubsets once, at import: on frame 0 there is no crack yet.)"""
+    from pxr import Usd, UsdGeom
+
+    script = textwrap.dedent(
+        """
+        import json, sys
+        import bpy
+
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        bpy.ops.wm.usd_import(filepath=sys.argv[1])
+        scene = bpy.context.scene
+        scene.frame_set(scene.frame_end)
+        ob = bpy.data.objects["block_surface"]
+        mesh = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+        crack = mesh.attributes["crack"]
+        values = [v.value for v in crack.data]
+        slots = sorted(slot.material.name for slot in ob.material_slots if slot.material)
+        print("CRACK " + json.dumps({"domain": crack.domain, "sum": int(sum(values)), "faces": len(mesh.polygons),
+                                     "slots": slots}))
+        """
+    )
+    path = blender_caches["pd"]
+    out = _blender(script, path)
+    info = json.loads(next(ln for ln in out.splitlines() if ln.startswith("CRACK "))[len("CRACK ") :])
+    stage = Usd.Stage.Open(str(path))
+    end = stage.GetEndTimeCode()
+    crack = UsdGeom.Subset(stage.GetPrimAtPath("/World/block_surface/crack")).GetIndicesAttr().Get(end)
+    faces = len(stage.GetPrimAtPath("/World/block_surface").GetAttribute("faceVertexCounts").Get(end))
+    assert info["domain"] == "FACE" and info["faces"] == faces
+    assert info["sum"] == len(crack) > 0
+    assert info["slots"] == ["crack", "surface"]
