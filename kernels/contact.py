@@ -12,12 +12,27 @@ c_b of its rest distance and a bonded pair at rest feels exactly nothing. The fo
     f_k = sum_j [ C_kj V_j (R_kj - r) - c^n_kj V_j v_n ]_+ n  +  friction,     n = (y_k - y_j) / r,
     C_kj = 2 C_k C_j / (C_k + C_j)  (contact modulus [N/m^6]),  v_n = (v_k - v_j) . n,
 
+(float32 range: C reaches 4e22 N/m^6 for steel at h = 4 mm and 5e26 for glass at h = 0.5 mm, so C_kj is evaluated
+as 2 / (1 / C_k + 1 / C_j) and only products C_kj V_j [N/m^4] are formed; the product C_k C_j overflowed to inf and
+the first contact of any stiff body gave an infinite force),
+
 with the normal dashpot c^n_kj = 2 zeta sqrt(C_kj m_red / (V_k V_j)) (damping ratio zeta of the pair's relative
 oscillation, m_red the reduced mass) clamped so the normal force never pulls (no adhesion), and regularised Coulomb
 friction on the tangential relative velocity v_t: |f_t| = min(mu |f_n|, c^t_kj V_j |v_t|) opposing v_t, with the
-critically damped c^t_kj (zeta = 1). The pair energy is 1/2 C_kj V_k V_j (R_kj - r)^2 [J]. Every term is symmetric in
-(k, j), so the pair forces V_k f_kj and V_j f_jk are equal and opposite (momentum is conserved; the hard floor below
-conserves it only approximately, as each particle averages over its own floor contacts).
+critically damped c^t_kj (zeta = 1). The pair energy is 1/2 C_kj V_k V_j (R_kj - r)^2 [J] (times the cap's scale
+below). Every term is symmetric in (k, j), so the pair forces V_k f_kj and V_j f_jk are equal and opposite (momentum
+is conserved; the hard floor below conserves it only approximately, as each particle averages over its own floor
+contacts).
+
+**Stiffness cap.** Each particle's contact stiffness row sum sum_j C_kj V_j [N/m^4] (what contact adds to its
+Silling-Askari sum, hence to the stable step) is capped at its budget B_k = n_b C_k (2 r_k)^3, the stiffness of n_b
+contacts (n_b = 12 by default, so B_k = S_k, one interior bond row sum): every pair term is scaled by
+s_kj = min(s_k, s_j), s_k = min(1, B_k / sum_j C_kj V_j), with s_k taken from the previous pass (one step of lag,
+double-buffered so no thread reads a value another writes). The scale is symmetric, so momentum stays exact; it is 1
+until a particle has more than the budget's worth of contacts (measured: at most 5 contacts per particle in a steel
+plate, h = 4 mm, hit by a 300 m/s sphere; at most 3 in the fracture runs of docs/stability.md), so ordinary contact is
+unchanged, and the contact's stable step sqrt(2 rho_k / B_k) is a bound on the contact springs rather than an
+assumption about how many there are.
 
 A hard floor backs the penalty up: a pair closer than floor_factor R_kj (an impact faster than the penalty can stop
 within a step or two) is projected back to that distance and its approaching normal velocity removed (inelastic),
@@ -56,8 +71,11 @@ def contact_pair_distance(
 
 @wp.func
 def contact_pair_modulus(ck: float, cj: float):
-    """Pair contact modulus C_kj = 2 C_k C_j / (C_k + C_j) [N/m^6] (exactly symmetric in k and j)."""
-    return 2.0 * ck * cj / (ck + cj)
+    """Pair contact modulus C_kj = 2 C_k C_j / (C_k + C_j) [N/m^6], evaluated as 2 / (1 / C_k + 1 / C_j): exactly
+    symmetric in k and j, and free of the float32 overflow of the product C_k C_j (C is 4e22 N/m^6 for steel at
+    h = 4 mm, 5e26 for glass at h = 0.5 mm: the product overflowed to inf, and the first contact gave an infinite
+    force)."""
+    return 2.0 / (1.0 / ck + 1.0 / cj)
 
 
 EXPOSED = wp.constant(1)  # hash-grid group of the particles that take part in contact
@@ -146,12 +164,17 @@ def make_particle_contact_kernels(shielded: bool):
         damping_ratio: float,
         friction: float,
         floor_factor: float,
+        budget_count: float,
+        scale_in: wp.array(dtype=float),
         force_density: wp.array(dtype=wp.vec3),
         position_delta: wp.array(dtype=wp.vec3),
         velocity_delta: wp.array(dtype=wp.vec3),
+        scale_out: wp.array(dtype=float),
     ):
         """Adds the contact force density [N/m^3] of every particle j within its contact distance to
-        force_density[k].
+        force_density[k], each pair's stiffness and dashpot scaled by min(scale_in[k], scale_in[j]); writes
+        scale_out[k] = min(1, B_k / sum_j C_kj V_j) with B_k = budget_count C_k (2 r_k)^3 (the stiffness cap, see the
+        module docstring; scale_in and scale_out must be different arrays).
 
         Hard floor: for pairs closer than floor_factor R_kj the kernel also writes particle k's share of a Jacobi
         (averaged) projection back to that distance into position_delta[k] [m], and of the removal of their
@@ -160,12 +183,15 @@ def make_particle_contact_kernels(shielded: bool):
         k = wp.tid()
         position_delta[k] = wp.vec3(0.0)
         velocity_delta[k] = wp.vec3(0.0)
+        scale_out[k] = 1.0
         if wp.static(SHIELDED):
             if exposed[k] != EXPOSED:
                 return
         yk = positions[k]
         vk = velocities[k]
         ck = modulus[k]
+        sk = scale_in[k]
+        row = float(0.0)  # unscaled sum_j C_kj V_j (the cap's measure)
         vol_k = volume[k]
         mk = mass[k]
         free_k = kind[k] == PARTICLE_FREE
@@ -189,20 +215,23 @@ def make_particle_contact_kernels(shielded: bool):
                 continue
             r = wp.sqrt(r2)
             n = d / r
-            c = contact_pair_modulus(ck, modulus[j])
             vol_j = volume[j]
             mj = mass[j]
-            # critical dashpot per unit V_k V_j: 2 sqrt(C m_red / (V_k V_j))
-            c_crit = 2.0 * wp.sqrt(c * (mk * mj / (mk + mj)) / (vol_k * vol_j))
+            # float32 range: C alone reaches 1e27 N/m^6 at sub-mm spacings, so only products with V_j are formed
+            cv = contact_pair_modulus(ck, modulus[j]) * vol_j  # C_kj V_j [N/m^4]
+            row += cv
+            cv *= wp.min(sk, scale_in[j])
+            # critical dashpot c_crit V_j = 2 sqrt(C m_red / (V_k V_j)) V_j = 2 sqrt(C V_j m_red / V_k)
+            cv_crit = 2.0 * wp.sqrt(cv * (mk * mj / (mk + mj)) / vol_k)
             vrel = vk - velocities[j]
             vn = wp.dot(vrel, n)
-            fn = wp.max(c * vol_j * (R - r) - damping_ratio * c_crit * vol_j * vn, 0.0)
+            fn = wp.max(cv * (R - r) - damping_ratio * cv_crit * vn, 0.0)
             f += fn * n
             if friction > 0.0:
                 vt = vrel - vn * n
                 vt_len = wp.length(vt)
                 if vt_len > 0.0:
-                    ft = wp.min(friction * fn, c_crit * vol_j * vt_len)
+                    ft = wp.min(friction * fn, cv_crit * vt_len)
                     f -= (ft / vt_len) * vt
             r_floor = floor_factor * R
             if r < r_floor and free_k:
@@ -214,6 +243,9 @@ def make_particle_contact_kernels(shielded: bool):
                 if vn < 0.0:
                     dv -= (w * vn) * n
         force_density[k] = force_density[k] + f
+        budget = budget_count * ck * (8.0 * radius[k] * radius[k] * radius[k])
+        if row > budget:
+            scale_out[k] = budget / row
         if floor_count > 0:
             s = 1.0 / float(floor_count)
             position_delta[k] = s * dx
@@ -232,13 +264,14 @@ def make_particle_contact_kernels(shielded: bool):
         query_radius: float,
         distance_factor: float,
         bonded_factor: float,
+        scale: wp.array(dtype=float),
         energy: wp.array(dtype=float),
         row_sum: wp.array(dtype=float),
         contact_count: wp.array(dtype=wp.int32),
     ):
-        """Per particle: energy[k] = sum_j 1/4 C_kj V_k V_j (R_kj - r)^2 [J] (half of each pair's energy), the
-        contact stiffness row sum row_sum[k] = sum_j C_kj V_j [N/m^4] (to add to the Silling-Askari bond sum) and
-        the number of active contacts."""
+        """Per particle: energy[k] = sum_j 1/4 s_kj C_kj V_k V_j (R_kj - r)^2 [J] (half of each pair's energy), the
+        contact stiffness row sum row_sum[k] = sum_j s_kj C_kj V_j [N/m^4] (to add to the Silling-Askari bond sum)
+        and the number of active contacts; s_kj = min(scale[k], scale[j]), the cap's scale the force pass uses."""
         k = wp.tid()
         energy[k] = 0.0
         row_sum[k] = 0.0
@@ -248,6 +281,7 @@ def make_particle_contact_kernels(shielded: bool):
                 return
         yk = positions[k]
         ck = modulus[k]
+        sk = scale[k]
         vol_k = volume[k]
         e = float(0.0)
         s = float(0.0)
@@ -267,9 +301,9 @@ def make_particle_contact_kernels(shielded: bool):
             if r2 >= R * R:
                 continue
             gap = R - wp.sqrt(r2)
-            c = contact_pair_modulus(ck, modulus[j])
-            e += 0.25 * c * vol_k * volume[j] * gap * gap
-            s += c * volume[j]
+            cv = contact_pair_modulus(ck, modulus[j]) * volume[j] * wp.min(sk, scale[j])
+            e += 0.25 * cv * vol_k * gap * gap
+            s += cv
             count += 1
         energy[k] = e
         row_sum[k] = s

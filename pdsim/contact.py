@@ -22,8 +22,10 @@ from .errors import ParameterError
 from .validate import check_range
 
 CONTACT_NEIGHBOR_BUDGET = 12
-"""Contact modulus calibration: C_k V = S_k / 12, so 12 simultaneous contacts (the kissing number of equal spheres)
-add at most one interior bond row sum S_k to a particle's Silling-Askari sum."""
+"""Contact modulus calibration: C_k (2 r_k)^3 = S_k / 12, so 12 simultaneous contacts (the kissing number of equal
+spheres) add one interior bond row sum S_k to a particle's Silling-Askari sum; and the cap: a particle's contact
+stiffness row sum never exceeds that of 12 contacts (kernels/contact.py, stiffness cap), so the contact's stable step
+is a bound whatever the number of contacts."""
 
 
 GRID_CELL_FACTOR = 2.0
@@ -65,7 +67,8 @@ class ContactDiagnostics:
 
     Attributes:
         energy: half of the penalty energy of each of the particle's contact pairs [J], shape [n] (sums to the total).
-        row_sum: contact stiffness row sum sum_j C_kj V_j [N/m^4], shape [n] (adds to the bonds' Silling-Askari sum).
+        row_sum: contact stiffness row sum sum_j C_kj V_j [N/m^4] as the force pass uses it (capped, see
+            CONTACT_NEIGHBOR_BUDGET), shape [n] (adds to the bonds' Silling-Askari sum).
         count: number of active contact pairs, int shape [n].
     """
 
@@ -81,7 +84,8 @@ class ParticleContact:
     body, min(bonded_factor |X_j - X_k|, distance_factor (r_k + r_j)) from their reference positions X (LAMMPS PERI's
     rule): a bonded pair at rest feels nothing and a compressed one only below bonded_factor of its rest distance, so
     bonds need no look-up and broken ones need no bookkeeping. The force is a linear penalty with a little normal
-    damping and optional Coulomb friction (kernels/contact.py).
+    damping and optional Coulomb friction (kernels/contact.py). A particle's contact stiffness is capped at that of
+    12 contacts, so ``stable_time_step()`` bounds the contact springs (docs/stability.md, Contact).
 
     Args:
         rest_positions: reference positions X [m], shape [n, 3].
@@ -171,7 +175,7 @@ class ParticleContact:
             self.stiffness_scale * bond_stiffness_row_sum(kappa, mu, delta) / (CONTACT_NEIGHBOR_BUDGET * (2.0 * r) ** 3)
         )
         self._density_host = rho
-        self._volume_host = vol
+        self._radius_host = r
         self._modulus_host = modulus
         f32 = np.float32
         d = self.device
@@ -190,6 +194,10 @@ class ParticleContact:
         self._all_free = wp.zeros(n, dtype=wp.int32, device=d)
         self._position_delta = wp.zeros(n, dtype=wp.vec3, device=d)
         self._velocity_delta = wp.zeros(n, dtype=wp.vec3, device=d)
+        # stiffness cap's per-particle scale, double-buffered: the force pass reads _scale and writes _scale_next,
+        # then apply() swaps them, so _scale is the next pass's and _scale_next the one just applied
+        self._scale = wp.ones(n, dtype=float, device=d)
+        self._scale_next = wp.ones(n, dtype=float, device=d)
         self._energy = wp.zeros(n, dtype=float, device=d)
         self._row_sum = wp.zeros(n, dtype=float, device=d)
         self._count = wp.zeros(n, dtype=wp.int32, device=d)
@@ -275,7 +283,7 @@ class ParticleContact:
         velocity Verlet), then applies the hard-floor projection to ``displacements`` and ``velocities`` (free
         particles only: ``kind`` int32 [n], 0 = free; all free when None). Call it after the bond force density and
         before the kick. Rebuilds the hash grid on ``positions`` (measured: the rebuild is about 5 % of the call; the
-        query dominates). No allocation."""
+        query dominates). Updates the stiffness cap's scale for the next call (one call of lag). No allocation."""
         import warp as wp
 
         from .kernels import contact as kc
@@ -303,12 +311,16 @@ class ParticleContact:
                 self.damping_ratio,
                 self.friction,
                 self.floor_factor,
+                float(CONTACT_NEIGHBOR_BUDGET),
+                self._scale,
                 force_density,
                 self._position_delta,
                 self._velocity_delta,
+                self._scale_next,
             ],
             device=self.device,
         )
+        self._scale, self._scale_next = self._scale_next, self._scale
         if self.floor_factor > 0.0:
             wp.launch(
                 kc.apply_contact_projection,
@@ -348,6 +360,7 @@ class ParticleContact:
                 self.query_radius,
                 self.distance_factor,
                 self.bonded_factor,
+                self._scale_next,  # after apply()'s swap: the scale its force pass applied (the forces' potential)
                 self._energy,
                 self._row_sum,
                 self._count,
@@ -365,10 +378,14 @@ class ParticleContact:
         return float(self.diagnostics(positions).energy.sum())
 
     def stable_time_step(self, contact_count: int = CONTACT_NEIGHBOR_BUDGET) -> float:
-        """Silling-Askari step of the contact springs alone, min_k sqrt(2 rho_k / (contact_count C_k V_k)) [s], for
-        a particle with ``contact_count`` simultaneous contacts. With the default calibration and 12 contacts this
-        equals the continuum bond estimate of the body; a solver can take the min with its own estimate."""
-        s = contact_count * self._modulus_host * self._volume_host
+        """Silling-Askari step of the contact springs alone, min_k sqrt(2 rho_k / (contact_count C_k (2 r_k)^3)) [s],
+        for a particle with ``contact_count`` contacts' worth of stiffness. The default is the cap's budget (no
+        particle's contact row sum exceeds it), so the result bounds the contact springs whatever their number; with
+        the default calibration it equals the continuum bond estimate of the body (within the spread of the discrete
+        bond sums). A solver takes the min with its own estimate: velocity Verlet then stays within the
+        Gershgorin bound for bonds and contact together at safety factors up to 1/sqrt(2) = 0.707 (the Scene's 0.7),
+        since dt^2 (S_bond + S_contact) <= safety^2 (2 rho + 2 rho); docs/stability.md, Contact."""
+        s = contact_count * self._modulus_host * (2.0 * self._radius_host) ** 3
         return float(np.sqrt(2.0 * self._density_host / s).min())
 
 

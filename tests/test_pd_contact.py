@@ -316,6 +316,54 @@ def test_pair_force_damping_and_coulomb_friction():
     np.testing.assert_allclose(slow, [-fn, -c_crit * vol * 1.0e-6, 0.0], rtol=1e-3)
 
 
+def test_stiffness_cap_holds_a_crowded_particle_to_twelve_contacts():
+    """The stiffness cap (kernels/contact.py): a particle of one body with 18 particles of another on a sphere 0.9 h
+    around it (18 contacts at R = 1.35 h; the 18 are one body at rest, so they do not repel each other). The first
+    force pass applies the full stiffness, row sum 18 C V (C V = S / 12, S the continuum bond row sum), and sets the
+    centre's scale for the next pass to the budget over its row sum, 12 / 18 (the others, one contact each, keep 1).
+    The second pass scales every pair of the centre by 2/3: its row sum is then the budget 12 C V = S, each pair
+    force 2/3 of the penalty C V (R - r), the pair energies 2/3 too, the pair forces still cancel (momentum exact), and
+    the contact's stable step satisfies dt^2 S_contact <= 2 rho. Tolerances: float32 round-off (1e-5)."""
+    import warp as wp
+
+    n_out, r_shell = 18, 0.9 * H
+    i = np.arange(n_out) + 0.5
+    polar, azimuth = np.arccos(1.0 - 2.0 * i / n_out), math.pi * (1.0 + 5.0**0.5) * i  # Fibonacci sphere
+    shell = r_shell * np.stack(
+        [np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), np.cos(polar)], axis=1
+    )
+    X = np.concatenate([np.zeros((1, 3)), shell])
+    vol = H**3
+    contact = ParticleContact(
+        X, [0] + [1] * n_out, 0.5 * H, vol, MAT.density, MAT.bulk_modulus, MAT.shear_modulus, 3.015 * H
+    )
+    cv = bond_stiffness_row_sum(MAT.bulk_modulus, MAT.shear_modulus, 3.015 * H) / 12.0  # C V [N/m^4]
+    x = wp.array(X.astype(np.float32), dtype=wp.vec3)
+    zero = wp.zeros_like(x)
+    penalty = cv * (1.35 * H - r_shell)
+
+    def force_pass():
+        f = wp.zeros(len(X), dtype=wp.vec3)
+        contact.apply(x, wp.zeros_like(x), zero, f)
+        return f.numpy().astype(np.float64)
+
+    f1 = force_pass()
+    d1 = contact.diagnostics(x)
+    assert d1.count[0] == n_out and np.all(d1.count[1:] == 1)
+    assert d1.row_sum[0] == pytest.approx(n_out * cv, rel=1e-5)
+    np.testing.assert_allclose(np.linalg.norm(f1[1:], axis=1), penalty, rtol=1e-5)
+    f2 = force_pass()
+    d2 = contact.diagnostics(x)
+    assert d2.row_sum[0] == pytest.approx(12.0 * cv, rel=1e-5)
+    np.testing.assert_allclose(d2.row_sum[1:], cv * 12.0 / n_out, rtol=1e-5)
+    np.testing.assert_allclose(np.linalg.norm(f2[1:], axis=1), penalty * 12.0 / n_out, rtol=1e-5)
+    assert d2.energy.sum() == pytest.approx(d1.energy.sum() * 12.0 / n_out, rel=1e-5)
+    assert np.abs(f2.sum(axis=0)).max() < 1e-5 * penalty  # equal volumes: sum of V f is V sum f
+    dt = contact.stable_time_step()
+    assert dt**2 * d2.row_sum.max() <= 2.0 * MAT.density * (1.0 + 1e-5)
+    assert dt**2 * d1.row_sum.max() > 2.0 * MAT.density  # uncapped, 18 contacts would need a smaller step
+
+
 def test_exposure_marks_two_shells_and_crack_faces():
     """With shield_interior only particles within two lattice shells of a surface take part in contact: a cube of
     10^3 particles exposes 10^3 - 6^3 = 784. After a notch cuts it in two at x = 0 (bonds across start broken),
