@@ -1,4 +1,5 @@
-"""Command line: ``pdsim run [SCENE.py] --out CACHE.usdc [--frames N] [--device cpu|cuda] [--dt SECONDS]``.
+"""Command line: ``pdsim run [SCENE.py] --out CACHE.usdc [--frames N] [--device cpu|cuda] [--dt SECONDS]`` and
+``pdsim preview CACHE --out FILE.png|.gif|.mp4 [--frames A:B] [--color ATTR] [--camera ...] [--size WxH]``.
 
 A scene script is a Python file defining ``build_scene()`` that returns a :class:`pdsim.Scene`. With no script the
 shipped default scene runs. User mistakes print one line and exit with status 1; Ctrl-C exits with 130 and leaves the
@@ -24,7 +25,105 @@ def _parser(prog: str = "pdsim", *, with_scene: bool = True) -> argparse.Argumen
     if with_scene:
         r.add_argument("scene", nargs="?", help="scene script defining build_scene(); default: the shipped cantilever")
     _add_run_options(r)
+    _add_preview_parser(sub)
     return p
+
+
+def _add_preview_parser(sub) -> None:
+    v = sub.add_parser(
+        "preview",
+        help="render a USD cache to a PNG still or a GIF/MP4 animation (CPU ray casting)",
+        description="Render a USD cache (any method's) to a PNG still or a GIF/MP4 animation: every Mesh prim, "
+        "Points prims as spheres, Lambert shading with shadows on a ground plane, an automatically framed camera.",
+    )
+    v.add_argument("cache", help="USD cache (.usdc, .usda, .usd)")
+    v.add_argument("--out", help="output image: .png (one frame) or .gif / .mp4 (one image per frame)")
+    v.add_argument(
+        "--frames",
+        metavar="A:B",
+        help="frames to render: N, or A:B[:STEP] with A inclusive and B exclusive, like Python slices (A:B is frames "
+        "A .. B-1; negative values count from the end, -1 is the last frame; write --frames=-1 for a negative "
+        "start). Default: all frames for .gif/.mp4, the last frame for .png",
+    )
+    v.add_argument(
+        "--color",
+        metavar="ATTR",
+        help="colour by this primvar (per face or per vertex; vectors by length): floats through a colour ramp over "
+        "the rendered frames' range, integers (fragment ids) by a palette. A body's surface without it takes it from "
+        "the body's points (e.g. --color damage). Default: neutral material, crack faces in orange",
+    )
+    v.add_argument(
+        "--camera",
+        help="'AZIMUTH,ELEVATION[,DISTANCE]' in degrees, degrees, metres (looking at the centre of all frames' "
+        "geometry; azimuth about the stage's up axis from +x; distance fitted when left out), or "
+        "'eye=X,Y,Z:target=X,Y,Z' in metres. Default: -60,25 with the distance fitted",
+    )
+    v.add_argument("--size", metavar="WxH", help="image size in pixels (default 640x480; even sides for .mp4)")
+    v.add_argument("--fps", type=str, help="animation frame rate (default: the cache's frames per second)")
+    v.add_argument(
+        "--points",
+        choices=["auto", "all", "none"],
+        default="auto",
+        help="Points prims drawn as spheres: auto (those without a surface <name>_surface or render mesh "
+        "<name>_render beside them, e.g. a lattice), all, or none (default auto)",
+    )
+    v.add_argument(
+        "--fit",
+        choices=["all", "selected", "first"],
+        default="all",
+        help="what the automatic camera frames: all frames' geometry (default), the selected frames', or the first "
+        "frame's (far-flung debris then leaves the picture instead of shrinking the rest)",
+    )
+    v.add_argument("--supersample", type=str, default="1", help="rays per pixel along each axis, 1..4 (default 1)")
+    v.add_argument("--no-ground", action="store_true", help="no ground plane (and no shadows on it)")
+    v.add_argument("--no-shadows", action="store_true", help="no shadow rays")
+    v.add_argument("--device", choices=["cpu", "cuda"], default="cpu", help="Warp device (default: cpu)")
+
+
+def _number(field: str, text: str | None, kind, allowed: str):
+    """Parses an option given as text (so that a bad value is a one-line pdsim error, not an argparse one)."""
+    if text is None:
+        return None
+    try:
+        return kind(text)
+    except ValueError:
+        raise ParameterError(field, text, allowed) from None
+
+
+def _preview(args) -> int:
+    import warp as wp
+
+    from .output.preview import write_preview
+
+    if args.out is None:
+        raise ParameterError("out", None, "a path ending in .png (still), .gif or .mp4 (animation)")
+    fps = _number("fps", args.fps, float, "a number of frames per second in (0, 1000]")
+    supersample = _number("supersample", args.supersample, int, "an integer from 1 to 4")
+    wp.config.quiet = True
+    wp.config.log_level = wp.LOG_WARNING
+    result = write_preview(
+        args.cache,
+        args.out,
+        args.frames,
+        fps=fps,
+        color=args.color,
+        camera=args.camera,
+        size=args.size,
+        points=args.points,
+        fit=args.fit,
+        supersample=supersample,
+        ground=not args.no_ground,
+        shadows=not args.no_shadows,
+        device=_resolve_device(args.device),
+    )
+    frames = result.frames
+    span = f"frame {frames[0]}" if len(frames) == 1 else f"{len(frames)} frames ({frames[0]}..{frames[-1]})"
+    colour = ""
+    if result.color_range is not None:
+        colour = f", {args.color} {result.color_range[0]:.4g}..{result.color_range[1]:.4g}"
+    h, w = result.images[0].shape[:2]
+    print(f"pdsim: wrote {args.out}: {span}, {w}x{h}{colour}, {sum(result.seconds) / len(frames):.2f} s/frame")
+    return 0
 
 
 def _add_run_options(r: argparse.ArgumentParser):
@@ -93,10 +192,12 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``pdsim`` command."""
     parser = _parser()
     args = parser.parse_args(argv)
-    if args.command != "run":
+    if args.command not in ("run", "preview"):
         parser.print_help()
         return 2
     try:
+        if args.command == "preview":
+            return _preview(args)
         if args.scene:
             build = load_scene_script(args.scene)
         else:
