@@ -115,8 +115,9 @@ def test_hole_through_a_wall_shows_when_damage_crosses_it():
     largest shell changes) no later than one frame after the damage first crosses the wall (a lattice column through
     the thickness whose particles all reached the chip threshold); every shell is closed and consistently wound
     each frame; no triangle is longer than 3 h at rest. Slivers: the goal is no crack triangle with an angle under 5
-    degrees; measured at rest 0-16 per frame (up to 1 % of the crack triangles on the early frames; 39 of 27k on
-    frame 8, where the shared clean-up falls back), so this asserts at most 1.5 % as a regression guard."""
+    degrees; measured at rest 0-20 per frame (at most 0.5 % of the crack triangles, smallest angle 3.9 degrees:
+    needles at crack junctions on the outer surface), so this asserts at most 0.6 % and no crack angle under 3 degrees
+    as a regression guard."""
     import trimesh
 
     scene = _wall_scene(8)
@@ -172,7 +173,8 @@ def test_hole_through_a_wall_shows_when_damage_crosses_it():
     assert damage_frame is not None and hole_frame is not None
     assert hole_frame <= damage_frame + 1
     assert max(s[7] for s in stats) <= 3.0
-    assert all(s[4] <= 0.015 * max(s[5], 1) for s in stats)
+    assert all(s[4] <= 0.006 * max(s[5], 1) for s in stats)
+    assert min(s[3] for s in stats) >= 3.0
 
 
 def test_vertex_velocities_match_the_motion_of_the_vertices():

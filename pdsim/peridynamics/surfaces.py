@@ -49,13 +49,18 @@ triangles (same positions) and crack faces are pieces of the region boundaries:
 6. **Slivers** (:func:`clean_complex`). The booleans cut triangles near their corners and marching tetrahedra puts
    crack points near grid vertices, which leaves needles and caps. Rounds of edge collapses (edges shorter than 0.3 h
    and the shortest side of every triangle with an angle under 5 degrees) and edge flips (the longest side of such a
-   triangle, inside one patch) remove them on the shared complex, so both sides of a crack change alike. A collapse
-   moves a vertex onto a neighbour only if every patch of the vertex (its input planes and cracks) is a patch of the
-   neighbour, so outer faces stay exactly on the input surface, sharp edges and corners stay put and the volumes still
-   add up exactly; the link condition keeps every shell a closed 2-manifold. Measured on the brittle wall of
-   tests/test_pd_render_surfaces.py (h = 1 cm): 0-16 crack triangles per frame keep an angle under 5 degrees (of up
-   to 27k; up to 1 % on the early frames), no triangle is longer than 2.7 h at rest. Faceted curved inputs (a sphere
-   whose facets are smaller than h) keep more slivers, since no vertex may leave its facet.
+   triangle, inside one patch; a flip never creates an edge the shell has in either direction, and one round never
+   creates the same edge twice) remove them on the shared complex, so both sides of a crack change alike. A collapse
+   moves a vertex onto a neighbour only if the neighbour lies on every input plane of the vertex (its cracks may
+   slide: a crack's rim moves along a box edge or across a face, both sides alike), so outer faces stay exactly on
+   the input surface, sharp edges and corners stay put and the volumes still add up exactly; the link condition
+   keeps every shell a closed 2-manifold. Measured on the brittle wall of tests/test_pd_render_surfaces.py
+   (h = 1 cm, frames 2-8, rest space): 0-20 crack triangles per frame keep an angle under 5 degrees (at most 0.5 %,
+   smallest 3.9 degrees; mostly needles of 0.02-0.1 h edges at crack junctions on the outer surface, where the link
+   condition blocks the collapse), no triangle is longer than 2.7 h at rest. Where two sides of a crack still differ
+   (manifold3d resolves a crack point exactly on an input plane differently in the two booleans; frame 8 of the
+   wall, two shells) those shells keep their own crack triangles. Faceted curved inputs (a sphere whose facets are
+   smaller than h) keep more slivers, since no vertex may leave its facet.
 7. **Damage.** Regions are the fragments (connected components of live bonds), except that a particle whose damage
    reaches ``damage_threshold`` (default 0.5: about 0.38 next to a clean crack through the bulk, so clean cracks
    still show through the fragments) becomes a chip of its own. Its cell separates from its neighbours' in the frame
@@ -576,7 +581,19 @@ def _undirected_edges(tri: np.ndarray, vertex_count: int):
     return uk // vertex_count, uk % vertex_count, inverse.reshape(3, -1).T
 
 
-def _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle):
+def _on_planes(inc, plane_eq, points, src, dst, spacing):
+    """Bool [c]: ``dst`` lies (within 1e-7 h) on the plane of every input-plane patch of ``src`` (``inc``: vertex x
+    patch incidence, ``plane_eq`` [p, 4] unit normal and offset of each patch, NaN for crack patches)."""
+    rows = inc[src].tocoo()
+    eq = plane_eq[rows.col]
+    dist = np.abs(np.einsum("ij,ij->i", eq[:, :3], points[dst[rows.row]]) - eq[:, 3])
+    bad = ~np.isnan(eq[:, 0]) & ~(dist <= 1e-7 * spacing)
+    out = np.ones(len(src), dtype=bool)
+    out[rows.row[bad]] = False
+    return out
+
+
+def _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle, plane_eq=None):
     """One round of edge collapses on the complex (see :func:`clean_complex`). Returns (triangles after the round
     [f, 3], mask [f] of the triangles that keep an area, number of collapses; 0: nothing left to do)."""
     from scipy.sparse import csr_matrix
@@ -605,6 +622,9 @@ def _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle
     common = np.asarray(inc[eu].multiply(inc[ev]).sum(axis=1)).ravel()
     u_into_v = common == n_patch[eu]
     v_into_u = common == n_patch[ev]
+    if plane_eq is not None:  # or: the target lies on every input plane of the source (crack patches may slide)
+        u_into_v |= _on_planes(inc, plane_eq, points, eu, ev, spacing)
+        v_into_u |= _on_planes(inc, plane_eq, points, ev, eu, spacing)
     ok = u_into_v | v_into_u
     src = np.where(u_into_v, eu, ev)[ok]
     dst = np.where(u_into_v, ev, eu)[ok]
@@ -720,10 +740,11 @@ def _flip_round(points, tri, shell, patch, sliver_angle):
     t2 = np.where(found, dface[order][pos], 0)
     d = np.where(found, dapex[order][pos], 0)
     ok = found & (patch[t2] == patch[sliver]) & (c != d)
-    # cd must not be an edge of the shell already.
-    ekey = (shell[sliver] * n_v + c) * n_v + d
-    pos2 = np.minimum(np.searchsorted(skey, ekey), len(skey) - 1)
-    ok &= skey[pos2] != ekey
+    # cd must not be an edge of the shell already (either direction).
+    for e0, e1 in ((c, d), (d, c)):
+        ekey = (shell[sliver] * n_v + e0) * n_v + e1
+        pos2 = np.minimum(np.searchsorted(skey, ekey), len(skey) - 1)
+        ok &= skey[pos2] != ekey
     # Geometry: orientation kept and the smaller angle grows.
     t_new1 = np.stack([c, a, d], axis=1)
     t_new2 = np.stack([d, b, c], axis=1)
@@ -770,13 +791,25 @@ def _flip_round(points, tri, shell, patch, sliver_angle):
     g_cnt = np.bincount(group[cand], minlength=group.max() + 1)
     g_pick = np.bincount(group[pick], minlength=group.max() + 1)
     pick = pick[g_pick[group[pick]] == g_cnt[group[pick]]]  # every copy of the flip was chosen
+    # Two flips of one round may not create the same edge in one shell: keep the first flip of each such edge (and
+    # drop every copy of a flip that loses in some shell).
+    new_key = (shell[sliver[pick]] * n_v + np.minimum(c[pick], d[pick])) * n_v + np.maximum(c[pick], d[pick])
+    _, first_of = np.unique(new_key, return_index=True)
+    dup = np.ones(len(pick), dtype=bool)
+    dup[first_of] = False
+    if dup.any():
+        bad_group = np.zeros(group.max() + 1, dtype=bool)
+        bad_group[group[pick[dup]]] = True
+        pick = pick[~bad_group[group[pick]]]
     out = tri.copy()
     out[sliver[pick]] = t_new1[pick]
     out[t2[pick]] = t_new2[pick]
     return out, len(pick)
 
 
-def clean_complex(points, tri, shell, patch, spacing, *, short_edge=SHORT_EDGE, sliver_angle=SLIVER_ANGLE):
+def clean_complex(
+    points, tri, shell, patch, spacing, *, short_edge=SHORT_EDGE, sliver_angle=SLIVER_ANGLE, crack_patch=None
+):
     """Removes slivers from the shell complex by edge collapses that keep every shell a closed 2-manifold.
 
     Candidates are edges shorter than ``short_edge`` spacings and the shortest side (up to one spacing) of every
@@ -784,7 +817,9 @@ def clean_complex(points, tri, shell, patch, spacing, *, short_edge=SHORT_EDGE, 
     positions: outer faces stay exactly on the input surface, sharp edges and corners stay put) and is allowed when
 
     - every patch of u is a patch of v (u stays on its planes and cracks: interior points may move onto rims,
-      creases and junctions, never the reverse),
+      creases and junctions, never the reverse), or, given ``crack_patch``, v lies on the plane of every input
+      patch of u (u's cracks may then slide: a crack's rim moves along a box edge or across a face, both sides
+      alike, while outer faces stay on the input planes and volumes still add up),
     - in every shell holding u and v, the edge uv exists and u and v share exactly two neighbours (the link
       condition, which keeps the shell a 2-manifold), and the shell has more than 6 vertices,
     - no remaining triangle turns by more than 60 degrees.
@@ -797,12 +832,25 @@ def clean_complex(points, tri, shell, patch, spacing, *, short_edge=SHORT_EDGE, 
         tri: triangles (global vertex ids), int64 [f, 3]; shell: shell of each triangle, int [f];
         patch: patch id of each triangle, int [f].
         spacing: particle spacing h [m].
+        crack_patch: bool [patch count], True for crack patches (the others are planar input patches); None: the
+            strict patch rule only.
 
     Returns:
         (tri, shell, patch) after the collapses (triangles that became degenerate removed).
     """
+    plane_eq = None
+    if crack_patch is not None:  # unit normal and offset of every input-plane patch (NaN: crack patches)
+        p_count = int(patch.max()) + 1
+        t = points[tri]
+        n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        normal = np.stack([np.bincount(patch, n[:, a], p_count) for a in range(3)], axis=1)
+        normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
+        offset = np.einsum("ij,ij->i", normal[patch], t.mean(axis=1))
+        offset = np.bincount(patch, offset, p_count) / np.maximum(np.bincount(patch, minlength=p_count), 1)
+        plane_eq = np.concatenate([normal, offset[:, None]], axis=1)
+        plane_eq[np.asarray(crack_patch, dtype=bool)] = np.nan
     for _ in range(_MAX_CLEAN_ROUNDS):
-        new, keep, collapsed = _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle)
+        new, keep, collapsed = _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle, plane_eq)
         t1, s1, p1 = new[keep], shell[keep], patch[keep]
         t1, flipped = _flip_round(points, t1, s1, p1, sliver_angle)
         if collapsed == 0 and flipped == 0:
@@ -1138,11 +1186,11 @@ class FragmentSurfaces:
         patch = np.where(across2 >= 0, plane_count + lo * k_count + hi, planes2)
         patch = np.unique(patch, return_inverse=True)[1].reshape(-1)
         if self.clean:
-            tri3, shell3, patch3 = clean_complex(points, tri2, shell2, patch, self.spacing)
+            is_crack_patch = np.zeros(int(patch.max()) + 1, dtype=bool)
+            is_crack_patch[patch[across2 >= 0]] = True
+            tri3, shell3, patch3 = clean_complex(points, tri2, shell2, patch, self.spacing, crack_patch=is_crack_patch)
             if shells_closed(tri3, shell3, len(points)).all():
                 # crack flag of each surviving triangle: look it up through its patch
-                is_crack_patch = np.zeros(int(patch.max()) + 1, dtype=bool)
-                is_crack_patch[patch[across2 >= 0]] = True
                 crack3 = is_crack_patch[patch3].astype(np.int32)
                 self.clean_failed = False
                 return points, tri3, shell3, crack3, True
