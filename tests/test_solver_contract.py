@@ -1,7 +1,8 @@
 """The solver contract, checked the same way for the three methods (peridynamics, FEM, particle lattice): momentum,
 the watchdog, independence of world position, the shared output attributes and the feature gate.
 
-Every scene is built through pdsim.Scene, as a user builds it, with the defaults on (automatic step; contact where the
+Tests run on the CPU always and on CUDA where present (the ``device`` fixture of tests/conftest.py). Every scene is
+built through pdsim.Scene, as a user builds it, with the defaults on (automatic step; contact where the
 method has it), and runs through the scene's own frame stepping (Scene.advance_frame), so the origin of the local
 frame and the time-step policy are those of a real run.
 """
@@ -75,9 +76,9 @@ def _lattice_block(offset, **_):
 BUILDERS = {"peridynamics": _pd_plate, "fem": _fem_bar, "lattice": _lattice_block}
 
 
-def _run(scene, steps):
-    """Builds the scene's solvers on the CPU and advances them ``steps`` steps of the scene's automatic step."""
-    solvers = scene.build_solvers(device="cpu")
+def _run(scene, steps, device="cpu"):
+    """Builds the scene's solvers on ``device`` and advances them ``steps`` steps of the scene's automatic step."""
+    solvers = scene.build_solvers(device=device)
     dt = scene.time_step_safety * min(s.stable_time_step() for s in solvers)
     if not np.isfinite(dt):
         dt = 1.0 / scene.fps
@@ -98,7 +99,7 @@ def _attributes(solvers):
 
 
 @pytest.mark.parametrize("method", METHODS)
-def test_translation_moves_nothing_but_the_output(method):
+def test_translation_moves_nothing_but_the_output(method, device):
     """The same scene at the origin and shifted by (1000, -500, 250) m gives the same displacements, damage and
     fragments; the world positions differ by the shift.
 
@@ -108,8 +109,8 @@ def test_translation_moves_nothing_but_the_output(method):
     the integer fields (fragment ids, lattice kinds, broken links) to be identical. Positions are compared with
     1e-6 m after removing the shift (float64 output of float32 displacements)."""
     build = BUILDERS[method]
-    a = _attributes(_run(build((0.0, 0.0, 0.0)), STEPS))
-    b = _attributes(_run(build(SHIFT), STEPS))
+    a = _attributes(_run(build((0.0, 0.0, 0.0)), STEPS, device))
+    b = _attributes(_run(build(SHIFT), STEPS, device))
     assert a.keys() == b.keys()
     u = a[next(k for k in a if k[1] == "displacement")]
     scale = float(np.abs(u).max())
@@ -129,7 +130,7 @@ def test_translation_moves_nothing_but_the_output(method):
 
 
 @pytest.mark.parametrize("method", ["peridynamics", "fem"])
-def test_linear_momentum_is_conserved_without_external_loads(method):
+def test_linear_momentum_is_conserved_without_external_loads(method, device):
     """With no gravity, no boundary condition and no collider, random initial velocities keep the total linear
     momentum to float32 round-off: |P(t) - P(0)| < 1e-5 of sum m |v| over 100 steps. (The lattice is massless and
     position-based: it has no momentum to conserve.)"""
@@ -139,7 +140,7 @@ def test_linear_momentum_is_conserved_without_external_loads(method):
     body.point_condition[:] = -1
     rng = np.random.default_rng(3)
     body.set_initial_velocity(rng.normal(0.0, 0.1, (body.point_count, 3)))
-    (solver,) = scene.build_solvers(device="cpu")
+    (solver,) = scene.build_solvers(device=device)
     p0 = solver.linear_momentum()
     scale = float(solver.masses() @ np.linalg.norm(solver.velocities(), axis=1))
     dt = 0.7 * solver.stable_time_step()
@@ -149,9 +150,9 @@ def test_linear_momentum_is_conserved_without_external_loads(method):
 
 
 @pytest.mark.parametrize("method", METHODS)
-def test_a_non_finite_state_is_caught(method):
+def test_a_non_finite_state_is_caught(method, device):
     """A NaN in the state makes check_state raise InstabilityError (the watchdog of every method)."""
-    (solver,) = BUILDERS[method]((0.0, 0.0, 0.0)).build_solvers(device="cpu")
+    (solver,) = BUILDERS[method]((0.0, 0.0, 0.0)).build_solvers(device=device)
     solver.check_state(1.0e6)
     if method == "lattice":  # set_displacements refuses non-finite input: write the device state directly
         u = solver.displacements(0).astype(np.float32)
@@ -166,12 +167,12 @@ def test_a_non_finite_state_is_caught(method):
 
 
 @pytest.mark.parametrize("method", METHODS)
-def test_views_use_the_shared_attribute_names(method):
+def test_views_use_the_shared_attribute_names(method, device):
     """Every view is a PointsView or MeshView; every attribute name is one of the shared names with the shared kind
     (vector3f: [n, 3]); each body has its PointsView under its own name; displacement is present for every
     method."""
     scene = BUILDERS[method]((0.0, 0.0, 0.0))
-    solvers = _run(scene, 5)
+    solvers = _run(scene, 5, device)
     views = [v for s in solvers for v in s.views()]
     names = {v.name for v in views if isinstance(v, PointsView)}
     assert names == {b.name for b in scene.bodies}
