@@ -1,6 +1,7 @@
-"""Lattice case a of shared/seeds/pbd_lattice.txt: tensile test with release (Table 1): 10x10 square, left column
-clamped, right column pulled at 0.35 units/step for 10 steps then released into followers, 401 steps; tracks the
-central particle j = 67 (Figures 5, 6, 8, 9).
+"""Lattice case a of shared/seeds/pbd_lattice.txt: tensile test with release (Table 1): 10x10 square, Figure 3's
+8-neighbour (Chebyshev) shell, left column clamped, right column pulled at 1.2 units/step (case a's text; Table 1
+says 0.35: ``case_a_scene(speed=0.35)``) for 10 steps then released into followers, 401 steps; tracks the central
+particle j = 67 (Figures 5, 6, 8, 9). The rows next to the frame lag the middle ones.
 
 Parameters: scenes/lattice_paper.py and docs/lattice.md. Writes the USD cache and the PNG figures (PE1 and PE2 contour
 plots at the paper's steps, trajectories of the tracked particles).

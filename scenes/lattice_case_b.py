@@ -1,6 +1,6 @@
 """Lattice case b of shared/seeds/pbd_lattice.txt: the Poisson effect: case a without release (leaders stop after 10
-steps), 100 steps, mixed-coordinate rule K = 0.01 /unit; the central particle j = 67, above the axis, moves down
-(Figures 10, 11).
+steps at 1.2 units/step), 100 steps, mixed-coordinate rule K = 0.01 /unit; the central particle j = 67, above the
+axis, moves down (Figures 10, 11).
 
 Parameters: scenes/lattice_paper.py and docs/lattice.md. Writes the USD cache and the PNG figures (PE1 and PE2 contour
 plots at the paper's steps, trajectories of the tracked particles).

@@ -1,6 +1,8 @@
-"""Lattice case d of shared/seeds/pbd_lattice.txt: simple fracture: square 15x13 specimen pulled at 0.35 units/step for
-10 steps, links lost beyond 2.0 / 2.5 units (shell 1 / 2), fictitious points at the rest offset; first and second
-gradient; tracks j = 103 (Figures 14, 15, 16).
+"""Lattice case d of shared/seeds/pbd_lattice.txt: simple fracture: square 15x13 specimen (Figure 3's Chebyshev shells)
+pulled at 1.2 units/step for 10 steps, links lost beyond 4.0 / 6.0 units (shell 1 / 2), fictitious points at the rest
+offset; first and second gradient; tracks j = 103, which rebounds after the crack with the second gradient only
+(Figures 14, 15, 16). Table 1's reading: ``case_d_scene(metric="coordination", speed=TABLE1_SPEED,
+distances=TABLE1_DISTANCES)``.
 
 Parameters: scenes/lattice_paper.py and docs/lattice.md. Writes the USD cache and the PNG figures (PE1 and PE2 contour
 plots at the paper's steps, trajectories of the tracked particles).

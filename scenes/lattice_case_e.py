@@ -1,5 +1,6 @@
 """Lattice case e of shared/seeds/pbd_lattice.txt: Saint-Venant's principle: four internal leaders of a 20x20 square
-diverge along the bisectors for 10 steps; remote particles stay at rest (Figure 17, step 9).
+diverge along the bisectors at 0.35 units/step (Table 1) for 10 steps; remote particles stay at rest (Figure 17,
+step 9).
 
 Parameters: scenes/lattice_paper.py and docs/lattice.md. Writes the USD cache and the PNG figures (PE1 and PE2 contour
 plots at the paper's steps, trajectories of the tracked particles).

@@ -1,6 +1,6 @@
 """Lattice case f of shared/seeds/pbd_lattice.txt: the lattice decides the fracture: hexagonal 15x17 specimen (first
-and second gradient) beside the square one, averaging frame rule, 400 steps; the hexagonal tracked particle j = 133
-rebounds (Figures 18-21).
+and second gradient) beside the square one, averaging frame rule, Table 1's 0.35 units/step and thresholds 2.0 / 2.5
+units, 400 steps; the hexagonal tracked particle j = 133 rebounds (Figures 18-21).
 
 Parameters: scenes/lattice_paper.py and docs/lattice.md. Writes the USD cache and the PNG figures (PE1 and PE2 contour
 plots at the paper's steps, trajectories of the tracked particles).

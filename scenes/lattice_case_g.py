@@ -1,5 +1,6 @@
 """Lattice case g of shared/seeds/pbd_lattice.txt: the frame rule: hexagonal fracture, second gradient, averaging frame
-rule against the single-follower rule; with averaging two frame points stay between the pieces (Figure 22).
+rule against the single-follower rule (0.35 units/step, thresholds 2.0 / 2.5 units, as case f); with averaging two
+frame points stay between the pieces (Figure 22).
 
 Parameters: scenes/lattice_paper.py and docs/lattice.md. Writes the USD cache and the PNG figures (PE1 and PE2 contour
 plots at the paper's steps, trajectories of the tracked particles).

@@ -1,7 +1,19 @@
 """The reference cases a-g of shared/seeds/pbd_lattice.txt (and a 3D tear) as ready-made lattice bodies and scenes;
 the scripts scenes/lattice_*.py run them. Lengths in lattice units (spacing 1, the paper's "units", read as metres),
-leader speeds in units per step, one step per frame. Parameters the paper does not give are documented in
-docs/lattice.md (section "Reference cases").
+leader speeds in units per step, one step per frame.
+
+Where the paper is ambiguous the builders take the reading that reproduces what it reports, and keep the others as
+keyword options (docs/lattice.md, "Readings of the paper"):
+
+- neighbourhood (``metric``): the square lattice's neighbours are the Chebyshev shells of the paper's Figure 3 (8 in
+  the first shell, 16 in the second); the other lattices use their coordination neighbours (hexagonal: 6 and 12).
+  ``metric="coordination"`` gives the square lattice's 4 + 8 instead (then the fields of cases a and d are exactly
+  uniform across the rows: no near-frame lag).
+- leader speed (``speed``): 1.2 units/step, the speed case a's text gives, for cases a-d (case d "uses the parameters
+  of the preceding"); Table 1's 0.35 for case e (which gives none) and for cases f and g (see ``distances``).
+- fracture thresholds (``distances``, per shell): case d 4.0 / 6.0 units, which at 1.2 units/step give the crack
+  timing of Figures 14 and 15; cases f and g 2.0 / 2.5 units at 0.35 units/step, the reading under which the
+  hexagonal rebound of Figure 19 appears.
 """
 
 from __future__ import annotations
@@ -15,11 +27,14 @@ from pdsim.lattice import (
     LatticeNeighbourhood,
     LatticeRule,
     LatticeRuleMixedCoordinate,
+    LatticeType,
 )
 
 __all__ = [
-    "FRACTURE_DISTANCES",
+    "CASE_A_SPEED",
+    "CASE_D_DISTANCES",
     "POISSON_K",
+    "TABLE1_DISTANCES",
     "TABLE1_SPEED",
     "case_a_scene",
     "case_b_scene",
@@ -30,15 +45,24 @@ __all__ = [
     "case_g_scene",
     "dogbone_shape",
     "fracture_specimen",
+    "paper_metric",
     "run_lattice_scene",
     "saint_venant_body",
     "tear_3d_scene",
     "tensile_specimen",
 ]
 
-TABLE1_SPEED = 0.35  # units/step (Table 1)
+CASE_A_SPEED = 1.2  # units/step: case a's text ("speed 1,2 unit/step time"); cases b, c, d take the same
+TABLE1_SPEED = 0.35  # units/step: Table 1 (cases e, f, g; an option for the others)
 POISSON_K = 0.01  # 1/unit, mixed-coordinate rule of cases b and c
-FRACTURE_DISTANCES = (2.0, 2.5)  # units, link-loss thresholds of shell 1 and shell 2 (cases d, f, g)
+CASE_D_DISTANCES = (4.0, 6.0)  # units, link-loss thresholds of shell 1 / shell 2 at CASE_A_SPEED (case d)
+TABLE1_DISTANCES = (2.0, 2.5)  # units, link-loss thresholds of shell 1 / shell 2 at TABLE1_SPEED (cases f, g)
+
+
+def paper_metric(lattice: Lattice) -> str:
+    """The neighbourhood metric of the paper's cases: "chebyshev" for the square lattice (Figure 3: the 8 points at
+    Chebyshev distance 1, then the 16 at distance 2), "coordination" for the others (hexagonal: 6, then 12)."""
+    return "chebyshev" if lattice.type == LatticeType.SQUARE else "coordination"
 
 
 def tensile_specimen(
@@ -46,10 +70,11 @@ def tensile_specimen(
     counts,
     *,
     gradient: int = 1,
+    metric: str | None = None,
     rule: LatticeRule | None = None,
     fracture: LatticeFracture | None = None,
     frame_rule: str = "average",
-    speed: float = TABLE1_SPEED,
+    speed: float = CASE_A_SPEED,
     stop_step: int | None = 10,
     release_step: int | None = None,
     axis: int = 0,
@@ -60,12 +85,12 @@ def tensile_specimen(
     """The paper's tensile specimen: a block of ``counts`` points whose first layer along ``axis`` is clamped and
     whose last layer moves along ``axis`` at ``speed`` [units/step] until ``stop_step`` and turns into followers at
     ``release_step``. A layer is every point within 0.6 spacing of the extreme coordinate (both row parities of a
-    hexagonal lattice)."""
+    hexagonal lattice). ``metric``: the neighbourhood metric (None: :func:`paper_metric`)."""
     body = LatticeBody.block(
         lattice,
         counts,
         origin=origin,
-        neighbourhood=LatticeNeighbourhood(gradient=gradient),
+        neighbourhood=LatticeNeighbourhood(metric=metric or paper_metric(lattice), gradient=gradient),
         rule=rule,
         fracture=fracture,
         frame_rule=frame_rule,
@@ -82,27 +107,45 @@ def tensile_specimen(
     return body
 
 
-def fracture_specimen(lattice: Lattice, *, gradient: int = 1, frame_rule: str = "average", name: str, origin=None):
-    """Cases d, f, g: a square 15x13 or hexagonal 15x17 specimen (the sizes implied by the paper's point numbers 103
-    and 133: two columns left of the leaders, at mid-height), centroid rule, links lost beyond FRACTURE_DISTANCES,
-    fictitious points at the rest offset, pulled at 0.35 units/step for 10 steps. Tracks that particle."""
-    ny = 17 if lattice.type.value == "hexagonal" else 13
+def fracture_specimen(
+    lattice: Lattice,
+    *,
+    gradient: int = 1,
+    frame_rule: str = "average",
+    metric: str | None = None,
+    speed: float = CASE_A_SPEED,
+    distances=CASE_D_DISTANCES,
+    name: str,
+    origin=None,
+) -> LatticeBody:
+    """Cases d, f, g: a square 15x13 or hexagonal 15x17 specimen, centroid rule, links lost beyond ``distances``
+    (per shell [units]), fictitious points at the rest offset, pulled at ``speed`` [units/step] for 10 steps (the
+    leaders then hold). Tracks the particle two columns left of the leaders at mid-height: the paper's point 103 in
+    the square specimen (the size is the one for which 103 is there, as the paper says), j = 133 in the hexagonal one
+    (the paper calls its 133 "the central point" without placing it; docs/lattice.md)."""
+    ny = 17 if lattice.type == LatticeType.HEXAGONAL else 13
     return tensile_specimen(
         lattice,
         (15, ny),
         gradient=gradient,
-        fracture=LatticeFracture(FRACTURE_DISTANCES),
+        metric=metric,
+        fracture=LatticeFracture(distances),
         frame_rule=frame_rule,
+        speed=speed,
         name=name,
         origin=origin,
         track=[15 * (ny // 2) + 12],
     )
 
 
-def saint_venant_body(*, count: int = 20, speed: float = TABLE1_SPEED, stop_step: int | None = 10) -> LatticeBody:
+def saint_venant_body(
+    *, count: int = 20, speed: float = TABLE1_SPEED, stop_step: int | None = 10, metric: str | None = None
+) -> LatticeBody:
     """Case e: a count x count square whose four central points are leaders diverging along the bisectors of the
-    corners at ``speed`` [units/step]."""
-    body = LatticeBody.block(Lattice.square(1.0), (count, count), name="saint_venant")
+    corners at ``speed`` [units/step]; ``metric`` None: :func:`paper_metric` (Figure 3's Chebyshev shell)."""
+    lattice = Lattice.square(1.0)
+    neighbourhood = LatticeNeighbourhood(metric=metric or paper_metric(lattice))
+    body = LatticeBody.block(lattice, (count, count), neighbourhood=neighbourhood, name="saint_venant")
     x = body.rest_positions[: body.body_count]
     centre = x.mean(axis=0)
     s = speed / np.sqrt(2.0)
@@ -123,61 +166,85 @@ def _scene(name: str, frames: int, bodies):
     return scene
 
 
-def case_a_scene():
-    """Table 1: 10x10 square, left column clamped, right column pulled 10 steps then released, 401 steps."""
-    body = tensile_specimen(Lattice.square(1.0), (10, 10), release_step=11, name="square_10x10", track=[66])
+def case_a_scene(*, metric: str | None = None, speed: float = CASE_A_SPEED):
+    """Table 1: 10x10 square, left column clamped, right column pulled at ``speed`` [units/step] for 10 steps then
+    released into followers, 401 steps; tracks the central point j = 67 (index 66)."""
+    body = tensile_specimen(
+        Lattice.square(1.0), (10, 10), metric=metric, speed=speed, release_step=11, name="square_10x10", track=[66]
+    )
     return _scene("lattice_case_a", 401, [body])
 
 
-def _poisson(gradient: int, name: str, origin=None):
+def _poisson(gradient: int, name: str, origin=None, metric=None, speed=CASE_A_SPEED):
     rule = LatticeRuleMixedCoordinate(k=POISSON_K)
     return tensile_specimen(
-        Lattice.square(1.0), (10, 10), gradient=gradient, rule=rule, name=name, origin=origin, track=[66]
+        Lattice.square(1.0),
+        (10, 10),
+        gradient=gradient,
+        metric=metric,
+        rule=rule,
+        speed=speed,
+        name=name,
+        origin=origin,
+        track=[66],
     )
 
 
-def case_b_scene():
+def case_b_scene(*, metric: str | None = None, speed: float = CASE_A_SPEED):
     """Case a without release (leaders stop after 10 steps), 100 steps, mixed-coordinate rule K = 0.01 /unit."""
-    return _scene("lattice_case_b", 100, [_poisson(1, "poisson_first_gradient")])
+    return _scene("lattice_case_b", 100, [_poisson(1, "poisson_first_gradient", metric=metric, speed=speed)])
 
 
-def case_c_scene():
+def case_c_scene(*, metric: str | None = None, speed: float = CASE_A_SPEED):
     """Case b with second gradient, beside case b's first-gradient specimen (14 units above) for comparison."""
-    bodies = [_poisson(2, "poisson_second_gradient"), _poisson(1, "poisson_first_gradient", origin=(0.0, 14.0, 0.0))]
+    bodies = [
+        _poisson(2, "poisson_second_gradient", metric=metric, speed=speed),
+        _poisson(1, "poisson_first_gradient", origin=(0.0, 14.0, 0.0), metric=metric, speed=speed),
+    ]
     return _scene("lattice_case_c", 100, bodies)
 
 
-def case_d_scene():
-    """Fracture of the square specimen, first gradient (bottom) and second gradient (20 units above), 100 steps."""
+def case_d_scene(*, metric: str | None = None, speed: float = CASE_A_SPEED, distances=CASE_D_DISTANCES):
+    """Fracture of the square 15x13 specimen, first gradient (bottom) and second gradient (20 units above), pulled
+    at ``speed`` [units/step] for 10 steps, links lost beyond ``distances`` (shell 1, shell 2 [units]), 100 steps.
+    Table 1's reading: ``metric="coordination", speed=TABLE1_SPEED, distances=TABLE1_DISTANCES``."""
     sq = Lattice.square(1.0)
+    kw = {"metric": metric, "speed": speed, "distances": distances}
     bodies = [
-        fracture_specimen(sq, gradient=1, name="fracture_first_gradient"),
-        fracture_specimen(sq, gradient=2, name="fracture_second_gradient", origin=(0.0, 20.0, 0.0)),
+        fracture_specimen(sq, gradient=1, name="fracture_first_gradient", **kw),
+        fracture_specimen(sq, gradient=2, name="fracture_second_gradient", origin=(0.0, 20.0, 0.0), **kw),
     ]
     return _scene("lattice_case_d", 100, bodies)
 
 
-def case_e_scene():
+def case_e_scene(*, metric: str | None = None, speed: float = TABLE1_SPEED):
     """Saint-Venant: four internal leaders of a 20x20 square diverge for 10 steps; 40 steps."""
-    return _scene("lattice_case_e", 40, [saint_venant_body()])
+    return _scene("lattice_case_e", 40, [saint_venant_body(speed=speed, metric=metric)])
 
 
-def case_f_scene():
-    """Fracture of the hexagonal 15x17 specimen (first gradient, averaging frame) beside the square one, 400 steps."""
+def case_f_scene(*, metric: str | None = None, speed: float = TABLE1_SPEED, distances=TABLE1_DISTANCES):
+    """Fracture of the hexagonal 15x17 specimen (first gradient, averaging frame) beside the square one and the
+    hexagonal second-gradient one, all pulled at ``speed`` with thresholds ``distances``, 400 steps."""
+    kw = {"metric": metric, "speed": speed, "distances": distances}
     bodies = [
-        fracture_specimen(Lattice.hexagonal(1.0), name="hexagonal_first_gradient"),
-        fracture_specimen(Lattice.square(1.0), name="square_first_gradient", origin=(0.0, 20.0, 0.0)),
-        fracture_specimen(Lattice.hexagonal(1.0), gradient=2, name="hexagonal_second_gradient", origin=(25.0, 0.0, 0)),
+        fracture_specimen(Lattice.hexagonal(1.0), name="hexagonal_first_gradient", **kw),
+        fracture_specimen(Lattice.square(1.0), name="square_first_gradient", origin=(0.0, 20.0, 0.0), **kw),
+        fracture_specimen(
+            Lattice.hexagonal(1.0), gradient=2, name="hexagonal_second_gradient", origin=(25.0, 0.0, 0), **kw
+        ),
     ]
     return _scene("lattice_case_f", 400, bodies)
 
 
-def case_g_scene():
+def case_g_scene(*, metric: str | None = None, speed: float = TABLE1_SPEED, distances=TABLE1_DISTANCES):
     """Hexagonal fracture, second gradient, frame rule "average" (bottom) against "single" (20 units above)."""
     hexagonal = Lattice.hexagonal(1.0)
+    kw = {"metric": metric, "speed": speed, "distances": distances}
     bodies = [
-        fracture_specimen(hexagonal, gradient=2, frame_rule="average", name="frame_average"),
-        fracture_specimen(hexagonal, gradient=2, frame_rule="single", name="frame_single", origin=(0.0, 20.0, 0.0)),
+        fracture_specimen(hexagonal, gradient=2, frame_rule="average", name="frame_average", **kw),
+        fracture_specimen(
+            hexagonal, gradient=2, frame_rule="single", name="frame_single", origin=(0.0, 20.0, 0.0), **kw
+        ),
     ]
     return _scene("lattice_case_g", 100, bodies)
 

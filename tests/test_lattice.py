@@ -1,6 +1,11 @@
 """The position-based particle lattice reproduces the behaviour reported in shared/seeds/pbd_lattice.txt (cases a-g,
 propagation, pseudo-energy), CPU backend. Lengths are in lattice units (spacing 1, the paper's "units"); leader speeds
-in units per step. Every parameter not given by the paper is the one documented in docs/lattice.md."""
+in units per step.
+
+These tests build their specimens here, under Table 1's reading: the lattice's coordination neighbours (square: 4 +
+8), 0.35 units/step and, for fracture, thresholds 2.0 / 2.5 units (docs/lattice.md, "Readings of the paper"). The
+shipped case scenes (scenes/lattice_paper.py) take the readings that show more of the paper (Figure 3's Chebyshev
+shells on the square lattice, case a's 1.2 units/step for cases a-d); tests/test_lattice_paper.py checks them."""
 
 from __future__ import annotations
 
@@ -18,7 +23,7 @@ from pdsim.lattice import (
 )
 
 V_TABLE1 = 0.35  # Table 1: leader speed [units/step] for 10 steps
-FRACTURE = (2.0, 2.5)  # per-shell link-loss thresholds [units] (docs/lattice.md: chosen so fracture starts at step 4-6)
+FRACTURE = (2.0, 2.5)  # per-shell link-loss thresholds [units] at 0.35 units/step (fracture starts at step 4-6)
 
 
 def _tensile(
@@ -250,8 +255,9 @@ def test_case_e_saint_venant_local_action():
 
 # ---------------------------------------------------------------------------------------------------- cases f, g
 def _fracture_specimen(lattice, gradient, frame_rule, steps):
-    """Cases f and g: square 15x13 or hexagonal 15x17 specimen (the sizes implied by the paper's point numbers 103
-    and 133), fracture as in case d; tracks the particle two columns left of the leaders at mid-height."""
+    """Cases f and g: square 15x13 specimen (the size for which the paper's point 103 lies where its text puts it:
+    mid-height, two columns left of the leaders) or hexagonal 15x17, fracture as in case d; tracks the particle two
+    columns left of the leaders at mid-height (j = 103 in the square, j = 133 in the hexagonal specimen)."""
     ny = 13 if lattice.type.value == "square" else 17
     body = _tensile(lattice, (15, ny), gradient=gradient, fracture=LatticeFracture(FRACTURE), frame_rule=frame_rule)
     tracked = 15 * (ny // 2) + 12

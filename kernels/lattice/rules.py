@@ -21,8 +21,9 @@ One lattice step (kernels launched in this order, per body):
    apart, so the +-paired offsets cancel exactly and a displacement far below the spacing is never rounded away.
 3. ``lattice_copy_frame`` (over the frame points, which are numbered last): every frame point takes the mean
    displacement of its assigned source particles (one source for the "single" frame rule).
-4. ``lattice_break_links`` (bodies with fracture only): a link whose current length exceeds its shell's threshold is
-   lost for good.
+4. ``lattice_break_links`` (bodies with fracture only): a body link (one end at least a leader or follower) whose
+   current length exceeds its shell's threshold is lost for good; links between two frame points are never used and
+   never break, so every link-loss count holds body links only.
 
 Kinds: 0 follower, 1 leader, 2 frame. Fictitious points are not particles: they exist per broken link, in the rule.
 """
@@ -249,6 +250,7 @@ def lattice_copy_frame(
 # ---------------------------------------------------------------------------------------------------- fracture
 @wp.kernel
 def lattice_break_links(
+    body_count: int,
     row_offsets: wp.array(dtype=wp.int32),
     link_neighbor: wp.array(dtype=wp.int32),
     link_offset: wp.array(dtype=wp.uint8),
@@ -258,15 +260,18 @@ def lattice_break_links(
     link_alive: wp.array(dtype=wp.uint8),
     broken_total: wp.array(dtype=wp.int32),
 ):
-    """A link whose current length |u_k - u_j + dX| [m] exceeds its shell's threshold is lost (irreversibly). Both
-    directions of a link compute the same length bit for bit, so links break in pairs. broken_total[0] counts."""
+    """A body link (at least one end among the first ``body_count`` particles: the frame points are numbered last)
+    whose current length |u_k - u_j + dX| [m] exceeds its shell's threshold is lost (irreversibly). Links between two
+    frame points never break: no rule reads them (frame points copy). Both directions of a link compute the same
+    length bit for bit, so links break in pairs. broken_total[0] counts lost directed links."""
     j = wp.tid()
     uj = u[j]
     n = int(0)
     for q in range(row_offsets[j], row_offsets[j + 1]):
-        if link_alive[q] != wp.uint8(0):
+        k = link_neighbor[q]
+        if link_alive[q] != wp.uint8(0) and (j < body_count or k < body_count):
             o = int(link_offset[q])
-            d = wp.length(u[link_neighbor[q]] - uj + offset_delta[o])
+            d = wp.length(u[k] - uj + offset_delta[o])
             if d > offset_threshold[o]:
                 link_alive[q] = wp.uint8(0)
                 n += 1
@@ -290,7 +295,8 @@ def lattice_pseudo_energy(
     broken: wp.array(dtype=wp.int32),
 ):
     """PE1(t, j) = sum over j's Lagrangian neighbours of (dis(t, k, j) - dis(t0, k, j))^2 [m^2] (the paper's
-    definition: real points, broken links included); pe1_intact sums intact links only; broken counts lost links."""
+    definition: real points, broken links included); pe1_intact sums intact links only; broken counts lost links
+    (body links only: links between two frame points never break)."""
     j = wp.tid()
     uj = u[j]
     e_all = float(0.0)

@@ -203,6 +203,7 @@ class _LatticeRuntime:
                 kl.lattice_break_links,
                 dim=self.n,
                 inputs=[
+                    self.body.body_count,
                     self.row_offsets,
                     self.link_neighbor,
                     self.link_offset,
@@ -459,6 +460,53 @@ class SolverLattice(Solver):
                     "relaxation"
                 )
 
+    def checkpoint(self) -> dict:
+        """The state to continue this run exactly (pdsim.solver.Solver.checkpoint), per body: the current, next and
+        previous configurations, categories and leader groups, live links and the broken-link count, the step count
+        and the tracked particles' history; and the solver's time."""
+        from ..solver import array_state
+
+        bodies = {}
+        for i, r in enumerate(self._runtimes):
+            r._flush_tracks()
+            bodies[str(i)] = {
+                "name": r.body.name,
+                "step_count": int(r.step_count),
+                "u_cur": array_state(r.u_cur),
+                "u_next": array_state(r.u_next),
+                "u_prev": array_state(r.u_prev),
+                "kind": array_state(r.kind),
+                "group": array_state(r.group),
+                "kind_host": np.array(r.kind_host, copy=True),
+                "link_alive": array_state(r.link_alive),
+                "broken_total": array_state(r.broken_total),
+                "track_u": np.concatenate(r.track_host_u) if r.track_host_u else None,
+                "track_pe1": np.concatenate(r.track_host_pe1) if r.track_host_pe1 else None,
+            }
+        return {"time": float(self.time), "bodies": bodies}
+
+    def restore(self, state: dict) -> None:
+        """Puts a :meth:`checkpoint` of a solver built from the same bodies back."""
+        from ..solver import assign_state
+
+        bodies = state["bodies"]
+        if len(bodies) != len(self._runtimes):
+            raise ParameterError("checkpoint", f"{len(bodies)} lattice bodies", f"{len(self._runtimes)} (the same scene)")
+        for i, r in enumerate(self._runtimes):
+            b = bodies[str(i)]
+            if b["name"] != r.body.name:
+                raise ParameterError("checkpoint", f"lattice body {b['name']!r}", f"body {r.body.name!r}")
+            for name in ("u_cur", "u_next", "u_prev", "kind", "group", "link_alive", "broken_total"):
+                assign_state(getattr(r, name), b[name], name)
+            r.kind_host = np.asarray(b["kind_host"]).copy()
+            r._update_leader_ids()
+            r.step_count = int(b["step_count"])
+            r._fragments = None
+            r.track_slot = 0
+            r.track_host_u = [] if b["track_u"] is None else [np.asarray(b["track_u"], dtype=np.float64)]
+            r.track_host_pe1 = [] if b["track_pe1"] is None else [np.asarray(b["track_pe1"], dtype=np.float64)]
+        self.time = float(state["time"])
+
     # -- scene integration -----------------------------------------------------------------------------------------
     @property
     def point_count(self) -> int:
@@ -484,8 +532,9 @@ class SolverLattice(Solver):
         velocities = zeros (float64 [n, 3]: a lattice has steps, not time, so its particles have no velocity),
         widths = the body's point_width [m] ([n]), and the shared attributes ``displacement`` (u [m], float64 [n, 3]),
         ``kind`` (LatticeKind values: 0 follower, 1 leader, 2 frame), ``pe1`` and ``pe1_intact`` [m^2], ``pe2`` [m],
-        ``broken_links`` and, for bodies with fracture, ``fragment`` (connected pieces over intact links, 0, 1, ...
-        by smallest particle index; -1 for frame points)."""
+        ``broken_links`` (lost body links per particle; links between two frame points never break) and, for bodies
+        with fracture, ``fragment`` (connected pieces over intact links, 0, 1, ... by smallest particle index; -1 for
+        frame points)."""
         out = []
         for r in self._runtimes:
             u = r.displacements()
@@ -561,7 +610,9 @@ class SolverLattice(Solver):
         return np.linalg.norm(r.displacements() - r.u_prev.numpy().astype(np.float64), axis=1)
 
     def broken_links(self, body=0) -> np.ndarray:
-        """Links lost per particle, shape [particle_count] (directed: a lost pair counts at both ends)."""
+        """Links lost per particle, shape [particle_count] (directed: a lost pair counts at both ends). Body links
+        only: a link with at least one leader or follower end (a frame point counts its lost links to body points);
+        links between two frame points are never used and never break."""
         return self._rt(body).pseudo_energy()[2]
 
     def link_alive(self, body=0) -> np.ndarray:
@@ -578,13 +629,15 @@ class SolverLattice(Solver):
 
     def fictitious_points(self, body=0) -> tuple[np.ndarray, np.ndarray]:
         """The fictitious points of the current step: (owner particle index [m], position [m, 3] [m]), one for each
-        link its owner has lost: x_j + s (X_k - X_j). Empty without fracture or fictitious points."""
+        link a body point (leader or follower) has lost: x_j + s (X_k - X_j). Frame points own none (they copy, they
+        apply no rule). Empty without fracture or fictitious points."""
         r = self._rt(body)
         b = r.body
         if not r.fracture or b.fracture.fictitious_distance is None:
             return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
-        dead = ~self.link_alive(body)
-        owner = np.repeat(np.arange(b.particle_count), np.diff(b.row_offsets))[dead]
+        owner = np.repeat(np.arange(b.particle_count), np.diff(b.row_offsets))
+        dead = ~self.link_alive(body) & (owner < b.body_count)
+        owner = owner[dead]
         x = self.positions(body)
         return owner, x[owner] + b.fracture.fictitious_distance * b.offset_delta[b.link_offset[dead]]
 
