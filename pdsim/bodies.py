@@ -10,6 +10,7 @@ constraining it twice raises ParameterError naming both (combine the axes in one
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -18,6 +19,9 @@ import numpy as np
 from .errors import ParameterError
 from .loads import PointLoads, TimeCurve, as_curve
 from .validate import check_axes, check_range, check_vec3
+
+
+SURFACE_REGION = "a region that contains part of the body's surface"  # what pdsim.loads allows a surface load
 
 
 class PointKind(IntEnum):
@@ -107,23 +111,52 @@ class PointBody(PointLoads):
         t0 = check_range("start", start, 0.0, None, lo_open=False)
         t1 = math.inf if release is None else check_range("release", release, t0, None)
         mask = self._select(region)
-        taken = self.point_condition[mask]
-        if np.any(taken >= 0):
-            other = self.conditions[int(taken[taken >= 0][0])].name
-            raise ParameterError(
-                "region",
-                region,
-                f"points of '{self.name}' not already constrained ({int((taken >= 0).sum())} of them are held by "
-                f"condition '{other}'; give one condition the axes of both)",
-            )
         label = name or f"{'fix' if kind == PointKind.FIXED else 'velocity'}_{len(self.conditions)}"
         if any(c.name == label for c in self.conditions):
             raise ParameterError("name", label, f"a condition name not already used on '{self.name}'")
+        taken = self.point_condition[mask]
+        if np.any(taken >= 0):
+            held, counts = np.unique(taken[taken >= 0], return_counts=True)
+            others = ", ".join(f"{int(c)} by '{self.conditions[int(i)].name}'" for i, c in zip(held, counts))
+            raise ParameterError(
+                "region",
+                region,
+                f"points of '{self.name}' not already constrained: {int(counts.sum())} of the {int(mask.sum())} "
+                f"points of the new condition '{label}' are already held ({others}); a point takes one condition: "
+                "give one condition the axes of both, or shrink one region",
+            )
         self.point_condition[mask] = len(self.conditions)
         self.conditions.append(
             BoundaryCondition(label, PointKind(kind), mask_axes, velocity, as_curve(curve), t0, t1, int(mask.sum()))
         )
         return int(mask.sum())
+
+    # -- loads on the surface: a region that misses the surface names the body -------------------------------------
+    def add_traction(self, region, traction, *, curve=None):
+        """A traction [Pa] on the part of the body's surface inside ``region`` (see pdsim.loads.PointLoads)."""
+        with self._surface_region_named():
+            return super().add_traction(region, traction, curve=curve)
+
+    def add_pressure(self, region, pressure: float, *, curve=None):
+        """A pressure [Pa] on the part of the body's surface inside ``region`` (see pdsim.loads.PointLoads)."""
+        with self._surface_region_named():
+            return super().add_pressure(region, pressure, curve=curve)
+
+    @contextmanager
+    def _surface_region_named(self):
+        """Re-raises the loads' 'a region that contains part of the body's surface' with the body's name and rest
+        bounds, so that a region placed in the wrong units or frame shows where the body is."""
+        try:
+            yield
+        except ParameterError as exc:
+            if exc.allowed != SURFACE_REGION:
+                raise
+            x = np.asarray(self.point_rest_positions, dtype=np.float64)
+            lo, hi = x.min(axis=0), x.max(axis=0)
+            box = f"[{', '.join(f'{c:.3g}' for c in lo)}] to [{', '.join(f'{c:.3g}' for c in hi)}] m"
+            raise ParameterError(
+                exc.field, exc.value, f"a region that contains part of the surface of '{self.name}' (which spans {box})"
+            ) from None
 
     @property
     def constrained(self) -> np.ndarray:

@@ -49,12 +49,16 @@ def _shape_from_trimesh(mesh, name: str, source: str) -> SolidShape:
     """Validates a trimesh.Trimesh as a solid: non-empty, watertight, consistently wound, positive volume."""
     if mesh is None or len(mesh.faces) == 0 or len(mesh.vertices) == 0:
         raise GeometryError(f"{source}: the mesh is empty (no triangles)")
+    size = float(np.max(np.ptp(np.asarray(mesh.vertices, dtype=np.float64), axis=0)))
     mesh = mesh.copy()
     mesh.merge_vertices()
     mesh.update_faces(mesh.nondegenerate_faces())
     mesh.remove_unreferenced_vertices()
     if len(mesh.faces) == 0:
-        raise GeometryError(f"{source}: the mesh is empty (all triangles are degenerate)")
+        hint = ""
+        if np.isfinite(size) and size < 1.0e-5:  # vertices closer than trimesh's merge tolerance (1e-8) merge
+            hint = f"; the mesh is {size:.3g} m across: is it in the wrong units? (load_mesh(..., scale=...))"
+        raise GeometryError(f"{source}: the mesh is empty (all triangles are degenerate){hint}")
     if not mesh.is_watertight:
         raise GeometryError(
             f"{source}: the mesh is not watertight (it has open or non-manifold edges), so it bounds no solid; "
@@ -93,7 +97,7 @@ def load_mesh(path: str | os.PathLike, *, scale: float = 1.0, translate=(0.0, 0.
     scale = check_range("scale", scale, 0.0, None)
     translate = _vec3("translate", translate)
     try:
-        mesh = trimesh.load(path, force="mesh", process=True)
+        mesh = _load_trimesh(path, suffix)
     except Exception as exc:  # noqa: BLE001 (trimesh raises many exception types for unreadable files)
         raise GeometryError(f"{path}: cannot read mesh ({exc})") from None
     if not isinstance(mesh, trimesh.Trimesh):
@@ -102,6 +106,30 @@ def load_mesh(path: str | os.PathLike, *, scale: float = 1.0, translate=(0.0, 0.
         mesh.apply_scale(scale)
         mesh.apply_translation(translate)
     return _shape_from_trimesh(mesh, name or os.path.splitext(os.path.basename(path))[0], path)
+
+
+TEXT_MESH_SUFFIXES = (".obj", ".off")  # always text: read here, so that their encoding never matters to trimesh
+
+
+def _load_trimesh(path: str, suffix: str):
+    """trimesh.load of a mesh file. Text formats (OBJ, OFF) are decoded here: UTF-8, else Latin-1 (every byte
+    sequence is valid Latin-1, and the geometry is ASCII), so a comment with one non-UTF-8 byte (a Latin-1 degree
+    sign or accent from an older exporter) does not send trimesh to its optional charset detector
+    (charset_normalizer, which may not be installed). Other formats go to trimesh as files."""
+    import io
+
+    import trimesh
+
+    if suffix not in TEXT_MESH_SUFFIXES:
+        return trimesh.load(path, force="mesh", process=True)
+    with open(path, "rb") as f:
+        data = f.read()
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError:
+        data = data.decode("latin-1").encode("utf-8")
+    resolver = trimesh.resolvers.FilePathResolver(path)  # material libraries beside an OBJ still load
+    return trimesh.load(io.BytesIO(data), file_type=suffix[1:], force="mesh", process=True, resolver=resolver)
 
 
 def shape_from_arrays(vertices, faces, *, name: str = "mesh") -> SolidShape:

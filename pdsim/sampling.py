@@ -6,23 +6,61 @@ import numpy as np
 
 from .errors import GeometryError, ParameterError
 from .geometry import SolidShape
-from .validate import check_range
+from .validate import check_range, format_bytes, unit_hint
 
 MAX_LATTICE_POINTS = 200_000_000
+
+
+SAMPLING_BYTES_PER_CANDIDATE = 100  # peak host memory of fill_solid per lattice point of the bounding box (60-65 B
+# measured with tools/preflight_calibration.py, plus the body's Morton sort)
+
+
+def lattice_counts(shape: SolidShape, spacing: float) -> np.ndarray:
+    """Points per axis of the simple-cubic lattice of ``spacing`` [m] over the shape's bounding box, as float64 [3]
+    (floats, so that a spacing far too small for the shape gives a large number, not an integer overflow)."""
+    extent = np.asarray(shape.extent, dtype=np.float64)
+    # Tolerance of 1e-3 cells: a box of edge n h stored in float32 (STL, PLY, GLB) measures n h (1 +- 1e-7) and must
+    # still get n points, not n + 1 with the outer layer on its faces (where the inside test is ambiguous).
+    with np.errstate(over="ignore"):
+        return np.maximum(np.ceil(extent / float(spacing) - 1.0e-3), 1.0)
+
+
+def check_lattice_size(shape: SolidShape, spacing: float, *, free_bytes: float | None = None) -> int:
+    """The number of candidate lattice points of ``fill_solid(shape, spacing)``, or ParameterError (naming the
+    spacing, the count, the memory it needs and a unit hint) when it exceeds MAX_LATTICE_POINTS or the free host
+    memory (``free_bytes``; measured when None)."""
+    counts = lattice_counts(shape, spacing)
+    total = float(np.prod(counts))
+    size = float(np.max(shape.extent))
+    if total > MAX_LATTICE_POINTS:
+        raise ParameterError(
+            "spacing",
+            spacing,
+            f"a value giving at most {MAX_LATTICE_POINTS:.0e} lattice points for '{shape.name}' (this gives "
+            f"{' x '.join(f'{c:.3g}' for c in counts)} = {total:.3g})" + unit_hint(size, spacing, count=total),
+        )
+    need = total * SAMPLING_BYTES_PER_CANDIDATE
+    if free_bytes is None:
+        from .preflight import free_host_memory
+
+        free_bytes = free_host_memory()
+    if free_bytes is not None and need > free_bytes:
+        raise ParameterError(
+            "spacing",
+            spacing,
+            f"a value whose particle sampling of '{shape.name}' fits in the {format_bytes(free_bytes)} of free host "
+            f"memory (this needs about {format_bytes(need)} for {total:.3g} lattice points; spacing >= "
+            f"{spacing * (need / free_bytes) ** (1.0 / 3.0):.3g} m fits)" + unit_hint(size, spacing, count=total),
+        )
+    return int(total)
 
 
 def simple_cubic_lattice(shape: SolidShape, spacing: float) -> np.ndarray:
     """Candidate simple-cubic lattice points [m], shape [n, 3], covering the shape's bounding box and centred on it
     (a box of edge n h gets exactly n points along that edge, h/2 from its faces)."""
     lo, hi = shape.bounds
-    extent = hi - lo
-    # Tolerance of 1e-3 cells: a box of edge n h stored in float32 (STL, PLY, GLB) measures n h (1 +- 1e-7) and must
-    # still get n points, not n + 1 with the outer layer on its faces (where the inside test is ambiguous).
-    counts = np.maximum(np.ceil(extent / spacing - 1.0e-3).astype(np.int64), 1)
-    if int(np.prod(counts)) > MAX_LATTICE_POINTS:
-        raise ParameterError(
-            "spacing", spacing, f"a value giving at most {MAX_LATTICE_POINTS:.0e} lattice points (this gives {counts})"
-        )
+    check_lattice_size(shape, spacing)
+    counts = lattice_counts(shape, spacing).astype(np.int64)
     start = 0.5 * (lo + hi) - 0.5 * (counts - 1) * spacing
     axes = [start[a] + spacing * np.arange(counts[a]) for a in range(3)]
     g = np.meshgrid(*axes, indexing="ij")
@@ -61,7 +99,11 @@ def fill_solid(shape: SolidShape, spacing: float, *, device: str = "cpu") -> tup
     h = check_range("spacing", spacing, 0.0, None)
     smallest = float(np.min(shape.extent))
     if h > smallest:
-        raise ParameterError("spacing", spacing, f"(0, {smallest:g}] for '{shape.name}' (its smallest extent)")
+        raise ParameterError(
+            "spacing",
+            spacing,
+            f"(0, {smallest:g}] for '{shape.name}' (its smallest extent)" + unit_hint(float(np.max(shape.extent)), h),
+        )
     candidates = simple_cubic_lattice(shape, h)
     positions = candidates[points_inside(shape, candidates, device=device)]
     if len(positions) == 0:

@@ -415,3 +415,131 @@ def test_inside_test_matches_trimesh_on_a_capsule():
     pts = rng.uniform(-9.0, 9.0, (4000, 3))
     far = np.abs(trimesh.proximity.signed_distance(cap, pts)) > 0.016
     assert np.array_equal(points_inside(shape, pts[far]), cap.contains(pts[far]))
+
+
+# ------------------------------------------------------------------------------------------ encodings, meshing crash
+
+
+def test_obj_with_latin1_comment_loads_without_charset_normalizer(tmp_path, monkeypatch):
+    """A valid OBJ whose comment holds Latin-1 bytes (a degree sign, an accent) loads with its exact volume even when
+    trimesh's optional charset detector (charset_normalizer) is not installed (it was refused with "No module named
+    'charset_normalizer'")."""
+    import trimesh
+
+    monkeypatch.setitem(sys.modules, "charset_normalizer", None)  # as on an installation without it
+    text = trimesh.exchange.obj.export_obj(_closed_box())
+    path = tmp_path / "bracket.obj"
+    path.write_bytes(b"# exported by Caf\xe9 CAD at 20\xb0C\n" + text.encode("ascii"))
+    with pytest.raises(UnicodeDecodeError):
+        path.read_bytes().decode("utf-8")
+    shape = pdsim.load_mesh(path)
+    assert shape.name == "bracket"
+    assert shape.volume == pytest.approx(0.006, rel=1e-12)
+
+
+def _need_pytetwild():
+    import importlib.util
+
+    if importlib.util.find_spec("pytetwild") is None:
+        pytest.skip("pytetwild is not installed")
+
+
+def test_mesher_crash_is_a_geometry_error_and_mesh_cache_still_works(tmp_path, monkeypatch):
+    """fTetWild runs in a child process: a native crash there (forced with os.abort()) is a GeometryError naming the
+    mesh, how the mesher ended and what to change, and writes no cache entry; the same call without the crash then
+    meshes, fills the cache, and a second call returns the cached mesh exactly."""
+    _need_pytetwild()
+    from pdsim.fem import mesh as fem_mesh
+
+    shape = pdsim.box((0.3, 0.2, 0.1), name="bracket")
+    monkeypatch.setattr(fem_mesh, "_CHILD_TEST_HOOK", "import os; os.abort()")
+    with pytest.raises(pdsim.GeometryError) as ei:
+        fem_mesh.tetrahedralize(shape, edge_length=0.05, cache_dir=tmp_path)
+    _assert_error(ei, pdsim.GeometryError, "bracket", "fTetWild crashed (SIGABRT)", "thicken the part", "edge_length")
+    assert not list(tmp_path.glob("*.vtu"))
+    monkeypatch.setattr(fem_mesh, "_CHILD_TEST_HOOK", "")
+    a = fem_mesh.tetrahedralize(shape, edge_length=0.05, cache_dir=tmp_path)
+    b = fem_mesh.tetrahedralize(shape, edge_length=0.05, cache_dir=tmp_path)
+    assert len(list(tmp_path.glob("*.vtu"))) == 1
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    np.testing.assert_array_equal(a.tets, b.tets)
+    assert a.volume == pytest.approx(0.006, rel=1e-6)
+
+
+def test_thin_parts_fail_cleanly_one_after_the_other():
+    """Two thin closed boxes meshed in one process: 1 x 1 x 1e-5 m at the default edge length, then 1 x 1 x 1e-4 m at
+    edge_length 0.05 m. In-process, fTetWild made no elements for the first and then segfaulted the interpreter (exit
+    139) on the second; each now meshes in its own child process and both raise GeometryError naming the part."""
+    _need_pytetwild()
+    for size, edge in (((1.0, 1.0, 1.0e-5), None), ((1.0, 1.0, 1.0e-4), 0.05)):
+        with pytest.raises(pdsim.GeometryError) as ei:
+            pdsim.tetrahedralize(pdsim.box(size, name="foil"), edge_length=edge)
+        _assert_error(ei, pdsim.GeometryError, "foil", "thicken the part")
+
+
+# -------------------------------------------------------------------------------------------------------- pre-flight
+
+
+def test_usd_identifier_matches_pxr():
+    """pdsim.preflight.usd_identifier (no pxr import) gives Tf.MakeValidIdentifier's prim name for plain, spaced,
+    punctuated, leading-digit, empty and non-ASCII names."""
+    from pxr import Tf
+
+    from pdsim.preflight import usd_identifier
+
+    for name in ["beam", "body 1", "body_1", "1st", "a-b.c", "", "_x", "Zo\u00eb", "\u65e5\u672c", "ground"]:
+        assert usd_identifier(name) == Tf.MakeValidIdentifier(name), name
+
+
+def test_touching_bodies_pass_preflight(device):
+    """Bodies that touch but do not interpenetrate pass: two peridynamic blocks face to face, an FEM block on top of
+    one, a second FEM block resting on the ground with its bottom vertices exactly at the ground's height, and a
+    sphere projectile touching the top face."""
+    from pdsim.preflight import preflight
+
+    scene = pdsim.Scene(fps=100.0, frames=2)
+    mat = _material()
+    scene.add_peridynamic_body(pdsim.box((0.2, 0.2, 0.2), center=(0.0, 0.0, 0.1)), mat, spacing=0.02, name="a")
+    scene.add_peridynamic_body(pdsim.box((0.2, 0.2, 0.2), center=(0.2, 0.0, 0.1)), mat, spacing=0.02, name="b")
+    scene.add_fem_body(pdsim.box_tet_mesh((0.2, 0.2, 0.2), (2, 2, 2), center=(0.0, 0.0, 0.3)), mat, name="c")
+    scene.add_fem_body(pdsim.box_tet_mesh((0.2, 0.2, 0.2), (2, 2, 2), center=(0.5, 0.0, 0.1)), mat, name="d")
+    scene.add_ground_plane(height=0.0)
+    scene.add_collider(pdsim.SphereProjectile(0.05, center=(0.2, 0.0, 0.25), velocity=(0.0, 0.0, -1.0)))
+    report = preflight(scene, device=device)
+    assert report.points == 2 * 1000 + 2 * 27
+    assert report.elements == 2 * 48
+
+
+def test_preflight_estimates_bound_the_built_solver(device):
+    """The pre-flight's counts match the built solver: particles exactly, bonds from above (interior count
+    4/3 pi (m + 1/2)^3 - 1 per particle) within a factor 1.5 on a cube of 20^3 particles; its automatic step estimate
+    is within 35 % of the solver's stable step and the substeps per frame follow from it."""
+    from pdsim.preflight import preflight
+
+    scene = pdsim.Scene(fps=100.0, frames=2)
+    body = scene.add_peridynamic_body(pdsim.box((0.2, 0.2, 0.2)), _material(), spacing=0.01, name="cube")
+    report = preflight(scene, device=device)
+    solver = scene.build_solvers(device=device)[0]
+    assert report.points == body.particle_count == solver.point_count
+    assert solver.bond_count <= report.bonds <= 1.5 * solver.bond_count
+    assert report.dt_estimate == pytest.approx(solver.stable_time_step(), rel=0.35)
+    assert report.substeps == math.ceil(scene.frame_time / report.dt - 1e-9)
+    assert report.host_bytes >= report.points * 400
+    assert report.free_host_bytes is None or report.free_host_bytes > 0
+    if device.startswith("cuda"):
+        assert report.device_bytes > 0 and report.free_device_bytes > 0
+
+
+def test_memory_check_fails_before_sampling_a_huge_lattice(monkeypatch):
+    """A spacing whose particle sampling alone needs more host memory than is free fails at once with the numbers
+    and the spacing that fits (free memory patched to 100 MB: a 1 m cube at 2 mm has 1.25e8 lattice points)."""
+    import time
+
+    from pdsim import preflight
+
+    monkeypatch.setattr(preflight, "free_host_memory", lambda: 1.0e8)
+    t0 = time.perf_counter()
+    with pytest.raises(pdsim.ParameterError) as ei:
+        pdsim.PeridynamicBody(pdsim.box((1.0, 1.0, 1.0), name="slab"), _material(), spacing=0.002)
+    assert time.perf_counter() - t0 < 5.0
+    _assert_error(ei, pdsim.ParameterError, "spacing=0.002", "100 MB of free host memory", "1.25e+08", "'slab'")

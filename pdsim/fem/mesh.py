@@ -8,7 +8,9 @@ Orientation and quality on load (:func:`tet_mesh_from_arrays`):
 
 - indices must be integers in range, four distinct vertices per element; unreferenced vertices are dropped;
 - an element whose quality q = 6 sqrt(2) |V| / l_rms^3 (1 for a regular tetrahedron, 0 for a flat one; l_rms the root
-  mean square of its six edge lengths) is below ``min_quality`` is degenerate (zero or near-zero volume): error;
+  mean square of its six edge lengths) is below ``min_quality`` (default 0.02) is degenerate: error naming the worst
+  elements, their quality and the stable time step each forces against the median element's (a sliver of quality
+  3e-3 cut an explicit run's step 400x and cracked falsely);
 - every interior face must be shared by exactly two elements whose fourth vertices lie on opposite sides of it; two
   on the same side means an element is inverted (folded over its neighbour): error. Three or more elements on one face
   is a non-manifold mesh: error;
@@ -20,16 +22,19 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import GeometryError, ParameterError
 from ..geometry import SolidShape
-from ..validate import check_range
+from ..validate import check_range, unit_hint
 
 TET_MESH_SUFFIXES = (".msh", ".vtk", ".vtu", ".mesh", ".inp", ".xdmf", ".med", ".usd", ".usda", ".usdc")
-DEFAULT_MIN_QUALITY = 1.0e-3
+DEFAULT_MIN_QUALITY = 0.02
+# fTetWild's meshes measure 0.26 to 0.36 at worst (box, sphere, cylinder); a sliver of quality 3e-3 cut the stable step
+# 400x below the median element's and cracked falsely. 0.02 keeps the worst element's step within about 40x.
+MAX_MESH_ELEMENTS = 20_000_000  # estimated elements above which tetrahedralize refuses (fTetWild's memory and time)
 
 # Outward faces of a positively oriented tetrahedron (det[X1-X0, X2-X0, X3-X0] > 0); face k is opposite corner 3 - k
 # for the first three and opposite corner 0 for the last: (0,2,1) opp 3, (0,1,3) opp 2, (0,3,2) opp 1, (1,2,3) opp 0.
@@ -51,6 +56,9 @@ class TetMesh:
     vertices: np.ndarray
     tets: np.ndarray
     name: str = "tet_mesh"
+    min_quality: float = DEFAULT_MIN_QUALITY  # the quality its elements were checked against (pre-flight rechecks
+    # meshes built directly, ``checked`` False)
+    checked: bool = field(default=False, repr=False, compare=False)
 
     @property
     def vertex_count(self) -> int:
@@ -90,7 +98,13 @@ class TetMesh:
         t = np.asarray(translate, dtype=np.float64)
         if t.shape != (3,) or not np.all(np.isfinite(t)):
             raise ParameterError("translate", translate, "a sequence of 3 finite numbers [m]")
-        return TetMesh(vertices=self.vertices * s + t, tets=self.tets.copy(), name=self.name)
+        return TetMesh(
+            vertices=self.vertices * s + t,
+            tets=self.tets.copy(),
+            name=self.name,
+            min_quality=self.min_quality,
+            checked=self.checked,  # a uniform scale keeps every element's quality
+        )
 
 
 def signed_volumes(vertices: np.ndarray, tets: np.ndarray) -> np.ndarray:
@@ -116,6 +130,33 @@ def element_heights(vertices: np.ndarray, tets: np.ndarray) -> np.ndarray:
     f = x[:, TET_FACES]  # [m, 4, 3, 3]
     areas = 0.5 * np.linalg.norm(np.cross(f[:, :, 1] - f[:, :, 0], f[:, :, 2] - f[:, :, 0]), axis=2)
     return 3.0 * np.abs(signed_volumes(vertices, tets)) / areas.max(axis=1)
+
+
+def quality_problem(vertices: np.ndarray, tets: np.ndarray, min_quality: float, name: str, *, show: int = 3):
+    """The one-line message of a mesh whose elements fall below ``min_quality`` (None when none does): the worst
+    ``show`` elements with their quality and the stable time step each forces, as a fraction of the median element's
+    (an explicit step is proportional to an element's smallest height). All numpy, no loop over elements."""
+    q = np.abs(element_quality(vertices, tets))
+    bad = np.flatnonzero(q < min_quality)
+    if not bad.size:
+        return None
+    heights = element_heights(vertices, tets)
+    median = float(np.median(heights))
+    worst = bad[np.argsort(q[bad], kind="stable")[:show]]
+
+    def entry(e) -> str:
+        hgt = float(heights[e])
+        if not hgt > 0.0:
+            return f"element {int(e)} (quality {q[e]:.3g}: flat, no stable time step)"
+        return f"element {int(e)} (quality {q[e]:.3g}: stable time step 1/{median / hgt:.3g} of the median element's)"
+
+    vol = abs(float(signed_volumes(vertices, tets[worst[:1]])[0]))
+    return (
+        f"{name}: element {int(worst[0])} is degenerate (quality {q[worst[0]]:.3g} < min_quality={min_quality:g}; "
+        f"1 is a regular tetrahedron; volume {vol:.3g} m^3); {bad.size} such element(s) of {len(tets)}, worst "
+        f"{', '.join(entry(e) for e in worst)}; slivers cut an explicit run's time step and crack falsely: remesh "
+        "(tetrahedralize with optimize=True, or better mesher settings) or lower min_quality to accept them"
+    )
 
 
 def _face_keys(tets: np.ndarray):
@@ -220,15 +261,9 @@ def tet_mesh_from_arrays(vertices, tets, *, name: str = "tet_mesh", min_quality:
         remap = np.cumsum(used) - 1
         v = v[used]
         t = remap[t]
-    q = element_quality(v, t)
-    bad = np.flatnonzero(np.abs(q) < min_quality)
-    if bad.size:
-        vol = signed_volumes(v, t)
-        raise GeometryError(
-            f"{name}: element {int(bad[0])} is degenerate (volume {abs(vol[bad[0]]):.3g} m^3, quality "
-            f"{abs(q[bad[0]]):.3g} < min_quality={min_quality:g}; 1 is a regular tetrahedron); {bad.size} such "
-            "element(s): remesh or lower min_quality"
-        )
+    problem = quality_problem(v, t, min_quality, name)
+    if problem:
+        raise GeometryError(problem)
     pairs = interior_face_pairs(t)
     if pairs.size:
         # signed volume of (face triple in sorted order, opposite vertex) for both elements of each interior face
@@ -248,7 +283,7 @@ def tet_mesh_from_arrays(vertices, tets, *, name: str = "tet_mesh", min_quality:
     neg = signed_volumes(v, t) < 0.0
     t = t.copy()
     t[neg] = t[neg][:, [0, 1, 3, 2]]
-    return TetMesh(vertices=v, tets=t.astype(np.int32), name=name)
+    return TetMesh(vertices=v, tets=t.astype(np.int32), name=name, min_quality=min_quality, checked=True)
 
 
 def tetrahedralize(
@@ -267,6 +302,11 @@ def tetrahedralize(
     fTetWild's output differs from run to run (measured on one input: 2,078 to 3,463 vertices, also with one thread).
     For reproducible simulations pass ``cache_dir``: the first mesh made for a given surface and parameters is saved
     there (.vtu, keyed by a SHA-1 of the inputs) and loaded by later calls.
+
+    fTetWild runs in a child Python process (``sys.executable``, loading only numpy and the compiled wrapper; about
+    0.1 s of start-up against 0.5 s and more of meshing): a native crash of the mesher (it segfaults on some thin
+    parts) raises GeometryError naming the mesh instead of ending the caller. A surface whose estimated element
+    count exceeds MAX_MESH_ELEMENTS is refused before meshing (ParameterError, with a unit hint).
 
     Args:
         shape: a closed, consistently oriented surface (``pdsim.load_mesh``, ``pdsim.box``, ...; an open surface is
@@ -302,11 +342,14 @@ def tetrahedralize(
         cached = os.path.join(os.fspath(cache_dir), f"{label}-{h.hexdigest()[:20]}.vtu")
         if os.path.isfile(cached):
             return load_tet_mesh(cached, name=label, min_quality=min_quality)
-    wrapper = _ftetwild()
-    with _scratch_directory():  # fTetWild writes a scratch __tracked_surface.stl into the working directory
-        v, t = _run_ftetwild(wrapper, shape, edge_length, epsilon, optimize, threads)
+    check_mesh_size(shape, edge_length)
+    v, t = _mesh_in_child(shape, label, edge_length, epsilon, optimize, threads)
     if len(t) == 0:
-        raise GeometryError(f"{shape.name}: fTetWild produced no elements (is the surface too thin for edge_length?)")
+        raise GeometryError(
+            f"{label}: fTetWild produced no elements: the surface is too thin for edge_length={edge_length:.3g} m "
+            f"(its thinnest bounding-box side is {float(np.min(shape.extent)):.3g} m); thicken the part or lower "
+            "edge_length"
+        )
     mesh = tet_mesh_from_arrays(v, t, name=label, min_quality=min_quality)
     if cached is not None:
         tmp = cached + ".tmp.vtu"
@@ -315,76 +358,106 @@ def tetrahedralize(
     return mesh
 
 
-class _scratch_directory:
-    """Runs a block in a fresh temporary working directory (removed afterwards), then returns to the old one."""
+def check_mesh_size(shape: SolidShape, edge_length: float) -> float:
+    """The number of elements fTetWild makes for ``shape`` at ``edge_length`` [m], estimated as the volume over a
+    regular tetrahedron's (edge^3 / (6 sqrt 2); measured: 0.98x on a box, 2.5x on a sphere, whose curved surface is
+    refined); ParameterError with a unit hint above MAX_MESH_ELEMENTS."""
+    estimate = abs(shape.volume) / (edge_length**3 / (6.0 * math.sqrt(2.0)))
+    if estimate > MAX_MESH_ELEMENTS:
+        raise ParameterError(
+            "edge_length",
+            edge_length,
+            f"a length giving at most {MAX_MESH_ELEMENTS:.0e} elements for '{shape.name}' (this gives about "
+            f"{estimate:.3g}: edge_length >= {edge_length * (estimate / MAX_MESH_ELEMENTS) ** (1.0 / 3.0):.3g} m fits)"
+            + unit_hint(float(np.max(shape.extent)), edge_length, what="edge_length", count=estimate),
+        )
+    return estimate
 
-    def __enter__(self):
-        import tempfile
 
-        self._old = os.getcwd()
-        self._tmp = tempfile.TemporaryDirectory(prefix="pdsim-ftetwild-")
-        os.chdir(self._tmp.name)
-        return self
+# The child process that runs fTetWild: a native crash (fTetWild segfaults on some thin parts, and on a second call
+# in a process after an earlier call failed) ends the child, not the caller. It loads only numpy and the compiled
+# wrapper (not pdsim, not pyvista): about 0.1 s of start-up. Its working directory is a scratch folder, where fTetWild
+# writes its __tracked_surface.stl. Arguments: wrapper path, input .npz, output .npz.
+_CHILD = r"""
+import importlib.machinery, importlib.util, sys
+import numpy as np
+{hook}
+path, inp, outp = sys.argv[1:4]
+key = "pytetwild.PyfTetWildWrapper"
+loader = importlib.machinery.ExtensionFileLoader(key, path)
+module = importlib.util.module_from_spec(importlib.util.spec_from_file_location(key, path, loader=loader))
+loader.exec_module(module)
+a = np.load(inp)
+v, t = module.tetrahedralize_mesh(
+    a["vertices"], a["faces"], bool(a["optimize"]), False, 0.05, float(a["edge_length"]), float(a["epsilon"]), 10.0,
+    False, int(a["threads"]), 80, 6, True, False, False,
+    np.empty((0, 3), dtype=np.float64), np.empty((0, 4), dtype=np.int32), np.empty(0, dtype=np.float64),
+)
+np.savez(outp, vertices=np.asarray(v, dtype=np.float64), tets=np.asarray(t, dtype=np.int64))
+"""
+_CHILD_TEST_HOOK = ""  # Python run in the child before meshing (tests: "import os; os.abort()" to test a crash)
 
-    def __exit__(self, *exc):
-        os.chdir(self._old)
-        self._tmp.cleanup()
-        return False
 
+def _mesh_in_child(shape: SolidShape, label: str, edge_length, epsilon, optimize, threads):
+    """Runs fTetWild on ``shape`` in a child Python process; returns (vertices [n, 3], tets [m, 4]). A crash of the
+    mesher (a signal, or an exception) becomes a GeometryError naming the mesh, how it ended and what to change."""
+    import signal
+    import subprocess
+    import sys
+    import tempfile
 
-def _run_ftetwild(wrapper, shape, edge_length, epsilon, optimize, threads):
-    """Calls fTetWild's tetrahedralize_mesh; returns (vertices [n, 3], tets [m, 4])."""
-    return wrapper.tetrahedralize_mesh(
-        np.ascontiguousarray(shape.vertices, dtype=np.float64),
-        np.ascontiguousarray(shape.faces, dtype=np.uint32),
-        bool(optimize),
-        False,  # skip_simplify
-        0.05,  # relative edge length (unused when the absolute one is > 0)
-        float(edge_length),
-        float(epsilon),
-        10.0,  # stop_energy
-        False,  # coarsen
-        int(threads),
-        80,  # optimisation iterations
-        6,  # log level
-        True,  # quiet
-        False,  # vtk ordering
-        False,  # disable filtering
-        np.empty((0, 3), dtype=np.float64),
-        np.empty((0, 4), dtype=np.int32),
-        np.empty(0, dtype=np.float64),
+    wrapper = _ftetwild_path()
+    with tempfile.TemporaryDirectory(prefix="pdsim-ftetwild-") as tmp:
+        inp, outp = os.path.join(tmp, "surface.npz"), os.path.join(tmp, "tets.npz")
+        np.savez(
+            inp,
+            vertices=np.ascontiguousarray(shape.vertices, dtype=np.float64),
+            faces=np.ascontiguousarray(shape.faces, dtype=np.uint32),
+            optimize=bool(optimize),
+            edge_length=float(edge_length),
+            epsilon=float(epsilon),
+            threads=int(threads),
+        )
+        code = _CHILD.replace("{hook}", _CHILD_TEST_HOOK)
+        proc = subprocess.run(
+            [sys.executable, "-c", code, wrapper, inp, outp], cwd=tmp, capture_output=True, text=True, check=False
+        )
+        if proc.returncode == 0 and os.path.isfile(outp):
+            with np.load(outp) as r:
+                return r["vertices"], r["tets"]
+    if proc.returncode < 0:
+        try:
+            how = f"crashed ({signal.Signals(-proc.returncode).name})"
+        except ValueError:
+            how = f"crashed (signal {-proc.returncode})"
+    else:
+        last = [ln.strip() for ln in proc.stderr.splitlines() if ln.strip()]
+        how = f"failed (exit status {proc.returncode}{': ' + last[-1] if last else ''})"
+    ext = shape.extent
+    raise GeometryError(
+        f"{label}: fTetWild {how} meshing the surface ({len(shape.faces)} triangles, {ext[0]:.3g} x {ext[1]:.3g} x "
+        f"{ext[2]:.3g} m, edge_length={edge_length:.3g} m); thin parts crash the mesher: thicken the part (its "
+        f"thinnest bounding-box side is {float(np.min(ext)):.3g} m) or lower edge_length, or mesh it elsewhere and "
+        "load it with load_tet_mesh"
     )
 
 
-def _ftetwild():
-    """The compiled fTetWild wrapper of pytetwild. pytetwild 0.4.2's package ``__init__`` imports pyvista (an
-    undeclared, heavy dependency used only for its PyVista accessor); when pyvista is missing the extension module is
-    loaded directly, which needs nothing but numpy."""
-    try:
-        from pytetwild import PyfTetWildWrapper
-
-        return PyfTetWildWrapper
-    except ModuleNotFoundError as exc:
-        if exc.name == "pytetwild":
-            raise GeometryError("meshing a surface needs pytetwild (pip install pytetwild)") from None
-    import importlib.machinery
+def _ftetwild_path() -> str:
+    """Path of pytetwild's compiled fTetWild wrapper, found without importing the package (whose ``__init__`` imports
+    pyvista, an undeclared heavy dependency)."""
     import importlib.util
-    import sys
 
-    key = "pytetwild.PyfTetWildWrapper"
-    if key in sys.modules:
-        return sys.modules[key]
-    spec = importlib.util.find_spec("pytetwild")
+    try:
+        spec = importlib.util.find_spec("pytetwild")
+    except (ImportError, ValueError):
+        spec = None
+    if spec is None or not spec.submodule_search_locations:
+        raise GeometryError("meshing a surface needs pytetwild (pip install pytetwild)")
     folder = spec.submodule_search_locations[0]
     files = [f for f in os.listdir(folder) if f.startswith("PyfTetWildWrapper") and f.endswith((".so", ".pyd"))]
     if not files:
         raise GeometryError(f"pytetwild is installed in {folder} but its compiled fTetWild module is missing")
-    path = os.path.join(folder, files[0])
-    loader = importlib.machinery.ExtensionFileLoader(key, path)
-    module = importlib.util.module_from_spec(importlib.util.spec_from_file_location(key, path, loader=loader))
-    loader.exec_module(module)
-    sys.modules[key] = module
-    return module
+    return os.path.join(folder, files[0])
 
 
 def load_tet_mesh(

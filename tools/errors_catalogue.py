@@ -1,0 +1,930 @@
+"""The catalogue of bad inputs: each case builds one mistake (through the scene API or the ``pdsim`` command line),
+and the one-line message users see for it. ``tests/test_errors_catalogue.py`` runs every case (error type, message,
+one line, nothing half-written: no cache created, an earlier cache left as it was); this script runs them too and
+writes docs/errors.md from the same list, so the page and the tests cannot drift apart.
+
+    python tools/errors_catalogue.py            # rewrites docs/errors.md
+    python tools/errors_catalogue.py --check    # exit 1 when docs/errors.md is out of date
+
+Run cases call :func:`pdsim.preflight.preflight` with the output path, time step and frame count before
+``Scene.run``, as ``Scene.run`` does once it calls the pre-flight itself; command-line cases marked ``run_preflight``
+need that (they are skipped by the tests until ``Scene.run`` calls it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import hashlib
+import inspect
+import os
+import subprocess
+import sys
+import tempfile
+import textwrap
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+import pdsim
+
+ROOT = Path(__file__).resolve().parents[1]
+DOC = ROOT / "docs" / "errors.md"
+MAT = {"density": 1000.0, "youngs_modulus": 1.0e5, "poisson_ratio": 0.3}
+
+
+def run_calls_preflight() -> bool:
+    """True once Scene.run calls pdsim.preflight.preflight (then command-line run cases check it too)."""
+    return "preflight(" in inspect.getsource(pdsim.Scene.run)
+
+
+class NoError(AssertionError):
+    """A case that raised nothing (or a command that exited 0)."""
+
+
+# ------------------------------------------------------------------------------------------------------- workspace
+class Workspace:
+    """A case's folder: inputs it writes (allowed to stay), earlier outputs it plants (must stay byte for byte) and
+    the output path of its run. After the case, anything else in the folder was written by the failed run."""
+
+    def __init__(self, root: Path):
+        self.root = Path(root)
+        self.inputs: set[Path] = set()
+        self.earlier: dict[Path, str] = {}
+
+    def input(self, name: str, content: str | bytes) -> Path:
+        path = self.root / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if isinstance(content, bytes):
+            path.write_bytes(content)
+        else:
+            path.write_text(content)
+        self.inputs.add(path)
+        return path
+
+    def folder(self, name: str) -> Path:
+        path = self.root / name
+        path.mkdir(parents=True, exist_ok=True)
+        self.inputs.add(path)
+        return path
+
+    def earlier_cache(self, name: str = "out.usdc") -> Path:
+        """An earlier cache at ``name`` (a small USD text layer) that the failed run must leave as it was."""
+        path = self.root / name
+        path.write_text('#usda 1.0\n(\n    doc = "an earlier pdsim cache"\n)\n\ndef Xform "World"\n{\n}\n')
+        self.earlier[path] = hashlib.sha256(path.read_bytes()).hexdigest()
+        return path
+
+    @property
+    def out(self) -> Path:
+        return self.root / "out.usdc"
+
+    def leftovers(self) -> list[str]:
+        """Files and folders in the workspace that the case did not plant (written by the failed run), and earlier
+        outputs that changed."""
+        found = []
+        for p in sorted(self.root.rglob("*")):
+            if p in self.inputs or any(q in p.parents for q in self.inputs if q.is_dir()):
+                continue
+            if p in self.earlier:
+                if hashlib.sha256(p.read_bytes()).hexdigest() != self.earlier[p]:
+                    found.append(f"{p.name} (earlier output changed)")
+                continue
+            found.append(str(p.relative_to(self.root)))
+        found += [f"{p.name} (earlier output removed)" for p in self.earlier if not p.exists()]
+        return found
+
+
+# ----------------------------------------------------------------------------------------------------------- cases
+@dataclass
+class Case:
+    """One bad input. ``act(ws)`` makes the mistake: a scene-API case raises, a command-line case returns the
+    CompletedProcess of ``pdsim``. ``fragments`` must appear in the message."""
+
+    id: str
+    area: str
+    wrong: str
+    allowed: str
+    error: type
+    fragments: tuple
+    act: Callable
+    cli: bool = False
+    run_preflight: bool = False  # command-line case that needs Scene.run to call the pre-flight
+    needs_ftetwild: bool = False
+    skip_with_cuda: bool = False
+    notes: list = field(default_factory=list)
+
+
+CASES: list[Case] = []
+
+
+def case(id, area, wrong, allowed, error, *fragments, **kwargs):
+    def register(fn):
+        CASES.append(Case(id, area, wrong, allowed, error, fragments, fn, **kwargs))
+        return fn
+
+    return register
+
+
+def _material(**overrides):
+    return pdsim.Material(**{**MAT, **overrides})
+
+
+def _scene(**kwargs) -> pdsim.Scene:
+    return pdsim.Scene(fps=100.0, frames=2, **kwargs)
+
+
+def _beam(scene, name="beam", center=(0.15, 0.0, 0.5), spacing=0.05):
+    return scene.add_peridynamic_body(pdsim.box((0.3, 0.1, 0.1), center=center), _material(), spacing, name=name)
+
+
+def _run(scene, ws: Workspace, out=None, *, dt=None, frames=None):
+    """What Scene.run does with the pre-flight: the checks, then the run (CPU, quiet)."""
+    from pdsim.preflight import preflight
+
+    out = ws.out if out is None else out
+    preflight(scene, device="cpu", out=out, dt=dt, frames=frames)
+    scene.run(out, device="cpu", dt=dt, frames=frames, progress=False)
+
+
+@contextlib.contextmanager
+def _patched(module, name, value):
+    old = getattr(module, name)
+    setattr(module, name, value)
+    try:
+        yield
+    finally:
+        setattr(module, name, old)
+
+
+def _box_mesh_text(extents=(0.3, 0.2, 0.1), *, open_faces=0, scale=1.0) -> str:
+    import trimesh
+
+    m = trimesh.creation.box(extents=np.asarray(extents) * scale)
+    faces = m.faces[: len(m.faces) - open_faces]
+    return trimesh.exchange.obj.export_obj(trimesh.Trimesh(m.vertices, faces, process=False))
+
+
+def _sliver_mesh():
+    """A structured box mesh plus one sliver (quality about 3e-3) glued on a boundary face: vertices, tets."""
+    m = pdsim.box_tet_mesh((0.4, 0.2, 0.2), (8, 4, 4))
+    f = m.boundary_faces()[0]
+    x = m.vertices[f]
+    n = np.cross(x[1] - x[0], x[2] - x[0])
+    n /= np.linalg.norm(n)
+    v = np.vstack([m.vertices, x.mean(axis=0) + 1.0e-4 * n])
+    t = np.vstack([m.tets, [[f[0], f[1], f[2], len(m.vertices)]]])
+    return v, t
+
+
+# -- meshes and shapes ------------------------------------------------------------------------------------------
+A_MESH = "meshes and shapes"
+
+
+@case("open_mesh", A_MESH, "an OBJ with a hole (two triangles missing)", "a closed (watertight) surface",
+      pdsim.GeometryError, "not watertight")  # fmt: skip
+def _(ws):
+    pdsim.load_mesh(ws.input("open.obj", _box_mesh_text(open_faces=2)))
+
+
+@case("empty_obj", A_MESH, "an OBJ file without faces", "a file holding triangles", pdsim.GeometryError, "empty")
+def _(ws):
+    pdsim.load_mesh(ws.input("empty.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n"))
+
+
+@case("mesh_suffix", A_MESH, "a mesh file of an unknown type", ".obj, .stl, .ply, .glb, .gltf, .off",
+      pdsim.GeometryError, "'.xyz'", ".obj")  # fmt: skip
+def _(ws):
+    pdsim.load_mesh(ws.input("model.xyz", "0 0 0\n"))
+
+
+@case("mesh_missing", A_MESH, "a mesh path that does not exist", "an existing file", pdsim.GeometryError,
+      "no such file")  # fmt: skip
+def _(ws):
+    pdsim.load_mesh(ws.root / "missing.obj")
+
+
+@case("mesh_scale_zero", A_MESH, "load_mesh(scale=0)", "a scale > 0", pdsim.ParameterError, "scale=0", "(0, inf)")
+def _(ws):
+    pdsim.load_mesh(ws.input("box.obj", _box_mesh_text()), scale=0.0)
+
+
+@case("mesh_translate", A_MESH, "load_mesh(translate=(1, 2))", "3 finite numbers [m]", pdsim.ParameterError,
+      "translate=", "3 finite numbers")  # fmt: skip
+def _(ws):
+    pdsim.load_mesh(ws.input("box.obj", _box_mesh_text()), translate=(1.0, 2.0))
+
+
+@case("face_indices", A_MESH, "shape_from_arrays with a face index past the last vertex",
+      "integer vertex indices in [0, vertex count)", pdsim.GeometryError, "vertex indices", "[0, 8)")  # fmt: skip
+def _(ws):
+    box = pdsim.box((1.0, 1.0, 1.0))
+    faces = box.faces.copy()
+    faces[0, 0] = 8
+    pdsim.shape_from_arrays(box.vertices, faces, name="bad_faces")
+
+
+@case("nan_vertex", A_MESH, "a NaN vertex coordinate", "finite coordinates", pdsim.GeometryError, "non-finite")
+def _(ws):
+    box = pdsim.box((1.0, 1.0, 1.0))
+    v = box.vertices.copy()
+    v[2, 1] = np.nan
+    pdsim.shape_from_arrays(v, box.faces, name="nan_vertex")
+
+
+@case("mesh_scale_1e9", A_MESH, "load_mesh(scale=1e-9): a 0.3 m part shrunk below trimesh's merge tolerance",
+      "a mesh in metres", pdsim.GeometryError, "degenerate", "wrong units")  # fmt: skip
+def _(ws):
+    pdsim.load_mesh(ws.input("box.obj", _box_mesh_text()), scale=1.0e-9)
+
+
+@case("box_size", A_MESH, "pdsim.box with a negative edge", "three edge lengths > 0 [m]", pdsim.ParameterError,
+      "size=", "edge lengths > 0")  # fmt: skip
+def _(ws):
+    pdsim.box((0.3, -0.1, 0.1))
+
+
+@case("sphere_subdivisions", A_MESH, "pdsim.sphere(subdivisions=9)", "an integer in [1, 7]",
+      pdsim.ParameterError, "subdivisions=9", "[1, 7]")  # fmt: skip
+def _(ws):
+    pdsim.sphere(0.1, subdivisions=9)
+
+
+# -- materials --------------------------------------------------------------------------------------------------
+A_MAT = "materials"
+
+
+@case("poisson_half", A_MAT, "Poisson's ratio 0.5 (incompressible)", "(-1, 0.5)", pdsim.ParameterError,
+      "poisson_ratio=0.5", "(-1, 0.5)")  # fmt: skip
+def _(ws):
+    _material(poisson_ratio=0.5)
+
+
+@case("density_negative", A_MAT, "a negative density", "a density > 0 [kg/m^3]", pdsim.ParameterError,
+      "density=-1000.0", "(0, inf)")  # fmt: skip
+def _(ws):
+    _material(density=-1000.0)
+
+
+@case("modulus_nan", A_MAT, "Young's modulus NaN", "a finite number > 0 [Pa]", pdsim.ParameterError,
+      "youngs_modulus=nan", "finite")  # fmt: skip
+def _(ws):
+    _material(youngs_modulus=float("nan"))
+
+
+@case("two_fracture_laws", A_MAT, "both fracture_energy and critical_stretch", "one of the two",
+      pdsim.ParameterError, "critical_stretch=", "None when fracture_energy is given")  # fmt: skip
+def _(ws):
+    _material(fracture_energy=100.0, critical_stretch=0.01)
+
+
+@case("failure_without_yield", A_MAT, "failure_plastic_strain without a yield stress",
+      "failure_plastic_strain only with yield_stress", pdsim.ParameterError, "failure_plastic_strain=",
+      "unless yield_stress")  # fmt: skip
+def _(ws):
+    _material(failure_plastic_strain=0.2)
+
+
+# -- bodies -----------------------------------------------------------------------------------------------------
+A_BODY = "bodies and spacing"
+
+
+@case("spacing_too_large", A_BODY, "a spacing larger than the body", "a spacing up to the smallest extent",
+      pdsim.ParameterError, "spacing=0.2", "(0, 0.1]", "pebble")  # fmt: skip
+def _(ws):
+    pdsim.PeridynamicBody(pdsim.box((0.1, 0.1, 0.1), name="pebble"), _material(), spacing=0.2)
+
+
+@case("spacing_zero", A_BODY, "spacing 0", "a spacing > 0 [m]", pdsim.ParameterError, "spacing=0.0", "(0, inf)")
+def _(ws):
+    pdsim.PeridynamicBody(pdsim.box((0.1, 0.1, 0.1)), _material(), spacing=0.0)
+
+
+@case("spacing_in_mm", A_BODY, "a spacing given in millimetres (5 for 5 mm) on a 0.3 m part",
+      "a spacing in metres", pdsim.ParameterError, "spacing=5", "did you mean millimetres",
+      "spacing=0.005")  # fmt: skip
+def _(ws):
+    pdsim.PeridynamicBody(pdsim.box((0.3, 0.2, 0.1)), _material(), spacing=5.0)
+
+
+@case("mesh_in_mm", A_BODY, "a part modelled in millimetres read as metres (300 m across at spacing 5 mm)",
+      "at most 2e8 lattice points", pdsim.ParameterError, "spacing=0.005", "lattice points",
+      "did you mean millimetres", "scale=0.001")  # fmt: skip
+def _(ws):
+    part = pdsim.load_mesh(ws.input("part_mm.obj", _box_mesh_text(scale=1000.0)))
+    pdsim.PeridynamicBody(part, _material(), spacing=0.005)
+
+
+@case("lattice_overflow", A_BODY, "a mesh scale so large the lattice count overflows int64 (was a numpy error or "
+      "an out-of-memory kill)", "at most 2e8 lattice points", pdsim.ParameterError, "spacing=0.01",
+      "lattice points")  # fmt: skip
+def _(ws):
+    part = pdsim.load_mesh(ws.input("box.obj", _box_mesh_text()), scale=1.0e8)
+    pdsim.PeridynamicBody(part, _material(), spacing=0.01)
+
+
+@case("mesh_1e6_too_small", A_BODY, "a mesh scaled by 1e-6 (its peridynamic constants overflow float32; was a "
+      "ZeroDivisionError in the run)", "a spacing whose constants fit float32", pdsim.ParameterError,
+      "overflow float32", "wrong units")  # fmt: skip
+def _(ws):
+    part = pdsim.load_mesh(ws.input("box.obj", _box_mesh_text()), scale=1.0e-6)
+    scene = _scene()
+    scene.add_peridynamic_body(part, _material(), spacing=2.5e-8)
+    scene.build_solvers(device="cpu")
+
+
+@case("horizon_factor", A_BODY, "horizon_factor=10", "[1.5, 8]", pdsim.ParameterError, "horizon_factor=10",
+      "[1.5, 8]")  # fmt: skip
+def _(ws):
+    pdsim.PeridynamicBody(pdsim.box((0.1, 0.1, 0.1)), _material(), spacing=0.02, horizon_factor=10)
+
+
+@case("surface_correction", A_BODY, "an unknown surface correction", "'directional', 'family' or 'none'",
+      pdsim.ParameterError, "surface_correction='madenci'", "'directional'")  # fmt: skip
+def _(ws):
+    pdsim.PeridynamicBody(pdsim.box((0.1, 0.1, 0.1)), _material(), spacing=0.02, surface_correction="madenci")
+
+
+# -- boundary conditions and loads ------------------------------------------------------------------------------
+A_BC = "boundary conditions and loads"
+
+
+@case("fix_empty_region", A_BC, "body.fix with a region that holds no particle", "a region with at least one point",
+      pdsim.ParameterError, "region=", "at least one particle", "'beam'")  # fmt: skip
+def _(ws):
+    _beam(_scene()).fix(pdsim.BoxRegion(lo=(5.0, 5.0, 5.0), hi=(6.0, 6.0, 6.0)))
+
+
+@case("region_not_region", A_BC, "body.fix('left end')", "a BoxRegion, SphereRegion, HalfSpace or a callable",
+      pdsim.ParameterError, "region='left end'", "BoxRegion")  # fmt: skip
+def _(ws):
+    _beam(_scene()).fix("left end")
+
+
+@case("conflicting_conditions", A_BC, "a set_velocity region overlapping a fix region",
+      "one condition per point (one condition with the axes of both)", pdsim.ParameterError, "'pull'", "'clamp'",
+      "already held")  # fmt: skip
+def _(ws):
+    body = _beam(_scene())
+    body.fix(pdsim.BoxRegion(lo=(-1.0, -1.0, -1.0), hi=(0.05, 1.0, 2.0)), name="clamp")
+    body.set_velocity(pdsim.BoxRegion(lo=(-1.0, -1.0, -1.0), hi=(0.12, 1.0, 2.0)), (0.1, 0.0, 0.0), name="pull")
+
+
+@case("traction_no_surface", A_BC, "a traction whose region misses the body's surface",
+      "a region that holds part of the surface", pdsim.ParameterError, "surface of 'beam'", "spans")  # fmt: skip
+def _(ws):
+    _beam(_scene()).add_traction(pdsim.BoxRegion(lo=(5.0, 5.0, 5.0), hi=(6.0, 6.0, 6.0)), (1.0e3, 0.0, 0.0))
+
+
+@case("bad_axes", A_BC, "axes='xw'", "a non-empty combination of 'x', 'y', 'z'", pdsim.ParameterError,
+      "axes='xw'", "'x', 'y', 'z'")  # fmt: skip
+def _(ws):
+    _beam(_scene()).fix(pdsim.BoxRegion(lo=(-1.0, -1.0, -1.0), hi=(0.05, 1.0, 2.0)), axes="xw")
+
+
+@case("release_before_start", A_BC, "release before start", "release > start [s]", pdsim.ParameterError,
+      "release=0.1", "(0.2, inf)")  # fmt: skip
+def _(ws):
+    _beam(_scene()).fix(pdsim.BoxRegion(lo=(-1.0, -1.0, -1.0), hi=(0.05, 1.0, 2.0)), start=0.2, release=0.1)
+
+
+# -- scene --------------------------------------------------------------------------------------------------------
+A_SCENE = "scene"
+
+
+@case("frames_zero", A_SCENE, "Scene(frames=0)", "an integer >= 1", pdsim.ParameterError, "frames=0",
+      "an integer >= 1")  # fmt: skip
+def _(ws):
+    pdsim.Scene(frames=0)
+
+
+@case("up_axis", A_SCENE, "Scene(up_axis='X')", "'Y' or 'Z'", pdsim.ParameterError, "up_axis='X'", "'Y' or 'Z'")
+def _(ws):
+    pdsim.Scene(up_axis="X")
+
+
+@case("fps_zero", A_SCENE, "Scene(fps=0)", "(0, 1000]", pdsim.ParameterError, "fps=0", "(0, 1000]")
+def _(ws):
+    pdsim.Scene(fps=0)
+
+
+@case("time_scale_and_frame_time", A_SCENE, "both time_scale and frame_time", "one of the two",
+      pdsim.ParameterError, "time_scale=0.2", "give one of the two")  # fmt: skip
+def _(ws):
+    pdsim.Scene(time_scale=0.2, frame_time=1.0e-3)
+
+
+@case("gravity_two_numbers", A_SCENE, "gravity=(0, -9.81)", "3 finite numbers [m/s^2]", pdsim.ParameterError,
+      "gravity=", "3 finite numbers")  # fmt: skip
+def _(ws):
+    pdsim.Scene(gravity=(0.0, -9.81))
+
+
+@case("not_a_body", A_SCENE, "scene.add_body('beam')", "a pdsim body", pdsim.ParameterError, "body='beam'",
+      "PeridynamicBody")  # fmt: skip
+def _(ws):
+    _scene().add_body("beam")
+
+
+@case("duplicate_name", A_SCENE, "two bodies named 'beam'", "unique body names", pdsim.ParameterError,
+      "name='beam'", "not already used")  # fmt: skip
+def _(ws):
+    scene = _scene()
+    _beam(scene)
+    _beam(scene, center=(0.15, 0.5, 0.5))
+
+
+@case("usd_name_clash", A_SCENE, "bodies 'body 1' and 'body_1' (one USD prim /World/body_1)",
+      "names whose USD identifiers differ", pdsim.ParameterError, "'body 1'", "'body_1'", "/World/body_1")  # fmt: skip
+def _(ws):
+    scene = _scene()
+    _beam(scene, name="body 1")
+    _beam(scene, name="body_1", center=(0.15, 0.5, 0.5))
+
+
+@case("body_named_ground", A_SCENE, "a body named 'ground' in a scene with a ground plane",
+      "a name other than the ground's prim", pdsim.ParameterError, "'ground'", "/World/ground")  # fmt: skip
+def _(ws):
+    scene = _scene()
+    _beam(scene, name="ground")
+    scene.add_ground_plane(height=0.0)
+
+
+@case("empty_scene", A_SCENE, "a scene without bodies", "at least one body", pdsim.ParameterError, "bodies=[]",
+      "at least one body")  # fmt: skip
+def _(ws):
+    _scene().build_solvers(device="cpu")
+
+
+@case("bodies_overlap", A_SCENE, "two bodies that interpenetrate at the start", "bodies that touch at most",
+      pdsim.GeometryError, "'left' and 'right' overlap", "m^3")  # fmt: skip
+def _(ws):
+    scene = _scene()
+    scene.add_peridynamic_body(pdsim.box((0.2, 0.2, 0.2)), _material(), spacing=0.02, name="left")
+    scene.add_peridynamic_body(pdsim.box((0.2, 0.2, 0.2), center=(0.15, 0.0, 0.0)), _material(), 0.02, name="right")
+    ws.earlier_cache()
+    _run(scene, ws)
+
+
+@case("fem_pd_overlap", A_SCENE, "an FEM slab inside a peridynamic block", "bodies that touch at most",
+      pdsim.GeometryError, "'block' and 'slab' overlap")  # fmt: skip
+def _(ws):
+    scene = _scene()
+    scene.add_peridynamic_body(pdsim.box((0.2, 0.2, 0.2)), _material(), spacing=0.02, name="block")
+    scene.add_fem_body(pdsim.box_tet_mesh((0.4, 0.4, 0.05), (4, 4, 1), center=(0, 0, 0.05)), _material(), name="slab")
+    scene.build_solvers(device="cpu")
+
+
+@case("projectile_inside", A_SCENE, "a projectile that starts inside a body", "a projectile outside the body",
+      pdsim.GeometryError, "projectile 'ball'", "starts inside body 'plate'")  # fmt: skip
+def _(ws):
+    scene = _scene()
+    scene.add_peridynamic_body(pdsim.box((0.2, 0.2, 0.05)), _material(), spacing=0.01, name="plate")
+    scene.add_collider(pdsim.SphereProjectile(0.03, center=(0.0, 0.0, 0.02), velocity=(0, 0, -10), name="ball"))
+    scene.build_solvers(device="cpu")
+
+
+@case("ground_above", A_SCENE, "a ground plane above the bodies (was reported as 'time step too large')",
+      "a ground plane at or below the bodies", pdsim.GeometryError, "starts below the ground plane",
+      "height 0.5 m")  # fmt: skip
+def _(ws):
+    scene = _scene()
+    scene.add_peridynamic_body(pdsim.box((0.2, 0.2, 0.1), center=(0, 0, 0.05)), _material(), 0.02, name="slab")
+    scene.add_ground_plane(height=0.5)
+    scene.build_solvers(device="cpu")
+
+
+# -- FEM meshes -------------------------------------------------------------------------------------------------
+A_FEM = "FEM meshes"
+
+
+@case("sliver_element", A_FEM, "a tetrahedral mesh with a sliver (quality 3e-3: its stable step is 1/350 of the "
+      "median element's)", "elements of quality >= min_quality (default 0.02), or a lower min_quality",
+      pdsim.GeometryError, "is degenerate", "quality 0.00", "min_quality=0.02", "of the median element's")  # fmt: skip
+def _(ws):
+    v, t = _sliver_mesh()
+    pdsim.tet_mesh_from_arrays(v, t, name="bracket")
+
+
+@case("sliver_tetmesh_direct", A_FEM, "a TetMesh built directly (unchecked) with a sliver, in a scene",
+      "elements of quality >= the mesh's min_quality", pdsim.GeometryError, "bracket", "is degenerate")  # fmt: skip
+def _(ws):
+    v, t = _sliver_mesh()
+    scene = _scene()
+    scene.add_fem_body(pdsim.TetMesh(v, t.astype(np.int32), name="bracket"), _material())
+    scene.build_solvers(device="cpu")
+
+
+@case("inverted_element", A_FEM, "two elements folded over their shared face", "a valid, non-overlapping mesh",
+      pdsim.GeometryError, "inverted")  # fmt: skip
+def _(ws):
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0.2, 0.2, 1.0], [0.3, 0.3, 0.5]])
+    pdsim.tet_mesh_from_arrays(v, [[0, 1, 2, 3], [0, 2, 1, 4]], name="folded")
+
+
+@case("fem_measure", A_FEM, "FemBody(measure='cauchy')", "'linear', 'corotated' or 'green'", pdsim.ParameterError,
+      "measure='cauchy'", "'corotated'")  # fmt: skip
+def _(ws):
+    pdsim.FemBody(pdsim.box_tet_mesh((1, 1, 1), (1, 1, 1)), _material(), measure="cauchy")
+
+
+@case("edge_length_for_tetmesh", A_FEM, "edge_length with a ready TetMesh", "None (a TetMesh is not remeshed)",
+      pdsim.ParameterError, "edge_length=0.1", "not remeshed")  # fmt: skip
+def _(ws):
+    pdsim.FemBody(pdsim.box_tet_mesh((1, 1, 1), (1, 1, 1)), _material(), edge_length=0.1)
+
+
+@case("fem_mesh_in_mm", A_FEM, "an FEM part modelled in millimetres read as metres, edge_length 5 mm",
+      "at most 2e7 elements", pdsim.ParameterError, "edge_length=0.005", "did you mean millimetres")  # fmt: skip
+def _(ws):
+    part = pdsim.load_mesh(ws.input("part_mm.obj", _box_mesh_text(scale=1000.0)))
+    pdsim.FemBody(part, _material(), edge_length=0.005)
+
+
+@case("mesher_crash", A_FEM, "fTetWild crashing on a surface (a native abort, forced here; a thin part does it)",
+      "a surface the mesher can fill (thicker, or a smaller edge_length)", pdsim.GeometryError,
+      "fTetWild crashed (SIGABRT)", "thicken the part", needs_ftetwild=True)  # fmt: skip
+def _(ws):
+    from pdsim.fem import mesh
+
+    with _patched(mesh, "_CHILD_TEST_HOOK", "import os; os.abort()"):
+        pdsim.FemBody(pdsim.box((0.3, 0.2, 0.1), name="bracket"), _material(), edge_length=0.05)
+
+
+@case("thin_part", A_FEM, "a closed box 1 m x 1 m x 10 um meshed at the default edge length",
+      "a part thicker than the mesher's envelope", pdsim.GeometryError, "too thin", "thicken the part",
+      needs_ftetwild=True)  # fmt: skip
+def _(ws):
+    pdsim.FemBody(pdsim.box((1.0, 1.0, 1.0e-5), name="foil"), _material())
+
+
+# -- runs and output --------------------------------------------------------------------------------------------
+A_RUN = "runs and output"
+
+
+@case("out_suffix", A_RUN, "an output path ending in .abc", ".usdc, .usda or .usd", pdsim.ParameterError,
+      "out=", "cache.abc", ".usdc")  # fmt: skip
+def _(ws):
+    _run(_tiny(), ws, ws.root / "cache.abc")
+
+
+@case("out_folder_missing", A_RUN, "an output folder that does not exist", "a path in an existing folder",
+      pdsim.ParameterError, "no_such_dir", "existing folder")  # fmt: skip
+def _(ws):
+    _run(_tiny(), ws, ws.root / "no_such_dir" / "out.usdc")
+
+
+@case("out_is_folder", A_RUN, "an output path that is an existing folder", "a file path", pdsim.ParameterError,
+      "a file path, not a folder")  # fmt: skip
+def _(ws):
+    _run(_tiny(), ws, ws.folder("cache.usdc"))
+
+
+@case("out_read_only", A_RUN, "an output folder nobody can write to (/proc)", "a writable folder",
+      pdsim.ParameterError, "/proc/out.usdc", "can write to")  # fmt: skip
+def _(ws):
+    _run(_tiny(), ws, "/proc/out.usdc")
+
+
+@case("frames_folder_blocked", A_RUN, "a file named like the cache's frame folder (out.frames)",
+      "a free <stem>.frames path", pdsim.ParameterError, "out.frames", "is free")  # fmt: skip
+def _(ws):
+    ws.input("out.frames", "not a folder")
+    _run(_tiny(), ws)
+
+
+@case("run_frames_zero", A_RUN, "scene.run(frames=0)", "an integer >= 1", pdsim.ParameterError, "frames=0")
+def _(ws):
+    ws.earlier_cache()
+    _run(_tiny(), ws, frames=0)
+
+
+@case("dt_negative", A_RUN, "dt=-1e-5", "a step > 0 [s]", pdsim.ParameterError, "dt=-1e-05", "(0, inf)")
+def _(ws):
+    _run(_tiny(), ws, dt=-1.0e-5)
+
+
+@case("dt_tiny", A_RUN, "dt=1e-12 (4e10 substeps a frame)", "at most 1e7 substeps per frame",
+      pdsim.ParameterError, "dt=1e-12", "substeps per frame", "4.17e+10")  # fmt: skip
+def _(ws):
+    scene = pdsim.Scene(fps=24.0, frames=2)
+    _beam(scene)
+    ws.earlier_cache()
+    _run(scene, ws, dt=1.0e-12)
+
+
+@case("automatic_step_tiny", A_RUN, "a steel body at 1 cm spacing with 20 s frames (2e7 automatic substeps)",
+      "at most 1e7 substeps per frame", pdsim.ParameterError, "spacing=0.01", "substeps")  # fmt: skip
+def _(ws):
+    scene = pdsim.Scene(fps=24.0, frames=2, frame_time=20.0)
+    steel = pdsim.Material(density=7850.0, youngs_modulus=2.0e11, poisson_ratio=0.3)
+    scene.add_peridynamic_body(pdsim.box((0.1, 0.1, 0.1)), steel, spacing=0.01, name="billet")
+    _run(scene, ws)
+
+
+@case("memory", A_RUN, "a spacing and horizon whose bonds need about 18 GB (8 GB free)",
+      "a scene that fits the free memory", pdsim.ParameterError, "spacing=0.01", "GB of free host memory",
+      "spacing >=")  # fmt: skip
+def _(ws):
+    from pdsim import preflight
+
+    with _patched(preflight, "free_host_memory", lambda: 8.0e9):
+        scene = pdsim.Scene(fps=24.0, frames=2)
+        scene.add_peridynamic_body(pdsim.box((0.46, 0.46, 0.46)), _material(), 0.01, horizon_factor=8.0, name="block")
+        _run(scene, ws)
+
+
+@case("disk_full", A_RUN, "a cache larger than the free disk space (1 MB free)", "a folder with room for the cache",
+      pdsim.ParameterError, "room for the cache", "1 MB free")  # fmt: skip
+def _(ws):
+    from pdsim import preflight
+
+    scene = pdsim.Scene(fps=24.0, frames=48)
+    scene.add_peridynamic_body(pdsim.box((0.2, 0.2, 0.2)), _material(), spacing=0.02, name="block")
+    with _patched(preflight, "free_disk_space", lambda folder: 1.0e6):
+        _run(scene, ws)
+
+
+def _tiny() -> pdsim.Scene:
+    scene = _scene()
+    _beam(scene)
+    return scene
+
+
+# -- command line -------------------------------------------------------------------------------------------------
+A_CLI = "command line"
+
+SCRIPT = """
+import pdsim
+
+
+def build_scene():
+    scene = pdsim.Scene(fps={fps}, frames=2, name="tiny")
+    material = pdsim.Material(density=1000.0, youngs_modulus=1.0e5, poisson_ratio=0.3)
+    beam = scene.add_peridynamic_body(pdsim.box((0.3, 0.1, 0.1), center=(0.15, 0.0, 0.5)), material, spacing=0.05,
+                                      name="beam")
+    beam.fix(pdsim.BoxRegion(lo=(-1.0, -1.0, -1.0), hi=(0.05, 1.0, 2.0)))
+{extra}    return scene
+"""
+
+
+def _script(ws: Workspace, extra: str = "", fps: float = 100.0) -> Path:
+    body = textwrap.indent(textwrap.dedent(extra), "    ") if extra else ""
+    return ws.input("scene.py", SCRIPT.format(extra=body, fps=fps))
+
+
+def _cli(ws: Workspace, *args) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "pdsim.cli", *map(str, args)],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ws.root,
+    )
+
+
+def _cli_run(ws: Workspace, script, *args) -> subprocess.CompletedProcess:
+    return _cli(ws, "run", script, "--device", "cpu", "--quiet", *args)
+
+
+@case("cli_scene_not_py", A_CLI, "pdsim run scene.txt", "a Python scene script (*.py)", pdsim.ParameterError,
+      "scene.txt", "*.py", cli=True)  # fmt: skip
+def _(ws):
+    return _cli_run(ws, ws.input("scene.txt", "x"), "--out", ws.out)
+
+
+@case("cli_scene_missing", A_CLI, "pdsim run nope.py (no such file)", "an existing file", pdsim.ParameterError,
+      "nope.py", "an existing file", cli=True)  # fmt: skip
+def _(ws):
+    return _cli_run(ws, ws.root / "nope.py", "--out", ws.out)
+
+
+@case("cli_no_build_scene", A_CLI, "a scene script without build_scene()", "a script defining build_scene()",
+      pdsim.ParameterError, "build_scene()", cli=True)  # fmt: skip
+def _(ws):
+    return _cli_run(ws, ws.input("empty_scene.py", "x = 1\n"), "--out", ws.out)
+
+
+@case("cli_build_scene_not_scene", A_CLI, "build_scene() returning something else", "a pdsim.Scene",
+      pdsim.ParameterError, "build_scene()", "pdsim.Scene", cli=True)  # fmt: skip
+def _(ws):
+    return _cli_run(ws, ws.input("dict_scene.py", "def build_scene():\n    return {}\n"), "--out", ws.out)
+
+
+@case("cli_frames_zero", A_CLI, "pdsim run --frames 0", "an integer >= 1", pdsim.ParameterError, "frames=0",
+      cli=True)  # fmt: skip
+def _(ws):
+    ws.earlier_cache()
+    return _cli_run(ws, _script(ws), "--out", ws.out, "--frames", 0)
+
+
+@case("cli_dt_negative", A_CLI, "pdsim run --dt=-1e-5", "a step > 0 [s]", pdsim.ParameterError, "dt=-1e-05",
+      cli=True)  # fmt: skip
+def _(ws):
+    return _cli_run(ws, _script(ws), "--out", ws.out, "--dt=-1e-5")
+
+
+@case("cli_out_folder_missing", A_CLI, "pdsim run --out no_such_dir/x.usdc", "a path in an existing folder",
+      pdsim.ParameterError, "existing folder", cli=True)  # fmt: skip
+def _(ws):
+    return _cli_run(ws, _script(ws), "--out", ws.root / "no_such_dir" / "x.usdc")
+
+
+@case("cli_out_is_folder", A_CLI, "pdsim run --out cache.usdc where cache.usdc is a folder", "a file path",
+      pdsim.ParameterError, "a file path, not a folder", cli=True)  # fmt: skip
+def _(ws):
+    return _cli_run(ws, _script(ws), "--out", ws.folder("cache.usdc"))
+
+
+@case("cli_overlap", A_CLI, "a scene script whose bodies overlap", "bodies that touch at most", pdsim.GeometryError,
+      "'beam' and 'beam2' overlap", cli=True)  # fmt: skip
+def _(ws):
+    extra = """
+    scene.add_peridynamic_body(pdsim.box((0.3, 0.1, 0.1), center=(0.2, 0.0, 0.5)), material, spacing=0.05,
+                               name="beam2")
+    """
+    ws.earlier_cache()
+    return _cli_run(ws, _script(ws, extra), "--out", ws.out)
+
+
+@case("cli_missing_mesh", A_CLI, "a scene script loading a mesh file that is not there", "an existing file",
+      pdsim.GeometryError, "part.stl", "no such file", cli=True)  # fmt: skip
+def _(ws):
+    return _cli_run(ws, _script(ws, 'pdsim.load_mesh("part.stl")\n'), "--out", ws.out)
+
+
+@case("cli_device_cuda", A_CLI, "pdsim run --device cuda on a machine without CUDA", "'cpu'", pdsim.ParameterError,
+      "device='cuda'", "no CUDA device", cli=True, skip_with_cuda=True)  # fmt: skip
+def _(ws):
+    return _cli(ws, "run", _script(ws), "--device", "cuda", "--quiet", "--out", ws.out)
+
+
+@case("cli_dt_tiny", A_CLI, "pdsim run --dt 1e-12 (4e10 substeps a frame)", "at most 1e7 substeps per frame",
+      pdsim.ParameterError, "dt=1e-12", "substeps per frame", cli=True, run_preflight=True)  # fmt: skip
+def _(ws):
+    ws.earlier_cache()
+    return _cli_run(ws, _script(ws, fps=24.0), "--out", ws.out, "--dt", "1e-12")
+
+
+@case("cli_out_read_only", A_CLI, "pdsim run --out /proc/out.usdc (a folder nobody can write to)",
+      "a writable folder", pdsim.ParameterError, "can write to", cli=True, run_preflight=True)  # fmt: skip
+def _(ws):
+    return _cli_run(ws, _script(ws), "--out", "/proc/out.usdc")
+
+
+# ---------------------------------------------------------------------------------------------------------- running
+def _stderr_lines(stderr: str) -> list[str]:
+    """stderr lines of pdsim, without the line Warp's native library prints itself when it finds no CUDA driver."""
+    return [ln for ln in stderr.splitlines() if ln.strip() and not ln.startswith("Warp CUDA warning:")]
+
+
+def capture(c: Case, root: Path) -> str:
+    """Runs a case in the empty folder ``root``; returns its message with ``root`` written as ``<tmp>``. Raises
+    NoError when nothing failed, AssertionError when the failure is not the documented one (type, fragments, one
+    line, for the command line: exit status 1, no traceback) or when the run left files behind."""
+    ws = Workspace(root)
+    if c.cli:
+        proc = c.act(ws)
+        if proc.returncode == 0:
+            raise NoError(f"{c.id}: pdsim exited 0")
+        assert proc.returncode == 1, (c.id, proc.returncode, proc.stderr)
+        assert "Traceback" not in proc.stdout + proc.stderr, proc.stderr
+        lines = _stderr_lines(proc.stderr)
+        assert len(lines) == 1, (c.id, proc.stderr)
+        assert lines[0].startswith("pdsim: error: "), lines[0]
+        message = lines[0][len("pdsim: error: ") :]
+    else:
+        try:
+            c.act(ws)
+        except pdsim.PdsimError as exc:
+            assert type(exc) is c.error, (c.id, type(exc), str(exc))
+            message = str(exc)
+        else:
+            raise NoError(f"{c.id}: nothing was raised")
+    assert "\n" not in message, message
+    for frag in c.fragments:
+        assert frag in message, f"{c.id}: {frag!r} not in {message!r}"
+    left = ws.leftovers()
+    assert not left, f"{c.id}: the failed run left {left}"
+    return message.replace(str(root), "<tmp>")
+
+
+def skip_reason(c: Case) -> str | None:
+    """Why a case cannot run here, or None."""
+    if c.run_preflight and not run_calls_preflight():
+        return "Scene.run does not call pdsim.preflight.preflight yet"
+    if c.needs_ftetwild:
+        import importlib.util
+
+        if importlib.util.find_spec("pytetwild") is None:
+            return "pytetwild is not installed"
+    if c.skip_with_cuda:
+        import warp as wp
+
+        if wp.get_cuda_device_count() > 0:
+            return "this machine has a CUDA device"
+    return None
+
+
+# ------------------------------------------------------------------------------------------------------------- doc
+HEADER = """# Bad inputs and their messages
+
+Every mistake below stops pdsim before it simulates anything, with one line that names what is wrong and what is
+allowed (the command line prints it as `pdsim: error: <message>` and exits with status 1, without a traceback).
+Nothing is half-written: a run that fails leaves no cache and keeps an earlier cache at the same path as it was.
+
+The cases are in `tools/errors_catalogue.py`; `tests/test_errors_catalogue.py` runs each one and checks its message
+against this page, and `python tools/errors_catalogue.py` rewrites the page. `<tmp>` stands for the folder of the
+case. Pre-flight checks (`pdsim/preflight.py`) run in `Scene.build_solvers` and `Scene.run`: bodies overlapping or
+below the ground, projectiles inside a body, USD names that clash, memory, substeps, mesh quality, the output folder
+and its free space.
+"""
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ")
+
+
+def render(messages: dict[str, str]) -> str:
+    lines = [HEADER]
+    total = 0
+    areas = list(dict.fromkeys(c.area for c in CASES))
+    for area in areas:
+        lines += [
+            f"\n## {area[0].upper() + area[1:]}\n",
+            "| case | what is wrong | message | what is allowed |",
+            "|---|---|---|---|",
+        ]
+        for c in (c for c in CASES if c.area == area):
+            total += 1
+            msg = messages.get(c.id)
+            text = f"`{_cell(msg)}`" if msg else "(not run here)"
+            lines.append(f"| `{c.id}` | {_cell(c.wrong)} | {text} | {_cell(c.allowed)} |")
+    lines.append(f"\n{total} cases.\n")
+    return "\n".join(lines)
+
+
+def doc_messages(text: str) -> dict[str, str]:
+    """{case id: message} of a rendered page."""
+    out = {}
+    for line in text.splitlines():
+        if line.startswith("| `") and line.count("|") >= 5:
+            cells = [c.strip() for c in line.strip().strip("|").split(" | ")]
+            cid = cells[0].strip("`")
+            msg = cells[2]
+            out[cid] = msg[1:-1].replace("\\|", "|") if msg.startswith("`") else None
+    return out
+
+
+def run_all() -> dict[str, str]:
+    """Runs every case that can run here; {case id: message}. Cases that need Scene.run to call the pre-flight take
+    the message of their scene-API twin (the same check) until it does."""
+    import warp as wp
+
+    wp.config.quiet = True
+    wp.config.log_level = wp.LOG_WARNING
+    twins = {"cli_dt_tiny": "dt_tiny", "cli_out_read_only": "out_read_only"}
+    messages, failed = {}, []
+    for c in CASES:
+        if skip_reason(c):
+            continue
+        with tempfile.TemporaryDirectory(prefix="pdsim-errors-") as tmp:
+            try:
+                messages[c.id] = capture(c, Path(tmp))
+            except AssertionError as exc:
+                failed.append(f"{c.id}: {exc}")
+    if failed:
+        raise SystemExit("cases that do not fail as documented:\n" + "\n".join(failed))
+    for cid, twin in twins.items():
+        if cid not in messages and twin in messages:
+            messages[cid] = messages[twin]
+    return messages
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--check", action="store_true", help="exit 1 when docs/errors.md is out of date")
+    args = p.parse_args(argv)
+    old = doc_messages(DOC.read_text()) if DOC.exists() else {}
+    messages = run_all()
+    for cid, msg in old.items():  # keep what this machine cannot run (e.g. the CUDA case on a GPU machine)
+        if cid not in messages and msg and any(c.id == cid for c in CASES):
+            messages[cid] = msg
+    text = render(messages)
+    if args.check:
+        current = DOC.read_text() if DOC.exists() else ""
+        if current != text:
+            print(f"{DOC} is out of date: run python tools/errors_catalogue.py", file=sys.stderr)
+            return 1
+        return 0
+    DOC.write_text(text)
+    print(f"wrote {DOC}: {len(CASES)} cases, {len(messages)} messages")
+    return 0
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("PYTHONWARNINGS", "ignore")
+    sys.exit(main())
