@@ -1,9 +1,12 @@
-"""Command line: ``pdsim run [SCENE.py] --out CACHE.usdc [--frames N] [--device cpu|cuda] [--dt SECONDS]`` and
+"""Command line: ``pdsim run [SCENE.py] --out CACHE.usdc [--frames N] [--device cpu|cuda] [--dt SECONDS | --dt-factor F]
+[--resume] [--checkpoint-interval SECONDS]`` and
 ``pdsim preview CACHE --out FILE.png|.gif|.mp4 [--frames A:B] [--color ATTR] [--camera ...] [--size WxH]``.
 
 A scene script is a Python file defining ``build_scene()`` that returns a :class:`pdsim.Scene`. With no script the
-shipped default scene runs. User mistakes print one line and exit with status 1; Ctrl-C exits with 130 and leaves the
-cache of the finished frames.
+shipped default scene runs. Exit status of ``pdsim run``: 0 done; 1 a user mistake (one line); 3 the simulation
+diverged (the watchdog's one line names the frame, the body and the likely cause; the cache keeps every finished
+frame); 130 Ctrl-C (SIGINT) and 143 SIGTERM: the run stops within a few steps, writes a checkpoint, prints one line
+and leaves the cache of the finished frames readable; ``--resume`` continues from the checkpoint.
 """
 
 from __future__ import annotations
@@ -14,7 +17,9 @@ import os
 import sys
 
 from . import __version__
-from .errors import ParameterError, PdsimError
+from .errors import InstabilityError, ParameterError, PdsimError
+
+EXIT_DIVERGED = 3  # exit status when the watchdog stops a diverging run
 
 
 def _parser(prog: str = "pdsim", *, with_scene: bool = True) -> argparse.ArgumentParser:
@@ -131,6 +136,29 @@ def _add_run_options(r: argparse.ArgumentParser):
     r.add_argument("--frames", type=int, help="number of frames after the rest pose (integer >= 1)")
     r.add_argument("--device", choices=["cpu", "cuda"], help="Warp device (default: cuda when present, else cpu)")
     r.add_argument("--dt", type=float, help="time step in seconds (default: automatic stable step)")
+    r.add_argument(
+        "--dt-factor",
+        metavar="F",
+        help="run at F times the automatic time step (F > 0; default 1; above 1 the run may diverge, which the "
+        "watchdog catches). Not with --dt",
+    )
+    r.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue from the checkpoint <stem>.checkpoint.npz beside --out (written every --checkpoint-interval "
+        "and when stopped by SIGTERM or Ctrl-C); the frames after it go to <stem>.from<NNNNNN><suffix> and "
+        "<stem>.segments.json lists which cache holds which frames",
+    )
+    r.add_argument(
+        "--checkpoint-interval",
+        metavar="SECONDS",
+        help="wall time between checkpoints (default 60; 0: every frame; 'off': none, not even when stopped)",
+    )
+    r.add_argument(
+        "--check-interval",
+        metavar="STEPS",
+        help="steps between the watchdog's divergence checks (default 16; also at every frame end)",
+    )
     r.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -162,30 +190,109 @@ def _resolve_device(name: str | None) -> str | None:
     return "cuda"
 
 
+def _run_settings(args) -> dict:
+    """Scene.run keyword arguments of the run options (one-line ParameterErrors for bad values)."""
+    settings = {}
+    if args.dt_factor is not None:
+        factor = _number("dt-factor", args.dt_factor, float, "a number > 0 (times the automatic time step)")
+        if not factor > 0.0 or factor != factor or factor == float("inf"):
+            raise ParameterError("dt-factor", args.dt_factor, "a finite number > 0 (times the automatic time step)")
+        if args.dt is not None:
+            raise ParameterError("dt-factor", args.dt_factor, "left out when --dt is given (give one of the two)")
+        settings["dt_factor"] = factor
+    interval = args.checkpoint_interval
+    if interval is not None:
+        if interval.strip().lower() == "off":
+            settings["checkpoint_interval_s"] = None
+        else:
+            value = _number("checkpoint-interval", interval, float, "seconds >= 0, or 'off'")
+            if not value >= 0.0 or value == float("inf"):
+                raise ParameterError("checkpoint-interval", interval, "seconds >= 0, or 'off'")
+            settings["checkpoint_interval_s"] = value
+    if args.check_interval is not None:
+        steps = _number("check-interval", args.check_interval, int, "an integer >= 1")
+        if steps < 1:
+            raise ParameterError("check-interval", args.check_interval, "an integer >= 1")
+        settings["check_interval"] = steps
+    if args.resume:
+        settings["resume"] = True
+    return settings
+
+
+def _one_line_warning(message, category, filename, lineno, file=None, line=None):
+    print(f"pdsim: warning: {message}", file=sys.stderr)
+
+
 def _execute(build_scene, args) -> int:
+    import signal
+    import warnings
+
     import warp as wp
 
+    from .checkpoint import StopRequest, signal_exit_code
     from .scene import Scene
 
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING  # no per-module load lines; warnings and errors still show
+    settings = _run_settings(args)
     scene = build_scene()
     if not isinstance(scene, Scene):
         raise ParameterError("build_scene()", type(scene).__name__, "a function returning a pdsim.Scene")
     out = args.out or f"{scene.name}.usdc"
+    stop = StopRequest()
+    in_main = _is_main_thread()
+    if in_main:
+        stop.install()
+    previous = warnings.showwarning
+    warnings.showwarning = _one_line_warning
     try:
         report = scene.run(
-            out, frames=args.frames, device=_resolve_device(args.device), dt=args.dt, progress=not args.quiet
+            out,
+            frames=args.frames,
+            device=_resolve_device(args.device),
+            dt=args.dt,
+            progress=not args.quiet,
+            stop=stop,
+            **settings,
         )
-    except KeyboardInterrupt:
-        print(f"pdsim: interrupted; {out} holds the frames finished so far", file=sys.stderr)
-        return 130
+    except InstabilityError as exc:
+        print(f"pdsim: error: {exc}", file=sys.stderr)
+        return EXIT_DIVERGED
+    except KeyboardInterrupt as exc:
+        signum = getattr(exc, "signal", None) or stop.signal or signal.SIGINT
+        where = getattr(exc, "cache", None) or out
+        note = getattr(exc, "note", "")
+        checkpoint = getattr(exc, "checkpoint", None)
+        resume = f"; checkpoint written: continue with --resume ({checkpoint})" if checkpoint else ""
+        name = signal.Signals(signum).name if signum in set(signal.Signals) else str(signum)
+        print(
+            f"pdsim: interrupted; {where} holds the frames finished so far ({note or 'see the cache'}){resume} "
+            f"[{name}]",
+            file=sys.stderr,
+        )
+        return signal_exit_code(signum)
+    finally:
+        warnings.showwarning = previous
+        if in_main:
+            stop.uninstall()
+    span = f"{report.frames_written} frames"
+    if report.first_frame:
+        last = report.first_frame + report.frames_written - 1
+        parts = ", ".join(f"{os.path.basename(p)} {a}..{b}" for p, a, b in report.segments)
+        span = f"frames {report.first_frame}..{last} (resumed; the run's caches: {parts})"
     print(
-        f"pdsim: wrote {report.path}: {report.frames_written} frames, {report.summary}, "
+        f"pdsim: wrote {report.path}: {span}, {report.summary}, "
         f"dt={report.dt:.3g} s x {report.substeps_per_frame} substeps/frame, "
         f"{report.wall_seconds:.1f} s"
     )
     return 0
+
+
+def _is_main_thread() -> bool:
+    """Signal handlers can be installed from the main thread only."""
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -13,6 +13,10 @@ methods inside a step (contact between bodies of different methods):
     end_step(dt)       second half kick; time advances
 
 ``step(dt)`` runs the three in turn.
+
+Checkpoints: ``checkpoint() -> dict`` and ``restore(dict)`` capture and put back everything a run needs to continue
+bit for bit (pdsim/checkpoint.py, ``pdsim run --resume``); PointSolver's cover the shared kinematics and each method
+adds its own state (bonds, plastic state, contact, topology after fracture, lattice state).
 """
 
 from __future__ import annotations
@@ -55,6 +59,7 @@ class Solver(ABC):
     _force_time: float = 0.0
     time: float = 0.0
     step_count: int = 0
+    watchdog = None  # a pdsim.kinematics.Watchdog the scene attached, used by check_state
 
     @classmethod
     def requested_features(cls, bodies, context: SolverContext) -> dict:
@@ -122,6 +127,40 @@ class Solver(ABC):
         """{(body name, condition name): force [N], float64 [3]} the boundary conditions exert now."""
         return {}
 
+    # -- checkpoints ----------------------------------------------------------------------------------------------
+    def checkpoint(self) -> dict:
+        """Everything a run needs to continue from the current state exactly as if it had not stopped: a nested dict
+        of numpy arrays and plain scalars (int, float, str, bool, None), e.g. {"time": t, "u": array, ...}. Arrays
+        are host copies of the device state, bit for bit (pdsim/checkpoint.py writes them to ``<stem>.checkpoint.npz``).
+        The contract: ``restore(checkpoint())`` on a solver built from the same bodies leaves it stepping exactly as
+        the one checkpointed (bit-identical on the CPU)."""
+        raise FeatureNotAvailableError(f"{type(self).__name__} ({self.method}) cannot write checkpoints")
+
+    def restore(self, state: dict) -> None:
+        """Puts the state of :meth:`checkpoint` back into this solver (built from the same bodies and context)."""
+        raise FeatureNotAvailableError(f"{type(self).__name__} ({self.method}) cannot restore checkpoints")
+
+
+def array_state(array) -> np.ndarray:
+    """A host copy of a Warp array (numpy; vectors as [n, 3], bit for bit), or None for None."""
+    return None if array is None else np.array(array.numpy(), copy=True)
+
+
+def assign_state(array, values, name: str = "array") -> None:
+    """Copies checkpointed ``values`` (numpy) into the Warp ``array`` in place (same shape required)."""
+    from .errors import ParameterError
+
+    if array is None or values is None:
+        if (array is None) != (values is None):
+            raise ParameterError(name, "checkpoint", "the state of a solver built from the same scene")
+        return
+    values = np.asarray(values)
+    if tuple(array.numpy().shape) != tuple(values.shape):
+        raise ParameterError(
+            name, f"shape {values.shape}", f"shape {tuple(array.numpy().shape)} (a checkpoint of the same scene)"
+        )
+    array.assign(values)
+
 
 class PointSolver(Solver):
     """A solver whose state lives on points with mass, integrated by the shared kinematics (pdsim/kinematics.py).
@@ -134,6 +173,8 @@ class PointSolver(Solver):
 
     def begin_step(self, dt: float) -> None:
         """Kick-drift of the shared kinematics, then the colliders at t + dt."""
+        if self.watchdog is not None and self.kin.watchdog is not self.watchdog:
+            self.watchdog.bind(self.kin)  # the kinematics were rebuilt (FEM fracture)
         self._force_time = self.time + dt
         self.kin.begin_step(self.time, dt)
         self.apply_colliders(self._force_time, dt)
@@ -164,7 +205,50 @@ class PointSolver(Solver):
             self.step(dt)
 
     def check_state(self, speed_limit: float) -> None:
-        self.kin.check(speed_limit, f"at t={self.time:.6g} s (step {self.step_count}) in {self.summary()}")
+        where = f"at t={self.time:.6g} s (step {self.step_count}) in {self.summary()}"
+        if self.watchdog is not None:
+            self.watchdog.check(speed_limit, where)
+        else:
+            self.kin.check(speed_limit, where)
+
+    # -- checkpoints of the shared kinematics -----------------------------------------------------------------------
+    def kinematics_checkpoint(self) -> dict:
+        """The shared point state: u, v, a, the kinds and conditions in force (point_kind, active_kind,
+        active_velocity), the force array, time, step count and the next kick."""
+        kin = self.kin
+        return {
+            "time": float(self.time),
+            "step_count": int(self.step_count),
+            "force_time": float(self._force_time),
+            "next_kick": int(kin.next_kick),
+            "kin_time": float(kin.time),
+            "point_count": int(kin.point_count),
+            "u": array_state(kin.u),
+            "v": array_state(kin.v),
+            "a": array_state(kin.a),
+            "point_kind": array_state(kin.point_kind),
+            "active_kind": array_state(kin.active_kind),
+            "active_velocity": array_state(kin.active_velocity),
+            "force": array_state(self.force),
+        }
+
+    def kinematics_restore(self, state: dict) -> None:
+        """Puts :meth:`kinematics_checkpoint` back (the kinematics must have the same point count)."""
+        kin = self.kin
+        for name in ("u", "v", "a", "point_kind", "active_kind", "active_velocity"):
+            assign_state(getattr(kin, name), state[name], name)
+        assign_state(self.force, state["force"], "force")
+        kin.next_kick = int(state["next_kick"])
+        kin.time = float(state["kin_time"])
+        self.time = float(state["time"])
+        self.step_count = int(state["step_count"])
+        self._force_time = float(state["force_time"])
+
+    def checkpoint(self) -> dict:
+        return {"kinematics": self.kinematics_checkpoint()}
+
+    def restore(self, state: dict) -> None:
+        self.kinematics_restore(state["kinematics"])
 
     def reaction_forces(self) -> dict:
         return self.kin.reactions(self.force, self.time)
@@ -224,4 +308,13 @@ def solver_for(body) -> type:
     return SOLVERS[method]
 
 
-__all__ = ["SOLVERS", "PointSolver", "Solver", "SolverContext", "register_solver", "solver_for"]
+__all__ = [
+    "SOLVERS",
+    "PointSolver",
+    "Solver",
+    "SolverContext",
+    "array_state",
+    "assign_state",
+    "register_solver",
+    "solver_for",
+]

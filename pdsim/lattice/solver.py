@@ -491,7 +491,9 @@ class SolverLattice(Solver):
 
         bodies = state["bodies"]
         if len(bodies) != len(self._runtimes):
-            raise ParameterError("checkpoint", f"{len(bodies)} lattice bodies", f"{len(self._runtimes)} (the same scene)")
+            raise ParameterError(
+                "checkpoint", f"{len(bodies)} lattice bodies", f"{len(self._runtimes)} (the same scene)"
+            )
         for i, r in enumerate(self._runtimes):
             b = bodies[str(i)]
             if b["name"] != r.body.name:

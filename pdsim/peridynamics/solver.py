@@ -307,13 +307,61 @@ class SolverPeridynamics(PointSolver):
 
     def check_state(self, speed_limit: float):
         """Raises InstabilityError if a displacement or velocity is not finite or a speed exceeds ``speed_limit``
-        [m/s]."""
-        self.kin.check(
-            speed_limit,
-            f"at t={self.time:.6g} s (step {self.step_count})",
-            hint=f"the time step is too large for this material and spacing (stable estimate "
-            f"{self.stable_time_step():.3g} s): use a smaller --dt or leave it automatic",
+        [m/s]; with a watchdog attached (pdsim.kinematics.Watchdog, as Scene.run does) also when the energy exceeds
+        what the run started with plus the work put in, or the dilatation leaves its bounds."""
+        where = f"at t={self.time:.6g} s (step {self.step_count})"
+        hint = (
+            f"the time step is too large for this material and spacing (stable estimate "
+            f"{self.stable_time_step():.3g} s): use a smaller --dt or leave it automatic"
         )
+        if self.watchdog is not None:
+            self.watchdog.check(speed_limit, where, hint)
+        else:
+            self.kin.check(speed_limit, where, hint=hint)
+
+    def checkpoint(self) -> dict:
+        """The state to continue this run exactly (pdsim.solver.Solver.checkpoint): the shared kinematics, the bond
+        state (live flags, plastic extensions, equivalent plastic strain, the step's dilatation and bond cache) and
+        particle contact's stiffness-cap scales and exposure."""
+        from ..solver import array_state
+
+        s = self.state
+        out = {"kinematics": self.kinematics_checkpoint(), "bonds": {}}
+        for name in ("theta", "bp", "force_density", "bond_ne", "bond_lambda", "bond_alive", "stretch_min"):
+            out["bonds"][name] = array_state(getattr(s, name))
+        out["bonds"]["bond_plastic"] = array_state(s.bond_plastic)
+        out["bonds"]["eqps"] = array_state(s.eqps)
+        if self.contact is not None:
+            c = self.contact
+            out["contact"] = {
+                "scale": array_state(c._scale),
+                "scale_next": array_state(c._scale_next),
+                "exposed": array_state(c.exposed),
+            }
+        return out
+
+    def restore(self, state: dict) -> None:
+        """Puts a :meth:`checkpoint` of a solver built from the same bodies back; fragment labels and surfaces are
+        recomputed from the restored bonds at the next output."""
+        from ..errors import ParameterError
+        from ..solver import assign_state
+
+        if int(state["kinematics"]["point_count"]) != self.particle_count:
+            raise ParameterError(
+                "checkpoint", f"{state['kinematics']['point_count']} particles", f"{self.particle_count} particles"
+            )
+        self.kinematics_restore(state["kinematics"])
+        s = self.state
+        for name, values in state["bonds"].items():
+            assign_state(getattr(s, name), values, name)
+        if self.contact is not None:
+            c = state.get("contact")
+            if c is None:
+                raise ParameterError("checkpoint", "no contact state", "a checkpoint of a scene with particle contact")
+            assign_state(self.contact._scale, c["scale"], "contact scale")
+            assign_state(self.contact._scale_next, c["scale_next"], "contact scale")
+            assign_state(self.contact.exposed, c["exposed"], "contact exposure")
+        self._fragments = None
 
     # -- scene integration --------------------------------------------------------------------------------------------
     @property
