@@ -26,8 +26,8 @@ def warn_if_above_estimate(dt: float, dt_crit: float):
     """Warns when a user time step exceeds the (conservative) stable estimate; divergence is still detected."""
     if dt > dt_crit:
         warnings.warn(
-            f"time step {dt:.3g} s exceeds the stable estimate {dt_crit:.3g} s; the run is checked for "
-            "divergence every frame",
+            f"time step {dt:.3g} s exceeds the stable estimate {dt_crit:.3g} s; the watchdog checks the run for "
+            "divergence every few steps",
             stacklevel=3,
         )
 

@@ -696,7 +696,16 @@ def markdown(records, *, command: str, wall: float) -> str:
         f"    {command}",
         "",
     ]
-    return "\n".join(parts)
+    return "\n".join(_wrap(p) for p in parts)
+
+
+def _wrap(paragraph: str, width: int = 120) -> str:
+    """Prose paragraphs wrapped at ``width`` (tables, headings and indented lines as they are)."""
+    import textwrap
+
+    if not paragraph or paragraph.startswith(("|", "#", " ")) or "\n" in paragraph:
+        return paragraph
+    return textwrap.fill(paragraph, width=width, break_long_words=False, break_on_hyphens=False)
 
 
 def overhead(frames: int = 12, repeats: int = 5, *, log=print) -> dict:
@@ -734,14 +743,44 @@ def overhead(frames: int = 12, repeats: int = 5, *, log=print) -> dict:
     finally:
         pdsim.Scene._attach_watchdogs = real
         shutil.rmtree(folder, ignore_errors=True)
-    best = {k: min(v) for k, v in times.items()}
+    median = {k: float(np.median(v)) for k, v in times.items()}
+    parts = _check_costs(build_scene(), report.substeps_per_frame)
     return {
         "frames": frames,
         "particles": report.particle_count,
         "steps_per_frame": report.substeps_per_frame,
-        "times": times,
-        "overhead": best["watchdog"] / best["none"] - 1.0,
+        "cpu_times": times,
+        "overhead_of_medians": median["watchdog"] / median["none"] - 1.0,
+        **parts,
     }
+
+
+def _check_costs(scene, steps_per_frame: int) -> dict:
+    """CPU time [ms] of one fast check, one frame-end check and one step of ``scene``'s solver, and the share of a
+    frame the checks take (a frame: steps_per_frame steps, a fast check every 16, a frame-end check)."""
+    from pdsim.kinematics import Watchdog
+
+    solver = scene.build_solvers(device="cpu", **_no_preflight(scene))[0]
+    dt = scene.frame_time / steps_per_frame
+    watchdog = Watchdog(solver, energy_floor=1.0e-9)
+    pdsim.Scene.advance_frame([solver], dt, 20)
+
+    def cost(fn, n):
+        t0 = time.process_time()
+        for _ in range(n):
+            fn()
+        return (time.process_time() - t0) / n
+
+    def full():
+        watchdog.full_check = True
+        watchdog.check(1.0e30, "")
+
+    fast = cost(lambda: watchdog.check(1.0e30, ""), 40)
+    frame_end = cost(full, 20)
+    solver.watchdog = solver.kin.watchdog = None
+    step = cost(lambda: pdsim.Scene.advance_frame([solver], dt, 16), 4) / 16
+    share = ((steps_per_frame // 16) * fast + frame_end) / (steps_per_frame * step)
+    return {"fast_check_ms": fast * 1e3, "frame_end_check_ms": frame_end * 1e3, "step_ms": step * 1e3, "share": share}
 
 
 def _warp_version() -> str:
@@ -760,6 +799,7 @@ def main(argv=None) -> int:
     p.add_argument(
         "--overhead", type=int, metavar="FRAMES", help="only measure the watchdog's overhead on the default scene"
     )
+    p.add_argument("--from-json", metavar="FILE", help="only write the markdown of the records of an earlier run")
     args = p.parse_args(argv)
     import warp as wp
 
@@ -769,13 +809,25 @@ def main(argv=None) -> int:
         result = overhead(args.overhead)
         print(json.dumps(result, indent=1))
         return 0
+    command = "python tools/stress.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    if args.from_json:
+        with open(args.from_json) as f:
+            data = json.load(f)
+        records = [Record(**r) for r in data["records"]]
+        text = markdown(records, command=data["command"], wall=data["wall_s"])
+        if args.markdown:
+            with open(args.markdown, "w") as f:
+                f.write(text)
+        else:
+            print(text)
+        return 0
     start = time.perf_counter()
     records = run_all(cases(args.quick, tuple(args.methods), args.random))
     wall = time.perf_counter() - start
-    command = "python tools/stress.py " + " ".join(argv if argv is not None else sys.argv[1:])
     if args.json:
         with open(args.json, "w") as f:
-            json.dump([asdict(r) for r in records], f, indent=1, default=float)
+            payload = {"command": command.strip(), "wall_s": wall, "records": [asdict(r) for r in records]}
+            json.dump(payload, f, indent=1, default=float)
     text = markdown(records, command=command.strip(), wall=wall)
     if args.markdown:
         with open(args.markdown, "w") as f:
