@@ -132,6 +132,12 @@ def _preview(args) -> int:
 
 
 def _add_run_options(r: argparse.ArgumentParser):
+    r.add_argument(
+        "--explain",
+        action="store_true",
+        help="print what the scene runs (per body: live features, the kernels a step launches, the state allocated, "
+        "the time step and substeps) and exit without simulating or writing anything",
+    )
     r.add_argument("--out", help="output cache (.usdc, .usda or .usd); default: <scene name>.usdc")
     r.add_argument("--frames", type=int, help="number of frames after the rest pose (integer >= 1)")
     r.add_argument("--device", choices=["cpu", "cuda"], help="Warp device (default: cuda when present, else cpu)")
@@ -238,6 +244,11 @@ def _execute(build_scene, args) -> int:
     scene = build_scene()
     if not isinstance(scene, Scene):
         raise ParameterError("build_scene()", type(scene).__name__, "a function returning a pdsim.Scene")
+    if getattr(args, "explain", False):
+        from .explain import explain_scene
+
+        print(explain_scene(scene, _resolve_device(args.device) or "cpu", dt=args.dt))
+        return 0
     out = args.out or f"{scene.name}.usdc"
     stop = StopRequest()
     in_main = _is_main_thread()

@@ -382,3 +382,12 @@ def test_keyboard_interrupt_cli_returns_130(tmp_path, monkeypatch, capsys, scene
     assert re.search(r"interrupted; .*interrupted\.usdc holds the frames finished so far", err)
     assert "Traceback" not in err
     _assert_two_finished_frames(out)
+
+
+def test_run_explain_prints_the_plan_and_writes_nothing(tmp_path):
+    """`pdsim run --explain`: exit 0, prints the live features and the kernels one step launches (the default scene
+    launches dilatation and force), and writes no cache."""
+    proc = _cli("run", "--explain", "--device", "cpu", "--out", tmp_path / "x.usdc", cwd=tmp_path, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "live features" in proc.stdout and "dilatation" in proc.stdout and "force" in proc.stdout
+    assert list(tmp_path.iterdir()) == []
