@@ -303,7 +303,9 @@ class SolverPeridynamics(PointSolver):
         """Ground plane and colliders on the free particles (spheres of radius h/2) at ``time`` [s]."""
         m = self.model
         for c in self._colliders_all:
-            c.apply(m.rest_positions, self.kin.u, self.kin.v, m.radius, self.kin.point_kind, time, dt, mass=self.kin.mass)
+            c.apply(
+                m.rest_positions, self.kin.u, self.kin.v, m.radius, self.kin.point_kind, time, dt, mass=self.kin.mass
+            )
 
     def check_state(self, speed_limit: float):
         """Raises InstabilityError if a displacement or velocity is not finite or a speed exceeds ``speed_limit``
