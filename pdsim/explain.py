@@ -19,6 +19,8 @@ import copy
 import math
 import time
 
+import numpy as np
+
 from .errors import ParameterError
 
 __all__ = ["capture_launches", "explain_scene", "scene_plan"]
@@ -228,11 +230,62 @@ def _solver_label(solver, index: int) -> str:
     return f"{index}:{type(solver).__name__}"
 
 
-def scene_plan(scene, device: str | None = "cpu", *, dt: float | None = None) -> dict:
+def _one_step(rec, labels, solvers, coupling, step_dt) -> None:
+    """One step of every solver, as Scene.advance_frame takes it (the launches go to ``rec`` under each owner)."""
+    from .solver import PointSolver
+
+    coupled = [(lab, s) for lab, s in zip(labels, solvers) if isinstance(s, PointSolver)]
+    for lab, s in zip(labels, solvers):
+        if not isinstance(s, PointSolver):
+            rec.owner = lab
+            s.step()  # a lattice step (a frame is steps_per_frame of them)
+    if len(coupled) == 1 and coupling is None:
+        rec.owner = coupled[0][0]
+        coupled[0][1].step(step_dt)
+    elif coupled:  # the phases of Scene.advance_frame, one step
+        for lab, s in coupled:
+            rec.owner = lab
+            s.begin_step(step_dt)
+        for lab, s in coupled:
+            rec.owner = lab
+            s.compute_forces()
+        if coupling is not None:
+            rec.owner = "method_contact"
+            coupling.apply(step_dt)
+        for lab, s in coupled:
+            rec.owner = lab
+            s.end_step(step_dt)
+
+
+def _scene_bounds(scene):
+    """World corners of the bodies at rest and of the projectiles' start (as Scene.run computes them)."""
+    corners = []
+    for b in scene.bodies:
+        x = np.asarray(
+            getattr(b, "point_rest_positions", None) if hasattr(b, "point_rest_positions") else b.rest_positions
+        )
+        corners += [x.min(axis=0), x.max(axis=0)]
+    corners += [np.asarray(c.pose(0.0)[0]) for c in scene.colliders if hasattr(c, "pose")]
+    return np.min(corners, axis=0), np.max(corners, axis=0)
+
+
+def scene_plan(
+    scene,
+    device: str | None = "cpu",
+    *,
+    dt: float | None = None,
+    dt_factor: float = 1.0,
+    check_interval: int = 16,
+) -> dict:
     """The facts :func:`explain_scene` prints, as a dict: scene fields, ``dt``, ``stable_dt``, ``substeps_per_frame``,
-    ``build_seconds`` and ``solvers`` (per solver: ``method``, ``class``, ``summary``, ``features``, ``bodies``,
-    ``step_kernels`` (list of (name, dim) in launch order), ``step_operations`` (every recorded entry, kernels and
-    hash-grid builds, copies, refits), ``state``, ``per_frame_kernels``), and ``method_contact_kernels``."""
+    ``build_seconds``, ``check_interval``, ``watchdog`` (whether one was attached, as Scene.run does) and ``solvers``
+    (per solver: ``method``, ``class``, ``summary``, ``features``, ``bodies``, ``step_kernels`` (list of (name, dim)
+    in launch order), ``step_operations`` (every recorded entry: kernels and hash-grid builds, copies, refits),
+    ``check_kernels`` (the watchdog check every ``check_interval`` steps), ``per_frame_kernels`` (the frame-end
+    check), ``state``), and ``method_contact_kernels``.
+
+    The solvers are built and watched as Scene.run builds and watches them; one step is taken untimed (work the
+    watchdog defers to the next step shows from the second step on), then one step is recorded."""
     import warp as wp
 
     from .solver import PointSolver
@@ -241,6 +294,10 @@ def scene_plan(scene, device: str | None = "cpu", *, dt: float | None = None) ->
         raise ParameterError("scene", scene, "a pdsim.Scene with at least one body")
     if dt is not None and not (dt > 0.0 and math.isfinite(dt)):
         raise ParameterError("dt", dt, "a finite time step > 0 [s] or None")
+    if not (dt_factor > 0.0 and math.isfinite(dt_factor)):
+        raise ParameterError("dt_factor", dt_factor, "a finite number > 0")
+    if isinstance(check_interval, bool) or int(check_interval) != check_interval or check_interval < 1:
+        raise ParameterError("check_interval", check_interval, "an integer >= 1")
     work = copy.copy(scene)
     work.colliders = [_fresh_copy(c) for c in scene.colliders]
     work.ground = _fresh_copy(scene.ground)
@@ -250,39 +307,36 @@ def scene_plan(scene, device: str | None = "cpu", *, dt: float | None = None) ->
     build_seconds = time.perf_counter() - t0
     stable_dt = min(s.stable_time_step() for s in solvers)
     frame_dt = float(scene.frame_time)
-    chosen = min(scene.time_step_safety * stable_dt, frame_dt) if dt is None else float(dt)
+    chosen = min(dt_factor * scene.time_step_safety * stable_dt, frame_dt) if dt is None else float(dt)
     substeps = max(1, math.ceil(frame_dt / chosen - 1.0e-9))
     step_dt = frame_dt / substeps
+    speed_limit = work._speed_limit(solvers) if hasattr(work, "_speed_limit") else math.inf
 
-    states = [device_state(s) for s in solvers]
     labels = [_solver_label(s, i) for i, s in enumerate(solvers)]
-    coupled = [(lab, s) for lab, s in zip(labels, solvers) if isinstance(s, PointSolver)]
     coupling = work.method_contact(solvers)
+    watched = hasattr(work, "_attach_watchdogs") and hasattr(work, "_schedule_watchdogs")
+    if watched:  # as Scene.run: a watchdog per solver with mass, checking every check_interval steps
+        dogs = work._attach_watchdogs(solvers, dt=step_dt, stable_dt=stable_dt, bounds=_scene_bounds(work))
+        work._schedule_watchdogs(
+            solvers, dogs, dt=step_dt, speed_limit=speed_limit, every=int(check_interval), stop=None
+        )
+    states = [device_state(s) for s in solvers]  # what the run holds before its first step
+    with capture_launches() as first:  # untimed: the first step (work deferred to the next step is not in it)
+        _one_step(first, labels, solvers, coupling, step_dt)
     with capture_launches() as rec:
+        _one_step(rec, labels, solvers, coupling, step_dt)
+    with capture_launches() as check_rec:  # the watchdog's check, every check_interval steps
         for lab, s in zip(labels, solvers):
-            if not isinstance(s, PointSolver):
-                rec.owner = lab
-                s.step()  # a lattice step (a frame is steps_per_frame of them)
-        if len(coupled) == 1 and coupling is None:
-            rec.owner = coupled[0][0]
-            coupled[0][1].step(step_dt)
-        else:  # the phases of Scene.advance_frame, one step
-            for lab, s in coupled:
-                rec.owner = lab
-                s.begin_step(step_dt)
-            for lab, s in coupled:
-                rec.owner = lab
-                s.compute_forces()
-            if coupling is not None:
-                rec.owner = "method_contact"
-                coupling.apply(step_dt)
-            for lab, s in coupled:
-                rec.owner = lab
-                s.end_step(step_dt)
-    with capture_launches() as frame_rec:  # the per-frame watchdog Scene.run calls after each frame
+            check_rec.owner = lab
+            if getattr(s, "watchdog", None) is not None:
+                s.check_state(speed_limit)
+    with capture_launches() as frame_rec:  # the frame-end check Scene.run makes after each frame
         for lab, s in zip(labels, solvers):
             frame_rec.owner = lab
-            s.check_state(math.inf)
+            dog = getattr(s, "watchdog", None)
+            if dog is not None:
+                dog.full_check = True
+            s.check_state(speed_limit)
     wp.synchronize()
 
     out_solvers = []
@@ -299,6 +353,8 @@ def scene_plan(scene, device: str | None = "cpu", *, dt: float | None = None) ->
             "stable_dt": float(s.stable_time_step()),
             "step_kernels": rec.kernels(lab),
             "step_operations": [e for e in rec.entries if e["owner"] == lab],
+            "first_step_kernels": first.kernels(lab),
+            "check_kernels": check_rec.kernels(lab),
             "per_frame_kernels": frame_rec.kernels(lab),
             "state": st,
             "allocated_in_first_step": first_step,
@@ -316,7 +372,10 @@ def scene_plan(scene, device: str | None = "cpu", *, dt: float | None = None) ->
         "dt_given": dt is not None,
         "stable_dt": float(stable_dt),
         "time_step_safety": float(scene.time_step_safety),
+        "dt_factor": float(dt_factor),
         "substeps_per_frame": substeps,
+        "check_interval": int(check_interval),
+        "watchdog": bool(watched),
         "build_seconds": build_seconds,
         "solvers": out_solvers,
         "method_contact_kernels": rec.kernels("method_contact"),
@@ -377,7 +436,8 @@ def format_plan(plan: dict) -> str:
         f"scene '{plan['scene']}': {plan['frames']} frames at {plan['fps']:g} fps, {plan['frame_time']:.4g} s of "
         f"simulated time per frame; device {plan['device']}",
     ]
-    how = "given" if plan["dt_given"] else f"{plan['time_step_safety']:g} x the stable estimate"
+    factor = plan["dt_factor"] * plan["time_step_safety"]
+    how = "given" if plan["dt_given"] else f"{factor:g} x the stable estimate"
     lines.append(
         f"time step {plan['dt']:.4g} s ({how}; stable estimate {plan['stable_dt']:.4g} s), "
         f"{plan['substeps_per_frame']} substeps per frame, {plan['substeps_per_frame'] * plan['frames']} steps in all"
@@ -410,9 +470,15 @@ def format_plan(plan: dict) -> str:
             more = f" and {others} other device operation{'s' if others != 1 else ''}" if others else ""
             lines.append(f"  one step: {len(s['step_kernels'])} kernel launches{more}, in order:")
         lines += _kernel_lines(s["step_operations"], "    ")
+        if s["first_step_kernels"] != s["step_kernels"]:
+            names = ", ".join(_short_kernel(k) for k, _ in s["first_step_kernels"])
+            lines.append(f"  (the run's first step differs: {names})")
+        if s["check_kernels"]:
+            names = ", ".join(_short_kernel(k) for k, _ in s["check_kernels"])
+            lines.append(f"  every {plan['check_interval']} steps, the watchdog's check: {names}")
         if s["per_frame_kernels"]:
             names = ", ".join(_short_kernel(k) for k, _ in s["per_frame_kernels"])
-            lines.append(f"  per frame, after the substeps: {names} (the divergence watchdog), then the output views")
+            lines.append(f"  at each frame end, the watchdog's full check: {names}; then the output views")
         notes = [text for feat, text in _NOT_EVERY_STEP.items() if feat in s["features"] and feat != "contact"]
         if notes:
             lines.append("  not every step:")
@@ -439,12 +505,20 @@ def format_plan(plan: dict) -> str:
     return "\n".join(lines)
 
 
-def explain_scene(scene, device: str | None = "cpu", *, dt: float | None = None) -> str:
+def explain_scene(
+    scene,
+    device: str | None = "cpu",
+    *,
+    dt: float | None = None,
+    dt_factor: float = 1.0,
+    check_interval: int = 16,
+) -> str:
     """What ``scene`` will run, as text: per solver (one per method) its bodies, live features, the kernels one step
-    launches in order with their dims (recorded by wrapping ``warp.launch`` during one step of freshly built solvers),
-    the device arrays allocated (bytes), and the time step and substeps per frame (the policy of Scene.run; ``dt``
-    overrides the automatic step as ``pdsim run --dt`` does). The scene is not modified."""
-    return format_plan(scene_plan(scene, device, dt=dt))
+    launches in order with their dims (recorded by wrapping ``warp.launch`` during a step of freshly built solvers,
+    watched as Scene.run watches them), the watchdog's checks, the device arrays allocated (bytes), and the time step
+    and substeps per frame (the policy of Scene.run; ``dt`` and ``dt_factor`` as ``pdsim run --dt`` and
+    ``--dt-factor``; ``check_interval`` as ``--check-interval``). The scene is not modified."""
+    return format_plan(scene_plan(scene, device, dt=dt, dt_factor=dt_factor, check_interval=check_interval))
 
 
 if __name__ == "__main__":  # pragma: no cover - python -m pdsim.explain scenes/x.py [device]
