@@ -159,6 +159,7 @@ class SolverPeridynamics(PointSolver):
             self.features.add("colliders")
         self.time = 0.0
         self.step_count = 0
+        self._stable_dt = None  # the stable step, for the watchdog's message (computed on the first check)
         self._refresh_accelerations()
 
     # -- time step -----------------------------------------------------------------------------------------------
@@ -312,9 +313,11 @@ class SolverPeridynamics(PointSolver):
         [m/s]; with a watchdog attached (pdsim.kinematics.Watchdog, as Scene.run does) also when the energy exceeds
         what the run started with plus the work put in, or the dilatation leaves its bounds."""
         where = f"at t={self.time:.6g} s (step {self.step_count})"
+        if self._stable_dt is None:  # a bond pass: computed once, not at every check
+            self._stable_dt = self.stable_time_step()
         hint = (
             f"the time step is too large for this material and spacing (stable estimate "
-            f"{self.stable_time_step():.3g} s): use a smaller --dt or leave it automatic"
+            f"{self._stable_dt:.3g} s): use a smaller --dt or leave it automatic"
         )
         if self.watchdog is not None:
             self.watchdog.check(speed_limit, where, hint)
