@@ -1,6 +1,8 @@
 """Command line: ``pdsim run [SCENE.py] --out CACHE.usdc [--frames N] [--device cpu|cuda] [--dt SECONDS | --dt-factor F]
 [--resume] [--checkpoint-interval SECONDS]`` and
-``pdsim preview CACHE --out FILE.png|.gif|.mp4 [--frames A:B] [--color ATTR] [--camera ...] [--size WxH]``.
+``pdsim preview CACHE --out FILE.png|.gif|.mp4 [--frames A:B] [--color ATTR] [--camera ...] [--size WxH]``,
+``pdsim wedge SCENE.py --set NAME=V1,V2 [--set ...] --out DIR [--frames N] [--scheduler tcp://HOST:8786]`` (one cache
+per variant, on Dask) and ``pdsim bench accuracy [--quick] [--scheduler ...]`` (the run-time-vs-error map).
 
 A scene script is a Python file defining ``build_scene()`` that returns a :class:`pdsim.Scene`. With no script the
 shipped default scene runs. Exit status of ``pdsim run``: 0 done; 1 a user mistake (one line); 3 the simulation
@@ -31,7 +33,40 @@ def _parser(prog: str = "pdsim", *, with_scene: bool = True) -> argparse.Argumen
         r.add_argument("scene", nargs="?", help="scene script defining build_scene(); default: the shipped cantilever")
     _add_run_options(r)
     _add_preview_parser(sub)
+    _add_wedge_parser(sub)
+    b = sub.add_parser(
+        "bench",
+        help="measurements: 'pdsim bench accuracy [options]' runs the run-time-vs-error map (tools/accuracy_map.py)",
+        add_help=False,
+    )
+    b.add_argument("what", nargs="?", help="accuracy")
+    b.add_argument("options", nargs=argparse.REMAINDER, help="options of the benchmark ('--help' lists them)")
     return p
+
+
+def _add_wedge_parser(sub) -> None:
+    w = sub.add_parser(
+        "wedge",
+        help="run a scene once per combination of settings (on Dask), one USD cache per variant",
+        description="Run a scene script once per combination of --set values, one Dask task per variant (a "
+        "LocalCluster on this machine, or a farm's scheduler), each writing OUT/<stem>_vNN_<settings>.usdc, and "
+        "OUT/wedge.json listing them. Setting names: a build_scene keyword (spacing=0.02,0.01), scene.ATTR "
+        "(scene.fps=24,48), material.FIELD (material.fracture_energy=1,2,5), body.NAME.ATTR or "
+        "body.NAME.material.FIELD.",
+    )
+    w.add_argument("scene", help="scene script defining build_scene()")
+    w.add_argument(
+        "--set",
+        dest="settings",
+        action="append",
+        metavar="NAME=V1,V2,...",
+        help="a setting and its values (repeat --set for more settings; every combination runs)",
+    )
+    w.add_argument("--out", help="folder for the caches and wedge.json (made when missing)")
+    w.add_argument("--frames", help="frames per run (integer >= 1; default: the scene's own)")
+    w.add_argument("--scheduler", help="Dask scheduler address of a farm, tcp://HOST:8786 (default: a LocalCluster)")
+    w.add_argument("--workers", help="worker processes of the default LocalCluster (default: one per core)")
+    w.add_argument("--device", choices=["cpu", "cuda"], default="cpu", help="Warp device of the runs (default cpu)")
 
 
 def _add_preview_parser(sub) -> None:
@@ -139,9 +174,9 @@ def _add_run_options(r: argparse.ArgumentParser):
         "the time step and substeps) and exit without simulating or writing anything",
     )
     r.add_argument("--out", help="output cache (.usdc, .usda or .usd); default: <scene name>.usdc")
-    r.add_argument("--frames", type=int, help="number of frames after the rest pose (integer >= 1)")
+    r.add_argument("--frames", help="number of frames after the rest pose (integer >= 1)")
     r.add_argument("--device", choices=["cpu", "cuda"], help="Warp device (default: cuda when present, else cpu)")
-    r.add_argument("--dt", type=float, help="time step in seconds (default: automatic stable step)")
+    r.add_argument("--dt", help="time step in seconds (> 0; default: automatic stable step)")
     r.add_argument(
         "--dt-factor",
         metavar="F",
@@ -199,6 +234,12 @@ def _resolve_device(name: str | None) -> str | None:
 def _run_settings(args) -> dict:
     """Scene.run keyword arguments of the run options (one-line ParameterErrors for bad values)."""
     settings = {}
+    args.frames = _frames(args.frames)
+    if args.dt is not None:
+        dt = _number("dt", args.dt, float, "a time step in seconds > 0")
+        if not dt > 0.0 or dt == float("inf"):
+            raise ParameterError("dt", args.dt, "a finite time step in seconds > 0")
+        args.dt = dt
     if args.dt_factor is not None:
         factor = _number("dt-factor", args.dt_factor, float, "a number > 0 (times the automatic time step)")
         if not factor > 0.0 or factor != factor or factor == float("inf"):
@@ -225,6 +266,61 @@ def _run_settings(args) -> dict:
     return settings
 
 
+def _frames(text: str | None) -> int | None:
+    """--frames: an integer >= 1 (one-line ParameterError otherwise)."""
+    frames = _number("frames", text, int, "an integer >= 1")
+    if frames is not None and frames < 1:
+        raise ParameterError("frames", text, "an integer >= 1")
+    return frames
+
+
+def _wedge(args) -> int:
+    from . import sweep
+
+    if not args.settings:
+        raise ParameterError("set", None, "at least one --set NAME=V1,V2,... (the settings to vary)")
+    if args.out is None:
+        raise ParameterError("out", None, "a folder for the caches and wedge.json")
+    if os.path.exists(args.out) and not os.path.isdir(args.out):
+        raise ParameterError("out", args.out, "a folder (this path is an existing file)")
+    if not args.scene.endswith(".py") or not os.path.isfile(args.scene):
+        raise ParameterError("scene", args.scene, "an existing Python scene script (*.py)")
+    workers = _number("workers", args.workers, int, "an integer >= 1")
+    if workers is not None and workers < 1:
+        raise ParameterError("workers", args.workers, "an integer >= 1")
+    settings = sweep.parse_settings(args.settings)
+    records = sweep.run_wedge(
+        args.scene,
+        settings,
+        args.out,
+        scheduler=args.scheduler,
+        frames=_frames(args.frames),
+        device=_resolve_device(args.device),
+        workers=workers,
+    )
+    failed = [r for r in records if "failed" in r]
+    for r in records:
+        what = ", ".join(f"{k}={v}" for k, v in r["settings"].items())
+        if "failed" in r:
+            print(f"pdsim: variant {what}: failed: {r['failed']}", file=sys.stderr)
+        else:
+            print(f"pdsim: variant {what}: wrote {r['path']} ({r['frames_written']} frames, {r['seconds']:.1f} s)")
+    listing = os.path.join(args.out, "wedge.json")
+    print(f"pdsim: wedge of {len(records)} variants, {len(failed)} failed; list: {listing}")
+    return 1 if failed else 0
+
+
+def _bench(args) -> int:
+    from . import sweep
+
+    if args.what in (None, "-h", "--help"):
+        print("usage: pdsim bench accuracy [--quick] [--scheduler tcp://HOST:8786] [--workers N] [--out DIR] ...")
+        return 0 if args.what else 2
+    if args.what != "accuracy":
+        raise ParameterError("bench", args.what, "'accuracy' (the run-time-vs-error map)")
+    return sweep.bench_accuracy(list(args.options))
+
+
 def _one_line_warning(message, category, filename, lineno, file=None, line=None):
     print(f"pdsim: warning: {message}", file=sys.stderr)
 
@@ -247,7 +343,15 @@ def _execute(build_scene, args) -> int:
     if getattr(args, "explain", False):
         from .explain import explain_scene
 
-        print(explain_scene(scene, _resolve_device(args.device) or "cpu", dt=args.dt))
+        print(
+            explain_scene(
+                scene,
+                _resolve_device(args.device) or "cpu",
+                dt=args.dt,
+                dt_factor=settings.get("dt_factor", 1.0),
+                check_interval=settings.get("check_interval", 16),
+            )
+        )
         return 0
     out = args.out or f"{scene.name}.usdc"
     stop = StopRequest()
@@ -306,16 +410,44 @@ def _is_main_thread() -> bool:
     return threading.current_thread() is threading.main_thread()
 
 
+_VALUE_OPTIONS = ("--dt", "--dt-factor", "--frames", "--fps", "--checkpoint-interval", "--check-interval", "--workers")
+
+
+def _attach_negative_values(argv: list[str]) -> list[str]:
+    """``--dt -1e-5`` as ``--dt=-1e-5``: argparse takes a word like -1e-5 for an option, so a negative value would
+    end in argparse's own error instead of the one-line pdsim message naming the allowed range."""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        word = argv[i]
+        if word in _VALUE_OPTIONS and i + 1 < len(argv) and argv[i + 1].startswith("-"):
+            try:
+                float(argv[i + 1])
+            except ValueError:
+                pass
+            else:
+                out.append(f"{word}={argv[i + 1]}")
+                i += 2
+                continue
+        out.append(word)
+        i += 1
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``pdsim`` command."""
     parser = _parser()
-    args = parser.parse_args(argv)
-    if args.command not in ("run", "preview"):
+    args = parser.parse_args(_attach_negative_values(sys.argv[1:] if argv is None else list(argv)))
+    if args.command not in ("run", "preview", "wedge", "bench"):
         parser.print_help()
         return 2
     try:
         if args.command == "preview":
             return _preview(args)
+        if args.command == "wedge":
+            return _wedge(args)
+        if args.command == "bench":
+            return _bench(args)
         if args.scene:
             build = load_scene_script(args.scene)
         else:
@@ -330,7 +462,7 @@ def run_script(build_scene, argv: list[str] | None = None) -> int:
     """For scene scripts: ``if __name__ == "__main__": run_script(build_scene)``; takes the options of ``pdsim run``."""
     parser = argparse.ArgumentParser(prog=os.path.basename(sys.argv[0]), description="run this pdsim scene")
     _add_run_options(parser)
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_attach_negative_values(sys.argv[1:] if argv is None else list(argv)))
     try:
         code = _execute(build_scene, args)
     except PdsimError as exc:

@@ -391,3 +391,28 @@ def test_run_explain_prints_the_plan_and_writes_nothing(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "live features" in proc.stdout and "dilatation" in proc.stdout and "force" in proc.stdout
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "option, value, allowed",
+    [
+        ("--frames", "2.5", "integer >= 1"),
+        ("--frames", "0", "integer >= 1"),
+        ("--dt", "-1e-5", "> 0"),
+        ("--dt", "0", "> 0"),
+        ("--dt", "abc", "> 0"),
+        ("--dt-factor", "-2", "> 0"),
+        ("--check-interval", "-3", "integer >= 1"),
+    ],
+)
+def test_bad_run_option_is_one_line_error(tmp_path, capsys, scene_script, option, value, allowed):
+    """A bad number for a run option (negative, fractional, not a number) is the one-line pdsim error naming the
+    option and its allowed range, exit 1, before the scene is built; no cache is written."""
+    from pdsim.cli import main
+
+    out = tmp_path / "x.usdc"
+    assert main(["run", str(scene_script), "--out", str(out), option, value]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("pdsim: error:") and "\n" not in err, err
+    assert option.lstrip("-") in err and value in err and allowed in err, err
+    assert not out.exists()

@@ -98,6 +98,48 @@ def test_tiny_wedge_writes_one_cache_per_variant(client, scene_script, tmp_path)
     assert [v["path"] for v in manifest["variants"]] == paths
 
 
+def test_wedge_command_line(client, scene_script, tmp_path, capsys):
+    """`pdsim wedge SCENE --set NAME=V1,V2 --out DIR --scheduler ADDRESS`: the same wedge through the command line,
+    pointed at a scheduler by its address (here the in-process cluster's), one cache per variant; bad input is a
+    one-line error naming the option before any task runs."""
+    from pxr import Usd
+
+    from pdsim.cli import main
+
+    out = tmp_path / "cli_wedge"
+    address = client.scheduler.address
+    argv = ["wedge", scene_script, "--set", "spacing=0.025,0.0125", "--out", str(out), "--frames", "1"]
+    assert main([*argv, "--scheduler", address]) == 0
+    printed = capsys.readouterr().out
+    manifest = json.loads((out / "wedge.json").read_text())
+    paths = [v["path"] for v in manifest["variants"]]
+    assert len(paths) == 2 and all(p in printed for p in paths)
+    counts = []
+    for p in paths:
+        stage = Usd.Stage.Open(p)
+        assert stage.GetEndTimeCode() == 1
+        points = next(x for x in stage.Traverse() if x.GetTypeName() == "Points")
+        counts.append(len(points.GetAttribute("points").Get(1)))
+    assert counts[1] == 8 * counts[0]  # half the spacing: eight times the particles
+    for bad, field in (
+        (["wedge", scene_script, "--out", str(out)], "set"),
+        (["wedge", scene_script, "--set", "spacing=0.02"], "out"),
+        (["wedge", scene_script, "--set", "spacing", "--out", str(out)], "--set"),
+        (["wedge", scene_script, "--set", "spacing=0.02", "--out", str(out), "--frames", "1.5"], "frames"),
+        (["wedge", scene_script, "--set", "spacingg=0.02", "--out", str(out)], "keyword of build_scene"),
+    ):
+        assert main(bad) == 1
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("pdsim: error:") and field in err and "\n" not in err, err
+
+
+def test_bench_command_checks_its_name(capsys):
+    from pdsim.cli import main
+
+    assert main(["bench", "speed"]) == 1
+    assert "accuracy" in capsys.readouterr().err
+
+
 def test_wedge_settings_are_applied_and_checked(scene_script):
     """Keyword settings go to build_scene, dotted ones onto the built scene; unknown names and bad values fail
     before any task runs, with the setting named."""

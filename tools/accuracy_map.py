@@ -617,21 +617,26 @@ read as real). The shipped defaults are all on or next to the Pareto front, so n
 FARM = """
 ### Running the sweep on a farm
 
-`pdsim.sweep.run_sweep(problem, grid, scheduler=...)`, `run_sweeps` and `run_wedge` take a Dask scheduler address:
-start `dask scheduler` on one machine and `dask worker tcp://HOST:8786 --nthreads 1` on each worker machine (pdsim
-installed, `pip install -e ".[sweep]"`), then
+From the command line: `pdsim bench accuracy [--quick] [--scheduler tcp://HOST:8786] [--workers N]` runs this map
+(the same as `python tools/accuracy_map.py`, from a source checkout), and `pdsim wedge SCENE.py --set
+NAME=V1,V2,... [--set ...] --out DIR [--frames N] [--scheduler tcp://HOST:8786]` runs a scene once per combination of
+the values, one cache per variant plus `DIR/wedge.json`, e.g.
+`pdsim wedge scenes/four_walls.py --set material.critical_stretch=0.008,0.01,0.015 --set spacing=0.02 --out wedge`.
+Without `--scheduler` both use a `LocalCluster` on this machine. For a farm, start `dask scheduler` on one machine
+and `dask worker tcp://HOST:8786 --nthreads 1` on each worker machine (pdsim installed, `pip install -e ".[sweep]"`),
+then pass `--scheduler tcp://HOST:8786`, or from Python:
 
 ```python
 from pdsim.sweep import run_sweep, run_wedge
 records = run_sweep("cantilever", {"n": [2, 4, 8, 12], "method": ["fem"]}, scheduler="tcp://HOST:8786")
-run_wedge("scenes/four_walls.py", {"material.fracture_energy": [1, 2, 5]}, "/shared/wedge", scheduler="tcp://HOST:8786")
+run_wedge("scenes/four_walls.py", {"material.critical_stretch": [0.008, 0.01]}, "/shared/wedge", scheduler="tcp://HOST:8786")
 ```
 
-or `python tools/accuracy_map.py --scheduler tcp://HOST:8786`. A wedge's workers must see the scene script and the
-output folder at the same paths. A script that uses the default `LocalCluster` (worker processes) must call these
-under `if __name__ == "__main__":`, as any script that starts processes. `tests/test_validation_problems.py` checks
-the two cheapest levels of each problem (the error falls, at the rates above), `tests/test_sweep.py` a tiny sweep
-and a tiny wedge on an in-process cluster.
+A wedge's workers must see the scene script and the output folder at the same paths. A script that uses the default
+`LocalCluster` (worker processes) must call these under `if __name__ == "__main__":`, as any script that starts
+processes. `tests/test_validation_problems.py` checks the two cheapest levels of each problem (the error falls, at
+the rates above), `tests/test_sweep.py` a tiny sweep and a tiny wedge on an in-process cluster, from Python and
+through `pdsim wedge ... --scheduler ADDRESS`.
 """
 
 
