@@ -1,20 +1,19 @@
-"""Checkpoints of a run and what resuming needs: the checkpoint file, stop requests from signals, and the list of
-caches a resumed run's frames are in.
+"""Checkpoints of a run and what resuming needs: the checkpoint file and stop requests from signals.
 
 A run (``Scene.run``, ``pdsim run``) writes ``<stem>.checkpoint.npz`` beside its cache at frame ends (every
 ``checkpoint_interval_s`` seconds of wall time, or every frame with 0) and when a stop is requested (SIGTERM, Ctrl-C):
 every solver's ``checkpoint()`` (pdsim/solver.py: displacements, velocities, accelerations, bond flags, plastic
 state, contact scales, FEM topology after splits, lattice state), the watchdog's energy accounting, the projectiles'
-last poses, the frame and sub-step reached, and a fingerprint of the scene. The file is written to a temporary name
-and renamed (atomic): a kill leaves the previous checkpoint or the new one, never half of one. A run that finishes
-removes it.
+last poses, the frame and sub-step reached, the cache's run id and what the USD writer needs to continue the same
+prims (pdsim.output.writer.ViewWriter.checkpoint), and a fingerprint of the scene. The file is written to a temporary
+name and renamed (atomic): a kill leaves the previous checkpoint or the new one, never half of one. A run that
+finishes removes it.
 
 ``Scene.run(..., resume=True)`` (``pdsim run --resume``) rebuilds the scene, checks the fingerprint, restores the
-state and continues; on the CPU the frames it writes are bit for bit those of an uninterrupted run (the same float32
-operations in the same order). The USD writer (pdsim/output/usd.py) cannot reopen a cache to append frames, so a
-resumed run writes its frames to a continuation cache ``<stem>.from<NNNNNN><suffix>`` (frames NNNNNN.. of the run; a
-complete cache of its own) and ``<stem>.segments.json`` lists, in order, which file holds which frames
-(:func:`read_segments`). docs/stability.md describes the files.
+state and continues in the same cache: pdsim.output.usd.UsdCache reopens it at the checkpoint's frame (dropping any
+frames written after it) and the writer re-attaches to its prims. On the CPU the frames it writes are bit for bit those
+of an uninterrupted run (the same float32 operations in the same order), so the cache plays as one uninterrupted run's.
+docs/stability.md describes the files.
 """
 
 from __future__ import annotations
@@ -28,7 +27,7 @@ import numpy as np
 
 from .errors import ParameterError
 
-CHECKPOINT_FORMAT = 1
+CHECKPOINT_FORMAT = 2  # 2: the cache's run id and the writer's state (resumed runs append to the same cache)
 _META = "__meta__"
 
 
@@ -36,18 +35,6 @@ def checkpoint_path(out) -> Path:
     """``<stem>.checkpoint.npz`` beside the cache ``out``."""
     out = Path(out)
     return out.with_name(f"{out.stem}.checkpoint.npz")
-
-
-def segments_path(out) -> Path:
-    """``<stem>.segments.json`` beside the cache ``out``: the caches holding the frames of a resumed run."""
-    out = Path(out)
-    return out.with_name(f"{out.stem}.segments.json")
-
-
-def continuation_path(out, first_frame: int) -> Path:
-    """The cache a run resumed at ``first_frame`` writes: ``<stem>.from<first_frame, 6 digits><suffix>``."""
-    out = Path(out)
-    return out.with_name(f"{out.stem}.from{int(first_frame):06d}{out.suffix}")
 
 
 # -- the file -------------------------------------------------------------------------------------------------------
@@ -127,34 +114,6 @@ def load_checkpoint(path) -> dict:
     return root
 
 
-# -- segments of a resumed run -----------------------------------------------------------------------------------------
-def write_segments(out, segments) -> Path:
-    """Writes ``<stem>.segments.json``: [{"path": file name beside ``out``, "first": frame, "last": frame}, ...]."""
-    path = segments_path(out)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps([{"path": str(p), "first": int(a), "last": int(b)} for p, a, b in segments], indent=1))
-    os.replace(tmp, path)
-    return path
-
-
-def read_segments(out) -> list[tuple[Path, int, int]]:
-    """Where the frames of the run writing ``out`` are: [(cache path, first frame, last frame), ...] in frame order.
-    A run that never resumed: [(out, 0, last)] is not known here (one cache, read it directly), so this reads
-    ``<stem>.segments.json`` when it exists, else the checkpoint's segments, else returns [(out, 0, -1)] (the whole
-    cache ``out``)."""
-    out = Path(out)
-    folder = out.parent
-    path = segments_path(out)
-    if path.is_file():
-        items = json.loads(path.read_text())
-        return [(folder / e["path"], int(e["first"]), int(e["last"])) for e in items]
-    ck = checkpoint_path(out)
-    if ck.is_file():
-        state = load_checkpoint(ck)
-        return [(folder / p, int(a), int(b)) for p, a, b in state["run"]["segments"]]
-    return [(out, 0, -1)]
-
-
 # -- stop requests ---------------------------------------------------------------------------------------------------
 class RunInterrupted(KeyboardInterrupt):
     """A run stopped on request (SIGTERM, SIGINT) at a step boundary, after writing a checkpoint when checkpoints are
@@ -212,11 +171,7 @@ __all__ = [
     "RunInterrupted",
     "StopRequest",
     "checkpoint_path",
-    "continuation_path",
     "load_checkpoint",
-    "read_segments",
     "save_checkpoint",
-    "segments_path",
     "signal_exit_code",
-    "write_segments",
 ]

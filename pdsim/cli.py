@@ -187,8 +187,8 @@ def _add_run_options(r: argparse.ArgumentParser):
         "--resume",
         action="store_true",
         help="continue from the checkpoint <stem>.checkpoint.npz beside --out (written every --checkpoint-interval "
-        "and when stopped by SIGTERM or Ctrl-C); the frames after it go to <stem>.from<NNNNNN><suffix> and "
-        "<stem>.segments.json lists which cache holds which frames",
+        "and when stopped by SIGTERM or Ctrl-C), appending to the same cache: frames the stopped run wrote after the "
+        "checkpoint are replaced, and --out then plays every frame as one uninterrupted run",
     )
     r.add_argument(
         "--checkpoint-interval",
@@ -393,8 +393,7 @@ def _execute(build_scene, args) -> int:
     span = f"{report.frames_written} frames"
     if report.first_frame:
         last = report.first_frame + report.frames_written - 1
-        parts = ", ".join(f"{os.path.basename(p)} {a}..{b}" for p, a, b in report.segments)
-        span = f"frames {report.first_frame}..{last} (resumed; the run's caches: {parts})"
+        span = f"frames {report.first_frame}..{last} (resumed from the checkpoint; the cache holds frames 0..{last})"
     print(
         f"pdsim: wrote {report.path}: {span}, {report.summary}, "
         f"dt={report.dt:.3g} s x {report.substeps_per_frame} substeps/frame, "

@@ -7,7 +7,7 @@ import math
 import os
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -53,7 +53,6 @@ class RunReport:
     bond_count: int
     summary: str = ""  # what the solvers simulated, e.g. "2560 particles, 309440 bonds"
     first_frame: int = 0  # first frame this run wrote (after --resume: the frame after the checkpoint's)
-    segments: list = field(default_factory=list)  # resumed runs: (cache file, first frame, last frame) in order
     checks: int = 0  # watchdog checks made
 
 
@@ -270,9 +269,9 @@ class Scene:
 
         Checkpoints (pdsim/checkpoint.py): at frame ends, every ``checkpoint_interval_s`` seconds of wall time (0:
         every frame; None: never), and when ``stop`` is requested, the run writes ``<stem>.checkpoint.npz`` beside
-        ``out``; ``resume=True`` continues from it, bit for bit as an uninterrupted run on the CPU, writing its frames
-        to ``<stem>.from<NNNNNN><suffix>`` (``<stem>.segments.json`` lists which cache holds which frames). A finished
-        run removes its checkpoint.
+        ``out``; ``resume=True`` continues from it, bit for bit as an uninterrupted run on the CPU, in the same cache
+        ``out`` (the frames the interrupted run wrote after its checkpoint are replaced). A finished run removes its
+        checkpoint.
 
         Args:
             out: output path.
@@ -288,8 +287,8 @@ class Scene:
             color_range: (lo, hi) of real values mapped onto the colour ramp; default (0, 1).
             fragments_as_prims: write each fragment of a fracturing surface as its own Mesh
                 ``/World/<surface>/fragment_<id>`` (invisible before it appears).
-            resume: continue from ``<stem>.checkpoint.npz`` (ParameterError when there is none or it belongs to another
-                scene).
+            resume: continue from ``<stem>.checkpoint.npz`` and append to the cache it was written with (ParameterError
+                when there is none, it belongs to another scene, or that cache is gone).
             checkpoint_interval_s: wall time between checkpoints [s], >= 0, or None for none (default 60 s).
             check_interval: steps between watchdog checks, integer >= 1 (default 16; also at every frame end).
             stop: a pdsim.checkpoint.StopRequest (or anything with ``requested`` and ``signal``), polled at every step
@@ -298,15 +297,7 @@ class Scene:
             on_frame: callable(frame, solvers) run after each frame is written (diagnostics such as energy audits;
                 each solver's ``watchdog.last`` holds its frame-end check).
         """
-        from .checkpoint import (
-            RunInterrupted,
-            checkpoint_path,
-            continuation_path,
-            load_checkpoint,
-            save_checkpoint,
-            segments_path,
-            write_segments,
-        )
+        from .checkpoint import CHECKPOINT_FORMAT, RunInterrupted, checkpoint_path, load_checkpoint, save_checkpoint
         from .colliders import collider_names
         from .errors import InstabilityError
         from .output import UsdCache
@@ -371,17 +362,16 @@ class Scene:
 
         fingerprint = self._fingerprint(solvers, names)
         ck_path = checkpoint_path(out)
-        start, first_substep, segments = 0, 0, []
+        start, first_substep, cache_run = 0, 0, None
         if resume:
             state = load_checkpoint(ck_path)
-            start, first_substep, segments = self._restore_run(state, solvers, fingerprint, dt, substeps, frame_count)
+            start, first_substep, cache_run = self._restore_run(state, solvers, fingerprint, dt, substeps, frame_count)
         watchdogs = self._attach_watchdogs(solvers, dt=dt, stable_dt=stable_dt, bounds=bounds)
         self._schedule_watchdogs(solvers, watchdogs, dt=dt, speed_limit=speed_limit, every=check_interval, stop=stop)
         if resume:
             for i, w in enumerate(watchdogs):
                 if w is not None:
                     w.restore(state["watchdogs"][str(i)])
-        cache_path = continuation_path(out, start + 1) if resume else out
 
         def write_frame(frame: int) -> None:
             t = frame * frame_dt
@@ -398,12 +388,9 @@ class Scene:
             """The run's state after ``substep`` steps of frame ``frame + 1`` (frame ``frame`` finished)."""
             if checkpoint_interval_s is None:
                 return None
-            parts = list(segments)
-            first = start + 1 if resume else 0
-            if frame >= first:
-                parts.append([os.path.basename(cache.top_level_path), first, frame])
+            cache.save()  # the top-level layer on disk reaches ``frame``: a resume reopens the cache there
             state = {
-                "format": 1,
+                "format": CHECKPOINT_FORMAT,
                 "fingerprint": fingerprint,
                 "run": {
                     "frame": frame,
@@ -411,8 +398,9 @@ class Scene:
                     "dt": dt,
                     "substeps": substeps,
                     "frames": frame_count,
-                    "segments": parts,
+                    "cache_run": cache.run_id,
                 },
+                "writer": writer.checkpoint(),
                 "solvers": {str(i): s.checkpoint() for i, s in enumerate(solvers)},
                 "watchdogs": {str(i): ({} if w is None else w.checkpoint()) for i, w in enumerate(watchdogs)},
                 "colliders": _collider_states(self.colliders),
@@ -420,14 +408,23 @@ class Scene:
             return save_checkpoint(ck_path, state)
 
         metadata = {"frameTime": frame_dt, "timeScale": frame_dt * self.fps, "scene": str(self.name)}
-        with UsdCache(
-            cache_path,
-            fps=self.fps,
-            start_frame=start + 1 if resume else 0,
-            up_axis=self.up_axis,
-            save_interval_s=save_interval_s,
-            metadata=metadata,
-        ) as cache:
+        try:
+            cache = UsdCache(
+                out,
+                fps=self.fps,
+                up_axis=self.up_axis,
+                save_interval_s=save_interval_s,
+                metadata=metadata,
+                append_frame=start if resume else None,
+                append_run=cache_run,
+            )
+        except (ValueError, FileNotFoundError) as exc:
+            if not resume:
+                raise
+            raise ParameterError(
+                "resume", out, f"a cache holding the run the checkpoint belongs to, at its frame {start} ({exc})"
+            ) from None
+        with cache:
             writer = ViewWriter(
                 cache,
                 color_attribute=color_attribute,
@@ -435,6 +432,8 @@ class Scene:
                 fragments_as_prims=fragments_as_prims,
                 velocity_scale=frame_dt * self.fps,  # velocities per played second (USD's time codes per second)
             )
+            if resume:
+                writer.restore(state["writer"])
             coupling = self.method_contact(solvers)
             if not resume:
                 write_frame(0)
@@ -469,26 +468,21 @@ class Scene:
                         if stopping:
                             raise RunInterrupted(stop.signal, checkpoint=written, last_frame=frame)
             except InstabilityError as exc:
-                kept = self._frames_note(cache.top_level_path, start, frame - 1, segments, resume)
+                kept = self._frames_note(cache.top_level_path, frame - 1)
                 raise InstabilityError(f"{exc}; {kept}") from exc
             except KeyboardInterrupt as exc:
-                last = (start + 1 if resume else 0) + cache.frames_written - 1
+                last = -1 if cache.last_frame is None else cache.last_frame
                 exc.cache = str(cache.top_level_path)
                 exc.last_frame = last
-                exc.note = self._frames_note(cache.top_level_path, start, last, segments, resume)
+                exc.note = self._frames_note(cache.top_level_path, last)
                 raise
             finally:
                 bar.close()
             written = cache.frames_written
         if ck_path.is_file():
             ck_path.unlink()
-        parts = [*segments, [os.path.basename(cache_path), start + 1, frame_count]] if resume else []
-        if resume:
-            write_segments(out, parts)
-        elif segments_path(out).is_file():
-            segments_path(out).unlink()  # described an earlier resumed run, which this one replaced
         return RunReport(
-            path=os.fspath(cache_path),
+            path=out,
             frames_written=written,
             substeps_per_frame=substeps,
             dt=dt,
@@ -498,7 +492,6 @@ class Scene:
             bond_count=sum(s.bond_count for s in solvers),
             summary="; ".join(s.summary() for s in solvers),
             first_frame=start + 1 if resume else 0,
-            segments=[(str(p), int(a), int(b)) for p, a, b in parts],
             checks=sum(w.checks for w in watchdogs if w is not None),
         )
 
@@ -576,16 +569,10 @@ class Scene:
         return 20.0 * max([fall] + [s.speed_scale() for s in solvers])
 
     @staticmethod
-    def _frames_note(top, start: int, last: int, segments, resume: bool) -> str:
-        """Where the finished frames are, for messages."""
+    def _frames_note(top, last: int) -> str:
+        """Where the finished frames are, for messages: the cache (resumed runs included) holds frames 0..last."""
         top = os.fspath(top)
-        first = start + 1 if resume else 0
-        parts = [f"{p} holds frames {a}..{b}" for p, a, b in segments]
-        if last >= first:
-            parts.append(f"{top} holds frames {first}..{last}")
-        elif not parts:
-            parts.append(f"{top} holds no finished frame")
-        return "; ".join(parts)
+        return f"{top} holds frames 0..{last}" if last >= 0 else f"{top} holds no finished frame"
 
     def _fingerprint(self, solvers, collider_names) -> dict:
         """What a checkpoint must match to be resumed by this scene (plain JSON values)."""
@@ -607,9 +594,17 @@ class Scene:
 
     def _restore_run(self, state, solvers, fingerprint, dt, substeps, frame_count):
         """Checks a checkpoint against this scene and puts it back: (last finished frame, sub-steps done in the next
-        one, segments so far)."""
+        one, the run id of the cache it was written with)."""
         import json
 
+        from .checkpoint import CHECKPOINT_FORMAT
+
+        if state.get("format") != CHECKPOINT_FORMAT:
+            raise ParameterError(
+                "resume",
+                f"a checkpoint of format {state.get('format')!r}",
+                f"a checkpoint of format {CHECKPOINT_FORMAT} (this version of pdsim's; rerun without --resume)",
+            )
         saved = json.loads(json.dumps(state.get("fingerprint", {})))
         mine = json.loads(json.dumps(fingerprint))
         if saved != mine:
@@ -637,8 +632,7 @@ class Scene:
         for i, s in enumerate(solvers):
             s.restore(state["solvers"][str(i)])
         _restore_colliders(self.colliders, state.get("colliders", {}))
-        segments = [[str(p), int(a), int(b)] for p, a, b in run["segments"]]
-        return frame, substep, segments
+        return frame, substep, str(run["cache_run"])
 
     # -- the watchdog --------------------------------------------------------------------------------------------------
     def _scene_speeds(self, bounds) -> dict:

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 import pdsim
-from pdsim.checkpoint import RunInterrupted, checkpoint_path, read_segments
+from pdsim.checkpoint import RunInterrupted, checkpoint_path
 
 BLOCK_SCRIPT = """
 import numpy as np
@@ -84,14 +84,6 @@ def _mesh_points(path, name: str, first: int = 0, last: int = -1) -> dict:
     stage = Usd.Stage.Open(str(path))
     attr = UsdGeom.Mesh(stage.GetPrimAtPath(f"/World/{name}")).GetPointsAttr()
     return {int(t): np.asarray(attr.Get(t)) for t in attr.GetTimeSamples() if t >= first and (last < 0 or t <= last)}
-
-
-def _run_positions(out, name: str, reader=_positions) -> dict:
-    """Every frame of a run, gathered over the caches it wrote (pdsim.checkpoint.read_segments)."""
-    frames = {}
-    for path, first, last in read_segments(out):
-        frames.update(reader(path, name, first, last))
-    return frames
 
 
 def _assert_identical(reference: dict, resumed: dict):
@@ -251,8 +243,8 @@ def test_signals_stop_with_one_line_and_a_readable_cache(tmp_path, signum):
 
 def test_resume_after_sigterm_is_bit_identical(tmp_path):
     """A run stopped by SIGTERM and continued with `pdsim run --resume` gives, frame by frame, the same positions as
-    the uninterrupted run, bit for bit (CPU). The resumed frames go to <stem>.from<NNNNNN>.usdc, listed in
-    <stem>.segments.json; the finished run removes the checkpoint."""
+    the uninterrupted run, bit for bit (CPU), in the one cache --out; the finished run removes the checkpoint and
+    leaves no other top-level layer beside the cache."""
     frames = 60
     script = _script(tmp_path, frames=frames, breakable=True)
     reference = tmp_path / "reference.usdc"
@@ -264,12 +256,48 @@ def test_resume_after_sigterm_is_bit_identical(tmp_path):
     assert code == 143, stderr
     proc = _cli("run", script, "--out", out, "--device", "cpu", "--quiet", "--resume", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
-    assert "resumed" in proc.stdout
+    assert "resumed" in proc.stdout and f"the cache holds frames 0..{frames}" in proc.stdout
     assert not checkpoint_path(out).exists()
-    segments = read_segments(out)
-    assert segments[0][0] == out and segments[0][1] == 0
-    assert segments[-1][0].name.startswith("resumed.from") and segments[-1][2] == frames
-    _assert_identical(_positions(reference, "block"), _run_positions(out, "block"))
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("resumed")) == [
+        "resumed.frames",
+        "resumed.usdc",
+    ]
+    _assert_identical(_positions(reference, "block"), _positions(out, "block"))
+
+
+def test_kill_9_during_a_resumed_run_keeps_every_finished_frame(tmp_path):
+    """A run stopped at a step boundary, resumed with `pdsim run --resume`, and the resumed run killed with SIGKILL a
+    few frames later: `out` (the one cache) opens with frames 0..k, k past the checkpoint's frame, the frames of the
+    first run unchanged bit for bit, all finite and valid."""
+    import runpy
+
+    script = _script(tmp_path, frames=400, breakable=True)
+    out = tmp_path / "k.usdc"
+    with pytest.raises(RunInterrupted):  # the script's scene, stopped in this process (as by SIGTERM) in frame 3
+        runpy.run_path(str(script))["build_scene"]().run(out, device="cpu", progress=False, stop=_StopAfter(40))
+    before = _positions(out, "block")
+    last = max(before)
+    proc = subprocess.Popen(
+        _cli_args("run", script, "--out", out, "--device", "cpu", "--quiet", "--resume"),
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        _wait_for_frame(out, last + 3, proc)
+        proc.kill()
+        proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == -signal.SIGKILL
+    after = _positions(out, "block")
+    k = max(after)
+    assert k >= last + 2
+    _assert_cache_until(out, "block", k)
+    for frame, x in before.items():
+        assert np.array_equal(after[frame], x), frame
 
 
 class _StopAfter:
@@ -344,13 +372,14 @@ def test_resume_after_a_stop_is_bit_identical(tmp_path, build, polls):
     resumed = build()[0].run(out, device="cpu", progress=False, resume=True)
     assert resumed.first_frame == ei.value.last_frame + 1
     assert resumed.summary == report.summary  # the same topology at the end (FEM: the same splits)
-    _assert_identical(_positions(reference, points), _run_positions(out, points))
+    _assert_identical(_positions(reference, points), _positions(out, points))
     if surface is not None:
-        _assert_identical(_mesh_points(reference, surface), _run_positions(out, surface, _mesh_points))
+        _assert_identical(_mesh_points(reference, surface), _mesh_points(out, surface))
 
 
 def test_resume_refuses_a_missing_or_foreign_checkpoint(tmp_path):
-    """--resume without a checkpoint, or with the checkpoint of another scene, is a one-line ParameterError."""
+    """--resume without a checkpoint, with the checkpoint of another scene, or without the cache the checkpoint was
+    written with, is a one-line ParameterError."""
     scene, _, _ = _lattice_block()
     out = tmp_path / "x.usdc"
     with pytest.raises(pdsim.ParameterError, match="none found"):
@@ -365,6 +394,9 @@ def test_resume_refuses_a_missing_or_foreign_checkpoint(tmp_path):
     assert proc.returncode == 1
     lines = _lines(proc.stderr)
     assert len(lines) == 1 and lines[0].startswith("pdsim: error: resume=") and "another scene" in lines[0]
+    out.unlink()  # the cache the checkpoint belongs to is gone: nothing to continue
+    with pytest.raises(pdsim.ParameterError, match="a cache holding the run the checkpoint belongs to"):
+        scene.run(out, device="cpu", progress=False, resume=True)
 
 
 def test_checkpoint_file_round_trip(tmp_path):

@@ -32,6 +32,12 @@ atomic) only when it closes successfully; the earlier cache stays untouched unti
 finished frames of the failed run can be opened from the partial file. When ``path`` does not exist the run writes
 to ``path`` directly, so a crash leaves the frames finished so far there. A successful run removes the frame folders
 that no top-level layer beside it refers to any more (the replaced run's, those of killed runs).
+
+Resuming: ``UsdCache(path, ..., append_frame=F, append_run=run)`` reopens the cache of an interrupted run at its
+finished frame F and continues it (``pdsim run --resume``): it takes over the run folder, manifests, topology clips
+and prims (:meth:`UsdCache.existing` gives their handles), drops what was written after F (rewriting the top-level
+layer atomically at once, then deleting the later frame files) and writes on as a new run would, so the finished
+cache plays as an uninterrupted run's.
 """
 
 from __future__ import annotations
@@ -56,6 +62,7 @@ __all__ = [
     "UsdCache",
     "XformHandle",
     "cache_files",
+    "cache_run",
     "flatten_cache",
     "read_tet_mesh",
     "validate_usd",
@@ -280,6 +287,16 @@ class UsdCache:
             after every frame, which is what bounds a crash's loss to one frame. The frame layers are always written
             when their frame finishes.
         metadata: Extra ``customLayerData`` under the key ``pdsim`` (e.g. ``{"frameTime": 2e-6}``).
+        append_frame: Reopen the cache pdsim wrote at ``path`` (or at :attr:`partial_path`, see ``append_run``) and
+            continue it after this finished frame: the run folder, manifests, topology clips and prims are taken over
+            (:meth:`existing` gives the prims' handles), the frames after ``append_frame`` are dropped (their samples
+            in the top-level layer, their files, the prims defined while writing them), and the top-level layer is
+            rewritten at once (atomically) to end at ``append_frame``. ``fps``, ``up_axis``, ``meters_per_unit`` and
+            ``start_frame`` must be the cache's. Success then replaces ``path`` when the reopened top-level layer is
+            the partial one, as for a new run.
+        append_run: With ``append_frame``: the run id (``customLayerData pdsim:run``) the reopened cache must hold;
+            the top-level layer is the one of ``partial_path`` and ``path`` that holds it. None: ``partial_path`` when
+            it exists, else ``path``.
     """
 
     def __init__(
@@ -292,6 +309,8 @@ class UsdCache:
         meters_per_unit: float = 1.0,
         save_interval_s: float = 0.0,
         metadata: dict | None = None,
+        append_frame: int | None = None,
+        append_run: str | None = None,
     ):
         self.path = Path(path)
         suffix = self.path.suffix.lower()
@@ -321,6 +340,29 @@ class UsdCache:
         self._suffix = ".usda" if suffix == ".usda" else ".usdc"  # frame layers: text for text caches, else crate
         self.frames_dir = self.path.with_name(f"{self.path.stem}.frames")
         self.partial_path = self.path.with_name(f"{self.path.stem}.partial{self.path.suffix}")
+        self._types = _type_names()
+        self._names: dict[str, set[str]] = {"/World": set()}  # parent path -> child identifiers
+        self._pending: dict[int, _Frame] = {}
+        # clip set -> {attribute path: Sdf type name} of every attribute its clips sample; "default" holds the
+        # per-frame samples, "topology_<mesh>" the topology of a mesh (or of a surface's fragment prims)
+        self._manifests: dict[str, dict[str, object]] = {"default": {}}
+        self._manifests_written: dict[str, int] = {}  # clip set -> size of its manifest on disk
+        self._topology_frames: dict[str, list[int]] = {}  # topology clip set -> frames of its clips
+        self._defined_at: dict[str, int] = {}  # prim path -> the frame being written when it was defined (> start)
+        self._handles: dict[str, object] = {}  # prim path -> handle, for the prims of a reopened cache
+        self._last_finished: int | None = None
+        self._frames_written = 0
+        self._top_written = None  # last frame whose top-level layer is on disk
+        self._last_save_end = time.monotonic()
+        self._closed = False
+        if append_frame is not None:
+            if isinstance(append_frame, bool) or int(append_frame) != append_frame:
+                raise ValueError(f"append_frame={append_frame!r} must be an integer")
+            self._reopen(int(append_frame), append_run, up_axis, float(meters_per_unit))
+            return
+        if append_run is not None:
+            raise ValueError("append_run is given only with append_frame")
+
         self._staged = self.path.exists()  # an earlier cache is there: replace it only on success
         self._top_path = self.partial_path if self._staged else self.path
         self.run_id = self._new_run_id()
@@ -341,26 +383,18 @@ class UsdCache:
         time_attr = world.GetPrim().CreateAttribute("pdsim:time", Sdf.ValueTypeNames.Double, custom=True)
         time_attr.SetDocumentation("simulated time of the frame [s]")
 
-        self._types = _type_names()
-        self._names: dict[str, set[str]] = {"/World": set()}  # parent path -> child identifiers
-        self._pending: dict[int, _Frame] = {}
-        # clip set -> {attribute path: Sdf type name} of every attribute its clips sample; "default" holds the
-        # per-frame samples, "topology_<mesh>" the topology of a mesh (or of a surface's fragment prims)
-        self._manifests: dict[str, dict[str, object]] = {"default": {}}
-        self._manifests_written: dict[str, int] = {}  # clip set -> size of its manifest on disk
-        self._topology_frames: dict[str, list[int]] = {}  # topology clip set -> frames of its clips
-        self._last_finished: int | None = None
-        self._frames_written = 0
-        self._top_written = None  # last frame whose top-level layer is on disk
-        self._last_save_end = time.monotonic()
-        self._closed = False
-
     # ------------------------------------------------------------------ properties
 
     @property
     def frames_written(self) -> int:
         """Number of frames finished with :meth:`end_frame`."""
         return self._frames_written
+
+    @property
+    def last_frame(self) -> int | None:
+        """The last finished frame (of this run or, for a reopened cache, the frame it was reopened at); None before
+        the first."""
+        return self._last_finished
 
     @property
     def stage(self):
@@ -374,6 +408,211 @@ class UsdCache:
         return self._top_path
 
     # ------------------------------------------------------------------ prims
+
+    def _reopen(self, frame: int, run: str | None, up_axis: str, meters_per_unit: float) -> None:
+        """Take over the cache at ``path`` (or ``partial_path``) at its finished frame ``frame`` (append_frame)."""
+        from pxr import Sdf, Usd
+
+        candidates = [p for p in (self.partial_path, self.path) if p.is_file()]
+        if not candidates:
+            raise FileNotFoundError(f"no cache at {str(self.path)!r} (nor {str(self.partial_path)!r}) to continue")
+        infos = {p: _pdsim_info(p) for p in candidates}
+        if run is not None:
+            matches = [p for p in candidates if infos[p].get("run") == run]
+            if not matches:
+                found = ", ".join(f"{p.name}: {infos[p].get('run')!r}" for p in candidates)
+                raise ValueError(f"no cache beside {str(self.path)!r} holds the run {run!r} (found {found})")
+            top = matches[0]
+        else:
+            top = candidates[0]
+        info = infos[top]
+        if info.get("cacheFormat") != CACHE_FORMAT_VERSION or not info.get("run") or not info.get("frames"):
+            raise ValueError(f"{str(top)!r} is not a pdsim cache of format {CACHE_FORMAT_VERSION}")
+        self._staged = top == self.partial_path
+        self._top_path = top
+        self.run_id = str(info["run"])
+        self.run_dir = self.frames_dir / self.run_id
+        if (self.path.parent / str(info["frames"])).resolve() != self.run_dir.resolve() or not self.run_dir.is_dir():
+            raise ValueError(f"the run folder {str(self.run_dir)!r} of {str(top)!r} is missing")
+
+        source = Sdf.Layer.OpenAsAnonymous(str(top))
+        checks = {
+            "fps": (source.timeCodesPerSecond, self.fps),
+            "start_frame": (source.startTimeCode, float(self.start_frame)),
+            "up_axis": (source.pseudoRoot.GetInfo("upAxis"), up_axis),
+            "meters_per_unit": (source.pseudoRoot.GetInfo("metersPerUnit"), meters_per_unit),
+        }
+        for name, (theirs, mine) in checks.items():
+            if theirs != mine:
+                raise ValueError(f"{name}={mine!r} differs from the cache's {theirs!r} ({str(top)!r})")
+        last = int(source.endTimeCode)
+        if not self.start_frame <= frame <= last:
+            raise ValueError(
+                f"append_frame={frame} is not a finished frame of {str(top)!r} (frames {self.start_frame}..{last})"
+            )
+        old_clips = dict(source.GetPrimAtPath("/World").GetInfo("clips") or {})
+
+        # the top-level layer without its clips and without what the frames after ``frame`` added
+        layer = Sdf.Layer.CreateAnonymous(f"pdsim_cache{self.path.suffix.lower()}")
+        layer.TransferContent(source)
+        del source
+        world = layer.GetPrimAtPath("/World")
+        for key in ("clips", "clipSets"):
+            if world.HasInfo(key):
+                world.ClearInfo(key)
+        layer.customLayerData = {}
+        defined = {str(k): int(v) for k, v in dict(info.get("definedAt", {})).items()}
+        removed = sorted((p for p, f in defined.items() if f > frame), key=lambda p: p.count("/"))
+        for path in removed:
+            spec = layer.GetPrimAtPath(path)
+            if spec is not None:  # None: its parent went first
+                del layer.GetPrimAtPath(Sdf.Path(path).GetParentPath()).nameChildren[spec.name]
+        self._defined_at = {p: f for p, f in defined.items() if f <= frame}
+
+        def drop_later(path):
+            if path.IsPropertyPath():
+                for t in layer.ListTimeSamplesForPath(path):
+                    if t > frame:
+                        layer.EraseTimeSample(path, t)
+
+        layer.Traverse(Sdf.Path.absoluteRootPath, drop_later)
+
+        def gone(attr_path: str) -> bool:
+            return any(attr_path.startswith(p + "/") or attr_path.startswith(p + ".") for p in removed)
+
+        # clip sets: the manifests on disk (they may name attributes first sampled after ``frame``: harmless) and the
+        # topology clips up to ``frame``
+        folder = top.parent
+        for clip_set, meta in old_clips.items():
+            manifest_path = meta.get("manifestAssetPath")
+            entries: dict[str, object] = {}
+            if manifest_path is not None:
+                manifest = Sdf.Layer.OpenAsAnonymous(str(folder / manifest_path.path))
+                if manifest is None:
+                    raise ValueError(f"the manifest {manifest_path.path!r} of {str(top)!r} is missing")
+
+                def collect(path, manifest=manifest, entries=entries):
+                    if path.IsPropertyPath():
+                        spec = manifest.GetAttributeAtPath(path)
+                        if spec is not None:
+                            entries[str(path)] = spec.typeName
+
+                manifest.Traverse(Sdf.Path.absoluteRootPath, collect)
+            kept = {p: t for p, t in entries.items() if not gone(p)}
+            self._manifests[clip_set] = kept
+            self._manifests_written[clip_set] = len(kept) if len(kept) == len(entries) else -1
+            if clip_set != "default":
+                frames = [round(float(t)) for t, _ in meta.get("active", [])]
+                frames = [f for f in frames if f <= frame]
+                if frames:
+                    self._topology_frames[clip_set] = frames
+
+        self._layer = layer
+        self._stage = Usd.Stage.Open(layer)
+        for prim in self._stage.TraverseAll():
+            path = str(prim.GetPath())
+            self._names.setdefault(path, set())
+            self._names.setdefault(str(prim.GetPath().GetParentPath()), set()).add(prim.GetName())
+        self._last_finished = frame
+        self._write_top()  # the cache now ends at ``frame``, atomically
+        self._remove_frames_after(frame)
+        self._attach_handles(frame)
+
+    def _remove_frames_after(self, frame: int) -> None:
+        """Delete the frame and topology layers of the run folder after ``frame`` (the top-level layer no longer names
+        them)."""
+        for child in self.run_dir.iterdir():
+            parts = child.name.split(".")
+            if (
+                len(parts) >= 3
+                and child.is_file()
+                and len(parts[-2]) == _FRAME_DIGITS
+                and parts[-2].isdigit()
+                and int(parts[-2]) > frame
+            ):
+                child.unlink()
+
+    def _attach_handles(self, frame: int) -> None:
+        """Handles for the Points, Mesh and Xform prims of a reopened cache, with the vertex and face counts of their
+        geometry at ``frame``."""
+        from pxr import Sdf, UsdGeom
+
+        kinds = {str(t): k for k, t in self._types.items() if k in _PRIMVAR_KINDS}
+        samples = Sdf.Layer.OpenAsAnonymous(str(self._frame_file(frame)))
+        topologies = {}  # clip set -> (layer of its last clip up to ``frame``, the clip's frame)
+        for clip_set, frames in self._topology_frames.items():
+            layer = Sdf.Layer.OpenAsAnonymous(str(self._topology_file(clip_set, frames[-1])))
+            topologies[clip_set] = (layer, frames[-1])
+        mesh_set = {}
+        for clip_set, manifest in self._manifests.items():
+            for attr_path in manifest:
+                if attr_path.endswith(".faceVertexIndices"):
+                    mesh_set[attr_path[: -len(".faceVertexIndices")]] = clip_set
+
+        def sample_length(layer, at: int, path: str, name: str) -> int:
+            if layer is None:
+                return 0
+            value = layer.QueryTimeSample(Sdf.Path(path).AppendProperty(name), float(at))
+            return 0 if value is None else len(value)
+
+        def primvars(prim, interpolation: str) -> dict[str, str]:
+            out = {}
+            for pv in UsdGeom.PrimvarsAPI(prim).GetPrimvars():
+                if pv.GetInterpolation() == interpolation and str(pv.GetTypeName()) in kinds:
+                    out[str(pv.GetPrimvarName())] = kinds[str(pv.GetTypeName())]
+            return out
+
+        for prim in self._stage.Traverse():
+            path = str(prim.GetPath())
+            if prim.IsA(UsdGeom.Points):
+                w = np.asarray(UsdGeom.Points(prim).GetWidthsAttr().Get() or [], dtype=np.float32)
+                self._handles[path] = PointsHandle(
+                    path=path,
+                    point_count=int(w.shape[0]),
+                    primvar_kinds=primvars(prim, UsdGeom.Tokens.vertex),
+                    _cache=self,
+                    _widths=w,
+                )
+            elif prim.IsA(UsdGeom.Mesh):
+                mesh = UsdGeom.Mesh(prim)
+                spec = self._layer.GetPrimAtPath(path)
+                handle = MeshHandle(
+                    path=path,
+                    face_primvar_kinds=primvars(prim, UsdGeom.Tokens.uniform),
+                    vertex_primvar_kinds=primvars(prim, UsdGeom.Tokens.vertex),
+                    normals=str(mesh.GetNormalsInterpolation()) if "normals" in spec.attributes else None,
+                    subsets=tuple(c.GetName() for c in prim.GetChildren() if c.IsA(UsdGeom.Subset)),
+                    _cache=self,
+                    _transform="xformOp:translate" in spec.attributes,
+                )
+                clip_set = mesh_set.get(path)
+                if clip_set is not None:
+                    handle.topology_set = clip_set
+                    handle._has_topology = clip_set in self._topology_frames
+                    handle.vertex_count = sample_length(samples, frame, path, "points")
+                    handle._face_count = sample_length(*topologies.get(clip_set, (None, 0)), path, "faceVertexCounts")
+                else:
+                    handle.topology_set = "topology_" + path[len("/World/") :].replace("/", "_")
+                    counts = mesh.GetFaceVertexCountsAttr().Get()
+                    if counts is not None:  # a static mesh (set_mesh)
+                        handle._has_topology = True
+                        handle._face_count = len(counts)
+                        handle.vertex_count = len(mesh.GetPointsAttr().Get() or [])
+                        self._manifests.pop(handle.topology_set, None)
+                    else:
+                        self._manifests.setdefault(handle.topology_set, {})
+                self._handles[path] = handle
+            elif prim.IsA(UsdGeom.Xform):
+                self._handles[path] = XformHandle(path=path, _cache=self)
+
+    def existing(self, path: str):
+        """The handle (PointsHandle, MeshHandle, XformHandle) of a prim of a reopened cache (``append_frame``), by prim
+        path, e.g. ``/World/bar``; ValueError when the cache holds no such prim."""
+        self._check_open()
+        handle = self._handles.get(path)
+        if handle is None:
+            raise ValueError(f"the reopened cache {str(self._top_path)!r} holds no Points, Mesh or Xform prim {path!r}")
+        return handle
 
     def _new_run_id(self) -> str:
         stamp = time.strftime("%Y%m%d-%H%M%S")
@@ -396,7 +635,11 @@ class UsdCache:
         if ident in names:
             raise ValueError(f"prim name {name!r} (as USD identifier {ident!r}) is already used under {base}")
         names.add(ident)
-        return f"{base}/{ident}"
+        path = f"{base}/{ident}"
+        frame = self.start_frame if self._last_finished is None else self._last_finished + 1
+        if frame > self.start_frame:  # a reopened cache drops the prims defined after the frame it resumes at
+            self._defined_at[path] = frame
+        return path
 
     def add_xform(self, name: str, *, parent: XformHandle | None = None) -> XformHandle:
         """Define a ``UsdGeom.Xform`` at ``/World/<name>`` (or under ``parent``) to group prims."""
@@ -946,8 +1189,10 @@ class UsdCache:
             "cacheFormat": CACHE_FORMAT_VERSION,
             "run": self.run_id,
             "frames": self._relative(self.run_dir),
-            "framesWritten": self._frames_written,
+            "framesWritten": self._last_finished - self.start_frame + 1,
         }
+        if self._defined_at:
+            info["definedAt"] = dict(self._defined_at)
         info.update(self.metadata)
         out.customLayerData = {"pdsim": info}
         _export(out, self._top_path)
@@ -955,9 +1200,11 @@ class UsdCache:
         self._last_save_end = _monotonic()
 
     def save(self) -> None:
-        """Write the top-level layer now (it is written after every frame unless ``save_interval_s`` > 0)."""
+        """Write the top-level layer now when it is behind the last finished frame (it is written after every frame
+        unless ``save_interval_s`` > 0)."""
         self._check_open()
-        self._write_top()
+        if self._top_written != self._last_finished:
+            self._write_top()
 
     def close(self, success: bool = True) -> None:
         """Finish the cache; frames written but not finished are dropped. Idempotent.
@@ -1018,8 +1265,8 @@ class UsdCache:
         self.close(success=exc_type is None)
         if exc is not None and self._frames_written and self._staged and hasattr(exc, "add_note"):
             exc.add_note(
-                f"pdsim: the earlier cache {str(self.path)!r} was kept; the {self._frames_written} frames finished by "
-                f"this run are in {str(self.partial_path)!r}"
+                f"pdsim: the earlier cache {str(self.path)!r} was kept; the frames {self.start_frame}.."
+                f"{self._last_finished} finished by this run are in {str(self.partial_path)!r}"
             )
         return False
 
@@ -1068,6 +1315,22 @@ class UsdCache:
 def _monotonic() -> float:
     """time.monotonic (the module name ``time`` is shadowed by arguments of UsdCache)."""
     return time.monotonic()
+
+
+def _pdsim_info(path: Path) -> dict:
+    """The ``customLayerData pdsim`` dictionary of the top-level layer at ``path`` (empty when there is none)."""
+    from pxr import Sdf
+
+    layer = Sdf.Layer.OpenAsAnonymous(str(path), metadataOnly=True)
+    if layer is None:
+        raise ValueError(f"{str(path)!r} is not a USD layer")
+    return dict(layer.customLayerData.get("pdsim", {}))
+
+
+def cache_run(path: str | os.PathLike) -> str | None:
+    """The run id (``customLayerData pdsim:run``) of the pdsim cache at ``path``; None when it names none."""
+    run = _pdsim_info(Path(path)).get("run")
+    return None if run is None else str(run)
 
 
 def cache_files(path: str | os.PathLike) -> list[Path]:

@@ -149,6 +149,16 @@ class _Shading:
             interpolation = "vertex" if _groups_are_per_vertex(self.faces, self.labels) else "faceVarying"
         self.interpolation = interpolation
 
+    @classmethod
+    def restored(cls, faces, labels, count: int, interpolation: str) -> _Shading:
+        """The smooth groups of a checkpoint (:meth:`ViewWriter.checkpoint`), as computed when the topology changed."""
+        shading = cls.__new__(cls)
+        shading.faces = np.asarray(faces, dtype=np.int64)
+        shading.labels = np.asarray(labels, dtype=np.int64)
+        shading.count = int(count)
+        shading.interpolation = str(interpolation)
+        return shading
+
     def normals(self, points) -> np.ndarray:
         if self.interpolation == "faceVarying":
             return corner_normals(points, self.faces, self.labels, self.count)
@@ -256,6 +266,17 @@ class _MeshEntry:
         self.visible: set[int] = set()  # fragment ids present on the last frame
         self.sampled: set[int] = set()  # fragment ids with visibility samples
         self.pieces = {}  # per fragment id: (face rows, vertex ids, local faces)
+        self.topology = None  # (faces, face attributes, vertex count) of the last topology written
+        self.restored = False  # restored from a checkpoint: the next frame compares its topology with ``topology``
+
+    def same_topology(self, view: MeshView, faces: np.ndarray) -> bool:
+        """Whether ``view`` has the topology last written (faces, vertex count and face attributes)."""
+        old_faces, old_attributes, old_count = self.topology
+        if len(view.points) != old_count or not np.array_equal(faces, old_faces):
+            return False
+        if set(view.face_attributes) != set(old_attributes):
+            return False
+        return all(np.array_equal(np.asarray(a), old_attributes[k]) for k, a in view.face_attributes.items())
 
 
 class ViewWriter:
@@ -313,6 +334,59 @@ class ViewWriter:
             else:
                 raise TypeError(f"not an output view: {view!r}")
 
+    def checkpoint(self) -> dict:
+        """What :meth:`restore` needs to continue writing into the same cache after a restart (pdsim.checkpoint): the
+        prims written so far by view name, and per mesh its last topology, smooth groups (fixed when the topology
+        changed, so normals continue bit for bit) and fragment prims. Plain values and numpy arrays."""
+        meshes = {}
+        for i, (name, e) in enumerate(self._meshes.items()):
+            faces, attributes, vertex_count = e.topology
+            meshes[str(i)] = {
+                "name": name,
+                "path": e.handle.path,
+                "fractures": e.fractures,
+                "split": e.split,
+                "first_frame": int(e.first_frame),
+                "faces": np.asarray(faces, dtype=np.int64),
+                "vertex_count": int(vertex_count),
+                "face_attributes": {k: np.asarray(a) for k, a in attributes.items()},
+                "labels": np.asarray(e.shading.labels, dtype=np.int64),
+                "count": int(e.shading.count),
+                "interpolation": e.shading.interpolation,
+                "fragments": [[int(fid), h.path] for fid, h in e.fragments.items()],
+                "visible": sorted(int(f) for f in e.visible),
+                "sampled": sorted(int(f) for f in e.sampled),
+            }
+        return {
+            "points": [[name, h.path] for name, h in self._points.items()],
+            "meshes": meshes,
+            "rigid": [[group, name, h.path] for (group, name), h in self._rigid.items()],
+            "groups": [[group, h.path] for group, h in self._groups.items()],
+        }
+
+    def restore(self, state: dict) -> None:
+        """Re-attach to the prims of a :meth:`checkpoint` in a cache reopened at the checkpoint's frame
+        (``UsdCache(..., append_frame=)``): the next frames continue them as an uninterrupted run would (same prims,
+        topology samples only where the topology changes, the same smooth groups)."""
+        cache = self.cache
+        self._points = {str(name): cache.existing(path) for name, path in state["points"]}
+        self._groups = {str(group): cache.existing(path) for group, path in state["groups"]}
+        self._rigid = {(group, str(name)): cache.existing(path) for group, name, path in state["rigid"]}
+        self._meshes = {}
+        for _, m in sorted(state["meshes"].items(), key=lambda item: int(item[0])):
+            entry = _MeshEntry(cache.existing(m["path"]), bool(m["fractures"]), split=bool(m["split"]))
+            entry.first_frame = int(m["first_frame"])
+            entry.shading = _Shading.restored(m["faces"], m["labels"], m["count"], m["interpolation"])
+            attributes = {k: np.asarray(a) for k, a in m["face_attributes"].items()}
+            entry.topology = (entry.shading.faces, attributes, int(m["vertex_count"]))
+            entry.restored = True
+            entry.fragments = {int(fid): cache.existing(path) for fid, path in m["fragments"]}
+            entry.visible = {int(f) for f in m["visible"]}
+            entry.sampled = {int(f) for f in m["sampled"]}
+            if entry.split:
+                entry.pieces = self._split(attributes["fragment"], int(m["vertex_count"]), entry.shading.faces)
+            self._meshes[str(m["name"])] = entry
+
     def _velocities(self, velocities):
         """Velocities [m/s simulated] as the cache's velocities [m per played second] (float64), or None."""
         if velocities is None:
@@ -358,6 +432,7 @@ class ViewWriter:
         entry = self._meshes.get(view.name)
         faces = np.asarray(view.faces, dtype=np.int64).reshape(-1, 3)
         fractures = "crack" in view.face_attributes or "fragment" in view.face_attributes
+        created = entry is None
         if entry is None:
             if self.fragments_as_prims and "fragment" in view.face_attributes:
                 entry = _MeshEntry(self.cache.add_xform(view.name), fractures, split=True)
@@ -377,10 +452,17 @@ class ViewWriter:
                 self._bind_subsets(handle)
             entry.first_frame = frame
             self._meshes[view.name] = entry
-        changed = entry.version != view.topology_version
-        if changed and (entry.shading is None or entry.version is not None):
+        if entry.restored:  # topology versions do not survive a restart: compare the topology itself
+            changed = not entry.same_topology(view, faces)
+            entry.restored = False
+        else:
+            changed = entry.version != view.topology_version
+        if changed and (entry.shading is None or not created):
             interpolation = "faceVarying" if entry.shading is None else entry.shading.interpolation
             entry.shading = _Shading(view.points, faces, self.sharp_angle, interpolation)
+        if changed:
+            attributes = {k: np.array(a) for k, a in view.face_attributes.items()}
+            entry.topology = (entry.shading.faces, attributes, len(view.points))
         normals = entry.shading.normals(view.points)
         if entry.split:
             self._write_fragments(frame, view, entry, faces, normals, changed)
@@ -432,10 +514,12 @@ class ViewWriter:
             **kwargs,
         )
 
-    def _split(self, view: MeshView, faces: np.ndarray) -> dict:
-        """Per fragment id: (its face rows [k], its vertex ids [m], its faces in local vertex indices [k, 3])."""
-        frag = np.asarray(view.face_attributes["fragment"], dtype=np.int64)
-        nv = max(len(view.points), 1)
+    @staticmethod
+    def _split(fragment, vertex_count: int, faces: np.ndarray) -> dict:
+        """Per fragment id (``fragment``: the fragment id of each face): (its face rows [k], its vertex ids [m], its
+        faces in local vertex indices [k, 3])."""
+        frag = np.asarray(fragment, dtype=np.int64)
+        nv = max(int(vertex_count), 1)
         order = np.argsort(frag, kind="stable")
         ids, starts = np.unique(frag[order], return_index=True)
         ends = np.r_[starts[1:], len(order)]
@@ -454,7 +538,7 @@ class ViewWriter:
 
     def _write_fragments(self, frame, view: MeshView, entry: _MeshEntry, faces, normals, changed: bool) -> None:
         if changed:
-            entry.pieces = self._split(view, faces)
+            entry.pieces = self._split(view.face_attributes["fragment"], len(view.points), faces)
         face_kinds, vertex_kinds = self._mesh_kinds(view)
         corner = normals.reshape(-1, 3, 3)
         points = np.asarray(view.points, dtype=np.float64)
