@@ -80,8 +80,9 @@ def collider_response(
 
 @wp.struct
 class RigidMotion:
-    """Pose and velocity of a collider over the current step, stored in a one-element device array that the host
-    rewrites once per step (so a captured graph replays with the new pose).
+    """Pose and velocity of a collider over the current step, stored in a one-element device array (a static mesh:
+    written once; a projectile: copied by ``select_motion`` from the frame's table each step, so a captured graph
+    replays with the new poses).
 
     pose: body frame to world; linear_velocity [m/s] of the frame origin; angular_velocity [rad/s] (world axes);
     band: detection depth below a mesh surface [m] (meshes only)."""
@@ -90,6 +91,16 @@ class RigidMotion:
     linear_velocity: wp.vec3
     angular_velocity: wp.vec3
     band: float
+
+
+@wp.kernel
+def select_motion(table: wp.array(dtype=RigidMotion), slot: int, band: float, motion: wp.array(dtype=RigidMotion)):
+    """motion[0] <- table[slot] with ``band`` [m] added to its band: the step's row of a table of the frame's
+    motions, written by the host before the frame (the slot is the step's place in the frame, the same in every
+    frame, so a captured frame replays with the new frame's poses)."""
+    m = table[slot]
+    m.band = m.band + band
+    motion[0] = m
 
 
 @wp.func

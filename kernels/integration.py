@@ -67,13 +67,17 @@ def evaluate_conditions(
     cond_curve: wp.array(dtype=wp.vec2i),
     curve_time: wp.array(dtype=float),
     curve_data: wp.array(dtype=float),
-    t: float,
+    clock: wp.array(dtype=wp.float64),
+    slot: int,
+    offset: wp.float64,
     active_kind: wp.array(dtype=wp.int32),
     active_velocity: wp.array(dtype=wp.vec3),
 ):
-    """State of boundary condition c at time t: its kind inside [start, release), free outside; its velocity scaled
-    by its time curve (zero for a fixed condition)."""
+    """State of boundary condition c at time t = clock[slot] + offset [s] (the device clock of pdsim/kinematics.py,
+    so that no launch argument changes between steps): its kind inside [start, release), free outside; its velocity
+    scaled by its time curve (zero for a fixed condition)."""
     c = wp.tid()
+    t = wp.float32(clock[slot] + offset)
     kind = cond_kind[c]
     if t < cond_start[c] or t >= cond_release[c]:
         kind = POINT_FREE
@@ -89,12 +93,25 @@ def evaluate_curves(
     span: wp.array(dtype=wp.vec2i),
     curve_time: wp.array(dtype=float),
     curve_data: wp.array(dtype=float),
-    t: float,
+    clock: wp.array(dtype=wp.float64),
+    slot: int,
     value: wp.array(dtype=float),
 ):
-    """value[c] = curve c at time t (the load scales of a step)."""
+    """value[c] = curve c at time t = clock[slot] [s] (the load scales of a step)."""
     c = wp.tid()
-    value[c] = curve_value(span[c], curve_time, curve_data, t)
+    value[c] = curve_value(span[c], curve_time, curve_data, wp.float32(clock[slot]))
+
+
+@wp.kernel
+def clock_begin_step(clock: wp.array(dtype=wp.float64), dt: wp.float64):
+    """The device clock of a step of dt [s]: clock[1] (the time at the end of the step) <- clock[0] + dt."""
+    clock[1] = clock[0] + dt
+
+
+@wp.kernel
+def clock_end_step(clock: wp.array(dtype=wp.float64)):
+    """The step is done: clock[0] (the time at the start of the next step) <- clock[1]."""
+    clock[0] = clock[1]
 
 
 @wp.kernel
@@ -501,14 +518,17 @@ def integration_kernels(dtype=wp.float32):
         velocities: wp.array(dtype=vec3),
         before: wp.array(dtype=vec3),
         mass: wp.array(dtype=dtype),
-        surface_speed: wp.float64,
+        surface_speeds: wp.array(dtype=wp.float64),
+        slot: int,
         count: int,
         threads: int,
         acc: wp.array(dtype=wp.float64),
     ):
         """A bound of the work [J] moving colliders did on the points since ``before`` was copied from the velocities:
-        sum m |v - v_before| times the largest speed of a collider surface [m/s], into acc[3]."""
+        sum m |v - v_before| times the largest speed of a collider surface [m/s] (``surface_speeds[slot]``, a table
+        of the frame's steps written before the frame), into acc[3]."""
         tid = wp.tid()
+        surface_speed = surface_speeds[slot]
         w = wp.float64(0.0)
         i = tid
         while i < count:

@@ -93,7 +93,9 @@ class GroundPlane(Collider):
         if key not in self._impulse:
             self._impulse[key] = wp.zeros(1, dtype=wp.vec3d, device=rest.device)
         if mass is None:
-            mass = wp.zeros(0, dtype=float, device=rest.device)
+            if key not in getattr(self, "_no_mass", {}):
+                self._no_mass = {**getattr(self, "_no_mass", {}), key: wp.zeros(0, dtype=float, device=rest.device)}
+            mass = self._no_mass[key]
         n = np.asarray(self.normal, dtype=np.float64)
         wp.launch(
             kc.collide_ground_plane,
@@ -189,30 +191,50 @@ def _mesh_arrays(shape, name: str):
 
 
 class _MotionBuffer:
-    """The collider's RigidMotion in a one-element device array, rewritten from the host once per step (through a
-    pinned staging copy on CUDA); the kernels read it, so no launch argument changes between steps."""
+    """RigidMotion rows in a device array, written from the host in one copy: a static mesh's single row, or a
+    projectile's table of the frame's steps (``rows`` entries plus a last scratch row for a step outside a frame
+    program); the kernels read them, so no launch argument changes between steps. On CUDA the staging array is
+    pageable host memory, not pinned: a copy from pageable memory has read its source when it returns, so the next
+    frame's rows can be written at once, while a pinned source could still be waiting in the stream behind the
+    frames in flight."""
 
-    def __init__(self, device):
+    def __init__(self, device, rows: int = 1):
         import warp as wp
 
         from .kernels import colliders as kc
 
         self.device = device
-        self.array = wp.zeros(1, dtype=kc.RigidMotion, device=device)
-        self._staging = self.array if device.is_cpu else wp.zeros(1, dtype=kc.RigidMotion, device="cpu", pinned=True)
+        self.rows = int(rows)
+        self.array = wp.zeros(self.rows, dtype=kc.RigidMotion, device=device)
+        self._staging = self.array if device.is_cpu else wp.zeros(self.rows, dtype=kc.RigidMotion, device="cpu")
         self._view = self._staging.numpy()  # zero-copy structured view of the host array
 
-    def write(self, position, rotation, linear_velocity, angular_velocity, band: float = 0.0):
+    def set_row(self, row: int, position, rotation, linear_velocity, angular_velocity, band: float = 0.0):
+        """Fills row ``row`` of the host staging array (``upload`` sends it)."""
+        v = self._view
+        v["pose"][row, :3] = position
+        v["pose"][row, 3:] = rotation
+        v["linear_velocity"][row] = linear_velocity
+        v["angular_velocity"][row] = angular_velocity
+        v["band"][row] = band
+
+    def upload(self, row: int | None = None):
+        """Copies the staging rows (all, or one) to the device; never during a graph capture (a captured copy would
+        replay the staging buffer's contents of replay time)."""
         import warp as wp
 
-        v = self._view
-        v["pose"][0, :3] = position
-        v["pose"][0, 3:] = rotation
-        v["linear_velocity"][0] = linear_velocity
-        v["angular_velocity"][0] = angular_velocity
-        v["band"][0] = band
-        if self._staging is not self.array:
+        if self._staging is self.array:
+            return
+        if self.device.is_capturing:
+            raise RuntimeError("a collider pose was written from the host during a graph capture")
+        if row is None:
             wp.copy(self.array, self._staging)
+        else:
+            wp.copy(self.array, self._staging, dest_offset=row, src_offset=row, count=1)
+
+    def write(self, position, rotation, linear_velocity, angular_velocity, band: float = 0.0):
+        self.set_row(0, position, rotation, linear_velocity, angular_velocity, band)
+        self.upload(0)
 
 
 class _MeshData:
@@ -228,17 +250,18 @@ class _MeshData:
 
 
 class _RadiusBound:
-    """Largest collision radius [m] of a Warp array, read from the device once per array."""
+    """Largest collision radius [m] of a Warp array, read from the device once per array (per solver: a collider
+    shared by several solvers reads each one's radii once, not at every call)."""
 
     def __init__(self):
-        self._array = None
-        self._value = 0.0
+        self._values = {}  # id(array) -> (array, value); the array is kept so that its id stays unique
 
     def __call__(self, radius) -> float:
-        if radius is not self._array:
-            self._array = radius
-            self._value = float(radius.numpy().max())
-        return self._value
+        entry = self._values.get(id(radius))
+        if entry is None or entry[0] is not radius:
+            entry = (radius, float(radius.numpy().max()) if radius.shape[0] else 0.0)
+            self._values[id(radius)] = entry
+        return entry[1]
 
 
 def _mesh_band(band: float | None, radius_bound: _RadiusBound, radius) -> float:
@@ -275,13 +298,12 @@ class MeshCollider(Collider):
         # the mesh's frame: centred on its bounding box, so float32 vertices keep their precision anywhere
         self.center = 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0))
         self._mesh = _MeshData(self.vertices - self.center, self.faces, self.device)
-        self._motion = _MotionBuffer(self.device)
+        self._motions = {}  # band [m] -> its _MotionBuffer (written once: the mesh is static)
         self._radius_bound = _RadiusBound()
-        self._band_written = None
 
     def bind(self, origin) -> None:
         super().bind(origin)
-        self._band_written = None
+        self._motions = {}
 
     def view(self, time: float = 0.0, *, bounds=None):
         """The static mesh for the output: vertices relative to the centre of its bounding box, placed at it."""
@@ -302,9 +324,11 @@ class MeshCollider(Collider):
         from .kernels import colliders as kc
 
         band = _mesh_band(self.band, self._radius_bound, radius)
-        if band != self._band_written:  # static: the pose is written once (again only if the radii change)
-            self._motion.write(self.center - self.origin, IDENTITY_ROTATION, np.zeros(3), np.zeros(3), band)
-            self._band_written = band
+        motion = self._motions.get(band)
+        if motion is None:  # static: the pose is written once per band (per solver's radii)
+            motion = _MotionBuffer(self.device)
+            motion.write(self.center - self.origin, IDENTITY_ROTATION, np.zeros(3), np.zeros(3), band)
+            self._motions[band] = motion
         wp.launch(
             kc.collide_mesh,
             dim=rest.shape[0],
@@ -315,7 +339,7 @@ class MeshCollider(Collider):
                 kind,
                 radius,
                 self._mesh.mesh.id,
-                self._motion.array,
+                motion.array,
                 self.friction,
             ],
             device=self.device,
@@ -327,9 +351,11 @@ class RigidProjectile(Collider):
 
     Its motion is either ballistic (``velocity`` [m/s], ``angular_velocity`` [rad/s, world axes] and ``gravity``
     [m/s^2] from the initial pose at time 0) or scripted: ``path(t)`` returns the position [m] of the body's origin at
-    time t [s], or a pair (position, rotation quaternion (x, y, z, w)). The pose is evaluated once per step on the
-    host and written to a one-element device array; the surface velocity used in the contact response is the rigid
-    motion over the step, (p(t) - p(t - dt)) / dt plus the rotation between the two poses.
+    time t [s], or a pair (position, rotation quaternion (x, y, z, w)). The poses of a frame's steps are evaluated on
+    the host before the frame (:meth:`begin_frame`) and written to a device table in one copy; each step copies its
+    row on the device (a step outside a frame program evaluates and writes its own); the surface velocity used in
+    the contact response is the rigid motion over the step, (p(t) - p(t - dt)) / dt plus the rotation between the
+    two poses.
 
     Args:
         center: initial position of the body's origin [m].
@@ -367,7 +393,9 @@ class RigidProjectile(Collider):
         self.path = path
         self.friction = check_range("friction", friction, 0.0, None, lo_open=False)
         self.device = wp.get_device(device)
-        self._motion = _MotionBuffer(self.device)
+        self._motion = _MotionBuffer(self.device)  # the step's motion, copied from the table's row
+        self._table = _MotionBuffer(self.device, 1)  # the frame's steps, then a scratch row
+        self._slots: dict = {}  # (end time [s], dt [s]) of each step of the frame -> its row
         self._last: tuple | None = None  # (time, position, quaternion) of the last evaluated pose
 
     def pose(self, time: float) -> tuple[np.ndarray, np.ndarray]:
@@ -396,10 +424,55 @@ class RigidProjectile(Collider):
         p, q = self.pose(time)
         return RigidView(self.name or type(self).__name__, points, faces, p, q, static=False)
 
+    def begin_frame(self, time: float, dt: float, steps: int) -> None:
+        """Evaluates the motion of the ``steps`` steps of ``dt`` [s] from ``time`` [s] (the end times accumulated as
+        the solvers accumulate theirs) and writes them to the device table in one copy; :meth:`apply` then copies the
+        step's row on the device. A second call for the same steps (another solver of the scene) does nothing."""
+        frame = (float(time), float(dt), int(steps), tuple(np.asarray(self.origin, dtype=np.float64).tolist()))
+        if frame == getattr(self, "_frame", None):
+            return
+        self._frame = frame
+        rows, ends, t = [], [], float(time)
+        for _ in range(int(steps)):
+            t = t + float(dt)
+            ends.append(t)
+            rows.append(self._motion_over(t, dt))
+        if self._table.rows != len(rows) + 1:
+            self._table = _MotionBuffer(self.device, len(rows) + 1)
+        for k, row in enumerate(rows):
+            self._table.set_row(k, *row)
+        self._table.upload()
+        self._slots = {(x, float(dt)): k for k, x in enumerate(ends)}
+
     def _update_motion(self, time: float, dt: float, band: float = 0.0):
-        """Writes the pose at ``time`` and the rigid motion over [time - dt, time] to the device; the pose at the
-        start of the step is the one evaluated by the previous call when it matches (to round-off of the time).
-        ``band`` [m] is widened by the distance the surface sweeps in the step (meshes)."""
+        """The step's motion into ``self._motion``: its row of the frame's table (:meth:`begin_frame`), or, for a
+        step outside a frame program, the motion evaluated now into the scratch row; ``band`` [m] (meshes) is added
+        to the distance the surface sweeps in the step."""
+        import warp as wp
+
+        from .kernels import colliders as kc
+
+        slot = self._slots.get((float(time), float(dt)))
+        if slot is None:
+            if self.device.is_capturing:
+                raise RuntimeError(
+                    f"the pose of {type(self).__name__} at t={time!r} s is not in the frame's table "
+                    "(RigidProjectile.begin_frame) during a graph capture"
+                )
+            slot = self._table.rows - 1
+            self._table.set_row(slot, *self._motion_over(time, dt))
+            self._table.upload(slot)
+        wp.launch(
+            kc.select_motion,
+            dim=1,
+            inputs=[self._table.array, int(slot), float(band), self._motion.array],
+            device=self.device,
+        )
+
+    def _motion_over(self, time: float, dt: float) -> tuple:
+        """(position, rotation, linear velocity, angular velocity, swept distance) in the local frame of the rigid
+        motion over [time - dt, time]; the pose at the start of the step is the one evaluated by the previous call
+        when it matches (to round-off of the time)."""
         t0 = float(time) - float(dt)
         if self._last is not None and math.isclose(self._last[0], t0, rel_tol=1.0e-9, abs_tol=1.0e-6 * float(dt)):
             p0, q0 = self._last[1], self._last[2]
@@ -413,7 +486,7 @@ class RigidProjectile(Collider):
         else:
             v = w = np.zeros(3)
         sweep = float(np.linalg.norm(p1 - p0) + np.linalg.norm(w) * dt * self._bounding_radius())
-        self._motion.write(p1 - self.origin, q1, v, w, band + sweep)
+        return p1 - self.origin, q1, v, w, sweep
 
     def _bounding_radius(self) -> float:
         return 0.0

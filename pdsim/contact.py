@@ -194,10 +194,13 @@ class ParticleContact:
         self._all_free = wp.zeros(n, dtype=wp.int32, device=d)
         self._position_delta = wp.zeros(n, dtype=wp.vec3, device=d)
         self._velocity_delta = wp.zeros(n, dtype=wp.vec3, device=d)
-        # stiffness cap's per-particle scale, double-buffered: the force pass reads _scale and writes _scale_next,
-        # then apply() swaps them, so _scale is the next pass's and _scale_next the one just applied
+        # stiffness cap's per-particle scale: the force pass reads _scale and writes _scale_out, then apply() copies
+        # _scale into _scale_next (the scale just applied) and _scale_out into _scale (the next pass's). Copies, not
+        # a swap of two arrays: every step launches with the same arrays, so a captured frame replays correctly
+        # whatever the parity of its step count
         self._scale = wp.ones(n, dtype=float, device=d)
         self._scale_next = wp.ones(n, dtype=float, device=d)
+        self._scale_out = wp.ones(n, dtype=float, device=d)
         self._energy = wp.zeros(n, dtype=float, device=d)
         self._row_sum = wp.zeros(n, dtype=float, device=d)
         self._count = wp.zeros(n, dtype=wp.int32, device=d)
@@ -316,11 +319,12 @@ class ParticleContact:
                 force_density,
                 self._position_delta,
                 self._velocity_delta,
-                self._scale_next,
+                self._scale_out,
             ],
             device=self.device,
         )
-        self._scale, self._scale_next = self._scale_next, self._scale
+        wp.copy(self._scale_next, self._scale)
+        wp.copy(self._scale, self._scale_out)
         if self.floor_factor > 0.0:
             wp.launch(
                 kc.apply_contact_projection,
@@ -360,7 +364,7 @@ class ParticleContact:
                 self.query_radius,
                 self.distance_factor,
                 self.bonded_factor,
-                self._scale_next,  # after apply()'s swap: the scale its force pass applied (the forces' potential)
+                self._scale_next,  # after apply(): the scale its force pass applied (the forces' potential)
                 self._energy,
                 self._row_sum,
                 self._count,

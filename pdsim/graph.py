@@ -9,13 +9,20 @@ concatenated particles) the fragments are numbered in the order of their smalles
 holding the body's first particle is 0. With ``compact=False`` the label of a fragment is instead the body-local index
 of its smallest particle; that number never changes over an animation (the piece keeping a fragment's smallest
 particle keeps its label when the fragment splits), which keeps per-fragment colours stable in a render.
+
+Two labellers give the same labels: scipy's on the host (numpy input), and :class:`DeviceLabeller` on the Warp device
+(kernels/graph.py: label propagation with pointer jumping, its loop captured with ``wp.capture_while`` so that it runs
+on the device without a launch and a read per iteration); :class:`FragmentTracker` uses the device one when it is
+given Warp arrays, and then reads only the live-bond count and, when bonds broke, one label per particle.
 """
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
-__all__ = ["FragmentTracker", "connected_components", "fragment_labels"]
+__all__ = ["DeviceLabeller", "FragmentTracker", "connected_components", "fragment_labels"]
 
 
 def _as_numpy(array) -> np.ndarray:
@@ -100,9 +107,24 @@ def fragment_labels(family_offsets, family_neighbors, bond_alive, body_offsets=N
         shape=(n, n),
     )
     _, component = connected_components(graph, directed=True, connection="weak")
-    # Smallest particle index of each component (np.unique's first occurrence), and the components ranked by it.
+    # Smallest particle index of each component (np.unique's first occurrence).
     _, first = np.unique(component, return_index=True)
-    root = first[component]  # smallest particle index of each particle's component, shape [n]
+    return labels_from_roots(first[component], body_offsets, compact=compact)
+
+
+def labels_from_roots(root, body_offsets, *, compact: bool = True) -> np.ndarray:
+    """Fragment labels (see :func:`fragment_labels`) from ``root``, the smallest particle index of each particle's
+    component (int [particle_count]); ``body_offsets`` int [body_count + 1] as there.
+
+    Raises:
+        ValueError: a component holding particles of two bodies (a live bond joining two bodies).
+    """
+    root = np.asarray(root, dtype=np.int64).ravel()
+    body_offsets = np.asarray(body_offsets, dtype=np.int64).ravel()
+    n = root.shape[0]
+    if n == 0:
+        return np.zeros(0, dtype=np.int32)
+    first = np.flatnonzero(root == np.arange(n))  # the roots, ascending: one per component
     body_of = np.searchsorted(body_offsets, np.arange(n), side="right") - 1
     if np.any(body_of[root] != body_of):
         raise ValueError("a live bond joins particles of two different bodies")
@@ -110,14 +132,95 @@ def fragment_labels(family_offsets, family_neighbors, bond_alive, body_offsets=N
         return (root - body_offsets[body_of]).astype(np.int32)
     # Global rank of each component by its root; a body's components hold consecutive ranks starting at the rank
     # of the component of its first particle, so subtracting that rank numbers fragments per body.
-    order = np.argsort(first, kind="stable")
-    rank_of_component = np.empty_like(order)
-    rank_of_component[order] = np.arange(order.shape[0])
-    rank = rank_of_component[component]
+    rank = np.searchsorted(first, root)
     nonempty = np.diff(body_offsets) > 0
     base = np.zeros(body_offsets.shape[0] - 1, dtype=np.int64)
     base[nonempty] = rank[body_offsets[:-1][nonempty]]
     return (rank - base[body_of]).astype(np.int32)
+
+
+class DeviceLabeller:
+    """Connected components of the live edges of a CSR graph on the Warp device (kernels/graph.py).
+
+    The labelling (an initialisation, then hook and jump passes until a pass changes nothing) is captured once as a
+    graph whose loop is ``wp.capture_while`` on a device flag: on CUDA a conditional node, so one graph launch runs
+    it to convergence on the device; on the CPU Warp's recorded replay. :meth:`roots` launches it and returns the
+    device labels: the smallest node index of each node's component.
+
+    Args:
+        offsets: CSR row starts, int32 Warp array [node_count + 1] (or numpy, copied to ``device``).
+        neighbors: neighbour node of each edge, int32 Warp array [>= edge_count] (or numpy).
+        alive: per-edge flag (Warp array of uint8 or int32, nonzero is alive), read at each launch.
+        device: Warp device (default: ``alive``'s).
+    """
+
+    _warned = False  # the host-loop warning was given (class-wide: once per process)
+
+    def __init__(self, offsets, neighbors, alive, device=None):
+        import warp as wp
+
+        self.device = wp.get_device(device if device is not None else alive.device)
+
+        def on_device(a):
+            if isinstance(a, wp.array) and a.dtype == wp.int32 and a.device == self.device:
+                return a
+            return wp.array(_as_numpy(a).astype(np.int32).ravel(), dtype=wp.int32, device=self.device)
+
+        self.offsets = on_device(offsets)
+        self.neighbors = on_device(neighbors)
+        self.alive = alive
+        self.node_count = int(self.offsets.shape[0]) - 1
+        self.labels = wp.zeros(max(self.node_count, 1), dtype=wp.int32, device=self.device)
+        self.changed = wp.zeros(1, dtype=wp.int32, device=self.device)
+        self._graph = None
+
+    def _launch_all(self):
+        import warp as wp
+
+        from .kernels import graph as kg
+
+        n, d = self.node_count, self.device
+
+        def iteration():
+            wp.launch(kg.label_clear, dim=1, inputs=[self.changed], device=d)
+            wp.launch(
+                kg.label_hook,
+                dim=n,
+                inputs=[self.offsets, self.neighbors, self.alive, self.labels, self.changed],
+                device=d,
+            )
+            wp.launch(kg.label_jump, dim=n, inputs=[self.labels, self.changed], device=d)
+
+        wp.launch(kg.label_init, dim=n, inputs=[self.labels, self.changed], device=d)
+        wp.capture_while(self.changed, iteration)
+
+    def roots(self):
+        """Labels the components now (``alive`` as it is); returns the int32 Warp array [node_count] of each node's
+        smallest component member."""
+        import warp as wp
+
+        if self.node_count <= 0:
+            return self.labels[:0]
+        if self.device.is_cuda and not wp.is_conditional_graph_supported():
+            # the loop's conditional node needs a CUDA 12.4+ driver: said once, then the loop runs from the host
+            # (wp.capture_while outside a capture: a launch of the iteration and a read of the flag per iteration)
+            if not DeviceLabeller._warned:
+                DeviceLabeller._warned = True
+                warnings.warn(
+                    "fragment labelling loops from the host: this CUDA driver has no conditional graph nodes "
+                    "(CUDA 12.4+ needed)",
+                    stacklevel=2,
+                )
+            self._launch_all()
+            return self.labels[: self.node_count]
+        if self._graph is None:
+            # warm-up outside the capture: loads the kernels, then the capture records the labelling
+            self._launch_all()
+            with wp.ScopedCapture(device=self.device) as capture:
+                self._launch_all()
+            self._graph = capture.graph
+        wp.capture_launch(self._graph)
+        return self.labels[: self.node_count]
 
 
 class FragmentTracker:
@@ -149,6 +252,9 @@ class FragmentTracker:
             else _as_numpy(body_offsets).astype(np.int64).ravel()
         )
         self.compact = bool(compact)
+        self._device_inputs = (family_offsets, family_neighbors)
+        self._labeller = None  # DeviceLabeller, made on the first update given a Warp array
+        self._count = None
         self.live_bond_count: int | None = None
         # Intact: one fragment per body, label 0 in both numberings (each body's first particle has local index 0).
         self.labels = np.zeros(n, dtype=np.int32)
@@ -177,6 +283,10 @@ class FragmentTracker:
         Returns:
             True when the labels differ from those returned by the previous call.
         """
+        import warp as wp
+
+        if isinstance(bond_alive, wp.array):
+            return self._update_on_device(bond_alive, live_bond_count)
         alive = _as_numpy(bond_alive).ravel()[: self.bond_count]
         count = int(np.count_nonzero(alive)) if live_bond_count is None else int(live_bond_count)
         if count == self.live_bond_count:
@@ -185,6 +295,37 @@ class FragmentTracker:
         labels = fragment_labels(
             self.family_offsets, self.family_neighbors, alive, self.body_offsets, compact=self.compact
         )
+        if np.array_equal(labels, self.labels):
+            return False
+        self.labels = labels
+        self.version += 1
+        return True
+
+    def _update_on_device(self, bond_alive, live_bond_count) -> bool:
+        """:meth:`update` for a Warp array: the live bonds are counted on the device (one number read) and, when
+        their number dropped, labelled there (:class:`DeviceLabeller`; one label per particle read)."""
+        import warp as wp
+
+        from .kernels import graph as kg
+
+        n = self.labels.shape[0]
+        if self.bond_count == 0 or n == 0:
+            return False
+        if live_bond_count is None:
+            if self._count is None:
+                self._count = wp.zeros(1, dtype=wp.int32, device=bond_alive.device)
+            self._count.zero_()
+            wp.launch(kg.count_live, dim=self.bond_count, inputs=[bond_alive, self._count], device=bond_alive.device)
+            live_bond_count = int(self._count.numpy()[0])
+        count = int(live_bond_count)
+        if count == self.live_bond_count:
+            return False
+        self.live_bond_count = count
+        if self._labeller is None or self._labeller.alive is not bond_alive:
+            offsets, neighbors = self._device_inputs
+            self._labeller = DeviceLabeller(offsets, neighbors, bond_alive)
+        root = self._labeller.roots().numpy()
+        labels = labels_from_roots(root, self.body_offsets, compact=self.compact)
         if np.array_equal(labels, self.labels):
             return False
         self.labels = labels

@@ -89,6 +89,12 @@ class PointKinematics:
         self.gravity = vec3(*[float(g) for g in self.gravity_host])
         self.point_kind = wp.zeros(n, dtype=wp.int32, device=d)
         self._check = wp.zeros(2, dtype=float, device=d)
+        # The device clock [s]: [0] the time at the start of the step, [1] the time at its end (the loads' time),
+        # [2] a scratch time for evaluations outside the step loop. Kernels read it, so no launch argument changes
+        # from step to step and a frame's steps can be replayed as a CUDA graph; ``clock_host`` mirrors it on the
+        # host (advanced by the same float64 additions, never read back).
+        self.clock = wp.zeros(3, dtype=wp.float64, device=d)
+        self.clock_host = [0.0, 0.0, 0.0]
         self._build_conditions()
         self._build_loads()
         self.time = 0.0
@@ -182,15 +188,58 @@ class PointKinematics:
             out.add("damping")
         return out
 
-    # -- stepping ------------------------------------------------------------------------------------------------------
-    def begin_step(self, t: float, dt: float):
-        """Velocity kicks due in [t, t + dt), the conditions' state at t + dt/2, then the first half kick and drift."""
+    # -- the device clock ------------------------------------------------------------------------------------------
+    def set_clock(self, t: float, slot: int = 0) -> None:
+        """Writes time ``t`` [s] into ``clock[slot]`` from the host (a restore, a rebuilt state, an evaluation at an
+        arbitrary time). Never inside a graph capture: a captured copy would replay the same time every frame."""
         import warp as wp
 
+        t = float(t)
+        if self.clock_host[slot] == t:
+            return
+        if self.device.is_capturing:
+            raise RuntimeError(
+                f"the device clock was set from the host to t={t!r} s during a graph capture (it holds "
+                f"{self.clock_host[slot]!r} s): a step outside PointKinematics.begin_step/end_step changed the time"
+            )
+        wp.copy(self.clock, wp.array([t], dtype=wp.float64, device="cpu"), dest_offset=slot, count=1)
+        self.clock_host[slot] = t
+
+    def _clock_slot(self, t: float) -> int:
+        """The clock slot holding time ``t`` [s] (the step's start or end), or the scratch slot set to it."""
+        t = float(t)
+        for slot in (1, 0):
+            if self.clock_host[slot] == t:
+                return slot
+        self.set_clock(t, 2)
+        return 2
+
+    def end_clock_step(self) -> None:
+        """The step begun by :meth:`begin_step` is done: the clock's start time becomes its end time (on the device
+        and in the host mirror). kick-drift integrators that do not call :meth:`end_step` call this."""
+        import warp as wp
+
+        from .kernels import integration as ki
+
+        wp.launch(ki.clock_end_step, dim=1, inputs=[self.clock], device=self.device)
+        self.clock_host[0] = self.clock_host[1]
+
+    # -- stepping ------------------------------------------------------------------------------------------------------
+    def begin_step(self, t: float, dt: float):
+        """Velocity kicks due in [t, t + dt), the conditions' state at t + dt/2, then the first half kick and drift.
+        The device clock advances to the step: clock[0] = t (already there unless the state was changed from the
+        host), clock[1] = t + dt."""
+        import warp as wp
+
+        from .kernels import integration as ki
+
         d = self.device
-        self.apply_kicks(t, dt)
+        self.apply_kicks(t, dt)  # first: it starts the step (the watchdog's check every few steps runs there)
+        self.set_clock(t, 0)
+        wp.launch(ki.clock_begin_step, dim=1, inputs=[self.clock, wp.float64(dt)], device=d)
+        self.clock_host[1] = self.clock_host[0] + float(dt)
         if self.condition_count:
-            self.evaluate_conditions(t + 0.5 * dt)
+            self._evaluate_conditions_at(0, 0.5 * dt)
         wp.launch(
             self.k.kick_drift,
             dim=self.point_count,
@@ -226,7 +275,12 @@ class PointKinematics:
             self.next_kick += 1
 
     def evaluate_conditions(self, t: float):
-        """Each boundary condition's state at time ``t`` [s] (active kind and velocity), on the device."""
+        """Each boundary condition's state at time ``t`` [s] (active kind and velocity), on the device (``t`` is
+        written to the clock's scratch slot unless the clock holds it)."""
+        self._evaluate_conditions_at(self._clock_slot(t), 0.0)
+
+    def _evaluate_conditions_at(self, slot: int, offset: float):
+        """Each boundary condition's state at the device time clock[slot] + offset [s]."""
         import warp as wp
 
         from .kernels import integration as ki
@@ -242,7 +296,9 @@ class PointKinematics:
                 self.cond_curve,
                 self.cond_curve_time,
                 self.cond_curve_value,
-                float(t),
+                self.clock,
+                int(slot),
+                wp.float64(offset),
                 self.active_kind,
                 self.active_velocity,
             ],
@@ -250,7 +306,9 @@ class PointKinematics:
         )
 
     def add_loads(self, force, t: float):
-        """Adds every load, scaled by its curve at ``t`` [s], to ``force`` (the solver's force array)."""
+        """Adds every load, scaled by its curve at ``t`` [s], to ``force`` (the solver's force array). ``t`` is read
+        from the device clock (the end of the step begun, or its start; another time is written to the scratch
+        slot)."""
         import warp as wp
 
         from .kernels import integration as ki
@@ -260,7 +318,14 @@ class PointKinematics:
             wp.launch(
                 ki.evaluate_curves,
                 dim=self.load_count,
-                inputs=[self.load_curve, self.load_curve_time, self.load_curve_value, float(t), self.load_scale],
+                inputs=[
+                    self.load_curve,
+                    self.load_curve_time,
+                    self.load_curve_value,
+                    self.clock,
+                    self._clock_slot(t),
+                    self.load_scale,
+                ],
                 device=d,
             )
             wp.launch(
@@ -273,7 +338,8 @@ class PointKinematics:
             self.watchdog.loads_applied(self)
 
     def end_step(self, force, inv_mass, dt: float):
-        """Second half kick: a = force * inv_mass + g - c v on the free axes."""
+        """Second half kick: a = force * inv_mass + g - c v on the free axes; the device clock moves to the step's
+        end."""
         import warp as wp
 
         wp.launch(
@@ -293,6 +359,7 @@ class PointKinematics:
             ],
             device=self.device,
         )
+        self.end_clock_step()
 
     # -- outputs and checks --------------------------------------------------------------------------------------------
     def reactions(self, force, t: float) -> dict:
@@ -492,6 +559,12 @@ class Watchdog:
         self.stride = 1
         self.frame_start_step = 0
         self._done = 0  # steps completed since the last check
+        # a frame replayed as a graph (pdsim/frame_graph.py) checks and polls ``stop`` at its end only
+        self.frame_checks_only = False
+        # the largest collider surface speed of each step of the frame, on the device (``begin_frame`` writes it;
+        # the last entry is a scratch slot for steps outside a frame program)
+        self._speed_times: dict = {}
+        self._speeds = wp.zeros(1, dtype=wp.float64, device=self.device)
         values = self._reduce()
         self.initial_energy = values["kinetic"] + values["gravity"]  # E(0) [J]
         self.held_kinetic = values["held_kinetic"]  # kinetic energy of the held axes at the last check [J]
@@ -534,9 +607,10 @@ class Watchdog:
         previous step is counted (its forces are final)."""
         if kin is not self.kin:
             self.bind(kin)
-        if self.interval is not None and self._done >= self.interval and self.speed_limit is not None:
+        in_frame = not self.frame_checks_only
+        if in_frame and self.interval is not None and self._done >= self.interval and self.speed_limit is not None:
             self.solver.check_state(self.speed_limit)  # resets _done
-        if self.stop is not None and self.stop.requested:
+        if in_frame and self.stop is not None and self.stop.requested:
             done = int(getattr(self.solver, "step_count", 0)) - self.frame_start_step
             if done > 0 and done % self.stride == 0:
                 from .checkpoint import RunInterrupted
@@ -598,18 +672,71 @@ class Watchdog:
                 device=self.device,
             )
         if self._before is not None and self._before.shape == kin.v.shape and n:
-            speed = float(self.surface_speed(self._time, dt))
-            if speed > 0.0:
-                threads = min(n, _WATCH_THREADS)
-                wp.launch(
-                    kin.k.watch_impulse_work,
-                    dim=threads,
-                    inputs=[kin.v, self._before, kin.mass, wp.float64(speed), n, threads, self.acc],
-                    device=self.device,
-                )
+            threads = min(n, _WATCH_THREADS)
+            wp.launch(
+                kin.k.watch_impulse_work,
+                dim=threads,
+                inputs=[
+                    kin.v,
+                    self._before,
+                    kin.mass,
+                    self._speeds,
+                    self._speed_slot(self._time, dt),
+                    n,
+                    threads,
+                    self.acc,
+                ],
+                device=self.device,
+            )
         # the support work of this step is counted once its forces are final (next step, or the check), on the
         # kinematics and force array of this step (a fracture may rebuild both at the end of the step)
         self._pending = (dt, kin, getattr(self.solver, "force", None))
+
+    # -- frames (pdsim/frame_graph.py) ---------------------------------------------------------------------------
+    def begin_frame(self, dt: float, steps: int) -> None:
+        """Writes the collider surface speed of each of the next ``steps`` steps of ``dt`` [s] to the device (one
+        copy), so that the steps read it from a table instead of a launch argument."""
+        import warp as wp
+
+        if self.surface_speed is None:
+            return
+        times, t = [], self._time
+        for _ in range(int(steps)):
+            t += dt
+            times.append(t)
+        speeds = np.array([float(self.surface_speed(x, dt)) for x in times] + [0.0], dtype=np.float64)
+        if self._speeds.shape[0] != speeds.shape[0]:
+            self._speeds = wp.zeros(speeds.shape[0], dtype=wp.float64, device=self.device)
+        self._speeds.assign(speeds)
+        self._speed_times = {(x, float(dt)): k for k, x in enumerate(times)}
+
+    def _speed_slot(self, time: float, dt: float) -> int:
+        """The slot of ``_speeds`` holding the surface speed of the step of ``dt`` ending at ``time`` (from
+        :meth:`begin_frame`), or the scratch slot written now (a step outside a frame program; never under
+        capture)."""
+        import warp as wp
+
+        slot = self._speed_times.get((time, float(dt)))
+        if slot is not None:
+            return slot
+        if self.device.is_capturing:
+            raise RuntimeError(
+                f"the watchdog's collider speed of the step ending at t={time!r} s is not in the frame's table "
+                "(Watchdog.begin_frame) during a graph capture"
+            )
+        slot = self._speeds.shape[0] - 1
+        speed = float(self.surface_speed(time, dt)) if self.surface_speed is not None else 0.0
+        wp.copy(self._speeds, wp.array([speed], dtype=wp.float64, device="cpu"), dest_offset=slot, count=1)
+        return slot
+
+    def after_replay(self, dt: float, steps: int) -> None:
+        """The host bookkeeping of ``steps`` steps of ``dt`` [s] that a graph replayed (what step_start and
+        loads_applied do on the host each step)."""
+        for _ in range(int(steps)):
+            self._time += dt
+        self._done += int(steps)
+        self._step_dt = None
+        self._pending = (dt, self.kin, getattr(self.solver, "force", None))
 
     def _flush_support_work(self) -> None:
         import warp as wp

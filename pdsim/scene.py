@@ -73,6 +73,10 @@ class Scene:
         up_axis: "Z" (default) or "Y"; written to the stage and used for the default gravity and ground plane.
         time_step_safety: automatic dt = safety * Silling-Askari estimate, in (0, 1]; default 0.7.
         name: scene label.
+        graph_capture: replay each frame's steps as one captured graph (pdsim/frame_graph.py): None (default) on CUDA
+            devices, False never (every step launched from the host), True on any device (the CPU replays Warp's
+            recorded operations). Scenes whose steps do host work (FEM fracture, the implicit FEM integrator) run
+            uncaptured with a warning naming the reason.
     """
 
     def __init__(
@@ -86,7 +90,11 @@ class Scene:
         name: str = "scene",
         time_scale: float | None = None,
         frame_time: float | None = None,
+        graph_capture: bool | None = None,
     ):
+        if graph_capture not in (None, True, False):
+            raise ParameterError("graph_capture", graph_capture, "None (on CUDA devices), True or False")
+        self.graph_capture = graph_capture
         if up_axis not in UP_AXES:
             raise ParameterError("up_axis", up_axis, "'Y' or 'Z'")
         self.fps = check_range("fps", fps, 0.0, 1000.0, hi_open=False)
@@ -507,12 +515,13 @@ class Scene:
         for s in points:
             if s.watchdog is not None:
                 s.watchdog.frame_start_step = int(s.step_count)
+        graphs = self._frame_graphs(solvers)
         if first == 0:
             for s in solvers:
                 if not isinstance(s, PointSolver):
-                    s.simulate(dt, substeps)
+                    self._frame_alone(s, dt, substeps, graphs)
         if points and substeps > first:
-            self.advance_frame(points, dt, substeps - first, coupling)
+            self.advance_frame(points, dt, substeps - first, coupling, graphs=graphs)
         for s in solvers:
             if s.watchdog is not None:
                 s.watchdog.full_check = True
@@ -531,29 +540,64 @@ class Scene:
             return None
         return MethodContact(particles, meshes)
 
+    def _frame_graphs(self, solvers):
+        """The FrameGraphs (pdsim/frame_graph.py) of this run's solvers, following ``graph_capture``: kept on the
+        first solver (it lives as long as the solvers do) for the same set of solvers."""
+        from .frame_graph import FrameGraphs
+
+        first = solvers[0]
+        cached = getattr(first, "_frame_graphs", None)
+        if cached is None or len(cached[0]) != len(solvers) or any(a is not b for a, b in zip(cached[0], solvers)):
+            device = first.kin.device if hasattr(first, "kin") else first.device
+            cached = (list(solvers), FrameGraphs(device, self.graph_capture))
+            first._frame_graphs = cached
+        return cached[1]
+
     @staticmethod
-    def advance_frame(solvers, dt: float, substeps: int, coupling=None) -> None:
+    def _frame_alone(solver, dt: float, substeps: int, graphs=None) -> None:
+        """A frame of a solver without mass (the lattice: a frame of its own steps), replayed as a graph where
+        ``graphs`` can."""
+        if graphs is None:
+            solver.simulate(dt, substeps)
+        else:
+            graphs.advance([solver], dt, substeps, None, lambda: solver.simulate(dt, substeps))
+
+    @staticmethod
+    def advance_frame(solvers, dt: float, substeps: int, coupling=None, graphs=None) -> None:
         """One frame of ``substeps`` steps of ``dt`` [s]: the solvers of methods with mass step together, phase by
         phase, so that ``coupling`` (contact between methods) acts within each step; the others (the lattice)
-        advance by a frame."""
+        advance by a frame. The frame's tables (projectile poses, the watchdog's collider speeds) are written to the
+        device first; no step reads the device. ``graphs`` (a pdsim.frame_graph.FrameGraphs) replays the steps as a
+        captured graph where it can; None launches them from the host."""
         from .solver import PointSolver
 
         coupled = [s for s in solvers if isinstance(s, PointSolver)]
         for s in solvers:
             if not isinstance(s, PointSolver):
-                s.simulate(dt, substeps)
-        if len(coupled) == 1 and coupling is None:
-            coupled[0].simulate(dt, substeps)
+                Scene._frame_alone(s, dt, substeps, graphs)
+        if not coupled:
             return
-        for _ in range(substeps):
-            for s in coupled:
-                s.begin_step(dt)
-            for s in coupled:
-                s.compute_forces()
-            if coupling is not None:
-                coupling.apply(dt)
-            for s in coupled:
-                s.end_step(dt)
+        for s in coupled:
+            s.begin_frame(dt, substeps)
+
+        def run_steps():
+            if len(coupled) == 1 and coupling is None:
+                coupled[0].simulate(dt, substeps)
+                return
+            for _ in range(substeps):
+                for s in coupled:
+                    s.begin_step(dt)
+                for s in coupled:
+                    s.compute_forces()
+                if coupling is not None:
+                    coupling.apply(dt)
+                for s in coupled:
+                    s.end_step(dt)
+
+        if graphs is None:
+            run_steps()
+        else:
+            graphs.advance(coupled, dt, substeps, coupling, run_steps)
 
     @staticmethod
     def _write_frame(writer, cache, solvers, frame: int) -> None:

@@ -204,6 +204,61 @@ class PointSolver(Solver):
         for _ in range(int(steps)):
             self.step(dt)
 
+    # -- frames replayed as graphs (pdsim/frame_graph.py) ----------------------------------------------------------
+    def graph_capture_blocker(self, dt: float) -> str | None:
+        """Why this solver's steps of ``dt`` [s] cannot be captured once and replayed every frame (work a step does
+        on the host), or None (default: the shared kinematics, colliders and contact are capturable). A solver that
+        launches from several CPU threads (``threads`` > 1, peridynamics on the CPU) cannot: a capture records the
+        launches of its own thread only."""
+        threads = getattr(self, "threads", 1)
+        if isinstance(threads, int) and threads > 1:
+            return f"{threads} CPU threads launch the bond passes (a capture records one thread's launches)"
+        return None
+
+    def begin_frame(self, dt: float, steps: int) -> None:
+        """Writes the tables of the next ``steps`` steps of ``dt`` [s] to the device before the frame (projectile
+        poses, the watchdog's collider speeds): one copy each, none inside the frame."""
+        for c in getattr(self, "colliders", ()):
+            if callable(getattr(c, "begin_frame", None)):
+                c.begin_frame(self.time, dt, steps)
+        if self.watchdog is not None:
+            self.watchdog.begin_frame(dt, steps)
+
+    def frame_needs_direct(self, dt: float, steps: int) -> bool:
+        """True when the next ``steps`` steps of ``dt`` [s] hold a velocity kick (a launch of its step only), with a
+        margin above the round-off of the accumulated time (a frame wrongly thought to hold one only runs directly)."""
+        kin = self.kin
+        if kin.next_kick < len(kin.kicks):
+            end = self.time + steps * dt * (1.0 + 1.0e-9) + 1.0e-12
+            return kin.kicks[kin.next_kick][0] < end
+        return False
+
+    def graph_key(self) -> tuple:
+        """What the captured launches depend on (pdsim/frame_graph.py keys its graphs by the identity of each object
+        and keeps the objects alive with the graph): the kinematics and force arrays (FEM fracture rebuilds them), the
+        watchdog's table and the projectiles' tables (reallocated when the substeps change)."""
+        parts = [self.kin, getattr(self, "force", None), getattr(self, "topology_version", 0)]
+        if self.watchdog is not None:
+            parts.append(self.watchdog._speeds)
+        for c in getattr(self, "colliders", ()):
+            if callable(getattr(c, "begin_frame", None)):
+                parts += [c._table.array, c._motion.array]
+        return tuple(parts)
+
+    def after_replay(self, dt: float, steps: int) -> None:
+        """The host bookkeeping of ``steps`` steps of ``dt`` [s] that a graph replayed on the device: time (the same
+        float64 additions as :meth:`begin_step` / :meth:`end_step`), step count, the kinematics' clock mirror and the
+        watchdog's accounting."""
+        t = self.time
+        for _ in range(int(steps)):
+            self._force_time = t + dt
+            t = self._force_time
+        self.time = t
+        self.step_count += int(steps)
+        self.kin.clock_host[0] = self.kin.clock_host[1] = t
+        if self.watchdog is not None:
+            self.watchdog.after_replay(dt, steps)
+
     def check_state(self, speed_limit: float) -> None:
         where = f"at t={self.time:.6g} s (step {self.step_count}) in {self.summary()}"
         if self.watchdog is not None:

@@ -117,8 +117,15 @@ def lattice_path_displacement(
 
 
 @wp.kernel
+def lattice_step_clock(step_clock: wp.array(dtype=wp.int32)):
+    """The step about to be taken: step_clock[0] += 1 (a device counter, so that no launch argument changes from step
+    to step and a frame can be replayed as a captured graph)."""
+    step_clock[0] = step_clock[0] + 1
+
+
+@wp.kernel
 def lattice_move_leaders(
-    step: int,
+    step_clock: wp.array(dtype=wp.int32),
     leader_ids: wp.array(dtype=wp.int32),
     group: wp.array(dtype=wp.int32),
     key_offsets: wp.array(dtype=wp.int32),
@@ -128,8 +135,9 @@ def lattice_move_leaders(
     u_cur: wp.array(dtype=wp.vec3),
     u_next: wp.array(dtype=wp.vec3),
 ):
-    """The leaders ``leader_ids`` take their path's displacement at ``step`` (in both buffers: the followers of this
-    step see it); a leader without a path (group < 0) holds its displacement."""
+    """The leaders ``leader_ids`` take their path's displacement at the step ``step_clock[0]`` (in both buffers: the
+    followers of this step see it); a leader without a path (group < 0) holds its displacement."""
+    step = step_clock[0]
     i = leader_ids[wp.tid()]
     g = group[i]
     u = u_cur[i]

@@ -61,6 +61,9 @@ class FemBody(PointBody):
         integrator: "explicit" (default) or "implicit".
         plasticity: plastic flow parameters, or None for a purely elastic body (nothing is allocated or launched).
         tensile_strength: largest principal stress before an element cracks [Pa], > 0; None: no fracture.
+        fracture_energy: energy a crack consumes per unit area of new crack surface, G_c [J/m^2], >= 0 (default 0):
+            a split happens only when the strain energy around it covers G_c times the crack area it opens, and that
+            energy is then taken from the motion around the crack (pdsim/fem/fracture.py). Needs tensile_strength.
         damping: mass-proportional damping c [1/s], >= 0 (a = f / m + g - c v).
         implicit_step_ratio: implicit integrator: the step the scene uses, as a multiple of the explicit limit, >= 1.
         render_mesh: a high-resolution surface embedded in the tetrahedra (barycentric) and output as its own mesh
@@ -84,6 +87,7 @@ class FemBody(PointBody):
         integrator: str = "explicit",
         plasticity: FemPlasticity | None = None,
         tensile_strength: float | None = None,
+        fracture_energy: float = 0.0,
         damping: float = 0.0,
         implicit_step_ratio: float = 10.0,
         render_mesh: SolidShape | bool | None = None,
@@ -125,6 +129,9 @@ class FemBody(PointBody):
         self.tensile_strength = (
             None if tensile_strength is None else check_range("tensile_strength", tensile_strength, 0.0, None)
         )
+        self.fracture_energy = check_range("fracture_energy", fracture_energy, 0.0, None, lo_open=False)
+        if self.fracture_energy > 0.0 and self.tensile_strength is None:
+            raise ParameterError("fracture_energy", fracture_energy, "0 without a tensile_strength (no fracture)")
         self.damping = check_range("damping", damping, 0.0, None, lo_open=False)
         self.implicit_step_ratio = check_range("implicit_step_ratio", implicit_step_ratio, 1.0, None, lo_open=False)
         self.name = name or shape.name

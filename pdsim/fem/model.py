@@ -76,6 +76,7 @@ class FemModel:
     ``element_offsets`` [bodies + 1] and ``element_body`` [m] (int64), ``volume_h`` [m^3], ``density_h`` [kg/m^3],
     ``centroids_h`` (local frame, fracture's crack planes), ``strength_h`` (tensile strength per element [Pa], inf on
     bodies without fracture, None when no body fractures; the solver retires split elements in its own copy),
+    ``fracture_energy_h`` (G_c per element [J/m^2], None when no body fractures),
     ``surface_face_ids`` (the boundary faces 4 e + k of the input meshes: every other boundary face is a crack face),
     ``widths`` (half the mean edge length of each body [m], the PointsView widths), ``explicit_dt`` (0.5 h_min / c_p
     [s]); Warp arrays ``dm_inv``, ``volume``, ``lame`` ((lambda, mu) per element [Pa]) and ``plastic_params`` ((yield
@@ -148,11 +149,12 @@ class FemModel:
                 dtype=np.float64,
             )[self.element_body]
             self.plastic_params = wp.array(pp.astype(f), dtype=vec3, device=dev)
-        self.strength_h = None
+        self.strength_h = self.fracture_energy_h = None
         if self.fracture:
             self.strength_h = per_element(
                 [np.inf if b.tensile_strength is None else b.tensile_strength for b in bodies]
             )
+            self.fracture_energy_h = per_element([b.fracture_energy for b in bodies])
         # faces of the input surfaces (4 e + k): every other boundary face is a crack face
         self.surface_face_ids = boundary_faces(tets, return_face_ids=True)[1]
         self.widths = [0.5 * _mean_edge_length(b.mesh.vertices, b.mesh.tets) for b in bodies]

@@ -42,7 +42,8 @@ only when some body yields. Fracture (pdsim/fem/fracture.py) costs one eigen-dec
 Samuelson bound exceeds its strength, a counter read per step, and host topology work (vectorised numpy/scipy, local to
 the split vertices) only on steps where some element exceeded its strength; the vertex arrays and the kinematics are
 then rebuilt from host arrays (displacements, velocities, accelerations and boundary conditions carried over to the
-new vertex numbering, copies inheriting their parent's; loads resolved again on the split mesh).
+new vertex numbering, copies inheriting their parent's; loads resolved again on the split mesh). With a fracture
+energy, the steps that follow a split also read and write the velocities on the host until the energy owed is paid.
 
 Colliders: the ground plane and the scene's colliders (pdsim/colliders.py) act on the free vertices with zero radius
 (float32 only). Contact between FEM pieces or bodies is not implemented: pieces of a cracked body pass through each
@@ -71,6 +72,9 @@ from .implicit import BackwardEuler
 from .mesh import boundary_faces
 from .model import FemModel
 from .static import StaticSolveReport, solve_static
+
+
+GRIFFITH_ROUNDS = 4  # fracture: rounds of the Griffith test before a step's remaining splits are made untested
 
 
 class _SplitBody(PointLoads):
@@ -117,7 +121,9 @@ class SolverFem(PointSolver):
             stiffness blocks: about 2x faster per implicit step on the CPU, docs/benchmarks.md).
 
     State: ``kin`` (the shared PointKinematics on the vertices), ``force`` (nodal forces [N]: internal plus loads at
-    the last evaluation), ``inv_mass`` (1 / lumped mass [1/kg]). ``features`` lists the live optional parts
+    the last evaluation), ``inv_mass`` (1 / lumped mass [1/kg]); fracture: ``split_count``, ``crack_area`` (crack
+    surface opened, one side [m^2]) and ``fracture_dissipated`` (fracture energy taken from the motion so far [J];
+    G_c times ``crack_area`` once the energy owed is paid). ``features`` lists the live optional parts
     (plasticity, fracture, gravity, ground_plane, colliders, damping, render_mesh, boundary_conditions, loads,
     velocity_kicks); kernels are compiled with the dead ones removed, and no state is allocated for them.
     """
@@ -267,8 +273,8 @@ class SolverFem(PointSolver):
         return {
             "material_plasticity": "FEM plasticity is set on the body: FemBody(..., plasticity=FemPlasticity("
             "yield_strain=..., creep=..., max_strain=...)); remove the Material field",
-            "material_fracture": "FEM fracture is set on the body: FemBody(..., tensile_strength=...) [Pa]; remove the "
-            "Material field",
+            "material_fracture": "FEM fracture is set on the body: FemBody(..., tensile_strength=... [Pa], "
+            "fracture_energy=... [J/m^2]); remove the Material field",
             "anisotropy": "the FEM material is isotropic; remove Material.anisotropy or use a PeridynamicBody",
         }.get(feature, super().instead(feature))
 
@@ -317,6 +323,13 @@ class SolverFem(PointSolver):
         self._vertex_body_h = model.vertex_body
         self._point_condition_h = model.point_condition  # body-local
         self._crack_vertex_h = np.zeros(len(model.rest), dtype=bool)
+        # fracture (pdsim/fem/fracture.py): per vertex, the crack plane it was split on (point in the rest local
+        # frame, unit normal; NaN off cracks) and the fracture energy it still owes [J]; totals of the crack area
+        # opened [m^2] and of the fracture energy taken from the motion [J]
+        self._crack_plane_h = np.full((len(model.rest), 6), np.nan)
+        self._debt_h = np.zeros(len(model.rest))
+        self.crack_area = 0.0
+        self.fracture_dissipated = 0.0
         self._build_vertex_data(bodies)
 
     @property
@@ -523,10 +536,24 @@ class SolverFem(PointSolver):
         self._compute_element_forces(dt)
         self._loads_into_force(self._force_time)
         self._gather("gather_kick", dt)
+        self.kin.end_clock_step()
         self.time += dt
         self.step_count += 1
         if self.fracture:
             self._fracture_event()
+
+    def graph_capture_blocker(self, dt: float) -> str | None:
+        """Why a frame of steps of ``dt`` [s] cannot be replayed as a graph (docs/architecture.md, GPU path), or
+        None: fracture splits elements on the host (a read of the over-strength count every step, then a new
+        topology); the implicit integrator's conjugate-gradient solve tests its convergence on the host; a scene
+        step above the explicit limit is split into a number of steps of the solver's own."""
+        if self.fracture:
+            return "FEM fracture (the over-strength count is read every step and splits rebuild the mesh on the host)"
+        if self.integrator == "implicit":
+            return "the implicit FEM integrator (its conjugate-gradient solve tests convergence on the host)"
+        if dt > self.model.explicit_dt * (1.0 + 1.0e-9):
+            return "an FEM body stepping alone above its explicit limit (simulate() splits each step)"
+        return None
 
     def simulate(self, dt: float, steps: int):
         """Runs ``steps`` steps of ``dt`` [s]; the explicit integrator splits each into ceil(dt / dt_stable) equal
@@ -601,12 +628,23 @@ class SolverFem(PointSolver):
         return self.split_count - before
 
     def _fracture_event(self) -> bool:
-        """Splits vertices where elements exceed their strength (only when the kernel counted one); True if the
-        topology changed."""
+        """Pays fracture energy still owed, then splits vertices where elements exceed their strength (only when the
+        kernel counted one) and the Griffith test passes (pdsim/fem/fracture.py); True if the topology changed."""
         import warp as wp
 
-        from .fracture import choose_splits, make_manifold, split_vertices
+        from .fracture import (
+            best_offsets,
+            choose_splits,
+            griffith_filter,
+            make_manifold,
+            opened_faces,
+            separation_directions,
+            split_vertices,
+            triangle_areas,
+        )
 
+        if self._debt_h.any():
+            self._pay_fracture_energy()
         if int(self._over_count.numpy()[0]) == 0:
             return False
         principal = self._principal.numpy().astype(np.float64)
@@ -614,24 +652,67 @@ class SolverFem(PointSolver):
         if over.size == 0:
             return False
         nv = self.point_count
-        verts, normals, sources = choose_splits(
+        rest, centroids = self._rest_local_h, self.model.centroids_h
+        directions = separation_directions(
+            self._tets_h, over, self._element_stresses, self.model.volume_h, principal[over, :3]
+        )
+        verts, normals, sources, anchors, new_crack = choose_splits(
             self._tets_h,
-            self._rest_local_h,
-            self.model.centroids_h,
+            rest,
+            centroids,
             over,
-            principal[over, :3],
+            directions,
             principal[over, 3],
             self._crack_vertex_h,
+            self._crack_plane_h,
         )
         if len(verts) == 0:
             return False
-        tets1, parent1 = split_vertices(self._tets_h, self._rest_local_h, self.model.centroids_h, verts, normals)
-        copies = np.arange(nv, len(parent1))
-        tets2, parent2 = make_manifold(tets1, len(parent1), np.concatenate([verts, copies]))
+        origins, fits = best_offsets(self._tets_h, rest, centroids, verts, normals, anchors, new_crack)
+        if not fits.all():
+            verts, normals, sources, anchors, origins = (a[fits] for a in (verts, normals, sources, anchors, origins))
+            if len(verts) == 0:
+                return False
+        gc = self.model.fracture_energy_h
+        energy = None
+        for round_ in range(GRIFFITH_ROUNDS + 1):
+            tets1, parent1 = split_vertices(self._tets_h, rest, centroids, verts, normals, origins)
+            copies = np.arange(nv, len(parent1))
+            tets2, parent2 = make_manifold(tets1, len(parent1), np.concatenate([verts, copies]))
+            if round_ == GRIFFITH_ROUNDS or not gc[sources].any():
+                break
+            if energy is None:
+                self.strain_energy()  # fills self._energy
+                energy = self._energy.numpy().astype(np.float64)
+            # Griffith on the whole topology change (the splits and the separations they cause)
+            keep, _, _ = griffith_filter(
+                self._tets_h, rest, verts, tets2, parent1[parent2], energy, gc, sources, self._debt_h
+            )
+            if keep.all():
+                break
+            verts, normals, sources, anchors, origins = (a[keep] for a in (verts, normals, sources, anchors, origins))
+            if len(verts) == 0:
+                return False
         parent = parent1[parent2]
         crack = self._crack_vertex_h[parent]
         crack[verts] = True
         crack[nv:] = True
+        # crack planes: the split vertex and its copies keep their split's plane, with its point moved to their
+        # projection onto it
+        crack_plane = self._crack_plane_h[parent]
+        x = rest[verts]
+        on_plane = x - np.einsum("sj,sj->s", x - origins, normals)[:, None] * normals
+        split_of = np.full(nv, -1, dtype=np.int64)
+        split_of[verts] = np.arange(len(verts))
+        mine = split_of[parent] >= 0
+        crack_plane[mine] = np.concatenate([on_plane, normals], axis=1)[split_of[parent[mine]]]
+        # the crack area opened, with its fracture energy owed by the vertices of the opened faces (a third each)
+        faces, elem = opened_faces(self._tets_h, tets2)
+        area = 0.5 * triangle_areas(rest[parent], faces)  # each opened face appears once per side
+        self.crack_area += float(area.sum())
+        debt = np.zeros(len(parent))
+        debt[:nv] = self._debt_h
+        debt += np.bincount(faces.ravel(), weights=np.repeat(gc[elem] * area / 3.0, 3), minlength=len(parent))
         self.split_count += len(verts)
         self.last_splits = (verts.copy(), normals.copy())
         for b in np.unique(self._vertex_body_h[verts]):
@@ -639,10 +720,47 @@ class SolverFem(PointSolver):
         # an element splits at most once (pdsim/fem/fracture.py): retire the sources from the strength test
         self._strength_h[sources] = np.inf
         self._strength = wp.array(self._strength_h.astype(self.np_dtype), dtype=self.dtype, device=self.device)
-        self._apply_topology(tets2, parent, crack)
+        self._apply_topology(tets2, parent, crack, crack_plane, debt)
         return True
 
-    def _apply_topology(self, tets: np.ndarray, parent: np.ndarray, crack: np.ndarray):
+    def _element_stresses(self, elements: np.ndarray) -> np.ndarray:
+        """Stresses of ``elements`` at the current displacements in the rest frame [Pa], float64 [r, 3, 3] (host;
+        the strain of the solver's measure, the corotated one with the rotations of the last force evaluation, less
+        the plastic strain; the directions of fracture's crack planes)."""
+        m = self.model
+        t = self._tets_h[elements]
+        u = self.kin.displacements()
+        du = np.stack([u[t[:, a]] - u[t[:, 0]] for a in (1, 2, 3)], axis=-1)  # columns
+        g = du @ m.dm_inv.numpy().astype(np.float64)[elements]
+        eye = np.eye(3)
+        if self.measure == "corotated":
+            r = self._rotation.numpy().astype(np.float64)[elements]
+            rf = np.swapaxes(r, 1, 2) @ (eye + g)
+            eps = 0.5 * (rf + np.swapaxes(rf, 1, 2)) - eye
+        elif self.measure == "green":
+            eps = 0.5 * (g + np.swapaxes(g, 1, 2) + np.swapaxes(g, 1, 2) @ g)
+        else:
+            eps = 0.5 * (g + np.swapaxes(g, 1, 2))
+        if self.plastic:
+            eps = eps - self._plastic_strain.numpy().astype(np.float64)[elements]
+        lame = m.lame.numpy().astype(np.float64)[elements]
+        tr = np.trace(eps, axis1=1, axis2=2)
+        return lame[:, 0, None, None] * tr[:, None, None] * eye + 2.0 * lame[:, 1, None, None] * eps
+
+    def _pay_fracture_energy(self):
+        """Takes the fracture energy owed from the relative motion around the cracks (pdsim/fem/fracture.py:
+        pay_fracture_energy; momentum conserving, never adding energy)."""
+        from .fracture import pay_fracture_energy
+
+        free = self.kin.point_condition_host < 0
+        v, self._debt_h, paid = pay_fracture_energy(
+            self._tets_h, self._mass_h, self.kin.velocities(), self._debt_h, free
+        )
+        if paid > 0.0:
+            self.kin.set_velocities(v)
+            self.fracture_dissipated += paid
+
+    def _apply_topology(self, tets: np.ndarray, parent: np.ndarray, crack: np.ndarray, crack_plane, debt):
         """Installs new element corners; vertex i of the new numbering copies the state of old vertex parent[i]
         (displacement, velocity, acceleration, boundary condition). Vertices are then renumbered body by body (stable:
         a single body keeps the numbering of the split), and the kinematics rebuilt from host arrays. The split keeps
@@ -661,6 +779,8 @@ class SolverFem(PointSolver):
         self._vertex_body_h = self._vertex_body_h[source]
         self._point_condition_h = self._point_condition_h[source]
         self._crack_vertex_h = crack[perm]
+        self._crack_plane_h = crack_plane[perm]
+        self._debt_h = debt[perm]
         self._tets_h = inverse[np.asarray(tets, dtype=np.int64)]
         faces, fid = boundary_faces(self._tets_h, return_face_ids=True)
         original = np.isin(fid, self.model.surface_face_ids)
@@ -710,6 +830,10 @@ class SolverFem(PointSolver):
             "vertex_body": self._vertex_body_h,
             "point_condition": self._point_condition_h,
             "crack_vertex": self._crack_vertex_h,
+            "crack_plane": self._crack_plane_h,
+            "fracture_debt": self._debt_h,
+            "crack_area": float(self.crack_area),
+            "fracture_dissipated": float(self.fracture_dissipated),
             "tets": self._tets_h,
             "strength": self._strength_h if self.fracture else None,
             "body_topology_version": np.asarray(self._body_topology_version, dtype=np.int64),
@@ -768,6 +892,10 @@ class SolverFem(PointSolver):
         self._body_topology_version = [int(x) for x in np.asarray(topo["body_topology_version"])]
         self.topology_version = int(topo["topology_version"])
         self.split_count = int(topo["split_count"])
+        self.crack_area = float(topo["crack_area"])
+        self._crack_plane_h = np.asarray(topo["crack_plane"], dtype=np.float64).copy()
+        self._debt_h = np.asarray(topo["fracture_debt"], dtype=np.float64).copy()
+        self.fracture_dissipated = float(topo["fracture_dissipated"])
         self.last_splits = (np.asarray(topo["last_split_vertices"]), np.asarray(topo["last_split_normals"]))
         self.kinematics_restore(state["kinematics"])
         e = state["elements"]

@@ -114,6 +114,10 @@ class _LatticeRuntime:
         self.u_next = wp.zeros(n, dtype=wp.vec3, device=device)
         self.u_prev = wp.zeros(n, dtype=wp.vec3, device=device)
         self.broken_total = wp.zeros(1, dtype=wp.int32, device=device)
+        # the step index on the device (the leaders' paths read it), advanced by a kernel each step; the host keeps
+        # a mirror (never read back), so that a frame's launches do not change from frame to frame
+        self.step_clock = wp.zeros(1, dtype=wp.int32, device=device)
+        self._clock_host = 0
         self.pe1 = wp.zeros(n, dtype=float, device=device)
         self.pe1_intact = wp.zeros(n, dtype=float, device=device)
         self.broken = wp.zeros(n, dtype=wp.int32, device=device)
@@ -140,6 +144,12 @@ class _LatticeRuntime:
 
         t = self.step_count + 1
         d = self.device
+        if self._clock_host != self.step_count:  # a restore or a state set from the host
+            if d.is_capturing:
+                raise RuntimeError("the lattice step clock was set from the host during a graph capture")
+            self.step_clock.assign(np.array([self.step_count], dtype=np.int32))
+        wp.launch(kl.lattice_step_clock, dim=1, inputs=[self.step_clock], device=d)
+        self._clock_host = t
         events = self.events.get(t, ())
         for ids, kind, group, host_ids in events:
             wp.launch(
@@ -153,7 +163,7 @@ class _LatticeRuntime:
                 kl.lattice_move_leaders,
                 dim=self.leader_count,
                 inputs=[
-                    t,
+                    self.step_clock,
                     self.leader_ids,
                     self.group,
                     self.key_offsets,
@@ -218,6 +228,29 @@ class _LatticeRuntime:
         self.u_cur, self.u_next = self.u_next, self.u_cur
         self.step_count = t
         self._record_tracks()
+
+    # -- frames replayed as graphs (pdsim/frame_graph.py) ----------------------------------------------------------
+    def capture_blocker(self) -> str | None:
+        """Why this body's steps cannot be replayed as a graph, or None: tracked particles are recorded into a slot
+        that is a launch argument and flushed to the host every few thousand steps."""
+        if len(self.tracked):
+            return f"the tracked particles of lattice body '{self.body.name}' (recorded into host-chosen slots)"
+        return None
+
+    def events_due(self, steps: int) -> bool:
+        """True when a category change falls in the next ``steps`` steps (a launch of that step only)."""
+        return any(self.step_count < s <= self.step_count + steps for s in self.events)
+
+    def graph_key(self) -> tuple:
+        """What the captured launches of a frame depend on: the buffers in their current roles, the leaders."""
+        return (self.u_cur, self.u_next, self.u_prev, self.leader_ids, self.leader_count)
+
+    def after_replay(self, steps: int) -> None:
+        """The host bookkeeping of ``steps`` replayed steps: step count, clock mirror, the buffers' roles."""
+        self.step_count += int(steps)
+        self._clock_host = self.step_count
+        if steps % 2:
+            self.u_cur, self.u_next = self.u_next, self.u_cur
 
     def _update_leader_ids(self):
         import warp as wp
@@ -436,6 +469,31 @@ class SolverLattice(Solver):
         """One frame of a scene: ``steps_per_frame`` lattice steps (``dt`` and ``steps`` only advance ``time`` [s] by
         dt x steps: a lattice is step-based)."""
         self.run_steps(self.steps_per_frame)
+        self.time += float(dt) * int(steps)
+
+    # -- frames replayed as graphs (pdsim/frame_graph.py) ----------------------------------------------------------
+    def graph_capture_blocker(self, dt: float) -> str | None:
+        """Why a frame cannot be replayed as a graph (tracked particles), or None."""
+        for r in self._runtimes:
+            reason = r.capture_blocker()
+            if reason:
+                return reason
+        return None
+
+    def frame_needs_direct(self, dt: float, steps: int) -> bool:
+        """True when a category change falls in the next frame."""
+        return any(r.events_due(self.steps_per_frame) for r in self._runtimes)
+
+    def graph_key(self) -> tuple:
+        return tuple(k for r in self._runtimes for k in r.graph_key())
+
+    def begin_frame(self, dt: float, steps: int) -> None:
+        """Nothing to write before a lattice frame (its step index lives on the device)."""
+
+    def after_replay(self, dt: float, steps: int) -> None:
+        """The host bookkeeping of a replayed frame (:meth:`simulate`'s)."""
+        for r in self._runtimes:
+            r.after_replay(self.steps_per_frame)
         self.time += float(dt) * int(steps)
 
     def stable_time_step(self) -> float:
