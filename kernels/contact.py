@@ -345,6 +345,10 @@ def particle_mesh_contact(
     damping_ratio: float,
     p_force: wp.array(dtype=wp.vec3),
     m_force: wp.array(dtype=wp.vec3),
+    dt: float,
+    p_work: wp.array(dtype=wp.float64),
+    m_work: wp.array(dtype=wp.float64),
+    work_slot: int,
 ):
     """Contact between the particles of one method and the closed surface mesh of another (cross-method contact).
 
@@ -356,7 +360,13 @@ def particle_mesh_contact(
     m_red, with stiffness_rate = (0.25 / dt)^2: one contact oscillates at omega dt = 0.25, so even tens of
     simultaneous contacts on one point stay inside velocity Verlet's stability limit (omega dt < 2).
     ``p_to_force`` and the mesh's forces: multiply a force [N] into each solver's force unit (1 / V for a force
-    density, 1 for nodal forces); ``m_points`` maps the mesh's vertices to its solver's points."""
+    density, 1 for nodal forces); ``m_points`` maps the mesh's vertices to its solver's points.
+
+    Work: the positive part of the step's work of the contact force on each side, max(F . v_particle dt, 0) and
+    max(-F . v_surface dt, 0) [J] at the step's velocities, is added to ``p_work[work_slot]`` and
+    ``m_work[work_slot]``, each solver's watchdog's account of the work put in: the energy one body hands the other
+    through contact is work put into the receiving body (the positive parts bound it from above; the signed sum of
+    both sides, -F v_n dt, is what the penalty spring stores and the dashpot dissipates)."""
     q = wp.tid()
     i = p_points[q]
     x = p_rest[i] + p_u[i]
@@ -392,6 +402,8 @@ def particle_mesh_contact(
     wp.atomic_sub(m_force, a, force * wa)
     wp.atomic_sub(m_force, b, force * wb)
     wp.atomic_sub(m_force, c, force * wc)
+    wp.atomic_add(p_work, work_slot, wp.float64(wp.max(wp.dot(force, p_v[i]) * dt, 0.0)))
+    wp.atomic_add(m_work, work_slot, wp.float64(wp.max(-wp.dot(force, v_surface) * dt, 0.0)))
 
 
 @wp.kernel

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import ParameterError
+from .kinematics import WATCH_COLLIDERS
 from .validate import check_range
 
 CONTACT_NEIGHBOR_BUDGET = 12
@@ -416,6 +417,7 @@ class MethodContact:
         self.damping_ratio = check_range("damping_ratio", damping_ratio, 0.0, None, lo_open=False)
         self._meshes = {}  # id(solver) -> [version, points, faces, positions, wp.Mesh]
         self._to_force = {}  # id(solver) -> 1 / force_to_newton per point (Warp array)
+        self._scratch = {}  # id(solver) -> work account of a solver without a watchdog
         for ms in self.mesh_solvers:  # raise FeatureNotAvailableError now, before the run, for what they cannot honour
             check = getattr(ms, "check_method_contact", None)
             if check is not None:
@@ -469,6 +471,7 @@ class MethodContact:
         rate = (0.25 / float(dt)) ** 2
         for ms in self.mesh_solvers:
             _, m_points, m_faces, _, mesh = self._mesh(ms)
+            m_work = self._work_account(ms)
             for ps in self.particle_solvers:
                 p_points, p_radius = ps.contact_particles()
                 wp.launch(
@@ -491,9 +494,27 @@ class MethodContact:
                         self.damping_ratio,
                         ps.force,
                         ms.force,
+                        float(dt),
+                        self._work_account(ps),
+                        m_work,
+                        WATCH_COLLIDERS,
                     ],
                     device=ps.kin.u.device,
                 )
+
+    def _work_account(self, solver):
+        """The array the contact work done on ``solver``'s points goes to: its watchdog's work account (slot
+        WATCH_COLLIDERS: work done by other bodies), or a scratch array when it has no watchdog."""
+        import warp as wp
+
+        watchdog = getattr(solver, "watchdog", None)
+        if watchdog is not None:
+            return watchdog.acc
+        scratch = self._scratch.get(id(solver))
+        if scratch is None:
+            scratch = wp.zeros(4, dtype=wp.float64, device=solver.kin.u.device)
+            self._scratch[id(solver)] = scratch
+        return scratch
 
 
 __all__ = ["ContactDiagnostics", "MethodContact", "ParticleContact", "bond_stiffness_row_sum"]

@@ -482,6 +482,8 @@ class Watchdog:
     - velocity kicks: the kinetic energy they add, 1/2 m (|v + dv|^2 - |v|^2);
     - moving colliders (projectiles): sum m |dv| over what the colliders (and contact) changed in the step, times the
       largest speed of a collider surface (``surface_speed``);
+    - contact with a body of another method (pdsim.contact.MethodContact): the positive part of the contact force's
+      work on the points, max(F . v dt, 0) per contact and step, added into the colliders' slot by the contact kernel;
     - boundary conditions that start moving points: the positive increments of the kinetic energy of the held axes.
 
     :meth:`check` (the solvers' ``check_state``; the scene calls it every ``check_interval`` steps and at frame ends)
@@ -891,9 +893,9 @@ class Watchdog:
         elif self.energy and energy > bound:
             what = (
                 f"its kinetic plus gravitational energy reached {energy:.3g} J, far more than the {e0:.3g} J it "
-                f"started with + {work:.3g} J put in by loads, boundary conditions, kicks and moving colliders "
-                f"(+ {ENERGY_FACTOR - 1.0:.0%} of the {budget:.3g} J moved about, gravity's included): a stable run "
-                "cannot gain energy"
+                f"started with + {work:.3g} J put in by loads, boundary conditions, kicks, moving colliders and "
+                f"contact (+ {ENERGY_FACTOR - 1.0:.0%} of the {budget:.3g} J moved about, gravity's included): "
+                "a stable run cannot gain energy"
             )
         elif r["strain"] is not None:
             lo, hi = STRAIN_LIMITS[r["strain"]]
@@ -927,7 +929,8 @@ class Watchdog:
         return (
             f"its total energy reached {total:.3g} J (kinetic + gravitational {energy:.3g} J, strain {strain:.3g} J, "
             f"contact {contact:.3g} J), more than the {e0:.3g} J it started with + {work:.3g} J put in by loads, "
-            f"boundary conditions, kicks and moving colliders (+ {self.total_tolerance:.0%} of the {r['budget']:.3g} J "
+            f"boundary conditions, kicks, moving colliders and contact (+ {self.total_tolerance:.0%} of the "
+            f"{r['budget']:.3g} J "
             "moved about, gravity's included): a stable run cannot gain energy"
         )
 
