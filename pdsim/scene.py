@@ -207,6 +207,7 @@ class Scene:
             colliders=list(self.colliders),
             origin=self.origin(),
             gravity_is_default=self._gravity_is_default,
+            contact_is_default=self.contact is None,
         )
         return ctx
 

@@ -43,6 +43,7 @@ class SolverContext:
     colliders: list = field(default_factory=list)
     origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
     gravity_is_default: bool = True  # the scene's gravity was not given explicitly
+    contact_is_default: bool = True  # the scene's contact is automatic (Scene.enable_contact not called)
 
 
 class Solver(ABC):

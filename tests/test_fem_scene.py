@@ -191,3 +191,34 @@ def test_context_and_shortcuts_are_exclusive():
     body = FemBody(box_tet_mesh((0.2, 0.1, 0.1), (2, 1, 1)), MAT)
     with pytest.raises(pdsim.ParameterError, match=r"gravity=.*SolverContext"):
         SolverFem([body], SolverContext(), gravity=(0.0, 0.0, -9.81))
+
+
+def _two_fem_blocks():
+    scene = pdsim.Scene(gravity=(0.0, 0.0, 0.0))
+    material = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)
+    for i, x in enumerate((30.0, 30.2)):
+        scene.add_body(FemBody(box_tet_mesh((0.1, 0.1, 0.1), (2, 2, 2), center=(x, -4.0, 2.0)), material, name=f"b{i}"))
+    return scene
+
+
+def test_contact_between_fem_surfaces_is_refused_when_asked_and_announced_when_automatic():
+    """Contact between FEM surfaces is not simulated. Asked for explicitly (Scene.enable_contact) with two FEM
+    bodies, the build raises FeatureNotAvailableError naming the bodies, the setting and the alternatives; with
+    automatic contact it warns once, naming the bodies, instead of letting them pass through each other silently;
+    with contact off, nothing is said."""
+    from pdsim.errors import FeatureNotAvailableError
+
+    scene = _two_fem_blocks()
+    scene.enable_contact(True)
+    with pytest.raises(FeatureNotAvailableError, match=r"'b0', 'b1'.*enable_contact.*PeridynamicBody"):
+        scene.build_solvers(device="cpu")
+    scene = _two_fem_blocks()
+    with pytest.warns(UserWarning, match=r"'b0', 'b1'.*pass through each other"):
+        scene.build_solvers(device="cpu")
+    scene = _two_fem_blocks()
+    scene.enable_contact(False)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        scene.build_solvers(device="cpu")

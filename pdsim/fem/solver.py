@@ -47,7 +47,8 @@ energy, the steps that follow a split also read and write the velocities on the 
 
 Colliders: the ground plane and the scene's colliders (pdsim/colliders.py) act on the free vertices with zero radius
 (float32 only). Contact between FEM pieces or bodies is not implemented: pieces of a cracked body pass through each
-other.
+other. Asking for it (Scene.enable_contact with several FEM bodies or a cracking one) raises
+FeatureNotAvailableError; with automatic contact the scene warns once when the FEM bodies are built.
 
 Output (:meth:`SolverFem.views`): per body a PointsView of its vertices and a MeshView "<name>_surface" of the
 boundary of every piece (each a closed shell with its own vertices), whose topology version changes when fracture
@@ -266,7 +267,31 @@ class SolverFem(PointSolver):
                     asked.setdefault("material_fracture", f"body '{b.name}': Material.{field}={getattr(m, field)!r}")
             if getattr(m, "anisotropy", None) is not None:
                 asked.setdefault("anisotropy", f"body '{b.name}': Material.anisotropy")
+        if context.contact and not context.contact_is_default and cls._surfaces_could_meet(bodies):
+            asked["contact_between_fem"] = "the scene's contact (Scene.enable_contact) between FEM surfaces"
         return asked
+
+    @staticmethod
+    def _surfaces_could_meet(bodies) -> bool:
+        """Several FEM bodies, or one that cracks into pieces: surfaces that contact between FEM surfaces would
+        keep apart."""
+        return len(bodies) > 1 or any(getattr(b, "tensile_strength", None) is not None for b in bodies)
+
+    @classmethod
+    def check_features(cls, bodies, context: SolverContext) -> None:
+        """As Solver.check_features; with automatic contact, a warning that FEM surfaces do not collide with each
+        other (several FEM bodies, or the pieces of a cracking one), so that it is never silent."""
+        super().check_features(bodies, context)
+        if context.contact and context.contact_is_default and cls._surfaces_could_meet(bodies):
+            import warnings
+
+            names = ", ".join(f"'{b.name}'" for b in bodies)
+            warnings.warn(
+                f"fem bodies ({names}): contact between FEM surfaces is not simulated, so separate FEM bodies and the "
+                "pieces of a cracked FEM body pass through each other (FEM bodies do collide with peridynamic bodies, "
+                "the ground and colliders); use PeridynamicBody for bodies that must collide with each other",
+                stacklevel=2,
+            )
 
     @classmethod
     def instead(cls, feature: str) -> str:
@@ -276,6 +301,10 @@ class SolverFem(PointSolver):
             "material_fracture": "FEM fracture is set on the body: FemBody(..., tensile_strength=... [Pa], "
             "fracture_energy=... [J/m^2]); remove the Material field",
             "anisotropy": "the FEM material is isotropic; remove Material.anisotropy or use a PeridynamicBody",
+            "contact_between_fem": "contact between FEM surfaces is not simulated (FEM bodies do collide with "
+            "peridynamic bodies, the ground and colliders): use PeridynamicBody for bodies that must collide with each "
+            "other, or scene.enable_contact(False) to let separate FEM bodies and cracked pieces pass through each "
+            "other",
         }.get(feature, super().instead(feature))
 
     # -- model ----------------------------------------------------------------------------------------------------
