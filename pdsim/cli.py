@@ -234,12 +234,9 @@ def _resolve_device(name: str | None) -> str | None:
 def _run_settings(args) -> dict:
     """Scene.run keyword arguments of the run options (one-line ParameterErrors for bad values)."""
     settings = {}
-    args.frames = _frames(args.frames)
-    if args.dt is not None:
-        dt = _number("dt", args.dt, float, "a time step in seconds > 0")
-        if not dt > 0.0 or dt == float("inf"):
-            raise ParameterError("dt", args.dt, "a finite time step in seconds > 0")
-        args.dt = dt
+    # numbers here; their ranges are checked by Scene.run (the same messages as from a script)
+    args.frames = _number("frames", args.frames, int, "an integer >= 1")
+    args.dt = _number("dt", args.dt, float, "a time step in seconds > 0")
     if args.dt_factor is not None:
         factor = _number("dt-factor", args.dt_factor, float, "a number > 0 (times the automatic time step)")
         if not factor > 0.0 or factor != factor or factor == float("inf"):
@@ -267,10 +264,10 @@ def _run_settings(args) -> dict:
 
 
 def _frames(text: str | None) -> int | None:
-    """--frames: an integer >= 1 (one-line ParameterError otherwise)."""
+    """--frames of ``pdsim wedge``: an integer >= 1 (one-line ParameterError otherwise)."""
     frames = _number("frames", text, int, "an integer >= 1")
     if frames is not None and frames < 1:
-        raise ParameterError("frames", text, "an integer >= 1")
+        raise ParameterError("frames", frames, "an integer >= 1")
     return frames
 
 

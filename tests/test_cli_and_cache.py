@@ -394,25 +394,25 @@ def test_run_explain_prints_the_plan_and_writes_nothing(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "option, value, allowed",
+    "option, value, shown, allowed",
     [
-        ("--frames", "2.5", "integer >= 1"),
-        ("--frames", "0", "integer >= 1"),
-        ("--dt", "-1e-5", "> 0"),
-        ("--dt", "0", "> 0"),
-        ("--dt", "abc", "> 0"),
-        ("--dt-factor", "-2", "> 0"),
-        ("--check-interval", "-3", "integer >= 1"),
+        ("--frames", "2.5", "frames='2.5'", "integer >= 1"),
+        ("--frames", "0", "frames=0", "integer >= 1"),
+        ("--dt", "-1e-5", "dt=-1e-05", "(0, inf)"),  # a word argparse would take for an option
+        ("--dt", "0", "dt=0", "(0, inf)"),
+        ("--dt", "abc", "dt='abc'", "> 0"),
+        ("--dt-factor", "-2", "dt-factor='-2'", "> 0"),
+        ("--check-interval", "-3", "check-interval='-3'", "integer >= 1"),
     ],
 )
-def test_bad_run_option_is_one_line_error(tmp_path, capsys, scene_script, option, value, allowed):
+def test_bad_run_option_is_one_line_error(tmp_path, capsys, scene_script, option, value, shown, allowed):
     """A bad number for a run option (negative, fractional, not a number) is the one-line pdsim error naming the
-    option and its allowed range, exit 1, before the scene is built; no cache is written."""
+    option, the value and the allowed range, exit 1; no cache is written."""
     from pdsim.cli import main
 
     out = tmp_path / "x.usdc"
-    assert main(["run", str(scene_script), "--out", str(out), option, value]) == 1
+    assert main(["run", str(scene_script), "--out", str(out), "--quiet", option, value]) == 1
     err = capsys.readouterr().err.strip()
     assert err.startswith("pdsim: error:") and "\n" not in err, err
-    assert option.lstrip("-") in err and value in err and allowed in err, err
+    assert shown in err and allowed in err, err
     assert not out.exists()
