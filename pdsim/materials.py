@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from .errors import ParameterError
 from .validate import check_range
 
@@ -58,6 +60,21 @@ class Material:
         failure_plastic_strain: ductile failure: a stretched bond also breaks once the equivalent plastic strain of
             one of its particles passes this value (> 0; needs yield_stress).
         anisotropy: optional :class:`Anisotropy`.
+        strength_weibull_modulus: statistical strength: each bond's critical stretch is multiplied by its own
+            Weibull variate of shape m (this value, in [1, 100]) and unit median, P(factor < x) = 1 -
+            2^(-x^m), drawn per undirected bond from the bond's two body-local particle indices and
+            ``strength_seed`` (both directed copies get the same factor; the same seed gives the same bonds). Small m
+            scatters more (m = 4: 90 % of the factors between 0.52 and 1.44; m = 10: between 0.77 and 1.16). None
+            (default): every bond has the nominal strength. Needs a material that breaks.
+        strength_seed: seed of the strength scatter, an integer in [0, 2^31 - 1] (default 0).
+        debris_damping: rate c [1/s] >= 0 at which particles that lost most of their bonds (damage above
+            ``debris_damage``) are pulled towards the mean velocity of the neighbours they are still bonded to, or,
+            once loose, of their reference family (the material they broke from): a = c (v_bar - v)
+            (kernels/peridynamics/damping.py). It calms the high-frequency debris
+            that a brittle crack sheds without touching intact material (damage 0). 0 (default): off. The
+            step must keep c dt < 1. Needs a material that breaks.
+        debris_damage: damage threshold in (0, 1) above which ``debris_damping`` acts (default 0.7: a particle on a
+            clean crack face has lost about half its bonds and is left alone).
 
     Features a material does not use cost nothing: the solver allocates and launches plasticity only for materials
     with a yield stress and fracture only for materials that can break.
@@ -74,6 +91,10 @@ class Material:
     compressive_bonus: float = 0.0
     failure_plastic_strain: float | None = None
     anisotropy: Anisotropy | None = None
+    strength_weibull_modulus: float | None = None
+    strength_seed: int = 0
+    debris_damping: float = 0.0
+    debris_damage: float = 0.7
 
     def __post_init__(self):
         object.__setattr__(self, "density", check_range("density", self.density, 0.0, None))
@@ -111,6 +132,27 @@ class Material:
             )
         if self.anisotropy is not None and not isinstance(self.anisotropy, Anisotropy):
             raise ParameterError("anisotropy", self.anisotropy, "a pdsim.Anisotropy or None")
+        if self.strength_weibull_modulus is not None:
+            m = check_range(
+                "strength_weibull_modulus", self.strength_weibull_modulus, 1.0, 100.0, lo_open=False, hi_open=False
+            )
+            object.__setattr__(self, "strength_weibull_modulus", m)
+        seed = self.strength_seed
+        if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or not 0 <= int(seed) <= 2**31 - 1:
+            raise ParameterError("strength_seed", seed, "an integer in [0, 2147483647]")
+        object.__setattr__(self, "strength_seed", int(seed))
+        object.__setattr__(
+            self, "debris_damping", check_range("debris_damping", self.debris_damping, 0.0, None, lo_open=False)
+        )
+        object.__setattr__(self, "debris_damage", check_range("debris_damage", self.debris_damage, 0.0, 1.0))
+        scatter = self.strength_weibull_modulus is not None or self.debris_damping > 0.0
+        if scatter and not self.breaks:
+            field_name = "strength_weibull_modulus" if self.strength_weibull_modulus is not None else "debris_damping"
+            raise ParameterError(
+                field_name,
+                getattr(self, field_name),
+                "None / 0 for a material that never breaks (give critical_stretch or fracture_energy)",
+            )
 
     @property
     def yields(self) -> bool:

@@ -113,6 +113,21 @@ def fill_solid(shape: SolidShape, spacing: float, *, device: str = "cpu") -> tup
     return positions, np.full(len(positions), h**3)
 
 
+def jitter_points(
+    shape: SolidShape, points: np.ndarray, spacing: float, fraction: float, seed: int, *, device: str = "cpu"
+) -> np.ndarray:
+    """Jittered sampling: each lattice point of ``points`` [n, 3] (cell centres of a simple-cubic lattice of
+    ``spacing`` h) moves by an independent uniform offset in [-fraction h / 2, fraction h / 2)^3, so it stays inside
+    its own cell (the cells still partition the shape: every particle keeps the volume h^3). A point whose moved
+    position falls outside the shape keeps its lattice position. The offsets come from numpy's PCG64 generator seeded
+    with ``seed`` and are drawn in the order of ``points`` (give them in Morton order, which does not depend on where
+    the shape lies, and the jitter is the same anywhere in the world). Returns the moved points [n, 3]."""
+    rng = np.random.default_rng(int(seed))
+    moved = points + (fraction * spacing) * (rng.random(points.shape) - 0.5)
+    keep = points_inside(shape, moved, device=device)
+    return np.where(keep[:, None], moved, points)
+
+
 def morton_order(points: np.ndarray, cell: float) -> np.ndarray:
     """Permutation that sorts points [n, 3] along a Morton (Z-order) curve of cells of size ``cell`` [m]. Lattice
     points (spaced ``cell`` apart) sit on cell centres, so their cell does not depend on round-off: the order is the

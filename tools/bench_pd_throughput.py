@@ -2,9 +2,9 @@
 
 Builds an ``n^3`` simple cubic block (spacing h = 1 mm, E = 1 GPa, nu = 0.25, rho = 1000 kg/m^3, families cut at
 delta = horizon_factor * h with full volumes), gives it the initial velocities of a *state* and times ``steps`` calls
-of ``SolverPeridynamics.step`` (the full step: conditions, kick-drift, dilatation, (plastic update), force density
-(with the breaking test), kick). LAMMPS (``tools/lammps_peri.py``) runs the same particles from the same velocities
-with the same time step and number of steps, so both codes integrate the same motion of the same block:
+of ``SolverPeridynamics.step`` (the full step: conditions, kick-drift, dilatation (with the plastic update), force
+density (with the breaking test), kick). LAMMPS (``tools/lammps_peri.py``) runs the same particles from the same
+velocities with the same time step and number of steps, so both codes integrate the same motion of the same block:
 
 - ``rest``: zero velocity (the block stays in its reference configuration);
 - ``random``: uniform random velocities in +-0.1 m/s per component (numpy default_rng(seed), the same numbers in both
@@ -24,12 +24,14 @@ with the same time step and number of steps, so both codes integrate the same mo
 
 where bond_count is the number of directed bonds at the start (the sum of the family sizes, LAMMPS's ``total # of
 bonds``); a broken bond counts as visited (both codes still read its flag). ``ratio`` = pdsim / LAMMPS on one core:
-pdsim runs on one thread (Warp's CPU kernels are single-threaded) and LAMMPS on one MPI rank with
-``OMP_NUM_THREADS=1``. ``ratio_all_cores`` compares the same pdsim figure with LAMMPS on ``--ranks`` MPI ranks (default:
-every core; ``mpirun -np <ranks>``), which is what a user of each code gets from the machine.
+pdsim runs its bond passes on one thread (``SolverPeridynamics(threads=1)``) and LAMMPS on one MPI rank with
+``OMP_NUM_THREADS=1``. ``ratio_all_cores`` compares pdsim on ``--threads`` threads (default: ``--ranks``; each bond pass
+split into that many particle ranges launched at once) with LAMMPS on ``--ranks`` MPI ranks (default: every core;
+``mpirun -np <ranks>``), which is what a user of each code gets from the machine; the all-thread pdsim figures are
+reported under ``pdsim_threads``. The kick and drift of the shared kinematics stay on one thread.
 
 Clocks: both codes are timed by wall clock (pdsim around the steps, LAMMPS its ``Loop time``) and by CPU time (pdsim:
-the process's CPU time over the steps, Warp running the kernels in the calling thread; LAMMPS: ``Loop time`` times its
+the process's CPU time over the steps, all its threads together; LAMMPS: ``Loop time`` times its
 ``% CPU use``, the average over ranks), reported as ``bond_visits_per_cpu_s`` and ``ratio_cpu``. On a machine shared
 with other jobs the CPU time is the steadier measure of what one core does; on an idle machine the two agree. For a
 run on several ranks the CPU-time figure is the throughput it would have with a core per rank, except that MPI ranks
@@ -46,6 +48,7 @@ Script use::
     python tools/bench_pd_throughput.py --n 25 --steps 200 --state all
     python tools/bench_pd_throughput.py --n 25 --steps 200 --state ramp --json --breakdown
     python tools/bench_pd_throughput.py --n 25 --steps 200 --state random --no-lammps --json   # pdsim only
+    python tools/bench_pd_throughput.py --n 24 --steps 200 --state fracture --no-lammps --threads 4   # 1 and 4 threads
 """
 
 from __future__ import annotations
@@ -151,8 +154,9 @@ def critical_stretch_for(state: str, fracture: bool) -> float | None:
     return 1.0 if fracture else None
 
 
-def build_solver(n: int, *, horizon_factor: float, device: str, plastic=False, critical_stretch=None):
-    """The benchmark block: n^3 particles, families cut at delta (no partial volumes), at rest."""
+def build_solver(n: int, *, horizon_factor: float, device: str, plastic=False, critical_stretch=None, threads=1):
+    """The benchmark block: n^3 particles, families cut at delta (no partial volumes), at rest; its bond passes on
+    ``threads`` CPU threads (None on a CUDA device)."""
     import pdsim
 
     material = pdsim.Material(
@@ -165,7 +169,7 @@ def build_solver(n: int, *, horizon_factor: float, device: str, plastic=False, c
     )
     shape = pdsim.box((n * SPACING,) * 3)
     body = pdsim.PeridynamicBody(shape, material, SPACING, horizon_factor=horizon_factor, partial_volumes=False)
-    return pdsim.SolverPeridynamics([body], device=device)
+    return pdsim.SolverPeridynamics([body], device=device, threads=threads)
 
 
 def mean_damage(solver) -> float:
@@ -194,22 +198,25 @@ def time_steps(solver, dt: float, steps: int) -> tuple[float, float]:
     return time.perf_counter() - start, time.process_time() - cpu
 
 
-def time_kernels(solver, dt: float, steps: int) -> dict[str, float]:
-    """Seconds spent in each kernel over ``steps`` steps: wraps ``warp.launch`` so that every launch made by the
-    solver is synchronised and timed on its own (the solver's own launch arguments are used unchanged)."""
+def time_kernels(solver, dt: float, steps: int) -> tuple[dict[str, float], dict[str, float]]:
+    """Wall and CPU seconds spent in each kernel over ``steps`` steps: wraps ``warp.launch`` so that every launch made
+    by the solver is synchronised and timed on its own (the solver's own launch arguments are used unchanged; the
+    CPU time is the calling thread's, so run it on a solver with one thread)."""
     import warp as wp
 
     totals: dict[str, float] = {}
+    cpu_totals: dict[str, float] = {}
     original = wp.launch
 
     def timed_launch(kernel, *args, **kwargs):
         device = kwargs.get("device") or solver.device
         wp.synchronize_device(device)
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.thread_time()
         result = original(kernel, *args, **kwargs)
         wp.synchronize_device(device)
         key = getattr(kernel, "key", str(kernel))
         totals[key] = totals.get(key, 0.0) + time.perf_counter() - start
+        cpu_totals[key] = cpu_totals.get(key, 0.0) + time.thread_time() - cpu
         return result
 
     wp.launch = timed_launch
@@ -218,7 +225,7 @@ def time_kernels(solver, dt: float, steps: int) -> dict[str, float]:
             solver.step(dt)
     finally:
         wp.launch = original
-    return totals
+    return totals, cpu_totals
 
 
 def _init_warp(device: str):
@@ -245,23 +252,27 @@ def run_pdsim(
     plastic: bool = False,
     fracture: bool = False,
     breakdown: bool = False,
+    threads: int | None = 1,
 ) -> dict:
-    """Times pdsim on the block in ``state``; returns its figures, the rest positions and initial velocities (for
-    LAMMPS) and the time step."""
+    """Times pdsim on the block in ``state`` with its bond passes on ``threads`` CPU threads; returns its figures, the
+    rest positions and initial velocities (for LAMMPS) and the time step."""
     import warp as wp
 
     lp = _load_lammps_runner()
     dev = _init_warp(device)
     sc = critical_stretch_for(state, fracture)
     # kernel loads (and a first few steps) on a small copy of the block, so the timed block starts from the state
+    if dev.is_cuda:
+        threads = None
     if warmup > 0:
         small = build_solver(min(n, 6), horizon_factor=horizon_factor, device=device, plastic=plastic,
-                             critical_stretch=sc)  # fmt: skip
+                             critical_stretch=sc, threads=threads)  # fmt: skip
         small.simulate(TIME_STEP_SAFETY * small.stable_time_step(), warmup)
     runs, cpu_runs, setups = [], [], []
     for _ in range(max(1, repeat)):  # each timing starts from the same initial state on a freshly built block
         start = time.perf_counter()
-        solver = build_solver(n, horizon_factor=horizon_factor, device=device, plastic=plastic, critical_stretch=sc)
+        solver = build_solver(n, horizon_factor=horizon_factor, device=device, plastic=plastic, critical_stretch=sc,
+                              threads=threads)  # fmt: skip
         dt = TIME_STEP_SAFETY * solver.stable_time_step()
         rest = solver.positions()
         v0 = lp.initial_velocities(state, rest, steps, dt, seed=seed)
@@ -277,6 +288,7 @@ def run_pdsim(
     bonds = solver.model.bond_count
     out = {
         "state": state,
+        "threads": solver.threads,
         "particles": particles,
         "bonds": bonds,
         "bonds_per_particle": bonds / particles,
@@ -297,9 +309,10 @@ def run_pdsim(
     }
     if breakdown:
         kernel_steps = max(1, min(steps, 100))
-        totals = time_kernels(solver, dt, kernel_steps)
+        totals, cpu_totals = time_kernels(solver, dt, kernel_steps)
         out["kernel_steps"] = kernel_steps
         out["kernel_ms_per_step"] = {k: 1.0e3 * v / kernel_steps for k, v in totals.items()}
+        out["kernel_cpu_ms_per_step"] = {k: 1.0e3 * v / kernel_steps for k, v in cpu_totals.items()}
     return out, rest, v0, solver.bodies[0]
 
 
@@ -349,12 +362,17 @@ def run_benchmark(
     plastic: bool = False,
     fracture: bool = False,
     style: str = "lps",
+    threads: int | None = None,
 ) -> dict:
-    """Times pdsim and LAMMPS state by state; returns the figures as a dict (``states``: one entry per state, each
-    with ``ratio`` and, with more than one rank, ``ratio_all_cores``, when LAMMPS ran)."""
+    """Times pdsim (on one thread, and on ``threads`` threads when that is more than one) and LAMMPS state by state;
+    returns the figures as a dict (``states``: one entry per state, each with ``ratio`` and, with more than one rank,
+    ``ratio_all_cores``, when LAMMPS ran)."""
     lp = _load_lammps_runner()
     dev = _init_warp(device)
     ranks = os.cpu_count() or 1 if ranks is None else int(ranks)
+    threads = ranks if threads is None else int(threads)
+    if dev.is_cuda:
+        threads = 1
     if lammps == "none":
         installs = []
     elif lammps == "all":
@@ -369,6 +387,7 @@ def run_benchmark(
         "plastic": plastic,
         "fracture_feature": fracture or None,
         "ranks": ranks,
+        "threads": threads,
         "kernel_source_sha1": kernel_source_digest(),
         "lammps_installations": [i.describe() for i in installs],
         "states": {},
@@ -385,6 +404,14 @@ def run_benchmark(
         )  # fmt: skip
         pd["surface_correction"] = body.surface_correction
         entry = {"pdsim": pd}
+        pd_all = pd
+        if threads > 1:
+            pd_all, *_ = run_pdsim(
+                n, steps, state, device=device, horizon_factor=horizon_factor, warmup=warmup, repeat=repeat,
+                seed=seed, plastic=plastic, fracture=fracture, threads=threads,
+            )  # fmt: skip
+            entry["pdsim_threads"] = pd_all
+            entry["thread_speedup"] = pd_all["bond_visits_per_s"] / pd["bond_visits_per_s"]
         refs = []
         for inst in installs:
             for r in sorted({1, ranks}):
@@ -392,9 +419,10 @@ def run_benchmark(
                     rest, v0, steps, pd["dt"], state=state, plastic=plastic, fracture=fracture,
                     horizon_factor=horizon_factor, install=inst, ranks=r, repeat=repeat, style=style,
                 )  # fmt: skip
-                ref["ratio"] = pd["bond_visits_per_s"] / ref["bond_visits_per_s"]
+                mine = pd if r == 1 else pd_all  # one core each, or every thread beside every rank
+                ref["ratio"] = mine["bond_visits_per_s"] / ref["bond_visits_per_s"]
                 if ref.get("bond_visits_per_cpu_s"):
-                    ref["ratio_cpu"] = pd["bond_visits_per_cpu_s"] / ref["bond_visits_per_cpu_s"]
+                    ref["ratio_cpu"] = mine["bond_visits_per_cpu_s"] / ref["bond_visits_per_cpu_s"]
                 ref["bonds_match"] = ref["bonds"] == pd["bonds"] and ref["particles"] == pd["particles"]
                 refs.append(ref)
         entry["lammps"] = refs
@@ -443,9 +471,12 @@ def run_benchmark(
             "ratio_all_cores_cpu",
             "lammps_bond_visits_per_s",
             "bonds_match",
+            "thread_speedup",
         ):
             if key in only:
                 result[key] = only[key]
+        if "pdsim_threads" in only:
+            result["bond_visits_per_s_threads"] = only["pdsim_threads"]["bond_visits_per_s"]
     return result
 
 
@@ -466,11 +497,15 @@ def format_text(r: dict) -> str:
             f"[{state}] {n_edge}^3 = {pd['particles']} particles, {pd['bonds']} directed bonds, {pd['steps']} steps of "
             f"{pd['dt']:.3g} s; features {', '.join(pd['features'])}"
         )
-        lines.append(
-            f"  pdsim (1 thread)        : {pd['ms_per_step']:8.3f} ms/step  "
-            f"{pd['bond_visits_per_s'] / 1e6:7.1f} M bond visits/s ({pd['bond_visits_per_cpu_s'] / 1e6:7.1f} per CPU "
-            f"second)  mean damage {pd['mean_damage']:.3f}"
-        )
+        for run in (pd, e.get("pdsim_threads")):
+            if run is None:
+                continue
+            label = f"pdsim ({run['threads']} thread{'s' if run['threads'] > 1 else ''})"
+            lines.append(
+                f"  {label:<23s} : {run['ms_per_step']:8.3f} ms/step  "
+                f"{run['bond_visits_per_s'] / 1e6:7.1f} M bond visits/s ({run['bond_visits_per_cpu_s'] / 1e6:7.1f} "
+                f"per CPU second)  mean damage {run['mean_damage']:.3f}"
+            )
         for ref in e["lammps"]:
             match = "" if ref["bonds_match"] else f"  BOND COUNT MISMATCH ({ref['bonds']})"
             lines.append(
@@ -481,8 +516,9 @@ def format_text(r: dict) -> str:
                 f"(CPU time {ref.get('ratio_cpu', float('nan')):.2f}){match}"
             )
         if "kernel_ms_per_step" in pd:
+            cpu_ms = pd.get("kernel_cpu_ms_per_step", {})
             for key, ms in sorted(pd["kernel_ms_per_step"].items(), key=lambda kv: -kv[1]):
-                lines.append(f"  kernel {key:<32s} {ms:8.3f} ms/step")
+                lines.append(f"  kernel {key:<32s} {ms:8.3f} ms/step ({cpu_ms.get(key, float('nan')):8.3f} CPU ms)")
     if "least_favourable_ratio" in r:
         lines.append(
             f"least favourable state: {r['least_favourable_state']}, "
@@ -491,7 +527,8 @@ def format_text(r: dict) -> str:
         )
     if "least_favourable_all_cores_ratio" in r:
         lines.append(
-            f"least favourable state on all cores: {r['least_favourable_all_cores_state']}, pdsim (1 thread) / LAMMPS "
+            f"least favourable state on all cores: {r['least_favourable_all_cores_state']}, pdsim ({r['threads']} "
+            f"threads) / LAMMPS "
             f"({r['ranks']} ranks) = {r['least_favourable_all_cores_ratio']:.2f} (by CPU time, a core per rank: "
             f"{r.get('least_favourable_all_cores_ratio_cpu', float('nan')):.2f})"
         )
@@ -513,6 +550,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--no-lammps", action="store_true", help="same as --lammps none")
     parser.add_argument("--ranks", type=int, default=None, help="MPI ranks of the all-core LAMMPS run (default: cores)")
+    parser.add_argument(
+        "--threads", type=int, default=None, help="pdsim threads of the all-core run (default: --ranks; 1: one run)"
+    )
     parser.add_argument("--lammps-style", choices=("lps", "pmb"), default="lps", help="LAMMPS's elastic pair style")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random velocities")
     parser.add_argument("--json", action="store_true", help="print one JSON line instead of text")
@@ -524,6 +564,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--n and --steps must be >= 1")
     if args.ranks is not None and args.ranks < 1:
         parser.error("--ranks must be >= 1")
+    if args.threads is not None and args.threads < 1:
+        parser.error("--threads must be >= 1")
     states = STATES if args.state == "all" else (args.state,)
     result = run_benchmark(
         args.n,
@@ -540,6 +582,7 @@ def main(argv: list[str] | None = None) -> int:
         plastic=args.plastic,
         fracture=args.fracture,
         style=args.lammps_style,
+        threads=args.threads,
     )
     print(json.dumps(result) if args.json else format_text(result))
     if any(e.get("bonds_match") is False for e in result["states"].values()):

@@ -87,12 +87,14 @@ def dilatation_stripped(
     for q in range(family_offsets[k], family_offsets[k + 1]):
         g = bond_geom[q]
         L = g[3]
-        xi = wp.vec3(g[0], g[1], g[2]) * L
+        xh = wp.vec3(g[0], g[1], g[2])
+        xi = xh * L
         du = displacements[family_neighbors[q]] - uk
         eta = xi + du
         length = wp.length(eta)
-        n = eta / length
-        lam = wp.dot(n, wp.vec3(g[0], g[1], g[2]))
+        inv = 1.0 / length
+        n = eta * inv
+        lam = wp.dot(n, xh)
         e = (2.0 * wp.dot(xi, du) + wp.dot(du, du)) / (length + L)
         bond_ne[q] = wp.vec4(n[0], n[1], n[2], e)
         bond_lambda[q] = lam
@@ -304,11 +306,11 @@ def stripped_check(n: int, device: str, launches: int = 20, rounds: int = 8) -> 
     def variant(o):
         theta, bp, ne, lam, force = o
         wp.launch(ks.dilatation, dim=m.particle_count, device=d, inputs=[
-            u, m.family_offsets, m.family_neighbors, m.bond_geom, m.bond_wv_dil, m.dil_d, m.dil_coef, m.dev_b, u8,
-            theta, bp, ne, lam, f1])  # fmt: skip
+            0, u, m.family_offsets, m.family_neighbors, m.bond_geom, m.bond_wv_dil, m.dil_d, m.dil_coef, m.dev_b, u8,
+            theta, bp, ne, lam, f1, 0, *([f1] * 9), solver._dummy_i, f1])  # fmt: skip
         wp.launch(ks.force, dim=m.particle_count, device=d, inputs=[
-            m.family_offsets, m.family_neighbors, m.bond_geom, ne, lam, m.bond_wv_dil, m.bond_wv_dev, bp, u8, f1, f1,
-            f1, f1, f1, 0, f1, solver._dummy_i, force])  # fmt: skip
+            0, m.family_offsets, m.family_neighbors, m.bond_geom, ne, lam, m.bond_wv_dil, m.bond_wv_dev, bp, u8, f1, f1,
+            f1, f1, f1, 0, f1, f1, force])  # fmt: skip
 
     def stripped(o):
         theta, bp, ne, lam, force = o

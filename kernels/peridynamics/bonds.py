@@ -131,6 +131,19 @@ def compute_directional_bond_factors(
         bond_wv_dev[q] = bond_wv[q] * Gb
 
 
+@wp.func
+def bond_strength_factor(a: int, b: int, seed: int, modulus: float):
+    """Weibull variate of shape ``modulus`` and unit median, (-ln(1 - U) / ln 2)^(1 / m), for the undirected bond
+    between the body-local particle indices a and b: U comes from a PCG hash chain of (seed, min(a, b), max(a, b)),
+    so both directed copies of a bond draw the same factor and the same seed gives the same factors."""
+    lo = wp.min(a, b)
+    hi = wp.max(a, b)
+    s0 = wp.rand_init(seed, lo)
+    s1 = wp.rand_init(wp.randi(s0), hi)
+    u = wp.randf(s1)  # [0, 1)
+    return wp.pow(-wp.log(1.0 - u) / wp.log(2.0), 1.0 / modulus)
+
+
 @wp.kernel
 def init_bond_fracture(
     family_offsets: wp.array(dtype=wp.int32),
@@ -140,17 +153,25 @@ def init_bond_fracture(
     unbreakable: wp.array(dtype=wp.int32),
     axis: wp.array(dtype=wp.vec3),
     strength_ratio: wp.array(dtype=float),
+    local_index: wp.array(dtype=wp.int32),
+    weibull_modulus: wp.array(dtype=float),
+    strength_seed: wp.array(dtype=wp.int32),
     bond_critical_stretch: wp.array(dtype=float),
 ):
     """Per-bond critical stretch: s_c of the particle scaled by 1 - (1 - strength_ratio) (n . a)^2 about the world
-    material axis a; infinite when either particle lies in an unbreakable region. Symmetric in k and j."""
+    material axis a and, where the particle's weibull_modulus m > 0, by the bond's Weibull factor of shape m and unit
+    median (bond_strength_factor, from the two particles' body-local indices and the body's strength seed); infinite
+    when either particle lies in an unbreakable region. Symmetric in k and j (bonds never join two bodies)."""
     k = wp.tid()
     a = axis[k]
+    m = weibull_modulus[k]
     for q in range(family_offsets[k], family_offsets[k + 1]):
         j = family_neighbors[q]
         g = bond_geom[q]
         c = wp.dot(wp.vec3(g[0], g[1], g[2]), a)
         sc = critical_stretch[k] * (1.0 - (1.0 - strength_ratio[k]) * c * c)
+        if m > 0.0:
+            sc = sc * bond_strength_factor(local_index[k], local_index[j], strength_seed[k], m)
         if unbreakable[k] != 0 or unbreakable[j] != 0:
             sc = 1.0e30
         bond_critical_stretch[q] = sc

@@ -18,12 +18,20 @@ Formulas (kernels/peridynamics/bonds.py gives the notation and the elastic model
   continuum norm, 1 in the bulk); then t <- t sqrt(2 psi0) / ||t|| and e^p_j = e^d_j - t_j / alpha_j.
   Linear hardening sigma_Y = sigma_Y0 + H eps_p with the equivalent plastic strain
   eps_p = sqrt(5 sum_j w (e^p_j)^2 V_j beta_j / m_k) (equal to the uniaxial plastic strain for isochoric flow).
+  The return mapping runs in the dilatation kernel, right after a yielding particle's family sums (its bonds'
+  (n, e, Lambda) are then still in cache, and the volumetric sums of theta_p come with the dilatation's loop).
 - Fracture: a live bond breaks for good when its stretch (its elastic stretch, s - (e^p_kj + e^p_jk) / (2 L), for
   a yielding material) exceeds s_c,kj - alpha min(s_min,k, s_min,j) (Silling-Askari compressive bonus, s_min the
   particle's most compressive live stretch, <= 0, from this step's dilatation pass), or, for a ductile material,
   when the larger equivalent plastic strain of its two particles exceeds the failure plastic strain. The test runs
   at the end of the force pass, which already holds both directions' plastic extensions; both directed copies of a
-  bond see the same quantities, so they break in the same step without communication.
+  bond see the same quantities, so they break in the same step without communication. Broken bonds are skipped by
+  every pass after the flag (their cached (n, e) is left as it was).
+
+A step is two passes over the particles, dilatation (with the plastic update) then force, each launched over
+contiguous particle ranges (pdsim/peridynamics/solver.py, ParticleRanges): a kernel writes only its particles' rows
+and their own bonds' rows (and, for the mirror of the plastic extensions, the one slot each of its bonds owns at the
+reverse bond, read only by the next pass), and reads other particles' rows only from what an earlier pass wrote.
 """
 
 import warp as wp
@@ -32,7 +40,11 @@ _cache = {}
 
 
 def make_step_kernels(fracture: bool, plastic: bool):
-    """Kernels (dilatation, plastic_update, force, energy) for the given feature set, built once and cached."""
+    """Kernels (dilatation with the fused plastic update, force, energy) for the given feature set, built once and
+    cached. Every kernel takes the first particle of its launch (``first``): a launch covers the particles
+    first .. first + dim - 1, and each writes only its particles' rows and their bonds' rows (bonds are stored per
+    particle family; the plastic mirror is the one exception, module docstring), so launches over disjoint particle
+    ranges of one pass can run at the same time."""
     key = (bool(fracture), bool(plastic))
     if key in _cache:
         return _cache[key]
@@ -41,6 +53,7 @@ def make_step_kernels(fracture: bool, plastic: bool):
 
     @wp.kernel(module="unique")
     def dilatation(
+        first: int,
         displacements: wp.array(dtype=wp.vec3),
         family_offsets: wp.array(dtype=wp.int32),
         family_neighbors: wp.array(dtype=wp.int32),
@@ -55,53 +68,9 @@ def make_step_kernels(fracture: bool, plastic: bool):
         bond_ne: wp.array(dtype=wp.vec4),
         bond_lambda: wp.array(dtype=float),
         stretch_min: wp.array(dtype=float),
-    ):
-        """theta_k = d_k sum_live w e Lambda V beta G^dil; caches each bond's (n, e) and Lambda for the later passes
-        and, with fracture, the particle's most compressive live stretch (for the compressive bonus).
-
-        The deformed bond is eta = xi + (u_j - u_k) with xi the reference bond, and the extension is evaluated as
-        e = |eta| - L = (2 xi . du + du . du) / (|eta| + L), which keeps float32's relative precision at any strain
-        (|eta| - L would lose it to cancellation below a strain of about 1e-5)."""
-        k = wp.tid()
-        uk = displacements[k]
-        acc = float(0.0)
-        smin = float(0.0)
-        for q in range(family_offsets[k], family_offsets[k + 1]):
-            g = bond_geom[q]
-            L = g[3]
-            xi = wp.vec3(g[0], g[1], g[2]) * L
-            du = displacements[family_neighbors[q]] - uk
-            eta = xi + du
-            length = wp.length(eta)
-            n = eta / length
-            lam = wp.dot(n, wp.vec3(g[0], g[1], g[2]))
-            e = (2.0 * wp.dot(xi, du) + wp.dot(du, du)) / (length + L)
-            bond_ne[q] = wp.vec4(n[0], n[1], n[2], e)
-            bond_lambda[q] = lam
-            live = int(1)
-            if wp.static(FRACTURE):
-                live = int(bond_alive[q])
-                if live != 0:
-                    smin = wp.min(smin, e / g[3])
-            if live != 0:
-                acc += bond_wv_dil[q] * e * lam
-        th = dil_d[k] * acc
-        theta[k] = th
-        bp[k] = wp.vec2(dev_b[k], dil_coef[k] * th)
-        if wp.static(FRACTURE):
-            stretch_min[k] = smin
-
-    @wp.kernel(module="unique")
-    def plastic_update(
-        family_offsets: wp.array(dtype=wp.int32),
-        bond_geom: wp.array(dtype=wp.vec4),
+        plastic_particle_count: int,
         bond_wv: wp.array(dtype=float),
         bond_wv_dev: wp.array(dtype=float),
-        bond_alive: wp.array(dtype=wp.uint8),
-        bond_ne: wp.array(dtype=wp.vec4),
-        bond_lambda: wp.array(dtype=float),
-        theta: wp.array(dtype=float),
-        dev_b: wp.array(dtype=float),
         horizon: wp.array(dtype=float),
         weighted_volume: wp.array(dtype=float),
         yield_stress: wp.array(dtype=float),
@@ -109,60 +78,108 @@ def make_step_kernels(fracture: bool, plastic: bool):
         psi_scale: wp.array(dtype=float),
         bond_plastic: wp.array(dtype=float),
         eqps: wp.array(dtype=float),
+        bond_reverse: wp.array(dtype=wp.int32),
+        bond_plastic_reverse: wp.array(dtype=float),
     ):
-        """Return mapping of the deviatoric force state at particle k (launched over yielding particles only)."""
-        k = wp.tid()
-        delta = horizon[k]
+        """theta_k = d_k sum_live w e Lambda V beta G^dil for particle k = first + tid; caches each live bond's (n, e)
+        and Lambda for the later passes and, with fracture, the particle's most compressive live stretch (for the
+        compressive bonus). With plasticity, a yielding particle (k < plastic_particle_count) then runs the return
+        mapping of its deviatoric force state on the bonds it just cached (the plastic update: it writes its own
+        bonds' plastic extensions and its own equivalent plastic strain, and mirrors each new extension e^p_kj into
+        ``bond_plastic_reverse`` at the reverse bond j -> k, the one slot of that array bond k -> j owns, which no
+        kernel reads before the force pass).
+
+        The deformed bond is eta = xi + (u_j - u_k) with xi the reference bond, and the extension is evaluated as
+        e = |eta| - L = (2 xi . du + du . du) / (|eta| + L), which keeps float32's relative precision at any strain
+        (|eta| - L would lose it to cancellation below a strain of about 1e-5). A broken bond is skipped: no later pass
+        reads its cache."""
+        k = first + wp.tid()
+        uk = displacements[k]
+        acc = float(0.0)
+        smin = float(0.0)
+        yields = int(0)
+        if wp.static(PLASTIC):
+            if k < plastic_particle_count:
+                yields = 1
+        num = float(0.0)  # plastic volumetric strain: sum w L e Lambda V beta over the live family
+        den = float(0.0)  # and sum w L^2 V beta
+        for q in range(family_offsets[k], family_offsets[k + 1]):
+            if wp.static(FRACTURE):
+                if bond_alive[q] == wp.uint8(0):
+                    continue
+            g = bond_geom[q]
+            L = g[3]
+            xh = wp.vec3(g[0], g[1], g[2])
+            xi = xh * L
+            du = displacements[family_neighbors[q]] - uk
+            eta = xi + du
+            length = wp.length(eta)
+            inv = 1.0 / length
+            n = eta * inv
+            lam = wp.dot(n, xh)
+            e = (2.0 * wp.dot(xi, du) + wp.dot(du, du)) / (length + L)
+            bond_ne[q] = wp.vec4(n[0], n[1], n[2], e)
+            bond_lambda[q] = lam
+            if wp.static(FRACTURE):
+                smin = wp.min(smin, e / L)
+            acc += bond_wv_dil[q] * e * lam
+            if wp.static(PLASTIC):
+                if yields != 0:
+                    wl = bond_wv[q] * L
+                    num += wl * e * lam
+                    den += wl * L
+        th = dil_d[k] * acc
+        theta[k] = th
         bk = dev_b[k]
-        sigma_y = yield_stress[k] + hardening[k] * eqps[k]
-        psi0 = psi_scale[k] * 10.0 * sigma_y * sigma_y / (3.0 * wp.pi * wp.pow(delta, 5.0))
-        # volumetric strain of the live family, theta_p = 3 sum w L e Lambda V beta / sum w L^2 V beta: exactly
-        # 3 zeta under any isotropic expansion zeta, for every particle (surface or cracked), so the deviatoric part
-        # below vanishes bond by bond and hydrostatic load never yields
-        num = float(0.0)
-        den = float(0.0)
-        for q in range(family_offsets[k], family_offsets[k + 1]):
-            live = int(1)
-            if wp.static(FRACTURE):
-                live = int(bond_alive[q])
-            if live != 0:
-                L = bond_geom[q][3]
-                num += bond_wv[q] * L * bond_ne[q][3] * bond_lambda[q]
-                den += bond_wv[q] * L * L
-        th = float(0.0)
-        if den > 0.0:
-            th = 3.0 * num / den
-        norm2 = float(0.0)
-        for q in range(family_offsets[k], family_offsets[k + 1]):
-            live = int(1)
-            if wp.static(FRACTURE):
-                live = int(bond_alive[q])
-            if live != 0:
-                L = bond_geom[q][3]
-                vb = bond_wv[q] * L / delta  # V_j beta_j
-                alpha = 2.0 * bk * bond_wv_dev[q] / vb  # 2 w b G
-                ed = bond_ne[q][3] - bond_lambda[q] * th * L / 3.0
-                t = alpha * (ed - bond_plastic[q])
-                norm2 += t * t * vb
-        if 0.5 * norm2 > psi0:
-            r = wp.sqrt(2.0 * psi0 / norm2)
-            acc = float(0.0)
-            for q in range(family_offsets[k], family_offsets[k + 1]):
-                live = int(1)
-                if wp.static(FRACTURE):
-                    live = int(bond_alive[q])
-                if live != 0:
-                    L = bond_geom[q][3]
-                    ed = bond_ne[q][3] - bond_lambda[q] * th * L / 3.0
-                    ep = ed - r * (ed - bond_plastic[q])
-                    bond_plastic[q] = ep
-                acc += bond_wv[q] * bond_plastic[q] * bond_plastic[q]
-            m = weighted_volume[k]
-            if m > 0.0:
-                eqps[k] = wp.sqrt(5.0 * acc / m)
+        bp[k] = wp.vec2(bk, dil_coef[k] * th)
+        if wp.static(FRACTURE):
+            stretch_min[k] = smin
+        if wp.static(PLASTIC):
+            if yields != 0:
+                # Return mapping (module docstring). theta_p = 3 num / den is exactly 3 zeta under any isotropic
+                # expansion zeta, for every particle (surface or cracked), so the deviatoric extension
+                # e^d = e - Lambda theta_p L / 3 vanishes bond by bond and hydrostatic load never yields.
+                # ||t||^2 = sum alpha^2 (e^d - e^p)^2 V beta with alpha = 2 b G^dev w and V beta = w V beta L / delta,
+                # evaluated as delta sum (2 b w V beta G^dev (e^d - e^p))^2 / (w V beta L): one division per bond.
+                delta = horizon[k]
+                sigma_y = yield_stress[k] + hardening[k] * eqps[k]
+                psi0 = psi_scale[k] * 10.0 * sigma_y * sigma_y / (3.0 * wp.pi * wp.pow(delta, 5.0))
+                th3 = float(0.0)  # theta_p / 3
+                if den > 0.0:
+                    th3 = num / den
+                two_b = 2.0 * bk
+                norm2 = float(0.0)
+                for q in range(family_offsets[k], family_offsets[k + 1]):
+                    live = int(1)
+                    if wp.static(FRACTURE):
+                        live = int(bond_alive[q])
+                    if live != 0:
+                        L = bond_geom[q][3]
+                        ed = bond_ne[q][3] - bond_lambda[q] * th3 * L
+                        a = two_b * bond_wv_dev[q] * (ed - bond_plastic[q])
+                        norm2 += a * a / (bond_wv[q] * L)
+                norm2 = norm2 * delta
+                if 0.5 * norm2 > psi0:
+                    r = wp.sqrt(2.0 * psi0 / norm2)
+                    ep2 = float(0.0)
+                    for q in range(family_offsets[k], family_offsets[k + 1]):
+                        live = int(1)
+                        if wp.static(FRACTURE):
+                            live = int(bond_alive[q])
+                        ep = bond_plastic[q]
+                        if live != 0:
+                            ed = bond_ne[q][3] - bond_lambda[q] * th3 * bond_geom[q][3]
+                            ep = ed - r * (ed - ep)
+                            bond_plastic[q] = ep
+                            bond_plastic_reverse[bond_reverse[q]] = ep
+                        ep2 += bond_wv[q] * ep * ep
+                    m = weighted_volume[k]
+                    if m > 0.0:
+                        eqps[k] = wp.sqrt(5.0 * ep2 / m)
 
     @wp.kernel(module="unique")
     def force(
+        first: int,
         family_offsets: wp.array(dtype=wp.int32),
         family_neighbors: wp.array(dtype=wp.int32),
         bond_geom: wp.array(dtype=wp.vec4),
@@ -179,50 +196,59 @@ def make_step_kernels(fracture: bool, plastic: bool):
         failure_eqps: wp.array(dtype=float),
         plastic_bond_count: int,
         bond_plastic: wp.array(dtype=float),
-        bond_reverse: wp.array(dtype=wp.int32),
+        bond_plastic_reverse: wp.array(dtype=float),
         force_density: wp.array(dtype=wp.vec3),
     ):
-        """Force density [N/m^3] over live bonds, with plastic extensions where the material yields; then, with
-        fracture, the breaking test of each live bond (it takes effect from the next pass). The test reads only
-        quantities both directed copies of a bond share, so both break in the same step."""
-        k = wp.tid()
+        """Force density [N/m^3] at particle k = first + tid over live bonds, with plastic extensions where the
+        material yields; then, with fracture, the breaking test of each live bond (it takes effect from the next
+        pass). The test reads only quantities both directed copies of a bond share, so both break in the same step.
+        It compares extensions, e - (e^p_kj + e^p_jk) / 2 > s_c L, rather than stretches (no division per bond)."""
+        k = first + wp.tid()
         bpk = bp[k]
         f = wp.vec3(0.0)
+        smin_k = float(0.0)
+        alpha_k = float(0.0)
+        eqps_k = float(0.0)
+        fail_k = float(0.0)
+        if wp.static(FRACTURE):
+            smin_k = stretch_min[k]
+            alpha_k = bonus_alpha[k]
+            if wp.static(PLASTIC):
+                eqps_k = eqps[k]
+                fail_k = failure_eqps[k]
         for q in range(family_offsets[k], family_offsets[k + 1]):
-            live = int(1)
             if wp.static(FRACTURE):
-                live = int(bond_alive[q])
-            if live != 0:
-                j = family_neighbors[q]
-                c = bond_ne[q]
-                bpj = bp[j]
-                dev = (bpk[0] + bpj[0]) * c[3]
-                ep_sum = float(0.0)
+                if bond_alive[q] == wp.uint8(0):
+                    continue
+            j = family_neighbors[q]
+            c = bond_ne[q]
+            bpj = bp[j]
+            dev = (bpk[0] + bpj[0]) * c[3]
+            ep_sum = float(0.0)
+            if wp.static(PLASTIC):
+                if q < plastic_bond_count:
+                    ep_k = bond_plastic[q]
+                    ep_j = bond_plastic_reverse[q]  # e^p_jk, kept beside bond q (no gather)
+                    dev = dev - bpk[0] * ep_k - bpj[0] * ep_j
+                    ep_sum = ep_k + ep_j
+            s = bond_wv_dil[q] * bond_lambda[q] * (bpk[1] + bpj[1]) + bond_wv_dev[q] * dev
+            f += (2.0 * s) * wp.vec3(c[0], c[1], c[2])
+            if wp.static(FRACTURE):
+                broke = int(0)
                 if wp.static(PLASTIC):
                     if q < plastic_bond_count:
-                        ep_k = bond_plastic[q]
-                        ep_j = bond_plastic[bond_reverse[q]]
-                        dev = dev - bpk[0] * ep_k - bpj[0] * ep_j
-                        ep_sum = ep_k + ep_j
-                s = bond_wv_dil[q] * bond_lambda[q] * (bpk[1] + bpj[1]) + bond_wv_dev[q] * dev
-                f += (2.0 * s) * wp.vec3(c[0], c[1], c[2])
-                if wp.static(FRACTURE):
-                    L = bond_geom[q][3]
-                    stretch = c[3] / L
-                    broke = int(0)
-                    if wp.static(PLASTIC):
-                        if q < plastic_bond_count:
-                            if stretch > 0.0 and wp.max(eqps[k], eqps[j]) > failure_eqps[k]:
-                                broke = 1
-                    sc = bond_critical_stretch[q] - bonus_alpha[k] * wp.min(stretch_min[k], stretch_min[j])
-                    if stretch - 0.5 * ep_sum / L > sc:
-                        broke = 1
-                    if broke != 0:
-                        bond_alive[q] = wp.uint8(0)
+                        if c[3] > 0.0 and wp.max(eqps_k, eqps[j]) > fail_k:
+                            broke = 1
+                sc = bond_critical_stretch[q] - alpha_k * wp.min(smin_k, stretch_min[j])
+                if c[3] - 0.5 * ep_sum > sc * bond_geom[q][3]:
+                    broke = 1
+                if broke != 0:
+                    bond_alive[q] = wp.uint8(0)
         force_density[k] = f
 
     @wp.kernel(module="unique")
     def energy(
+        first: int,
         family_offsets: wp.array(dtype=wp.int32),
         bond_ne: wp.array(dtype=wp.vec4),
         bond_wv_dev: wp.array(dtype=float),
@@ -234,8 +260,9 @@ def make_step_kernels(fracture: bool, plastic: bool):
         dil_c0: wp.array(dtype=float),
         energy_density: wp.array(dtype=float),
     ):
-        """Elastic energy density W_k = c0 theta_k^2 + b_k sum_live w V beta G^dev (e - e^p)^2 [J/m^3]."""
-        k = wp.tid()
+        """Elastic energy density W_k = c0 theta_k^2 + b_k sum_live w V beta G^dev (e - e^p)^2 [J/m^3] at particle
+        k = first + tid."""
+        k = first + wp.tid()
         acc = float(0.0)
         for q in range(family_offsets[k], family_offsets[k + 1]):
             live = int(1)
@@ -254,7 +281,7 @@ def make_step_kernels(fracture: bool, plastic: bool):
         pass
 
     ks = StepKernels()
-    ks.dilatation, ks.plastic_update, ks.force, ks.energy = dilatation, plastic_update, force, energy
+    ks.dilatation, ks.force, ks.energy = dilatation, force, energy
     _cache[key] = ks
     return ks
 
@@ -272,13 +299,14 @@ def compose_positions(
 
 @wp.kernel
 def compute_damage(
+    first: int,
     family_offsets: wp.array(dtype=wp.int32),
     bond_wv: wp.array(dtype=float),
     bond_alive: wp.array(dtype=wp.uint8),
     damage: wp.array(dtype=float),
 ):
-    """phi_k = 1 - (sum_live w V beta) / (sum_all w V beta), in [0, 1]."""
-    k = wp.tid()
+    """phi_k = 1 - (sum_live w V beta) / (sum_all w V beta), in [0, 1], at particle k = first + tid."""
+    k = first + wp.tid()
     total = float(0.0)
     live = float(0.0)
     for q in range(family_offsets[k], family_offsets[k + 1]):
@@ -290,6 +318,17 @@ def compute_damage(
     if total > 0.0:
         d = 1.0 - live / total
     damage[k] = d
+
+
+@wp.kernel
+def mirror_plastic_extensions(
+    bond_reverse: wp.array(dtype=wp.int32),
+    bond_plastic: wp.array(dtype=float),
+    bond_plastic_reverse: wp.array(dtype=float),
+):
+    """bond_plastic_reverse[q] = bond_plastic[reverse of q] for every plastic bond q (after a state is restored)."""
+    q = wp.tid()
+    bond_plastic_reverse[q] = bond_plastic[bond_reverse[q]]
 
 
 @wp.kernel

@@ -10,10 +10,11 @@ from ..errors import ParameterError
 from ..geometry import SolidShape
 from ..materials import Material
 from ..regions import region_mask
-from ..sampling import fill_solid, morton_order
+from ..sampling import fill_solid, jitter_points, morton_order
 from ..validate import check_range
 
 SURFACE_CORRECTIONS = ("directional", "family", "none")
+SAMPLINGS = ("lattice", "jittered")
 
 
 class PeridynamicBody(PointBody):
@@ -32,6 +33,13 @@ class PeridynamicBody(PointBody):
         material_rotation: 3x3 rotation from the material frame (where ``material.anisotropy.axis`` is given) to world
             space; identity by default. Turning a body and its material_rotation together gives the same result.
         device: Warp device used to sample the shape ("cpu" by default; sampling is a one-off).
+        sampling: "lattice" (default: particles on the simple-cubic lattice) or "jittered" (each lattice point moved
+            at random inside its own cell, volume h^3 kept, pdsim.sampling.jitter_points): the particle
+            arrangement then has no lattice planes for cracks to follow (docs/fracture.md).
+        jitter: largest offset of a jittered particle along each axis, as a fraction of h, in (0, 1] (the offsets are
+            uniform in [-jitter h / 2, jitter h / 2)); 0.5 when None (default). Only with sampling="jittered".
+        sampling_seed: seed of the jitter, an integer in [0, 2^31 - 1] (default 0): the same seed gives the same
+            particles, wherever the body sits.
 
     Particles are sorted along a Morton curve so that neighbours are close in memory.
     """
@@ -49,11 +57,23 @@ class PeridynamicBody(PointBody):
         damping: float = 0.0,
         material_rotation=None,
         device: str = "cpu",
+        sampling: str = "lattice",
+        jitter: float | None = None,
+        sampling_seed: int = 0,
     ):
         if not isinstance(material, Material):
             raise ParameterError("material", material, "a pdsim.Material")
         if not isinstance(shape, SolidShape):
             raise ParameterError("shape", shape, "a pdsim SolidShape (pdsim.box, pdsim.load_mesh, ...)")
+        if sampling not in SAMPLINGS:
+            raise ParameterError("sampling", sampling, " or ".join(map(repr, SAMPLINGS)))
+        if sampling == "lattice" and jitter is not None:
+            raise ParameterError("jitter", jitter, "None (the default) unless sampling='jittered'")
+        jitter = check_range("jitter", 0.5 if jitter is None else jitter, 0.0, 1.0, hi_open=False)
+        if isinstance(sampling_seed, bool) or not isinstance(sampling_seed, int | np.integer):
+            raise ParameterError("sampling_seed", sampling_seed, "an integer in [0, 2147483647]")
+        if not 0 <= int(sampling_seed) <= 2**31 - 1:
+            raise ParameterError("sampling_seed", sampling_seed, "an integer in [0, 2147483647]")
         if surface_correction not in SURFACE_CORRECTIONS:
             raise ParameterError("surface_correction", surface_correction, " or ".join(map(repr, SURFACE_CORRECTIONS)))
         self.shape = shape
@@ -69,6 +89,11 @@ class PeridynamicBody(PointBody):
         positions, volumes = fill_solid(shape, self.spacing, device=device)
         order = morton_order(positions, self.spacing)
         self.rest_positions = positions[order]
+        self.sampling, self.jitter, self.sampling_seed = sampling, jitter, int(sampling_seed)
+        if sampling == "jittered":
+            self.rest_positions = jitter_points(
+                shape, self.rest_positions, self.spacing, jitter, self.sampling_seed, device=device
+            )
         self.volumes = volumes[order]
         n = len(self.rest_positions)
         self.unbreakable = np.zeros(n, dtype=bool)

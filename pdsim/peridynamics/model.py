@@ -50,6 +50,8 @@ class PeridynamicModel:
     hardening: object = None  # H per plastic particle [Pa]
     psi_scale: object = None  # family share of the continuum deviatoric norm per plastic particle [-]
     bond_reverse: object = None  # index of bond j -> k for each plastic bond k -> j
+    debris_rate: object = None  # debris damping rate c per particle [1/s] (None: no body damps its debris)
+    debris_damage: object = None  # damage above which debris damping acts, per particle [-]
     density_host: np.ndarray = field(repr=False, default=None)
     volumes_host: np.ndarray = field(repr=False, default=None)
     rest_host: np.ndarray = field(repr=False, default=None)
@@ -70,6 +72,7 @@ class PeridynamicState:
     bond_alive: object = None  # uint8 per bond (fracture)
     stretch_min: object = None  # most compressive live stretch per particle, this step (fracture)
     bond_plastic: object = None  # plastic extension per plastic bond [m]
+    bond_plastic_reverse: object = None  # the reverse bond's plastic extension per plastic bond [m] (a mirror)
     eqps: object = None  # equivalent plastic strain per particle [-]
 
 
@@ -138,7 +141,7 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
     nb = bond_wv.shape[0]
     bond_ne = wp.zeros(nb, dtype=wp.vec4, device=device)
     bond_lambda = wp.zeros(nb, dtype=float, device=device)
-    u8, f1, _ = placeholders(device)
+    u8, f1, i1 = placeholders(device)
     f_dil = np.ones((n, 3))
     f_dev = np.ones((n, 3))
     d_cont = 9.0 / (4.0 * math.pi * delta_h**4)
@@ -150,8 +153,14 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
         rest * (scale - 1) of a homogeneous deformation
         (the elastic kernels with d = 1, c0 = 0, b = 1)."""
         pos = wp.array((rest_h * (scale - 1.0)).astype(np.float32), dtype=wp.vec3, device=device)
-        inputs = [pos, offsets, neighbors, bond_geom, bond_wv, ones, zeros, zeros, u8]
-        wp.launch(ks.dilatation, dim=n, device=device, inputs=[*inputs, theta_out, bp, bond_ne, bond_lambda, f1])
+        inputs = [0, pos, offsets, neighbors, bond_geom, bond_wv, ones, zeros, zeros, u8]
+        no_plasticity = [0, *([f1] * 9), i1, f1]
+        wp.launch(
+            ks.dilatation,
+            dim=n,
+            device=device,
+            inputs=[*inputs, theta_out, bp, bond_ne, bond_lambda, f1, *no_plasticity],
+        )
 
     for axis in range(3):
         stretch = np.ones((len(rest_h), 3))
@@ -160,9 +169,8 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
         stress[:, axis] = 1.0 + zeta
         elastic_sums(stretch, sum_dil)  # dilatation factor: uniaxial stretch
         elastic_sums(stress, zeros_out)  # deviatoric factor: uniaxial stress (only the bond cache is used)
-        wp.launch(
-            ks.energy, dim=n, device=device, inputs=[offsets, bond_ne, bond_wv, u8, 0, f1, zeros, ones, zeros, sum_dev]
-        )
+        energy_inputs = [0, offsets, bond_ne, bond_wv, u8, 0, f1, zeros, ones, zeros, sum_dev]
+        wp.launch(ks.energy, dim=n, device=device, inputs=energy_inputs)
         sd = sum_dil.numpy().astype(np.float64)
         sv = sum_dev.numpy().astype(np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -308,6 +316,9 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
                 wp.array(unbreak, dtype=wp.int32, device=device),
                 axis,
                 arr(strength_h),
+                wp.array((np.arange(n) - np.repeat(body_offsets[:-1], counts)).astype(np.int32), device=device),
+                arr(per_particle([b.material.strength_weibull_modulus or 0.0 for b in bodies])),
+                wp.array(per_particle([b.material.strength_seed for b in bodies]).astype(np.int32), device=device),
                 bond_sc,
             ],
             device=device,
@@ -326,6 +337,11 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
             bonus_alpha=arr(per_particle([b.material.compressive_bonus for b in bodies])),
             failure_eqps=arr(fail_h),
         )
+        if any(b.material.debris_damping > 0.0 for b in bodies):  # kernels/peridynamics/damping.py
+            extra.update(
+                debris_rate=arr(per_particle([b.material.debris_damping for b in bodies])),
+                debris_damage=arr(per_particle([b.material.debris_damage for b in bodies])),
+            )
     plastic_bodies = [b for b in bodies if b.material.yields]
     if plastic_bodies:
         from ..kernels.peridynamics import step as ks

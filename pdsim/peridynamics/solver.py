@@ -28,7 +28,11 @@ the integrator conserves energy up to the dependence of Lambda on rotation, whic
 
 from __future__ import annotations
 
+import itertools
 import math
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 
@@ -51,12 +55,19 @@ class SolverPeridynamics(PointSolver):
             that build a solver directly). ``contact``: None or False (off), True (defaults) or a dict of
             ParticleContact options (pdsim/contact.py).
         surfaces: build renderable fragment surfaces for the output views (default True).
+        threads: CPU threads of the bond passes (``None``: the environment variable ``PDSIM_THREADS`` if set, else
+            every core this process may run on, but at most one per 50,000 bonds). Each pass (dilatation with the
+            plastic update, force with the breaking test, energy, damage) is split into that many contiguous particle
+            ranges of about equal bond count, launched at once (Warp releases the GIL while a CPU kernel runs) and
+            joined before the next pass; every particle is computed exactly as in one launch, so results are
+            bit-identical for any thread count. On a CUDA device each pass is one launch and ``threads`` must be None
+            or 1. The kick and drift of the shared kinematics run as one launch.
 
     State: displacements from the rest configuration, velocities and accelerations (pdsim/kinematics.py), so bond
     deformation is computed from displacement differences and does not depend on where the body sits. The step
-    launches: conditions and kick-drift, colliders, dilatation, (plastic update), force density (with the breaking
-    test), contact, loads, kick. No allocation happens per step. ``features`` lists the optional parts that are live
-    (and launched) for this scene.
+    launches: conditions and kick-drift, colliders, dilatation (with the plastic update), force density (with the
+    breaking test), contact, loads, kick. No allocation happens per step. ``features`` lists the optional parts that
+    are live (and launched) for this scene.
     """
 
     method = "peridynamics"
@@ -74,6 +85,7 @@ class SolverPeridynamics(PointSolver):
         colliders=None,
         origin=None,
         surfaces: bool = True,
+        threads: int | None = None,
     ):
         import warp as wp
 
@@ -91,6 +103,7 @@ class SolverPeridynamics(PointSolver):
         # yielding bodies first, so plastic state is a prefix of the particle and bond arrays (allocated only there)
         self.bodies = sorted(bodies, key=lambda b: not b.material.yields)
         self.device = wp.get_device(device)
+        resolve_threads(threads, self.device)  # a bad setting fails before anything is built
         self.ground = ground
         self.model = build_model(self.bodies, self.device, self.origin)
         m = self.model
@@ -124,8 +137,12 @@ class SolverPeridynamics(PointSolver):
             self._damage = wp.zeros(n, dtype=float, device=d)
         if m.plastic:
             self.state.bond_plastic = wp.zeros(max(m.plastic_bond_count, 1), dtype=float, device=d)
+            self.state.bond_plastic_reverse = wp.zeros(max(m.plastic_bond_count, 1), dtype=float, device=d)
             self.state.eqps = wp.zeros(n, dtype=float, device=d)
         self._kernels = make_step_kernels(fracture=m.fracture, plastic=m.plastic)
+        self._offsets_host = m.family_offsets.numpy()[: n + 1].astype(np.int64)
+        self._ranges = None
+        self.threads = threads
         for c in colliders:
             c.bind(self.origin)
         if ground is not None:
@@ -161,6 +178,18 @@ class SolverPeridynamics(PointSolver):
         self.step_count = 0
         self._stable_dt = None  # the stable step, for the watchdog's message (computed on the first check)
         self._refresh_accelerations()
+
+    # -- CPU threads -----------------------------------------------------------------------------------------------
+    @property
+    def threads(self) -> int:
+        """Threads the bond passes run on (1 on a CUDA device); settable (None: PDSIM_THREADS, else every core, at
+        most one per MIN_BONDS_PER_THREAD bonds)."""
+        return len(self._ranges.ranges)
+
+    @threads.setter
+    def threads(self, value: int | None):
+        count = resolve_threads(value, self.device, self.model.bond_count)
+        self._ranges = ParticleRanges(self._offsets_host, count, self.device)
 
     # -- time step -----------------------------------------------------------------------------------------------
     def stable_time_step(self) -> float:
@@ -203,6 +232,21 @@ class SolverPeridynamics(PointSolver):
         reverse = m.bond_reverse if m.plastic else i1
         return alive, plastic, reverse
 
+    def _mirror_plastic(self):
+        """bond_plastic_reverse from bond_plastic (after a restore; the step keeps the mirror itself)."""
+        import warp as wp
+
+        from ..kernels.peridynamics import step as pd_step
+
+        m, s = self.model, self.state
+        if m.plastic and m.plastic_bond_count > 0:
+            wp.launch(
+                pd_step.mirror_plastic_extensions,
+                dim=m.plastic_bond_count,
+                inputs=[m.bond_reverse, s.bond_plastic, s.bond_plastic_reverse],
+                device=self.device,
+            )
+
     def compute_forces(self):
         """Force density [N/m^3] at the current displacements: bonds (with plasticity and the breaking test where
         live), contact, then the loads at the end of the step being taken."""
@@ -212,10 +256,28 @@ class SolverPeridynamics(PointSolver):
         f1 = self._dummy_f
         alive, plastic, reverse = self._feature_arrays()
         frac = m.fracture
-        wp.launch(
+        plastic_args = (
+            [
+                m.plastic_particle_count,
+                m.bond_wv,
+                m.bond_wv_dev,
+                m.horizon,
+                m.weighted_volume,
+                m.yield_stress,
+                m.hardening,
+                m.psi_scale,
+                plastic,
+                s.eqps,
+                reverse,
+                s.bond_plastic_reverse,
+            ]
+            if m.plastic
+            else [0, *([f1] * 9), reverse, f1]
+        )
+        ranges = self._ranges
+        ranges.launch(
             ks.dilatation,
-            dim=m.particle_count,
-            inputs=[
+            [
                 self.kin.u,
                 m.family_offsets,
                 m.family_neighbors,
@@ -230,37 +292,12 @@ class SolverPeridynamics(PointSolver):
                 s.bond_ne,
                 s.bond_lambda,
                 s.stretch_min if frac else f1,
+                *plastic_args,
             ],
-            device=self.device,
         )
-        if m.plastic_particle_count > 0:
-            wp.launch(
-                ks.plastic_update,
-                dim=m.plastic_particle_count,
-                inputs=[
-                    m.family_offsets,
-                    m.bond_geom,
-                    m.bond_wv,
-                    m.bond_wv_dev,
-                    alive,
-                    s.bond_ne,
-                    s.bond_lambda,
-                    s.theta,
-                    m.dev_b,
-                    m.horizon,
-                    m.weighted_volume,
-                    m.yield_stress,
-                    m.hardening,
-                    m.psi_scale,
-                    plastic,
-                    s.eqps,
-                ],
-                device=self.device,
-            )
-        wp.launch(
+        ranges.launch(
             ks.force,
-            dim=m.particle_count,
-            inputs=[
+            [
                 m.family_offsets,
                 m.family_neighbors,
                 m.bond_geom,
@@ -277,11 +314,16 @@ class SolverPeridynamics(PointSolver):
                 m.failure_eqps if frac else f1,
                 m.plastic_bond_count,
                 plastic,
-                reverse,
+                s.bond_plastic_reverse if m.plastic else f1,
                 s.force_density,
             ],
-            device=self.device,
         )
+        if m.debris_rate is not None:  # Material.debris_damping (kernels/peridynamics/damping.py)
+            from ..kernels.peridynamics.damping import add_debris_damping
+
+            wp.launch(add_debris_damping, dim=m.particle_count, device=self.device, inputs=[
+                m.family_offsets, m.family_neighbors, m.bond_wv, alive, self.kin.v, m.inv_density, m.debris_rate,
+                m.debris_damage, s.force_density])
         if self.contact is not None:
             from ..kernels.peridynamics import step as pd_step
 
@@ -359,6 +401,7 @@ class SolverPeridynamics(PointSolver):
         s = self.state
         for name, values in state["bonds"].items():
             assign_state(getattr(s, name), values, name)
+        self._mirror_plastic()
         if self.contact is not None:
             c = state.get("contact")
             if c is None:
@@ -511,14 +554,11 @@ class SolverPeridynamics(PointSolver):
     def strain_energy_density(self) -> np.ndarray:
         """Elastic W_k at the current positions [J/m^3] (uses the bond geometry cached by the last force pass, which
         is always that of the current positions)."""
-        import warp as wp
-
         m, s = self.model, self.state
         alive, plastic, _ = self._feature_arrays()
-        wp.launch(
+        self._ranges.launch(
             self._kernels.energy,
-            dim=m.particle_count,
-            inputs=[
+            [
                 m.family_offsets,
                 s.bond_ne,
                 m.bond_wv_dev,
@@ -530,25 +570,17 @@ class SolverPeridynamics(PointSolver):
                 m.dil_c0,
                 self._energy_density,
             ],
-            device=self.device,
         )
         return self._energy_density.numpy().astype(np.float64)
 
     def damage(self) -> np.ndarray:
         """Damage phi_k = 1 - live / all bond weight per particle [-] (zeros when no body can break)."""
-        import warp as wp
-
         from ..kernels.peridynamics import step as pd_step
 
         m = self.model
         if not m.fracture:
             return np.zeros(m.particle_count)
-        wp.launch(
-            pd_step.compute_damage,
-            dim=m.particle_count,
-            inputs=[m.family_offsets, m.bond_wv, self.state.bond_alive, self._damage],
-            device=self.device,
-        )
+        self._ranges.launch(pd_step.compute_damage, [m.family_offsets, m.bond_wv, self.state.bond_alive, self._damage])
         return self._damage.numpy().astype(np.float64)
 
     def plastic_strain(self) -> np.ndarray:
@@ -580,3 +612,161 @@ def _bounds_centre(bodies) -> np.ndarray:
     """Centre of the bodies' rest bounding box [m] (the local frame's origin of a solver built without a scene)."""
     rest = np.concatenate([b.rest_positions for b in bodies])
     return 0.5 * (rest.min(axis=0) + rest.max(axis=0))
+
+
+THREADS_ENV = "PDSIM_THREADS"
+"""Environment variable: CPU threads of the peridynamic bond passes when a solver is built without ``threads``."""
+
+MIN_BONDS_PER_THREAD = 50_000
+"""The default thread count gives each thread at least this many bonds: starting and joining a pass on a pool thread
+costs some 50 us, about what one thread spends on 5,000 bonds in one pass."""
+
+RANGE_PARTICLE_COST = 4
+"""Cost of a particle's own work (reads, the per-particle arithmetic, its writes) in bond visits, added to its bond
+count when the particles are split into ranges of equal cost."""
+
+
+def available_cores() -> int:
+    """CPU cores this process may run on (its affinity mask where the platform has one)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def resolve_threads(threads, device, bond_count: int = 0) -> int:
+    """The thread count of the bond passes: ``threads`` (an integer >= 1), else the environment variable
+    PDSIM_THREADS, else every core in the process's affinity but no more than one per MIN_BONDS_PER_THREAD bonds;
+    1 on a CUDA device (where ``threads`` must be None or 1: the GPU runs each pass as one launch)."""
+    if threads is not None:
+        if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+            raise ParameterError("threads", threads, "None or an integer >= 1 (CPU threads of the bond passes)")
+        threads = int(threads)
+        if device.is_cuda and threads != 1:
+            raise ParameterError(
+                "threads", threads, f"None or 1 on the CUDA device {device} (each bond pass is one GPU launch)"
+            )
+        return threads
+    if device.is_cuda:
+        return 1
+    env = os.environ.get(THREADS_ENV, "").strip()
+    if env:
+        try:
+            value = int(env)
+        except ValueError:
+            value = 0
+        if value < 1:
+            raise ParameterError(THREADS_ENV, env, "an integer >= 1 (CPU threads of the peridynamic bond passes)")
+        return value
+    return max(1, min(available_cores(), int(bond_count) // MIN_BONDS_PER_THREAD))
+
+
+def _launch_wrapped(wp) -> bool:
+    """Whether ``wp.launch`` is a tool's wrapper (one that records or times launches) rather than Warp's own."""
+    return not getattr(wp.launch, "__module__", "").startswith("warp.")
+
+
+_executors: dict[tuple[int, int], ThreadPoolExecutor] = {}
+_executors_lock = threading.Lock()
+
+
+def _executor(workers: int) -> ThreadPoolExecutor:
+    """The process's pool of ``workers`` threads for range launches (shared by solvers, created on first use; a
+    process forked from one that had a pool gets its own, as the parent's threads do not exist in it)."""
+    key = (os.getpid(), workers)
+    with _executors_lock:
+        pool = _executors.get(key)
+        if pool is None:
+            pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="pdsim-pd")
+            _executors[key] = pool
+        return pool
+
+
+class ParticleRanges:
+    """Contiguous particle ranges of about equal cost (bond count plus RANGE_PARTICLE_COST per particle), one per
+    thread, and the launch of one pass over them.
+
+    Each step kernel takes the first particle of its launch and writes only its own particles' rows and their bonds'
+    rows (the families are stored per particle; the mirror of the plastic extensions writes one slot per bond, at its
+    reverse bond, that only the next pass reads: kernels/peridynamics/step.py), and a pass reads only what earlier
+    passes wrote, so the ranges of one pass are independent: ``launch`` starts one Warp launch per range, the calling
+    thread running the first while pool threads run the others (a CPU kernel runs with the GIL released), and returns
+    when all are done. A particle's arithmetic does not depend on its range, so results are bit-identical for any
+    thread count. On a CUDA device there is one range: one launch over all particles.
+
+    Warp (1.19) passes each launch's thread index as an argument of the generated CPU function (early versions kept
+    it in a static variable, which made concurrent CPU launches unsafe) and builds each launch's argument block
+    afresh; what is not safe is loading a module from several threads at once, so the kernels' modules are loaded
+    from the calling thread before the first threaded launch (``_load``). While the device records a graph
+    (``wp.ScopedCapture``, pdsim/frame_graph.py) the ranges are launched one after another from the calling thread,
+    which is the only thread a capture records; a CPU replay then runs them on one thread."""
+
+    def __init__(self, offsets_host: np.ndarray, threads: int, device):
+        n = len(offsets_host) - 1
+        self.device = device
+        self.particle_count = n
+        count = max(1, min(int(threads), n))
+        cost = offsets_host.astype(np.int64) + RANGE_PARTICLE_COST * np.arange(n + 1, dtype=np.int64)
+        targets = cost[-1] * np.arange(1, count) / count
+        above = np.clip(np.searchsorted(cost, targets), 1, n)  # the first cut at or past each target, or the one
+        cuts = np.where(targets - cost[above - 1] < cost[above] - targets, above - 1, above).tolist()  # nearer
+        for i in range(len(cuts)):  # one per thread (a handful): each range keeps at least one particle
+            cuts[i] = min(max(cuts[i], cuts[i - 1] + 1 if i else 1), n - (count - 1 - i))
+        bounds = [0, *cuts, n]
+        self.ranges = [(int(a), int(b - a)) for a, b in itertools.pairwise(bounds)]
+        self._loaded = set()
+        self._commands = {}  # kernel key -> (inputs key, recorded launches, inputs)
+
+    def _load(self, kernel) -> None:
+        import warp as wp
+
+        module = kernel.module
+        if id(module) not in self._loaded:
+            wp.load_module(module, device=self.device)
+            self._loaded.add(id(module))
+
+    def launch(self, kernel, inputs: list) -> None:
+        """``kernel`` over every particle: one launch per range with inputs ``[first, *inputs]``, joined."""
+        import warp as wp
+
+        device = self.device
+        if device.is_cuda or device.is_capturing or _launch_wrapped(wp):
+            # one launch on a GPU; in order from this thread while a graph is recorded; through wp.launch while a
+            # tool records or times launches by wrapping it (pdsim/explain.py, tools/bench_pd_throughput.py)
+            for first, count in self.ranges:
+                if count:
+                    wp.launch(kernel, dim=count, inputs=[first, *inputs], device=device)
+            return
+        launches = self._recorded(kernel, inputs)
+        if len(launches) <= 1:
+            for cmd in launches:
+                cmd.launch()
+            return
+        pool = _executor(len(launches) - 1)
+        futures = [pool.submit(cmd.launch) for cmd in launches[1:]]
+        try:
+            launches[0].launch()
+        finally:  # every range has finished before this returns or raises (they write the same arrays)
+            wait(futures)
+        for fut in futures:
+            fut.result()
+
+    def _recorded(self, kernel, inputs: list) -> list:
+        """The recorded launches (``wp.launch(..., record_cmd=True)``) of ``kernel`` over the ranges with ``inputs``,
+        kept while the inputs are the same arrays and values: replaying one costs a few microseconds of Python,
+        where ``wp.launch`` checks and packs every argument again, and the pool threads take turns on the GIL for
+        that Python part. The entry keeps the inputs alive, so an array's id cannot be reused while it is cached."""
+        import warp as wp
+
+        key = tuple(id(x) if isinstance(x, wp.array) else x for x in inputs)
+        entry = self._commands.get(kernel.key)
+        if entry is None or entry[0] != key:
+            self._load(kernel)
+            cmds = [
+                wp.launch(kernel, dim=count, inputs=[first, *inputs], device=self.device, record_cmd=True)
+                for first, count in self.ranges
+                if count
+            ]
+            entry = (key, cmds, list(inputs))
+            self._commands[kernel.key] = entry
+        return entry[1]

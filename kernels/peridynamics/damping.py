@@ -1,0 +1,58 @@
+"""Debris damping of brittle peridynamic bodies (Material.debris_damping).
+
+A brittle crack sheds particles that lost most of their bonds; released from a strained neighbourhood they carry a
+share of its elastic energy as high-frequency motion that no coarse discretisation resolves (chips that fly off
+faster than anything that hit the body). The kernel adds a drag towards the velocity of the material the particle
+broke from: for a particle k with damage phi_k = 1 - sum_live w V beta / sum_all w V beta above its threshold,
+
+    f_k += rho_k c_k (v_bar_k - v_k),    v_bar_k = sum_j w V_j beta v_j / sum_j w V_j beta
+
+over its live bonds when it has any (a particle that hangs on a fragment by a few bonds stops rattling against it),
+and over its whole reference family when it has none (a loose particle follows the material it came from instead
+of flying off). Intact material (phi_k = 0) and particles below the threshold get nothing, so an intact body's
+motion and energy are exactly those of the undamped model. The force is not paired (a chip's neighbours feel no
+reaction): it removes momentum from the debris only, which holds a small share of the body's mass. By damping the
+rattling of nearly free particles it also keeps some of them on their fragments (docs/fracture.md measures the
+effect). Stability of the explicit step needs c dt < 1.
+"""
+
+import warp as wp
+
+
+@wp.kernel
+def add_debris_damping(
+    family_offsets: wp.array(dtype=wp.int32),
+    family_neighbors: wp.array(dtype=wp.int32),
+    bond_wv: wp.array(dtype=float),
+    bond_alive: wp.array(dtype=wp.uint8),
+    velocities: wp.array(dtype=wp.vec3),
+    inv_density: wp.array(dtype=float),
+    rate: wp.array(dtype=float),
+    damage_threshold: wp.array(dtype=float),
+    force_density: wp.array(dtype=wp.vec3),
+):
+    """Adds rho_k c_k (v_bar_k - v_k) to the force density [N/m^3] of each particle whose damage exceeds its
+    threshold (module docstring); one thread per particle, a gather over its family."""
+    k = wp.tid()
+    c = rate[k]
+    if c <= 0.0:
+        return
+    total = float(0.0)
+    live = float(0.0)
+    v_all = wp.vec3(0.0)
+    v_live = wp.vec3(0.0)
+    for q in range(family_offsets[k], family_offsets[k + 1]):
+        wv = bond_wv[q]
+        vj = velocities[family_neighbors[q]]
+        total += wv
+        v_all += wv * vj
+        if bond_alive[q] != wp.uint8(0):
+            live += wv
+            v_live += wv * vj
+    if total <= 0.0:
+        return
+    if 1.0 - live / total > damage_threshold[k]:
+        v_bar = v_all / total
+        if live > 0.0:
+            v_bar = v_live / live
+        force_density[k] = force_density[k] + (c / inv_density[k]) * (v_bar - velocities[k])
