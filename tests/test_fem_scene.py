@@ -167,6 +167,8 @@ def test_plastic_body_views_carry_plastic_strain():
         (pdsim.Material(1000.0, 1.0e6, 0.3, critical_stretch=0.01), "critical_stretch", "tensile_strength"),
         (pdsim.Material(1000.0, 1.0e6, 0.3, fracture_energy=10.0), "fracture_energy", "tensile_strength"),
         (pdsim.Material(1000.0, 1.0e6, 0.3, anisotropy=pdsim.Anisotropy()), "anisotropy", "isotropic"),
+        (pdsim.Material(1000.0, 1.0e6, 0.3, hardening_modulus=1.0e5), "hardening_modulus", "FemPlasticity"),
+        (pdsim.Material(1000.0, 1.0e6, 0.3, compressive_bonus=1.0), "compressive_bonus", "tensile_strength"),
     ],
 )
 def test_peridynamic_material_fields_are_refused(material, field, instead):
