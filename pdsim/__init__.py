@@ -38,6 +38,7 @@ from .lattice import (
 from .loads import TimeCurve
 from .materials import Anisotropy, Material
 from .peridynamics import PeridynamicBody, SolverPeridynamics
+from . import presets as presets  # named materials: pdsim.presets.glass(), concrete, wood, clay, steel, aluminium
 from .regions import BoxRegion, HalfSpace, SphereRegion
 from .scene import RunReport, Scene
 from .solver import Solver, SolverContext

@@ -1,0 +1,142 @@
+"""Every Python block of docs/guide.md runs.
+
+The blocks are executed in order in one namespace (later blocks use the scenes and bodies of earlier ones), in a
+temporary folder, with ``pdsim.Scene.run`` cut to one frame on the CPU. Afterwards every scene the guide builds and
+does not run itself is run for one frame too, except the one it builds to show a FeatureNotAvailableError. A block
+preceded by ``<!-- guide:blender -->`` is Blender's Python: it runs in a subprocess when the ``bpy`` module is
+installed (``pip install -e ".[blender]"``) and is skipped otherwise. The material table's numbers are checked against
+pdsim.presets (its behaviour column is tests/test_guide_materials.py's).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import pathlib
+import re
+import subprocess
+import sys
+
+import pytest
+
+import pdsim
+from pdsim import presets
+
+GUIDE = pathlib.Path(__file__).parents[1] / "docs" / "guide.md"
+FRAMES = 1  # frames each run of the guide is cut to (after the rest pose)
+MARKER = re.compile(r"<!--\s*guide:(\w+)\s*-->")
+
+
+def _python_blocks() -> list[tuple[int, str, str]]:
+    """(line number of the fence, marker name or '', code) of each ```python block of the guide."""
+    lines = GUIDE.read_text(encoding="utf-8").splitlines()
+    blocks, i = [], 0
+    while i < len(lines):
+        if lines[i].strip() == "```python":
+            start = i
+            marker = MARKER.fullmatch(lines[i - 1].strip()) if i > 0 else None
+            i += 1
+            body = []
+            while lines[i].strip() != "```":
+                body.append(lines[i])
+                i += 1
+            blocks.append((start + 1, marker.group(1) if marker else "", "\n".join(body) + "\n"))
+        i += 1
+    return blocks
+
+
+def _run_guide(tmp_path, monkeypatch):
+    """Executes the guide's blocks (Blender's excepted) in ``tmp_path``; returns (namespace, [(scene, report)])."""
+    monkeypatch.chdir(tmp_path)
+    runs = []
+    real_run = pdsim.Scene.run
+
+    def short_run(self, out, **kwargs):
+        kwargs["frames"] = min(kwargs.get("frames") or self.frames, FRAMES)
+        kwargs["progress"] = False
+        kwargs["device"] = "cpu"
+        report = real_run(self, out, **kwargs)
+        runs.append((self, report))
+        return report
+
+    monkeypatch.setattr(pdsim.Scene, "run", short_run)
+    namespace = {"__name__": "guide"}
+    for line, marker, code in _python_blocks():
+        if marker == "blender":
+            continue
+        try:
+            exec(compile(code, f"{GUIDE}:{line}", "exec"), namespace)
+        except Exception as exc:
+            raise AssertionError(f"docs/guide.md: the python block at line {line} failed: {exc!r}") from exc
+    return namespace, runs
+
+
+def test_guide_python_blocks_run(tmp_path, monkeypatch):
+    """The blocks run; each run wrote its frame (plus the rest pose) into a cache that opens with the bodies'
+    prims; then every other scene with bodies runs for one frame. Exactly one scene (the FEM body given a
+    peridynamic yield stress, section 2.11) refuses with FeatureNotAvailableError, naming the FEM's own setting."""
+    from pxr import Usd
+
+    namespace, runs = _run_guide(tmp_path, monkeypatch)
+    assert len(runs) >= 2, "the guide runs its first scene and the bodies scene"
+    for scene, report in runs:
+        assert report.frames_written == FRAMES + 1
+        stage = Usd.Stage.Open(report.path)
+        assert stage.GetEndTimeCode() == FRAMES
+        for body in scene.bodies:
+            assert stage.GetPrimAtPath(f"/World/{body.name}").IsValid(), body.name
+    first = next(report for scene, report in runs if scene.name == "first")
+    stage = Usd.Stage.Open(first.path)
+    assert stage.GetPrimAtPath("/World/pane_surface").IsValid()
+    assert stage.GetPrimAtPath("/World/colliders/SphereProjectile_0").IsValid()
+    shot = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    assert shot.GetPrimAtPath("/World/pane").IsValid()  # the shot layer sees the cache through its sublayer
+    assert (tmp_path / "first_flat.usdc").stat().st_size > 0
+
+    ran = {id(scene) for scene, _ in runs}
+    refused = []
+    others = [v for v in namespace.values() if isinstance(v, pdsim.Scene) and v.bodies and id(v) not in ran]
+    assert others, "the guide builds scenes it does not run (plank, lattice)"
+    for scene in others:
+        try:
+            report = scene.run(tmp_path / f"{scene.name}.usdc")
+        except pdsim.FeatureNotAvailableError as exc:
+            refused.append((scene.name, str(exc)))
+            continue
+        assert report.frames_written == FRAMES + 1, scene.name
+    assert len(refused) == 1 and refused[0][0] == "fem_only", refused
+    assert "FemPlasticity" in refused[0][1]
+
+
+def test_guide_blender_block(tmp_path, monkeypatch):
+    """The guide's Blender block imports the guide's first cache in Blender (bpy, in a subprocess: bpy ships its own
+    USD libraries) and prints the frame range 0..1 and 24 fps."""
+    if importlib.util.find_spec("bpy") is None:
+        pytest.skip('bpy (Blender as a Python module) is not installed: pip install -e ".[blender]"')
+    blocks = _python_blocks()
+    monkeypatch.chdir(tmp_path)
+    namespace = {"__name__": "guide"}
+    exec(compile(blocks[0][2], f"{GUIDE}:{blocks[0][0]}", "exec"), namespace)
+    namespace["build_scene"]().run("first.usdc", frames=FRAMES, progress=False, device="cpu")
+    code = next(code for _, marker, code in blocks if marker == "blender")
+    proc = subprocess.run(
+        [sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300, check=False
+    )
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    assert re.search(rf"^0 {FRAMES} 24\b", proc.stdout, re.MULTILINE), proc.stdout[-2000:]
+
+
+def test_guide_material_table_matches_the_presets():
+    """Each row of the guide's material table (section 4.2) names a preset and quotes its density and its animation
+    Young's modulus; both equal pdsim.presets' values, and every preset has a row."""
+    text = GUIDE.read_text(encoding="utf-8")
+    rows = re.findall(r"^\| `(\w+)\((?:grain=\.\.\.)?\)` \| [^|]+ \| (\d+) \| [^|]+ \| ([^|]+) \|", text, re.MULTILINE)
+    assert {name for name, _, _ in rows} == set(presets.PRESETS)
+    units = {"kPa": 1.0e3, "MPa": 1.0e6, "GPa": 1.0e9}
+    for name, density, modulus in rows:
+        material = presets.preset(name)
+        assert float(density) == material.density, name
+        value = re.match(r"([\d.]+) (kPa|MPa|GPa)", modulus.strip())
+        if value is None:  # wood: the ratio of its bonds, checked against the anisotropy
+            assert f"{material.anisotropy.stiffness_ratio:g}x" in modulus, name
+            continue
+        assert float(value.group(1)) * units[value.group(2)] == pytest.approx(material.youngs_modulus), name
