@@ -6,5 +6,7 @@ Run:  python scenes/cantilever.py --out cantilever.usdc   or   pdsim run scenes/
 from pdsim.cli import run_script
 from pdsim.default_scene import build_scene
 
+PREVIEW = {}  # tools/make_gallery.py and tests/test_gallery.py: the default scene is small enough as it is
+
 if __name__ == "__main__":
     run_script(build_scene)

@@ -5,6 +5,8 @@ Run:  python scenes/drop.py --out drop.usdc      or      pdsim run scenes/drop.p
 
 import pdsim
 
+PREVIEW = {}  # tools/make_gallery.py and tests/test_gallery.py: the scene is small enough as it is
+
 
 def build_scene() -> pdsim.Scene:
     scene = pdsim.Scene(fps=24, frames=48, up_axis="Z", name="drop")  # gravity 9.81 m/s^2 down the up axis

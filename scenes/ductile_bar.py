@@ -22,8 +22,11 @@ def dogbone(length=0.4, grip_radius=0.045, gauge_radius=0.038, samples=48):
     return pdsim.shape_from_arrays(mesh.vertices, mesh.faces, name="bar")
 
 
-def build_scene() -> pdsim.Scene:
-    scene = pdsim.Scene(fps=24, frames=14, gravity=(0.0, 0.0, 0.0), name="ductile_bar")
+PREVIEW = {"spacing": 0.0125, "frames": 20}  # tools/make_gallery.py and tests/test_gallery.py: a quicker run
+
+
+def build_scene(*, spacing: float = 0.01, frames: int = 14) -> pdsim.Scene:
+    scene = pdsim.Scene(fps=24, frames=frames, gravity=(0.0, 0.0, 0.0), name="ductile_bar")
     metal = pdsim.Material(
         density=1000.0,
         youngs_modulus=2.0e6,
@@ -32,7 +35,7 @@ def build_scene() -> pdsim.Scene:
         failure_plastic_strain=0.6,
         name="ductile_metal",
     )
-    bar = scene.add_peridynamic_body(dogbone(), metal, spacing=0.01, damping=5.0)
+    bar = scene.add_peridynamic_body(dogbone(), metal, spacing=spacing, damping=5.0)
     grip = 0.2 - 0.03
     right = pdsim.HalfSpace((grip, 0.0, 0.0), (1.0, 0.0, 0.0))
     left = pdsim.HalfSpace((-grip, 0.0, 0.0), (-1.0, 0.0, 0.0))

@@ -17,14 +17,17 @@ from pdsim.fem import FemBody, FemPlasticity
 MESH_CACHE = os.path.join(os.path.expanduser("~"), ".cache", "pdsim", "meshes")  # fTetWild output varies per run
 
 
-def build_scene() -> pdsim.Scene:
-    scene = pdsim.Scene(fps=24, frames=72, up_axis="Z", name="fem_plastic_bar")
+PREVIEW = {"edge_length": 0.04, "frames": 36}  # tools/make_gallery.py and tests/test_gallery.py: a quick run
+
+
+def build_scene(*, edge_length: float = 0.025, frames: int = 72) -> pdsim.Scene:
+    scene = pdsim.Scene(fps=24, frames=frames, up_axis="Z", name="fem_plastic_bar")
     material = pdsim.Material(density=2700.0, youngs_modulus=1.0e8, poisson_ratio=0.33, name="soft_metal")
     rod = pdsim.cylinder(0.04, 1.0, center=(0.0, 0.0, 0.5), axis="z", sections=48, name="rod")
     body = FemBody(
         rod,
         material,
-        edge_length=0.025,
+        edge_length=edge_length,
         measure="corotated",
         integrator="implicit",
         implicit_step_ratio=100.0,

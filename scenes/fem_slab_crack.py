@@ -30,13 +30,16 @@ def slab_with_hole(size=(1.0, 0.05, 0.5), radius=0.08, center=(0.0, 0.0, 0.6)) -
     return pdsim.shape_from_arrays(solid.vertices, solid.faces, name="slab")
 
 
-def build_scene() -> pdsim.Scene:
-    scene = pdsim.Scene(fps=24, frames=48, up_axis="Z", gravity=(0.0, 0.0, 0.0), name="fem_slab_crack")
+PREVIEW = {"edge_length": 0.05, "frames": 24}  # tools/make_gallery.py and tests/test_gallery.py: a quick run
+
+
+def build_scene(*, edge_length: float = 0.03, frames: int = 48) -> pdsim.Scene:
+    scene = pdsim.Scene(fps=24, frames=frames, up_axis="Z", gravity=(0.0, 0.0, 0.0), name="fem_slab_crack")
     material = pdsim.Material(density=2000.0, youngs_modulus=2.0e6, poisson_ratio=0.25, name="brittle")
     slab = FemBody(
         slab_with_hole(),
         material,
-        edge_length=0.03,
+        edge_length=edge_length,
         measure="corotated",
         tensile_strength=3.0e4,  # [Pa]: a strain of about 1.5 %
         damping=2.0,

@@ -8,6 +8,9 @@ Run:  python scenes/lattice_3d_tear.py [--out lattice_3d_tear.usdc]   or   pdsim
 
 from lattice_paper import tear_3d_scene as build_scene
 
+# tools/make_gallery.py and tests/test_gallery.py: the same 2000 steps in 50 frames of 40 steps
+PREVIEW = {"frames": 50, "steps_per_frame": 40}
+
 if __name__ == "__main__":
     from pdsim.cli import run_script
 

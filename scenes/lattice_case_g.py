@@ -11,6 +11,8 @@ Run:  python scenes/lattice_case_g.py [--out lattice_case_g.usdc] [--plots latti
 
 from lattice_paper import case_g_scene as build_scene
 
+PREVIEW = {}  # tools/make_gallery.py and tests/test_gallery.py: the case is small enough as it is
+
 if __name__ == "__main__":
     from lattice_paper import run_lattice_scene
 
