@@ -98,7 +98,7 @@ def fill_solid(shape: SolidShape, spacing: float, *, device: str = "cpu") -> tup
     """
     h = check_range("spacing", spacing, 0.0, None)
     smallest = float(np.min(shape.extent))
-    if h > smallest:
+    if h > smallest * (1.0 + 1.0e-9):  # an extent equal to the spacing, up to the round-off of the vertices, is fine
         raise ParameterError(
             "spacing",
             spacing,

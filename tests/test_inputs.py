@@ -543,3 +543,15 @@ def test_memory_check_fails_before_sampling_a_huge_lattice(monkeypatch):
         pdsim.PeridynamicBody(pdsim.box((1.0, 1.0, 1.0), name="slab"), _material(), spacing=0.002)
     assert time.perf_counter() - t0 < 5.0
     _assert_error(ei, pdsim.ParameterError, "spacing=0.002", "100 MB of free host memory", "1.25e+08", "'slab'")
+
+
+def test_spacing_equal_to_the_thinnest_extent_is_one_layer():
+    """A box 1 cm thick filled at a 1 cm spacing, away from the origin: the vertices' round-off must not make the
+    extent read smaller than the spacing. One layer of 30 x 30 particles; a spacing above the extent is refused."""
+    from pdsim.sampling import fill_solid
+
+    shape = pdsim.box((0.3, 0.01, 0.3), center=(3.0, -2.0, 0.6))
+    positions, volumes = fill_solid(shape, 0.01)
+    assert len(positions) == 900 and volumes.sum() == pytest.approx(0.3 * 0.01 * 0.3, rel=1e-9)
+    with pytest.raises(pdsim.ParameterError, match=r"spacing=0.0101.*smallest extent"):
+        fill_solid(shape, 0.0101)
