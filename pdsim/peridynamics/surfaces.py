@@ -55,8 +55,8 @@ triangles (same positions) and crack faces are pieces of the region boundaries:
    slide: a crack's rim moves along a box edge or across a face, both sides alike), so outer faces stay exactly on
    the input surface, sharp edges and corners stay put and the volumes still add up exactly; the link condition
    keeps every shell a closed 2-manifold. Measured on the brittle wall of tests/test_pd_render_surfaces.py
-   (h = 1 cm, frames 2-8, rest space): 0-20 crack triangles per frame keep an angle under 5 degrees (at most 0.5 %,
-   smallest 3.9 degrees; mostly needles of 0.02-0.1 h edges at crack junctions on the outer surface, where the link
+   (h = 1 cm, frames 2-8, rest space): 0-6 crack triangles per frame keep an angle under 5 degrees (at most 0.05 %,
+   smallest 2.35 degrees; mostly needles of 0.02-0.1 h edges at crack junctions on the outer surface, where the link
    condition blocks the collapse), no triangle is longer than 2.7 h at rest. Where two sides of a crack still differ
    (manifold3d resolves a crack point exactly on an input plane differently in the two booleans; frame 8 of the
    wall, two shells) those shells keep their own crack triangles. Faceted curved inputs (a sphere whose facets are
