@@ -55,9 +55,6 @@ VIEWS: dict[str, dict] = {
 }
 # What the preview run shows that differs from the scene's description (seen on the gallery's own stills).
 NOTES: dict[str, str] = {
-    "ductile_bar": "At the preview spacing (12.5 mm, 20 frames) the bar necks and tears near both grips, not at its "
-    "waist, and sheds small fragments; at the scene's own spacing (10 mm) it had not torn after its 14 frames "
-    "(tools/make_gallery.py run of 2026-12-01).",
     "fem_plastic_bar": "At the preview mesh size (4 cm, two elements across the rod) the bend concentrates in a hinge "
     "just above the clamp, so the rod keeps a tilt rather than a curve.",
 }
