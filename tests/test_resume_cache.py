@@ -22,20 +22,7 @@ import pytest
 import pdsim
 from pdsim.checkpoint import RunInterrupted, checkpoint_path
 from pdsim.output.usd import UsdCache, validate_usd
-
-
-class _StopAfter:
-    """A stop request that becomes true at its ``n``-th poll (a deterministic SIGTERM)."""
-
-    def __init__(self, n: int):
-        self.n, self.calls, self.signal = n, 0, None
-
-    @property
-    def requested(self) -> bool:
-        self.calls += 1
-        if self.calls >= self.n:
-            self.signal = signal.SIGTERM
-        return self.signal is not None
+from test_watchdog_resume import _StopAfter  # a deterministic SIGTERM at the n-th poll
 
 
 class _StopAt:
