@@ -247,31 +247,61 @@ def _angle(a, b) -> float:
     return float(np.degrees(np.arccos(min(1.0, abs(a @ b) / np.linalg.norm(a) / np.linalg.norm(b)))))
 
 
-@pytest.mark.parametrize(
-    ("mesh_kind", "pull", "tolerance"),
-    [("structured", (1.0, 1.0, 0.0), 10.0), ("ftetwild", (1.0, 1.0, 0.0), 10.0), ("structured", (1.0, 0.0, 0.0), 4.0)],
-)
-def test_plate_in_tension_cracks_normal_to_the_pull(mesh_kind, pull, tolerance):
-    """A plate with a round hole pulled quasi-statically along ``pull`` (translated to (250, 40, -60) m) breaks in
-    two across the hole, and its crack surfaces face the pull: the area-weighted mean crack-face normal lies within
-    ``tolerance`` of the pull direction, by two measures: over all crack faces (each face's normal signed to point
-    along the pull), and the vector area of the crack surface of one of the two pieces (its outward normals summed with
-    their areas: the macroscopic crack plane, as a staircase of faces spans the same loop as the plane). The
-    structured mesh has no faces normal to (1, 1, 0) (its cubes are cut along x = y, y = z, x = z): the crack runs as
-    a staircase. Measured: structured (1,1,0) 6.2 deg and 0.0 deg, fTetWild (1,1,0) 0.9 deg and 1.7 deg,
-    structured (1,0,0) 0.0 deg and 0.0 deg (before: 34 deg and 9 deg for (1,1,0)). Every piece is closed."""
+def _plate_crack(mesh_kind, pull):
+    """The plate (``mesh_kind`` "structured" or "ftetwild", translated to (250, 40, -60) m) pulled along ``pull`` by
+    :func:`_pull_plate`. Returns (solver, figures): the mean crack-face normal's angle to the pull [deg] over all crack
+    faces (each face's normal signed to point along the pull) and over the crack surface of one of the two big pieces
+    (its vector area: the macroscopic crack plane, as a staircase of faces spans the same loop as the plane), and that
+    piece's staircase ratio (its crack area over the length of its vector area, the area of the section the crack's
+    rim spans; 1 for a flat crack); None for the figures unless the plate is in two big pieces.
+
+    ``.venv/bin/python -c "import sys; sys.path[:0] = ['tests']; import test_fem_fracture as t;
+    [print(k, p, t._plate_crack(k, p)[1]) for k, p, *_ in t.PLATE_PULLS]"`` prints the figures of every case."""
     if mesh_kind == "structured":
         mesh = _structured_plate().transformed(translate=SHIFT)
     else:
         mesh = load_tet_mesh(FTETWILD_PLATE, translate=SHIFT)
-    d = np.asarray(pull) / np.linalg.norm(pull)
+    d = np.asarray(pull, dtype=np.float64) / np.linalg.norm(pull)
     solver = _pull_plate(mesh, d)
     big = _big_pieces(solver)
-    assert len(big) == 2
+    if len(big) != 2:
+        return solver, None
     area, piece = _crack_faces(solver)
     signed = (area * np.sign(area @ d)[:, None]).sum(axis=0)
-    assert _angle(signed, d) <= tolerance
-    assert _angle(area[piece == big[0]].sum(axis=0), d) <= tolerance
+    one = area[piece == big[0]]
+    figures = {
+        "angle_all": _angle(signed, d),
+        "angle_piece": _angle(one.sum(axis=0), d),
+        "staircase": float(np.linalg.norm(one, axis=1).sum() / np.linalg.norm(one.sum(axis=0))),
+    }
+    return solver, figures
+
+
+# (mesh, pull, angle tolerance [deg], largest staircase ratio) of test_plate_in_tension_cracks_normal_to_the_pull
+PLATE_PULLS = [
+    ("structured", (1.0, 1.0, 0.0), 10.0, 1.8),
+    ("ftetwild", (1.0, 1.0, 0.0), 10.0, 1.4),
+    ("ftetwild", (1.0, -1.0, 0.0), 10.0, 1.6),
+    ("structured", (1.0, 0.0, 0.0), 4.0, 1.2),
+]
+
+
+@pytest.mark.parametrize(("mesh_kind", "pull", "tolerance", "staircase"), PLATE_PULLS)
+def test_plate_in_tension_cracks_normal_to_the_pull(mesh_kind, pull, tolerance, staircase):
+    """A plate with a round hole pulled quasi-statically along ``pull`` (translated to (250, 40, -60) m) breaks in
+    two across the hole, and its crack surfaces face the pull: the area-weighted mean crack-face normal lies within
+    ``tolerance`` of the pull direction, by the two measures of :func:`_plate_crack` (all crack faces; one piece's
+    crack surface), and that piece's crack is a staircase of faces at most ``staircase`` times the area of the section
+    it spans. The structured mesh has no faces normal to (1, 1, 0) (its cubes are cut along x = y, y = z, x = z): the
+    crack runs as a staircase. Measured (all faces, one piece, staircase ratio): structured (1,1,0) 6.2 deg, 0.0 deg,
+    1.62; fTetWild (1,1,0) 0.9 deg, 0.9 deg, 1.24; fTetWild (1,-1,0) 5.5 deg, 2.1 deg, 1.42; structured (1,0,0)
+    0.0 deg, 0.0 deg, 1.08 (before the crack planes: 34 deg and 9 deg for structured (1,1,0)). Every piece is
+    closed."""
+    solver, figures = _plate_crack(mesh_kind, pull)
+    assert figures is not None, "the plate is not in two big pieces"
+    assert figures["angle_all"] <= tolerance
+    assert figures["angle_piece"] <= tolerance
+    assert figures["staircase"] <= staircase
     assert closed_surface_defects(boundary_faces(solver.tets)) == 0
 
 
@@ -359,9 +389,9 @@ def _overloaded_bar(fracture_energy):
 
 def test_overloaded_bar_breaks_into_fewer_pieces_as_fracture_energy_rises():
     """The undamped bar overloaded by 5 % ends in fewer pieces as its fracture energy G_c rises (0, 3, 10 J/m^2;
-    measured 123, 23, 6 pieces), and its energy drop accounts for G_c times the crack area opened (2 % of the initial
-    energy; measured within 0.5 %: without fracture energy the splits conserve energy up to the time integration's
-    error), the energy owed being paid (at most 2 % left)."""
+    measured 130, 29, 7 pieces), and its energy drop accounts for G_c times the crack area opened (2 % of the initial
+    energy; measured +0.54 %, -0.98 %, +0.43 %: without fracture energy the splits conserve energy up to the time
+    integration's error), the energy owed being paid (at most 2 % left)."""
     pieces = []
     for gc in (0.0, 3.0, 10.0):
         solver, e0, drop = _overloaded_bar(gc)

@@ -452,6 +452,8 @@ jitter=0.5` on the brittle bodies, with `compressive_bonus=1` for impacts. `tool
 measures another scene with the same figures.
 
 Measured with `{command}` on {machine}.
+
+FEM cracks (tetrahedral bodies) are described and measured in [fem_fracture.md](fem_fracture.md).
 """
 
 

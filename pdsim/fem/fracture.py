@@ -55,9 +55,10 @@ Fracture energy (``FemBody(fracture_energy=G_c)`` [J/m^2], 0 by default):
   what is paid, G_c times the crack area once the debt is paid (solver.crack_area, solver.fracture_dissipated;
   tests/test_fem_fracture.py: an overloaded bar, within 2 % of its initial energy, the time integration's error).
 
-Limitations: a crack surface is a staircase of element faces (area larger than the plane's, by about 1.5 to 2 on the
-meshes of the tests); a crack keeps the plane it started with (it does not curve; a new crack starts where an
-over-strength element has no crack within NEAR_CRACK element sizes).
+Limitations: a crack surface is a staircase of element faces: a piece's crack area is 1.08 (pull along a mesh axis) to
+1.62 times the area of the section it spans on the plates of tests/test_fem_fracture.py (docs/fem_fracture.md); a crack
+keeps the plane it started with (it does not curve; a new crack starts where an over-strength element has no crack
+within NEAR_CRACK element sizes).
 """
 
 from __future__ import annotations
