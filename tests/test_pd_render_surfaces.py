@@ -114,11 +114,10 @@ def test_hole_through_a_wall_shows_when_damage_crosses_it():
     """The wall of :func:`_wall_scene`, frames 0-8. The hole shows (the genus or the component count of the wall's
     largest shell changes) no later than one frame after the damage first crosses the wall (a lattice column through
     the thickness whose particles all reached the chip threshold); every shell is closed and consistently wound
-    each frame; no triangle is longer than 3 h at rest. Slivers: the goal is no crack triangle with an angle under 5
-    degrees; measured at rest 0-6 per frame (at most 0.05 % of the crack triangles; smallest angle 2.35 degrees:
-    needles at crack junctions on the outer surface), so this asserts at most 0.1 % and no crack angle under 2 degrees
-    as a regression guard. (Before the threaded peridynamic step, whose float32 round-off differs, the same wall
-    broke into a slightly different pattern with 0-20 per frame, at most 0.5 %, smallest 3.9 degrees.)"""
+    each frame; no triangle is longer than 3 h at rest. No crack triangle has an angle under 5 degrees, at rest or as
+    drawn in the frame (the view written to the cache); measured smallest 5.08 degrees at rest and 5.03 drawn
+    (frames 0-8, 15k crack triangles at frame 8). The longest drawn edge is printed: crumbling material that has not
+    separated stretches its triangles (about 4 h at frames 4-6)."""
     import trimesh
 
     scene = _wall_scene(8)
@@ -151,6 +150,8 @@ def test_hole_through_a_wall_shows_when_damage_crosses_it():
         now_angle = triangle_angles(surface.points, surface.faces).min(axis=1)
         tri = surf.rest_vertices[surf.faces]
         longest = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max() / h
+        drawn = surface.points[surface.faces]
+        longest_drawn = np.linalg.norm(drawn - np.roll(drawn, 1, axis=1), axis=2).max() / h
         stats.append(
             (
                 frame,
@@ -160,22 +161,23 @@ def test_hole_through_a_wall_shows_when_damage_crosses_it():
                 int((rest_angle[crack] < 5.0).sum()),
                 int(crack.sum()),
                 float(now_angle[crack].min()) if crack.any() else 90.0,
+                int((now_angle[crack] < 5.0).sum()),
                 longest,
+                longest_drawn,
                 surf.rebuild_seconds,
             )
         )
     print(
-        "\nframe shells faces | crack min angle at rest, n < 5 deg / n crack | deformed min angle | max edge/h | "
-        "rebuild s"
+        "\nframe shells faces | crack min angle at rest, n < 5 deg / n crack | drawn: min angle, n < 5 deg | "
+        "max edge/h at rest, drawn | rebuild s"
     )
     for s in stats:
-        print("  {:2d} {:4d} {:6d} | {:6.2f} {:4d} / {:5d} | {:6.2f} | {:5.2f} | {:.2f}".format(*s))
+        print("  {:2d} {:4d} {:6d} | {:6.2f} {:4d} / {:5d} | {:6.2f} {:4d} | {:5.2f} {:5.2f} | {:.2f}".format(*s))
     print(f"damage crosses the wall at frame {damage_frame}, the hole shows at frame {hole_frame}")
     assert damage_frame is not None and hole_frame is not None
     assert hole_frame <= damage_frame + 1
-    assert max(s[7] for s in stats) <= 3.0
-    assert all(s[4] <= 0.001 * max(s[5], 1) for s in stats)
-    assert min(s[3] for s in stats) >= 2.0
+    assert max(s[8] for s in stats) <= 3.0
+    assert min(s[3] for s in stats) >= 5.0 and min(s[6] for s in stats) >= 5.0
 
 
 def test_vertex_velocities_match_the_motion_of_the_vertices():

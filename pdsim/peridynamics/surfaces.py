@@ -54,10 +54,12 @@ triangles (same positions) and crack faces are pieces of the region boundaries:
    moves a vertex onto a neighbour only if the neighbour lies on every input plane of the vertex (its cracks may
    slide: a crack's rim moves along a box edge or across a face, both sides alike), so outer faces stay exactly on
    the input surface, sharp edges and corners stay put and the volumes still add up exactly; the link condition
-   keeps every shell a closed 2-manifold. Measured on the brittle wall of tests/test_pd_render_surfaces.py
-   (h = 1 cm, frames 2-8, rest space): 0-6 crack triangles per frame keep an angle under 5 degrees (at most 0.05 %,
-   smallest 2.35 degrees; mostly needles of 0.02-0.1 h edges at crack junctions on the outer surface, where the link
-   condition blocks the collapse), no triangle is longer than 2.7 h at rest. Where two sides of a crack still differ
+   keeps every shell a closed 2-manifold. What the link condition blocks (needles at crack junctions on the outer
+   surface, where the ends of a short edge have three common neighbours) is then relaxed: the vertices of the
+   remaining slivers move towards the mean of their neighbours, projected onto their input planes (a rim vertex
+   slides in its face or along its crease, a corner stays), when that widens the smallest angle around them and
+   turns no triangle by more than 30 degrees; moves change no connectivity, so the shells stay closed and still
+   partition the solid. Where two sides of a crack still differ
    (manifold3d resolves a crack point exactly on an input plane differently in the two booleans; frame 8 of the
    wall, two shells) those shells keep their own crack triangles. Faceted curved inputs (a sphere whose facets are
    smaller than h) keep more slivers, since no vertex may leave its facet.
@@ -77,6 +79,16 @@ triangles (same positions) and crack faces are pieces of the region boundaries:
    is reproduced to about 1e-3 h, and vertices next to clamped particles stay put (default cantilever: 0.0015 h).
    Vertex velocities are the time derivative of this map, ``v_v = c' + w x R (X_v - Xc) + sum_k phi_vk (v_k - c' -
    w x R (X_k - Xc))`` with the mean velocity c' and the best-fit angular velocity w of the region's particles.
+9. **Drawn surface** (:meth:`FragmentSurfaces.drawn`). Material that crumbles without separating (particles with
+   damage below the chip threshold whose neighbours move apart by up to their spacing) squeezes the triangles
+   embedded in it. Each frame whose crack faces hold a triangle with an angle under 5 degrees gets rounds of edge
+   flips (as in step 6, now at the current positions) and then of vertex moves (step 6's relaxation, with no plane
+   constraint and turns of up to 60 degrees) before it is written. This depends on the frame's positions only (a
+   resumed run draws the same), keeps the vertex count (velocities stay those of step 8) and changes the faces only
+   on such frames. Measured on the brittle wall of tests/test_pd_render_surfaces.py (h = 1 cm, frames 0-8): no crack
+   triangle under 5 degrees at rest or as drawn (smallest 5.03 degrees drawn, 5.08 at rest; before the relaxation
+   and the drawn-surface pass: 2.35 degrees at rest and 0.28 degrees drawn, 6-36 slivers per frame); no triangle is
+   longer than 2.7 h at rest.
 
 USD: one ``UsdGeom.Mesh`` per body at ``/World/<body>_surface`` holds every shell. It carries the uniform (per-face)
 int primvars ``fragment`` (the fragment label; chips carry their particle's fragment) and ``crack`` (1 on crack
@@ -478,6 +490,7 @@ def partition_regions(
 # of its input triangle (coplanar input triangles share one); a crack face's patch is its pair of regions.
 
 SLIVER_ANGLE = 5.0  # triangles with a smaller angle [degrees] are slivers
+DEFORMED_ROUNDS = 8  # rounds of edge flips, then of vertex moves, per frame against slivers made by the motion
 SHORT_EDGE = 0.3  # edges shorter than this many spacings are collapsed
 _MAX_CLEAN_ROUNDS = 40
 
@@ -807,8 +820,168 @@ def _flip_round(points, tri, shell, patch, sliver_angle):
     return out, len(pick)
 
 
+def _relax_round(points, tri, patch, plane_eq, sliver_angle, max_turn=30.0, surface=None):
+    """One round of vertex moves against the slivers that collapses and flips leave (see :func:`clean_complex`).
+
+    The ends of the shortest side of every sliver move towards the mean of their neighbours, projected onto the
+    planes of their input patches (a vertex on one input plane slides in it, on two along their crease; on three
+    or more, or with no plane equations, it stays put; crack patches may bend a little, both sides alike). A move
+    (full, half or quarter way) is taken when the smallest angle of the vertex's triangles grows and none of them
+    (but slivers) turns by more than ``max_turn`` degrees; moved vertices share no triangle. With ``surface``
+    (input vertices [m], triangles, plane id per triangle, plane id per patch (-1: crack)) a vertex must also stay
+    inside an input triangle of each of its planes (a facet's plane reaches beyond the facet). ``points`` [v, 3] is
+    changed in place. Returns the number of vertices moved."""
+    from scipy.sparse import csr_matrix
+
+    n_v = points.shape[0]
+    angles = triangle_angles(points, tri)
+    amin = angles.min(axis=1)
+    sliver = np.flatnonzero(amin < sliver_angle)
+    if sliver.size == 0 or plane_eq is None:
+        return 0
+    cand = np.unique(tri[sliver])  # needles: the ends of the short side move; caps: the corner by the long side
+    # Input planes of each candidate (at most two allowed).
+    p_count = plane_eq.shape[0]
+    inc = csr_matrix((np.ones(3 * len(tri)), (tri.T.ravel(), np.tile(patch, 3))), shape=(n_v, p_count))
+    inc.sum_duplicates()
+    rows = inc[cand].tocoo()
+    planar = ~np.isnan(plane_eq[rows.col, 0])
+    r_row, r_eq = rows.row[planar], plane_eq[rows.col[planar]]
+    n_planes = np.bincount(r_row, minlength=len(cand))
+    keep = n_planes <= 2
+    # Neighbour means.
+    a = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
+    b = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
+    adj = csr_matrix((np.ones(len(a)), (a, b)), shape=(n_v, n_v))
+    adj.data[:] = 1.0
+    adj.sum_duplicates()
+    adj.data[:] = 1.0
+    adj = adj.maximum(adj.T).tocsr()
+    deg = np.asarray(adj[cand].sum(axis=1)).ravel()
+    target = (adj[cand] @ points) / np.maximum(deg, 1.0)[:, None]
+    # Project onto the planes: x = target - N^T (N N^T)^+ (N target - d), N the [k, 3] plane normals.
+    normals = np.zeros((len(cand), 2, 3))
+    offsets = np.zeros((len(cand), 2))
+    slot = np.arange(len(r_row)) - np.searchsorted(r_row, r_row)
+    ok_slot = slot < 2
+    normals[r_row[ok_slot], slot[ok_slot]] = r_eq[ok_slot, :3]
+    offsets[r_row[ok_slot], slot[ok_slot]] = r_eq[ok_slot, 3]
+    own_patch = np.full((len(cand), 2), -1, dtype=np.int64)
+    own_patch[r_row[ok_slot], slot[ok_slot]] = rows.col[planar][ok_slot]
+    gram = np.einsum("cij,ckj->cik", normals, normals)
+    resid = np.einsum("cij,cj->ci", normals, target) - offsets
+    target = target - np.einsum("cji,cj->ci", normals, np.einsum("cij,cj->ci", np.linalg.pinv(gram), resid))
+    cand, target, own_patch = cand[keep], target[keep], own_patch[keep]
+    if cand.size == 0:
+        return 0
+    # Triangles around each candidate, and the moves that help.
+    vt = csr_matrix((np.ones(3 * len(tri)), (tri.T.ravel(), np.tile(np.arange(len(tri)), 3))), shape=(n_v, len(tri)))
+    vt.sum_duplicates()
+    ring = vt[cand].tocoo()
+    c_of, f_of = ring.row, ring.col
+    old_min = np.full(len(cand), np.inf)
+    np.minimum.at(old_min, c_of, amin[f_of])
+    t_old = points[tri[f_of]]
+    n_old = np.cross(t_old[:, 1] - t_old[:, 0], t_old[:, 2] - t_old[:, 0])
+    best_step = np.zeros(len(cand))
+    for step in (0.25, 0.5, 1.0):
+        pos = points[cand] + step * (target - points[cand])
+        t_new = t_old.copy()
+        corner = tri[f_of] == cand[c_of][:, None]
+        t_new[corner] = np.repeat(pos[c_of], corner.sum(axis=1), axis=0)
+        n_new = np.cross(t_new[:, 1] - t_new[:, 0], t_new[:, 2] - t_new[:, 0])
+        cos_ok = np.einsum("ij,ij->i", n_old, n_new) >= np.cos(np.radians(max_turn)) * np.linalg.norm(
+            n_old, axis=1
+        ) * np.linalg.norm(n_new, axis=1)
+        a_new = np.full(len(cand), np.inf)
+        np.minimum.at(a_new, c_of, _min_angles(t_new))
+        turned = np.zeros(len(cand), dtype=bool)
+        np.logical_or.at(turned, c_of, ~cos_ok & (_min_angles(t_old) >= sliver_angle))
+        better = (a_new > old_min + 1e-6) & ~turned
+        if surface is not None:
+            better &= _on_input_planes(pos, own_patch, surface)
+        best_step = np.where(better, step, best_step)
+    move = best_step > 0.0
+    if not move.any():
+        return 0
+    # Independent moves: no two moved vertices share a triangle (smallest angle first).
+    cand, target, best_step, prio = cand[move], target[move], best_step[move], old_min[move]
+    ring = vt[cand].tocoo()
+    chosen = np.zeros(len(cand), dtype=bool)
+    open_ = np.ones(len(cand), dtype=bool)
+    blocked = np.zeros(len(tri), dtype=bool)
+    prio = prio + 1e-12 * np.arange(len(cand))
+    while open_.any():
+        live = open_[ring.row]
+        best = np.full(len(tri), np.inf)
+        np.minimum.at(best, ring.col[live], prio[ring.row[live]])
+        win = open_.copy()
+        np.logical_and.at(win, ring.row, best[ring.col] == prio[ring.row])
+        chosen |= win
+        blocked[ring.col[win[ring.row]]] = True
+        hit = np.zeros(len(cand), dtype=bool)
+        np.logical_or.at(hit, ring.row, blocked[ring.col])
+        open_ &= ~hit
+    c = cand[chosen]
+    points[c] += best_step[chosen][:, None] * (target[chosen] - points[c])
+    return int(chosen.sum())
+
+
+def _on_input_planes(pos, own_patch, surface) -> np.ndarray:
+    """Bool [c]: each point pos [c, 3] lies in an input triangle of each of its planes (``own_patch`` [c, 2] patch
+    ids, -1 for none; ``surface`` as in :func:`_relax_round`), within 1e-9 of the triangle's size."""
+    sv, sf, splane, plane_of_patch = surface
+    ok = np.ones(len(pos), dtype=bool)
+    order = np.argsort(splane, kind="stable")
+    starts = np.searchsorted(splane[order], np.arange(int(splane.max()) + 2))
+    for k in range(own_patch.shape[1]):
+        has = own_patch[:, k] >= 0
+        q = np.where(has, plane_of_patch[np.maximum(own_patch[:, k], 0)], -1)
+        has &= q >= 0
+        idx = np.flatnonzero(has)
+        count = starts[q[idx] + 1] - starts[q[idx]]
+        pair_c = np.repeat(idx, count)
+        pair_t = order[
+            np.repeat(starts[q[idx]], count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+        ]
+        a, b, c = (sv[sf[pair_t, i]] for i in range(3))
+        n = np.cross(b - a, c - a)
+        nn = np.einsum("ij,ij->i", n, n)
+        p = pos[pair_c]
+        bary = [
+            np.einsum("ij,ij->i", np.cross(c - b, p - b), n),
+            np.einsum("ij,ij->i", np.cross(a - c, p - c), n),
+            np.einsum("ij,ij->i", np.cross(b - a, p - a), n),
+        ]
+        inside = np.all(np.stack(bary, axis=1) >= -1e-9 * nn[:, None], axis=1)
+        found = np.zeros(len(pos), dtype=bool)
+        np.logical_or.at(found, pair_c, inside)
+        ok &= found | ~has
+    return ok
+
+
+def _min_angles(t: np.ndarray) -> np.ndarray:
+    """Smallest interior angle [degrees] of triangles given by their corners [f, 3, 3]."""
+    out = np.full(t.shape[0], 180.0)
+    for i in range(3):
+        a = t[:, (i + 1) % 3] - t[:, i]
+        b = t[:, (i + 2) % 3] - t[:, i]
+        cos = np.einsum("ij,ij->i", a, b) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300)
+        out = np.minimum(out, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    return out
+
+
 def clean_complex(
-    points, tri, shell, patch, spacing, *, short_edge=SHORT_EDGE, sliver_angle=SLIVER_ANGLE, crack_patch=None
+    points,
+    tri,
+    shell,
+    patch,
+    spacing,
+    *,
+    short_edge=SHORT_EDGE,
+    sliver_angle=SLIVER_ANGLE,
+    crack_patch=None,
+    surface=None,
 ):
     """Removes slivers from the shell complex by edge collapses that keep every shell a closed 2-manifold.
 
@@ -825,13 +998,18 @@ def clean_complex(
     - no remaining triangle turns by more than 60 degrees.
 
     Collapses of one round have disjoint neighbourhoods (chosen shortest first), so they are checked and applied
-    together, vectorised; the two sides of a crack share vertices and triangles, so both sides collapse alike.
+    together, vectorised; the two sides of a crack share vertices and triangles, so both sides collapse alike. Each
+    round also flips edges (:func:`_flip_round`); when neither collapses nor flips are left, the vertices of the
+    remaining slivers are moved (:func:`_relax_round`; ``points`` is changed in place) and the rounds go on.
 
     Args:
         points: vertex positions [m], float64 [v, 3].
         tri: triangles (global vertex ids), int64 [f, 3]; shell: shell of each triangle, int [f];
         patch: patch id of each triangle, int [f].
         spacing: particle spacing h [m].
+        surface: (input vertices [m], triangles, plane id per triangle, plane id per patch (-1 on crack patches)):
+            lets the vertices of slivers left over slide within the input surface (see :func:`_relax_round`); None:
+            only vertices off the input planes move.
         crack_patch: bool [patch count], True for crack patches (the others are planar input patches); None: the
             strict patch rule only.
 
@@ -854,7 +1032,12 @@ def clean_complex(
         t1, s1, p1 = new[keep], shell[keep], patch[keep]
         t1, flipped = _flip_round(points, t1, s1, p1, sliver_angle)
         if collapsed == 0 and flipped == 0:
-            break
+            backup = points.copy()
+            if _relax_round(points, t1, p1, plane_eq, sliver_angle, surface=surface) == 0:
+                break
+            if not shells_closed(t1, s1, len(points)).all():
+                points[:] = backup
+                break
         if not shells_closed(t1, s1, len(points)).all():  # a rare configuration the checks missed: stop here
             break
         tri, shell, patch = t1, s1, p1
@@ -987,6 +1170,9 @@ class FragmentSurfaces:
         self.clean = bool(clean)
         self.version = 0
         self._key: np.ndarray | None = None
+        self._view_faces: np.ndarray | None = None  # the faces of the last view, of rebuild _view_of, and their version
+        self._view_of = -1
+        self._view_version = 0
         self._manifold_mesh = None
         self._grid: LatticeGrid | None = None
         self.device = device
@@ -1086,14 +1272,13 @@ class FragmentSurfaces:
         self._key = key.copy()
         k_count = ids.shape[0]
         if k_count == 1:  # intact: the (refined) input surface
-            v, f, _ = self._surface
-            points, tri = v, f
-            tri_shell = np.zeros(len(f), dtype=np.int64)
-            tri_crack = np.zeros(len(f), dtype=np.int32)
+            points, tri, tri_patch = self._surface
+            tri_shell = np.zeros(len(tri), dtype=np.int64)
+            tri_crack = np.zeros(len(tri), dtype=np.int32)
             shared = True
         else:
-            points, tri, tri_shell, tri_crack, shared = self._clipped_complex(region, k_count)
-        self._split_shells(points, tri, tri_shell, tri_crack, labels[first], region, k_count, shared)
+            points, tri, tri_shell, tri_crack, tri_patch, shared = self._clipped_complex(region, k_count)
+        self._split_shells(points, tri, tri_shell, tri_crack, tri_patch, labels[first], region, k_count, shared)
         self._build_interpolation()
 
     def _clipped_pieces(self, region: np.ndarray, k_count: int):
@@ -1137,7 +1322,8 @@ class FragmentSurfaces:
 
     def _clipped_complex(self, region: np.ndarray, k_count: int):
         """All regions' shells as one complex (vertices shared between shells), crack faces shared by both sides
-        and slivers removed. Returns (points [p, 3], tri [f, 3], shell [f], crack flag [f], shared)."""
+        and slivers removed. Returns (points [p, 3], tri [f, 3], shell [f], crack flag [f], patch [f], shared); a
+        patch is an input plane or the crack between one pair of regions."""
         pieces = self._clipped_pieces(region, k_count)
         vcount = np.array([p[0].shape[0] for p in pieces], dtype=np.int64)
         fcount = np.array([p[1].shape[0] for p in pieces], dtype=np.int64)
@@ -1148,8 +1334,15 @@ class FragmentSurfaces:
         across = np.concatenate([p[2] for p in pieces])
         planes = np.concatenate([p[3] for p in pieces])
         crack = (across >= 0).astype(np.int32)
+        plane_count = int(self._surface[2].max()) + 1
+
+        def patches(shell, across, planes):
+            lo, hi = np.minimum(shell, across), np.maximum(shell, across)
+            patch = np.where(across >= 0, plane_count + lo * k_count + hi, planes)
+            return np.unique(patch, return_inverse=True)[1].reshape(-1)
+
         if self.simplify > 0.0:  # independent sides: no sharing, no clean-up
-            return points, tri, shell, crack, False
+            return points, tri, shell, crack, patches(shell, across, planes), False
         gid = _merge_coincident(points, np.repeat(np.arange(k_count), vcount), 1e-9 * self.spacing)
         used, gid = np.unique(gid, return_inverse=True)
         first = np.zeros(len(used), dtype=np.int64)
@@ -1179,29 +1372,40 @@ class FragmentSurfaces:
                     np.concatenate([p[1] for p in pieces]) + np.repeat(voff[:-1], fcount)[:, None],
                     shell,
                     crack,
+                    patches(shell, across, planes),
                     False,
                 )
-        plane_count = int(self._surface[2].max()) + 1
-        lo, hi = np.minimum(shell2, across2), np.maximum(shell2, across2)
-        patch = np.where(across2 >= 0, plane_count + lo * k_count + hi, planes2)
-        patch = np.unique(patch, return_inverse=True)[1].reshape(-1)
+        patch = patches(shell2, across2, planes2)
         if self.clean:
             is_crack_patch = np.zeros(int(patch.max()) + 1, dtype=bool)
             is_crack_patch[patch[across2 >= 0]] = True
-            tri3, shell3, patch3 = clean_complex(points, tri2, shell2, patch, self.spacing, crack_patch=is_crack_patch)
+            plane_of_patch = np.full(len(is_crack_patch), -1, dtype=np.int64)
+            plane_of_patch[patch[across2 < 0]] = planes2[across2 < 0]
+            tri3, shell3, patch3 = clean_complex(
+                points,
+                tri2,
+                shell2,
+                patch,
+                self.spacing,
+                crack_patch=is_crack_patch,
+                surface=(*self._surface, plane_of_patch),
+            )
             if shells_closed(tri3, shell3, len(points)).all():
                 # crack flag of each surviving triangle: look it up through its patch
                 crack3 = is_crack_patch[patch3].astype(np.int32)
                 self.clean_failed = False
-                return points, tri3, shell3, crack3, True
+                return points, tri3, shell3, crack3, patch3, True
             self.clean_failed = True
-        return points, tri2, shell2, (across2 >= 0).astype(np.int32), True
+        return points, tri2, shell2, (across2 >= 0).astype(np.int32), patch, True
 
-    def _split_shells(self, points, tri, tri_shell, tri_crack, region_fragment, region, k_count, shared) -> None:
+    def _split_shells(
+        self, points, tri, tri_shell, tri_crack, tri_patch, region_fragment, region, k_count, shared
+    ) -> None:
         """Per-shell vertex copies (shell after shell), faces, attributes and the particle -> shell map."""
         n_p = points.shape[0]
         order = np.argsort(tri_shell, kind="stable")
         tri, tri_shell, tri_crack = tri[order], tri_shell[order], tri_crack[order]
+        self._face_patch = np.asarray(tri_patch, dtype=np.int64)[order]
         pair = np.unique(tri_shell[:, None] * n_p + tri)  # (shell, vertex), sorted by shell
         faces = np.searchsorted(pair, tri_shell[:, None] * n_p + tri)
         pair_shell = pair // n_p
@@ -1219,6 +1423,7 @@ class FragmentSurfaces:
         vcounts = np.bincount(self.vertex_fragment, minlength=len(kept))
         self._vertex_ranges = np.concatenate([[0], np.cumsum(vcounts)])
         self._face_ranges = np.concatenate([[0], np.cumsum(fcounts)])
+        self._face_shell = shell_index[tri_shell]
         self._particle_shell = shell_index[region]
 
     def _build_interpolation(self) -> None:
@@ -1332,11 +1537,39 @@ class FragmentSurfaces:
         velocities, topology version, faces and the per-face ``fragment`` and ``crack``."""
         from ..output.views import MeshView
 
+        points, faces = self.drawn(self.vertex_positions(positions))
+        if self._view_faces is None or self._view_of != self.version or not np.array_equal(faces, self._view_faces):
+            self._view_faces, self._view_of = faces, self.version
+            self._view_version += 1
         return MeshView(
             name=f"{self.body_name}_surface",
-            points=self.vertex_positions(positions),
+            points=points,
             velocities=None if velocities is None else self.vertex_velocities(positions, velocities),
-            topology_version=self.version,
-            faces=self.faces,
+            topology_version=self._view_version,
+            faces=faces,
             face_attributes={"fragment": self.face_fragment, "crack": self.face_crack},
         )
+
+    def drawn(self, vertices):
+        """The surface to draw at the current vertex positions ``vertices`` [m] (from :meth:`vertex_positions`):
+        slivers made by the motion are flipped away and then relaxed (their vertices move towards their neighbours;
+        step 9 of the method). Depends on the vertex positions only, not on earlier frames.
+
+        Returns:
+            (vertex positions [m] float64 [vertex_count, 3], triangles int32 [face_count, 3]); face i still belongs
+            to the same shell, patch, fragment and crack flag.
+        """
+        x = np.array(vertices, dtype=np.float64)
+        faces = self.faces.astype(np.int64)
+        angles = triangle_angles(x, faces[self.face_crack == 1]).min(axis=1) if self.face_crack.any() else None
+        if angles is None or angles.min() >= SLIVER_ANGLE:
+            return x, self.faces
+        for _ in range(DEFORMED_ROUNDS):
+            faces, flipped = _flip_round(x, faces, self._face_shell, self._face_patch, SLIVER_ANGLE)
+            if flipped == 0:
+                break
+        free = np.full((int(self._face_patch.max()) + 1, 4), np.nan)  # no input plane holds in deformed space
+        for _ in range(DEFORMED_ROUNDS):
+            if _relax_round(x, faces, self._face_patch, free, SLIVER_ANGLE, max_turn=60.0) == 0:
+                break
+        return x, faces.astype(np.int32)
