@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 import pdsim
-from pdsim.peridynamics.surfaces import FragmentSurfaces, triangle_angles
+from pdsim.fragment_surfaces import FragmentSurfaces, triangle_angles
 
 
 def _frame_loop(scene, solver, frames):

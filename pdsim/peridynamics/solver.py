@@ -464,7 +464,7 @@ class SolverPeridynamics(PointSolver):
         """Per body: a PointsView (positions, velocities, widths = spacing; displacement, dilatation, and damage,
         fragment and plastic_strain where those features are live) and, unless ``surfaces`` was turned off, the
         renderable surface ``<body>_surface`` (a closed shell per fragment and per particle whose damage reached the
-        surfaces' threshold, pdsim/peridynamics/surfaces.py; vertex velocities [m/s]; face attributes fragment and
+        surfaces' threshold, pdsim/fragment_surfaces.py; vertex velocities [m/s]; face attributes fragment and
         crack; its topology changes only on frames where those regions change)."""
         x = self.positions()
         v = self.velocities()
@@ -476,7 +476,7 @@ class SolverPeridynamics(PointSolver):
         if self.model.plastic:
             values["plastic_strain"] = self.plastic_strain()
         if self.write_surfaces and self._surfaces is None:
-            from .surfaces import FragmentSurfaces
+            from ..fragment_surfaces import FragmentSurfaces
 
             self._surfaces = [
                 FragmentSurfaces(b.shape, b.rest_positions, b.spacing, b.name, device=str(self.device))

@@ -107,7 +107,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import SolidShape
+from .geometry import SolidShape
 
 __all__ = ["FragmentSurfaces"]
 
@@ -249,7 +249,7 @@ def _points_near_solid(shape: SolidShape, points: np.ndarray, radius: float, dev
     """Bool mask [n]: points [m] [n, 3] inside the closed ``shape`` or within ``radius`` [m] of its surface."""
     import warp as wp
 
-    from ..kernels.peridynamics import surfaces as kf
+    from .kernels import fragment_surfaces as kf
 
     centre = 0.5 * (shape.bounds[0] + shape.bounds[1])  # float32 relative to the shape: exact anywhere in the world
     with wp.ScopedDevice(device):
@@ -1535,7 +1535,7 @@ class FragmentSurfaces:
         """The surface as a MeshView ``<body>_surface`` for particle ``positions`` [m] (shape [particle_count, 3])
         and ``velocities`` [m/s] (same shape; None: no vertex velocities): vertices moved by the particles, vertex
         velocities, topology version, faces and the per-face ``fragment`` and ``crack``."""
-        from ..output.views import MeshView
+        from .output.views import MeshView
 
         points, faces = self.drawn(self.vertex_positions(positions))
         if self._view_faces is None or self._view_of != self.version or not np.array_equal(faces, self._view_faces):

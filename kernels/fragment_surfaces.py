@@ -1,4 +1,4 @@
-"""Kernels for fragment surfaces: which lattice points lie near a closed triangle mesh."""
+"""Kernels for fragment surfaces (pdsim/fragment_surfaces.py): which lattice points lie near a closed triangle mesh."""
 
 import warp as wp
 
