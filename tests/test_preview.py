@@ -330,6 +330,24 @@ def test_camera_specs():
     np.testing.assert_allclose(xy[0], [160.0, 120.0])
 
 
+def test_camera_image_up_is_continuous_towards_the_pole():
+    """Raising the elevation towards 90 degrees keeps the image's orientation: the horizontal part of the image's
+    up vector points the same way (within 1 degree) at elevations 85 to 89.9, for any azimuth (it used to jump to an
+    arbitrary horizontal direction beyond 87.4 degrees); it always points towards the stage's up as seen from the
+    eye."""
+    from pdsim.output.preview import camera_from_spec
+
+    lo, hi, up = np.array([-1.0, -0.5, 0.0]), np.array([1.0, 0.5, 0.4]), np.array([0.0, 0.0, 1.0])
+    for azimuth in (-90.0, 0.0, 37.0, 180.0):
+        ups = []
+        for elevation in (85.0, 88.0, 89.0, 89.9):
+            f, r, u = camera_from_spec(f"{azimuth},{elevation},5", lo, hi, up, (320, 240)).basis()
+            assert u @ up > 0.0 and abs(u @ f) < 1e-12 and abs(r @ up) < 1e-9
+            flat = u - (u @ up) * up
+            ups.append(flat / np.linalg.norm(flat))
+        assert all(np.degrees(np.arccos(np.clip(ups[0] @ w, -1.0, 1.0))) < 1.0 for w in ups), azimuth
+
+
 def test_frames_spec():
     """--frames: N, A:B (B exclusive), steps, open ends and negative values like Python slices; out of range or
     empty raises ParameterError naming frames."""

@@ -168,9 +168,9 @@ class Camera:
         """(forward, right, up) of the image plane: unit float64 [3] each, right-handed (right x up = -forward)."""
         f = self.target - self.eye
         f = f / np.linalg.norm(f)
-        up = self.up
-        if abs(float(f @ up)) > 0.999:  # looking along the up axis: take any horizontal direction as image up
-            up = np.roll(up, 1)
+        up = self.up - (self.up @ f) * f  # the stage's up as seen in the image: continuous up to the pole
+        if np.linalg.norm(up) < 1.0e-6:  # looking straight along the up axis: any horizontal direction is image up
+            up = np.roll(self.up, 1)
             up = up - (up @ f) * f
         r = np.cross(f, up)
         r /= np.linalg.norm(r)
