@@ -12,7 +12,9 @@ triangles (same positions) and crack faces are pieces of the region boundaries:
    The other vertices inside the solid or within 1.8 h of its surface take the fragment with the largest
    Gaussian-weighted vote (sigma = h) among their 16 nearest particles, which continues a crack straight through the
    surface layer. All remaining vertices are "outside". (A tetrahedron of the grid that meets the solid has every
-   vertex within its diameter sqrt(3) h of the solid, so the labelled vertices' regions cover the solid.)
+   vertex within its diameter sqrt(3) h of the solid, so the labelled vertices' regions cover the solid.) With
+   ``on_lattice=False`` every vertex is labelled by the vote: the FEM draws its cracked bodies over their mesh
+   vertices (pdsim/fem/solver.py), which are no lattice and coincide where fracture split them.
 2. **Partition of space: multi-label marching tetrahedra.** Every grid cube is split into the 6 tetrahedra of the
    Freudenthal (Kuhn) triangulation, the same in every cube, so neighbouring tetrahedra share faces. In a tetrahedron
    whose vertices carry two labels the interface is the marching-tetrahedra triangle or quad through points on the
@@ -245,8 +247,52 @@ def _edge_fractions(labels: np.ndarray, v: np.ndarray, w: np.ndarray, d: np.ndar
     return t
 
 
-def _points_near_solid(shape: SolidShape, points: np.ndarray, radius: float, device: str) -> np.ndarray:
-    """Bool mask [n]: points [m] [n, 3] inside the closed ``shape`` or within ``radius`` [m] of its surface."""
+SURFACE_GRAZE = 0.05  # interface points closer than this to the input surface [spacings] move off it
+
+
+def _off_surface(pos: np.ndarray, corners: np.ndarray, grid_x: np.ndarray, distance: np.ndarray, h: float):
+    """Interface points that would graze the input surface, moved just outside it (step 2 of the method).
+
+    A crack point within SURFACE_GRAZE h of the surface (inside or out) makes crack faces that meet it at a grazing
+    angle, and the clip leaves needles and caps of a thousandth of a spacing there, too small to clean up. Each such
+    point moves within its simplex (the grid edge, tetrahedron face or tetrahedron it is keyed by, whose corners are
+    ``corners``) towards the corner farthest outside, to where the signed distance interpolated linearly over the
+    simplex is SURFACE_GRAZE h (at most 0.9 of the way): the clip then cuts the crack faces there transversally.
+    Points stay inside their simplices, so the regions still partition space, and the move depends on the simplex
+    only, so every copy of a point moves alike.
+
+    Args:
+        pos: points [m], float64 [n, 3]; corners: their simplices' grid vertices, int [n, k] (k = 2, 3 or 4);
+        grid_x: grid vertex positions [m]; distance: signed distance of every grid vertex to the surface [m]
+            (negative inside, NaN: far outside); h: grid spacing [m].
+
+    Returns:
+        The points [m], float64 [n, 3].
+    """
+    x = np.array(pos, dtype=np.float64)
+    if x.shape[0] == 0:
+        return x
+    corner_x = grid_x[corners]  # [n, k, 3]
+    phi_c = np.nan_to_num(distance[corners], nan=10.0 * h)  # [n, k]
+    # barycentric coordinates (least squares over the simplex's edges from its first corner, well conditioned
+    # anywhere in the world) give the linear signed distance at the point
+    edges = (corner_x[:, 1:] - corner_x[:, :1]) / h  # [n, k - 1, 3]
+    gram = np.einsum("nid,njd->nij", edges, edges)
+    rhs = np.einsum("nid,nd->ni", edges, (x - corner_x[:, 0]) / h)
+    mu = np.linalg.solve(gram, rhs[..., None])[..., 0]  # [n, k - 1]
+    lam = np.concatenate([1.0 - mu.sum(axis=1, keepdims=True), mu], axis=1)
+    phi = np.einsum("nk,nk->n", lam, phi_c)
+    far = np.argmax(phi_c, axis=1)
+    phi_far = phi_c[np.arange(len(x)), far]
+    target = SURFACE_GRAZE * h
+    move = (np.abs(phi) < target) & (phi_far > target)
+    step = np.clip((target - phi) / np.where(move, phi_far - phi, 1.0), 0.0, 0.9)
+    x[move] += step[move, None] * (corner_x[np.arange(len(x)), far][move] - x[move])
+    return x
+
+
+def _signed_distances(shape: SolidShape, points: np.ndarray, device: str) -> np.ndarray:
+    """Signed distance [m] of points [m] [n, 3] to the surface of the closed ``shape``, negative inside, float64 [n]."""
     import warp as wp
 
     from .kernels import fragment_surfaces as kf
@@ -258,11 +304,11 @@ def _points_near_solid(shape: SolidShape, points: np.ndarray, radius: float, dev
             indices=wp.array(shape.faces.astype(np.int32).ravel(), dtype=wp.int32),
         )
         pts = wp.array((points - centre).astype(np.float32), dtype=wp.vec3)
-        near = wp.zeros(len(points), dtype=wp.int32)
+        distance = wp.zeros(len(points), dtype=float)
         lo, hi = np.minimum(points.min(axis=0), shape.bounds[0]), np.maximum(points.max(axis=0), shape.bounds[1])
         max_dist = 2.0 * float(np.linalg.norm(hi - lo)) + 1.0
-        wp.launch(kf.mark_points_near_solid, dim=len(points), inputs=[mesh.id, pts, max_dist, float(radius), near])
-        return near.numpy().astype(bool)
+        wp.launch(kf.signed_distance_to_solid, dim=len(points), inputs=[mesh.id, pts, max_dist, distance])
+        return distance.numpy().astype(np.float64)
 
 
 VOTE_COUNT = 16  # particles voting on the label of a grid vertex that holds no particle
@@ -280,6 +326,8 @@ class LatticeGrid:
         voted: grid vertices near the solid that hold no particle, int64 shape [voted_count].
         voters: the VOTE_COUNT nearest particles of each voted vertex, int64 shape [voted_count, VOTE_COUNT].
         vote_weight: their weights exp(-d^2 / (2 h^2)), float64 shape [voted_count, VOTE_COUNT].
+        surface_distance: signed distance [m] of each grid vertex to the input surface (negative inside), float64
+            shape [vertex_count]; NaN on the grid's outermost layer (never labelled).
     """
 
     spacing: float
@@ -289,9 +337,12 @@ class LatticeGrid:
     voted: np.ndarray
     voters: np.ndarray
     vote_weight: np.ndarray
+    surface_distance: np.ndarray
 
 
-def build_lattice_grid(rest_positions: np.ndarray, shape: SolidShape, spacing: float, *, device="cpu") -> LatticeGrid:
+def build_lattice_grid(
+    rest_positions: np.ndarray, shape: SolidShape, spacing: float, *, device="cpu", on_lattice: bool = True
+) -> LatticeGrid:
     """The grid of spacing h [m] aligned with the particles (rest positions [m], shape [n, 3]) around ``shape``.
 
     A tetrahedron of the grid that meets the solid has each vertex inside it or within its diameter sqrt(3) h of the
@@ -299,6 +350,9 @@ def build_lattice_grid(rest_positions: np.ndarray, shape: SolidShape, spacing: f
     while hugging it. A vertex holding a particle takes that particle's fragment; the others take the fragment with
     the largest Gaussian-weighted vote among their VOTE_COUNT nearest particles, which continues a crack straight
     through the layer around the surface (the nearest particle alone would bend it along the surface normal).
+    ``on_lattice=False`` says the particles are not lattice points (they may coincide, as the vertex copies of a
+    cracked FEM mesh do): every vertex is then labelled by the vote, even where the particles happen to sit on
+    grid vertices.
     """
     from scipy.spatial import cKDTree
 
@@ -314,18 +368,25 @@ def build_lattice_grid(rest_positions: np.ndarray, shape: SolidShape, spacing: f
     positions = origin + (ijk + lo) * h
     owner = -np.ones(positions.shape[0], dtype=np.int64)
     cell = np.rint((rest - origin) / h).astype(np.int64) - lo
-    if np.abs(origin + (cell + lo) * h - rest).max() <= 1e-6 * h:  # particles on grid vertices label their own
-        owner[cell @ strides] = np.arange(rest.shape[0])
-    needed = np.zeros(positions.shape[0], dtype=bool)
-    free = np.flatnonzero((owner < 0) & ~np.any((ijk == 0) | (ijk == dims - 1), axis=1))  # outer layer: outside
-    needed[free] = _points_near_solid(shape, positions[free], 1.8 * h, device)
-    voted = np.flatnonzero(needed)
+    if on_lattice and np.abs(origin + (cell + lo) * h - rest).max() <= 1e-6 * h:
+        owner[cell @ strides] = np.arange(rest.shape[0])  # particles on grid vertices label their own
+    surface_distance = np.full(positions.shape[0], np.nan)
+    queried = np.flatnonzero(~np.any((ijk == 0) | (ijk == dims - 1), axis=1))  # the outer layer is outside
+    surface_distance[queried] = _signed_distances(shape, positions[queried], device)
+    voted = np.flatnonzero((owner < 0) & (surface_distance <= 1.8 * h))  # inside or near (NaN compares False)
     k = min(VOTE_COUNT, rest.shape[0])
     dist, voters = cKDTree(rest).query(positions[voted], k=k)
     dist, voters = dist.reshape(len(voted), k), voters.reshape(len(voted), k)
     weight = np.exp(-0.5 * (dist / h) ** 2)
     return LatticeGrid(
-        spacing=h, dims=dims, positions=positions, owner=owner, voted=voted, voters=voters, vote_weight=weight
+        spacing=h,
+        dims=dims,
+        positions=positions,
+        owner=owner,
+        voted=voted,
+        voters=voters,
+        vote_weight=weight,
+        surface_distance=surface_distance,
     )
 
 
@@ -403,6 +464,12 @@ def partition_regions(
     )
     t[rows, cols] = t_unique[inverse.ravel()]
     edge_pos = grid_x[va] + (t[..., None] * h) * d_edge  # [t, 6, 3]
+    # Off the lattice (jittered particles, FEM vertices) crack points can come arbitrarily close to the surface; on it
+    # the surface lies half a spacing from the particles, and crack points lie on it exactly or well clear of it.
+    off_lattice = not (grid.owner >= 0).any()
+    sd = grid.surface_distance
+    if off_lattice:
+        edge_pos[crossing] = _off_surface(edge_pos[crossing], np.stack([va[crossing], vb[crossing]], 1), grid_x, sd, h)
 
     keys, positions, tris, refs = [edge_key.ravel()], [edge_pos.reshape(-1, 3)], [], []
 
@@ -430,6 +497,8 @@ def partition_regions(
     if many.size:
         cross_m = crossing[many]
         centre = (edge_pos[many] * cross_m[..., None]).sum(axis=1) / cross_m.sum(axis=1)[:, None]
+        if off_lattice:
+            centre = _off_surface(centre, tet_vid[many], grid_x, sd, h)
         centre_key = (tet_base[many] * 6 + tet_perm[many]) * 4 + 2
         keys.append(centre_key)
         positions.append(centre)
@@ -451,6 +520,8 @@ def partition_regions(
                     tet_vid[rows, a] * 64 + _dcode(offs[:, b] - offs[:, a]) * 8 + _dcode(offs[:, c] - offs[:, b])
                 ) * 4 + 1
                 face_pos = (edge_pos[rows, eab] + edge_pos[rows, eac] + edge_pos[rows, ebc]) / 3.0
+                if off_lattice:
+                    face_pos = _off_surface(face_pos, tet_vid[rows][:, [a, b, c]], grid_x, sd, h)
                 keys.append(face_key)
                 positions.append(face_pos)
                 for e in (eab, ebc, eac):
@@ -490,7 +561,8 @@ def partition_regions(
 # of its input triangle (coplanar input triangles share one); a crack face's patch is its pair of regions.
 
 SLIVER_ANGLE = 5.0  # triangles with a smaller angle [degrees] are slivers
-DEFORMED_ROUNDS = 8  # rounds of edge flips, then of vertex moves, per frame against slivers made by the motion
+RELAX_TURN = 30.0
+DEFORMED_ROUNDS = 16  # rounds of edge flips, then of vertex moves, per frame against slivers made by the motion
 SHORT_EDGE = 0.3  # edges shorter than this many spacings are collapsed
 _MAX_CLEAN_ROUNDS = 40
 
@@ -1033,7 +1105,7 @@ def clean_complex(
         t1, flipped = _flip_round(points, t1, s1, p1, sliver_angle)
         if collapsed == 0 and flipped == 0:
             backup = points.copy()
-            if _relax_round(points, t1, p1, plane_eq, sliver_angle, surface=surface) == 0:
+            if _relax_round(points, t1, p1, plane_eq, sliver_angle, max_turn=RELAX_TURN, surface=surface) == 0:
                 break
             if not shells_closed(t1, s1, len(points)).all():
                 points[:] = backup
@@ -1121,6 +1193,9 @@ class FragmentSurfaces:
         damage_threshold: particles whose damage reaches this value become chips of their own, in (0, 1]; see
             :meth:`update_topology`.
         clean: remove slivers by edge collapses (default True).
+        on_lattice: the particles are points of a lattice of this spacing (default True), so that those sitting on
+            grid vertices label them; False labels every grid vertex by the vote of its nearest particles (particles
+            anywhere, possibly coinciding: the vertices of a cracked FEM mesh, see :func:`build_lattice_grid`).
         device: Warp device of the one-off grid-near-mesh query.
 
     Attributes:
@@ -1147,6 +1222,7 @@ class FragmentSurfaces:
         refine: bool | None = None,
         damage_threshold: float = DAMAGE_THRESHOLD,
         clean: bool = True,
+        on_lattice: bool = True,
         device: str = "cpu",
     ):
         rest = np.asarray(rest_positions, dtype=np.float64)
@@ -1168,6 +1244,7 @@ class FragmentSurfaces:
         self.simplify = float(simplify)
         self.damage_threshold = float(damage_threshold)
         self.clean = bool(clean)
+        self.on_lattice = bool(on_lattice)
         self.version = 0
         self._key: np.ndarray | None = None
         self._view_faces: np.ndarray | None = None  # the faces of the last view, of rebuild _view_of, and their version
@@ -1291,7 +1368,9 @@ class FragmentSurfaces:
         solid_id = solid.original_id()
         plane = self._surface[2]
         if self._grid is None:
-            self._grid = build_lattice_grid(self.rest_positions, self.shape, self.spacing, device=self.device)
+            self._grid = build_lattice_grid(
+                self.rest_positions, self.shape, self.spacing, device=self.device, on_lattice=self.on_lattice
+            )
         regions = partition_regions(self._grid, region, crack_smoothing=self.crack_smoothing)
         empty = (np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64))
         pieces = []

@@ -321,9 +321,22 @@ class SolverPeridynamics(PointSolver):
         if m.debris_rate is not None:  # Material.debris_damping (kernels/peridynamics/damping.py)
             from ..kernels.peridynamics.damping import add_debris_damping
 
-            wp.launch(add_debris_damping, dim=m.particle_count, device=self.device, inputs=[
-                m.family_offsets, m.family_neighbors, m.bond_wv, alive, self.kin.v, m.inv_density, m.debris_rate,
-                m.debris_damage, s.force_density])
+            wp.launch(
+                add_debris_damping,
+                dim=m.particle_count,
+                device=self.device,
+                inputs=[
+                    m.family_offsets,
+                    m.family_neighbors,
+                    m.bond_wv,
+                    alive,
+                    self.kin.v,
+                    m.inv_density,
+                    m.debris_rate,
+                    m.debris_damage,
+                    s.force_density,
+                ],
+            )
         if self.contact is not None:
             from ..kernels.peridynamics import step as pd_step
 
