@@ -31,16 +31,20 @@ def _views_by_name(solver):
     return {v.name: v for v in solver.views()}
 
 
-def test_fracturing_body_views_closed_surfaces_with_topology_versions_only_on_change():
+@pytest.mark.parametrize("crack_surfaces", ["elements", "smooth"])
+def test_fracturing_body_views_closed_surfaces_with_topology_versions_only_on_change(crack_surfaces):
     """A notched bar pulled apart (implicit, 10 frames of 0.1 s): each frame's views hold a PointsView "bar" of the
     input vertices (a fixed count: world positions, displacement and fragment attributes) and a MeshView
     "bar_surface" whose topology version changes on some frames but not all (only when fracture changed the faces;
     unchanged versions come with identical faces); every frame's surface is closed (each directed edge has one
     opposite edge), the faces created by fracture carry crack = 1 (none at frame 0, some at the end) and the two
     pieces at the end have distinct fragment ids on faces and vertices. The PointsView carries the reactions of both
-    boundary conditions, and the solver's contact mesh (for contact with particle methods) is the same closed surface
-    with the same version."""
-    body = FemBody(_notched_bar(), MAT, tensile_strength=2.0e4, integrator="implicit", damping=5.0)
+    boundary conditions, and the solver's contact mesh (for contact with particle methods) is a closed surface with
+    the solver's topology version: with crack_surfaces="elements" the very surface drawn (the boundary faces of the
+    elements; "smooth" draws the input surface with fitted crack surfaces, tests/test_fem_crack_surfaces.py)."""
+    body = FemBody(
+        _notched_bar(), MAT, tensile_strength=2.0e4, integrator="implicit", damping=5.0, crack_surfaces=crack_surfaces
+    )
     body.fix(pdsim.BoxRegion(lo=(-1, -1, -1), hi=(1e-6, 1, 1)))
     body.set_velocity(pdsim.BoxRegion(lo=(1.0 - 1e-6, -1, -1), hi=(2, 1, 1)), (0.1, 0.0, 0.0))
     assert solver_for(body) is SolverFem
@@ -62,9 +66,10 @@ def test_fracturing_body_views_closed_surfaces_with_topology_versions_only_on_ch
         assert surface.faces.max() < len(surface.points)
         assert closed_surface_defects(surface.faces) == 0
         assert set(points.reactions) == {"fix_0", "velocity_1"}
-        ids, tris, version = solver.contact_mesh()  # the same closed surface, for contact between methods
-        assert version == solver.topology_version and tris.shape[0] == 3 * len(surface.faces)
-        assert closed_surface_defects(tris.numpy().reshape(-1, 3)) == 0 and ids.shape[0] == len(surface.points)
+        ids, tris, version = solver.contact_mesh()  # the elements' boundary, for contact between methods
+        assert version == solver.topology_version and closed_surface_defects(tris.numpy().reshape(-1, 3)) == 0
+        if crack_surfaces == "elements":  # the same closed surface
+            assert tris.shape[0] == 3 * len(surface.faces) and ids.shape[0] == len(surface.points)
         frames.append((surface.topology_version, surface.faces.copy(), surface.face_attributes, points.attributes))
     versions = [f[0] for f in frames]
     assert versions[0] == 0 and 1 < len(set(versions)) < len(versions)

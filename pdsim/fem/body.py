@@ -21,6 +21,7 @@ MEASURES = ("linear", "corotated", "green")
 INTEGRATORS = ("explicit", "implicit")
 PRECISIONS = ("float32", "float64")
 STIFFNESS_MODES = ("matrix_free", "assembled")
+CRACK_SURFACES = ("smooth", "elements")
 
 
 @dataclass(frozen=True)
@@ -73,6 +74,12 @@ class FemBody(PointBody):
         min_quality: element quality check of the mesh (see pdsim.fem.mesh), in [0, 1).
         mesh_cache: folder where meshes made by fTetWild are kept and reused (its output varies from run to run;
             see pdsim.fem.mesh.tetrahedralize), or None.
+        crack_surfaces: how the surface "<name>_surface" of a body that can fracture is drawn: "smooth" (default)
+            draws each piece as its part of the input surface (the ``SolidShape`` it was meshed from, or the boundary
+            of a ready TetMesh) closed by smooth crack surfaces fitted to the element faces the cracks opened
+            (pdsim/fragment_surfaces.py over the mesh vertices; docs/fem_fracture.md); "elements" draws the
+            boundary faces of each piece's tetrahedra (crack surfaces are staircases of element faces). Bodies
+            without ``tensile_strength`` always draw their boundary faces.
     """
 
     method = "fem"
@@ -94,6 +101,7 @@ class FemBody(PointBody):
         name: str | None = None,
         min_quality: float = DEFAULT_MIN_QUALITY,
         mesh_cache: str | None = None,
+        crack_surfaces: str = "smooth",
     ):
         if not isinstance(material, Material):
             raise ParameterError("material", material, "a pdsim.Material")
@@ -103,6 +111,8 @@ class FemBody(PointBody):
             raise ParameterError("integrator", integrator, " or ".join(map(repr, INTEGRATORS)))
         if integrator == "implicit" and measure == "green":
             raise ParameterError("measure", measure, "'linear' or 'corotated' with the implicit integrator")
+        if not isinstance(crack_surfaces, str) or crack_surfaces not in CRACK_SURFACES:
+            raise ParameterError("crack_surfaces", crack_surfaces, " or ".join(map(repr, CRACK_SURFACES)))
         if plasticity is not None and not isinstance(plasticity, FemPlasticity):
             raise ParameterError("plasticity", plasticity, "a pdsim.fem.FemPlasticity or None")
         if isinstance(shape, TetMesh):
@@ -135,6 +145,11 @@ class FemBody(PointBody):
         self.damping = check_range("damping", damping, 0.0, None, lo_open=False)
         self.implicit_step_ratio = check_range("implicit_step_ratio", implicit_step_ratio, 1.0, None, lo_open=False)
         self.name = name or shape.name
+        self.crack_surfaces = crack_surfaces
+        # the closed input surface smooth crack surfaces are drawn from; None where element faces are drawn
+        self.surface_shape = None
+        if self.fractures and crack_surfaces == "smooth":
+            self.surface_shape = shape if isinstance(shape, SolidShape) else mesh_surface(self.mesh, self.name)
         self._init_points()
 
     @property
@@ -184,6 +199,26 @@ class FemBody(PointBody):
         centroid lies in ``region``, each face's force shared equally by its three vertices: (vertex indices int64
         [k], forces float64 [k, 3]). ParameterError when the region holds no boundary face."""
         return face_point_forces(self.mesh.vertices, self.mesh.boundary_faces(), region, traction, pressure)
+
+
+def mesh_surface(mesh: TetMesh, name: str) -> SolidShape:
+    """The boundary of a tet mesh as a closed surface (its boundary faces on the vertices they use), for drawing
+    smooth crack surfaces. ParameterError (crack_surfaces) when it is not a closed 2-manifold: an edge of the boundary
+    not shared by exactly two faces of opposite directions, as where two parts of the mesh touch along an edge."""
+    faces = np.asarray(mesh.boundary_faces(), dtype=np.int64)
+    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    n = np.int64(mesh.vertex_count)
+    key = directed[:, 0] * n + directed[:, 1]
+    unique = np.unique(key)
+    if len(unique) != len(key) or not np.isin(directed[:, 1] * n + directed[:, 0], unique).all():
+        raise ParameterError(
+            "crack_surfaces",
+            "smooth",
+            f"'elements' for '{name}': the boundary of its tet mesh is not a closed 2-manifold (some edge is not "
+            "shared by exactly two boundary faces), so it bounds no solid to draw smooth crack surfaces from",
+        )
+    used, local = np.unique(faces, return_inverse=True)
+    return SolidShape(vertices=mesh.vertices[used], faces=local.reshape(-1, 3).astype(np.int32), name=name)
 
 
 def lumped_masses(vertices: np.ndarray, tets: np.ndarray, density) -> np.ndarray:

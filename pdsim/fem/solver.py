@@ -50,9 +50,13 @@ Colliders: the ground plane and the scene's colliders (pdsim/colliders.py) act o
 other. Asking for it (Scene.enable_contact with several FEM bodies or a cracking one) raises
 FeatureNotAvailableError; with automatic contact the scene warns once when the FEM bodies are built.
 
-Output (:meth:`SolverFem.views`): per body a PointsView of its vertices and a MeshView "<name>_surface" of the
-boundary of every piece (each a closed shell with its own vertices), whose topology version changes when fracture
-changes it; optionally an embedded render mesh "<name>_render".
+Output (:meth:`SolverFem.views`): per body a PointsView of its vertices and a MeshView "<name>_surface", whose
+topology version changes when its faces change; optionally an embedded render mesh "<name>_render". The surface of a
+body that cannot fracture, or of one with ``crack_surfaces="elements"``, is the boundary of its tetrahedra (each piece
+a closed shell with its own vertices). A body that can fracture draws by default (``crack_surfaces="smooth"``) its
+input surface closed by smooth crack surfaces: pdsim/fragment_surfaces.py's FragmentSurfaces over the body's current
+vertices (the copies fracture adds included; spacing the mean edge length; every vertex labelled by its piece),
+rebuilt when fracture changed the body's vertices (docs/fem_fracture.md).
 """
 
 from __future__ import annotations
@@ -76,6 +80,100 @@ from .static import StaticSolveReport, solve_static
 
 
 GRIFFITH_ROUNDS = 4  # fracture: rounds of the Griffith test before a step's remaining splits are made untested
+
+
+class _SmoothSurface:
+    """The drawn surface "<name>_surface" of a body that can fracture, with ``crack_surfaces="smooth"``.
+
+    A :class:`pdsim.fragment_surfaces.FragmentSurfaces` over the body's vertices (rest positions, the copies fracture
+    adds included) with the spacing of the mesh (its mean edge length) and every vertex labelled by its piece: the
+    input surface (``FemBody.surface_shape``) cut by crack surfaces fitted to the element faces the cracks opened, and
+    moved by the vertices of its own piece. The vertex copies coincide with their parents and are no lattice, so
+    every grid vertex is labelled by the vote of its nearest vertices (``on_lattice=False``).
+
+    It is built again from the current vertices and pieces whenever fracture changed the body's vertices (the body's
+    topology version), so the drawn surface is a function of the topology alone: a resumed run draws the same. A
+    piece that holds no vertex of the label grid (an element or a few that chipped off, smaller than a grid cell)
+    gets no region there and is drawn as the boundary faces of its elements instead (crack = 1 on the faces fracture
+    opened). The view's topology version changes exactly when its vertex count, faces or face attributes change.
+    """
+
+    def __init__(self, body: FemBody, spacing: float, device: str):
+        self.body = body
+        self.spacing = float(spacing)
+        self.device = device
+        self.surfaces = None  # FragmentSurfaces of the topology ``built_for``
+        self.built_for = None  # the body's topology version the surfaces were built for
+        self.rebuilds = 0  # builds so far, and the wall time of the last one [s]
+        self.rebuild_seconds = 0.0
+        self._used = None  # the body's vertices (local ids) that belong to an element, or None for all
+        self._version = -1
+        self._last = None  # (vertex count, faces, fragment, crack) of the last view
+
+    def _build(self, topology: int, rest: np.ndarray, fragment: np.ndarray, used: np.ndarray) -> None:
+        import time
+
+        from ..fragment_surfaces import FragmentSurfaces
+
+        t0 = time.perf_counter()
+        self._used = None if used.all() else np.flatnonzero(used)
+        sel = slice(None) if self._used is None else self._used
+        surfaces = FragmentSurfaces(
+            self.body.surface_shape, rest[sel], self.spacing, self.body.name, on_lattice=False, device=self.device
+        )
+        surfaces.update_topology(fragment[sel])
+        self.surfaces = surfaces
+        self.built_for = topology
+        self.rebuilds += 1
+        self.rebuild_seconds = time.perf_counter() - t0
+
+    def view(self, topology, rest, fragment, used, positions, velocities, element_surface):
+        """The MeshView at the body's current vertex ``positions`` [m] and ``velocities`` [m/s] (world, [n, 3]).
+
+        Args:
+            topology: the body's topology version (a rebuild when it changed).
+            rest: world rest positions of the body's vertices [m], float64 [n, 3].
+            fragment: piece id of each vertex, int [n]; used: whether each vertex belongs to an element, bool [n].
+            element_surface: (vertex ids [k] into the body's vertices, triangles [f, 3] into those ids, piece per
+                face [f], crack flag per face [f]) of the boundary faces of the body's elements.
+        """
+        from ..output.views import MeshView
+
+        if self.surfaces is None or self.built_for != topology:
+            self._build(topology, rest, fragment, used)
+        sel = slice(None) if self._used is None else self._used
+        drawn = self.surfaces.view(positions[sel], velocities[sel])
+        points, vel, faces = drawn.points, drawn.velocities, drawn.faces
+        frag_f = np.asarray(drawn.face_attributes["fragment"], dtype=np.int32)
+        crack_f = np.asarray(drawn.face_attributes["crack"], dtype=np.int32)
+        ids, e_faces, e_frag, e_crack = element_surface
+        chips = ~np.isin(e_frag, self.surfaces.fragment_ids)  # pieces without a region: their element faces
+        if chips.any():
+            verts, local = np.unique(e_faces[chips], return_inverse=True)
+            chip_ids = ids[verts]
+            faces = np.concatenate([faces, local.reshape(-1, 3).astype(faces.dtype) + len(points)])
+            points = np.concatenate([points, positions[chip_ids]])
+            vel = np.concatenate([vel, velocities[chip_ids]])
+            frag_f = np.concatenate([frag_f, e_frag[chips].astype(np.int32)])
+            crack_f = np.concatenate([crack_f, e_crack[chips].astype(np.int32)])
+        last = self._last
+        if (
+            last is None
+            or last[0] != len(points)
+            or not np.array_equal(last[1], faces)
+            or not np.array_equal(last[2], frag_f)
+            or not np.array_equal(last[3], crack_f)
+        ):
+            self._version += 1
+            self._last = (len(points), faces, frag_f, crack_f)
+        return MeshView(
+            name=f"{self.body.name}_surface",
+            points=points,
+            velocities=vel,
+            topology_version=self._version,
+            faces=faces,
+            face_attributes={"fragment": frag_f, "crack": crack_f},
+        )
 
 
 class _SplitBody(PointLoads):
@@ -349,6 +447,7 @@ class SolverFem(PointSolver):
         self._rotated = self.measure == "corotated"
         self._force_kernel = ke.element_force_kernel(self.dtype, self._measure_id, self.plastic, self.fracture, True)
         self._body_topology_version = [0] * len(bodies)
+        self._smooth_surfaces = self._new_smooth_surfaces()
 
         # vertex data (rebuilt when fracture changes the topology)
         self._rest_h = model.rest
@@ -366,6 +465,14 @@ class SolverFem(PointSolver):
         self.crack_area = 0.0
         self.fracture_dissipated = 0.0
         self._build_vertex_data(bodies)
+
+    def _new_smooth_surfaces(self) -> list:
+        """Per body: its :class:`_SmoothSurface` (a body that can fracture, with crack_surfaces="smooth"), else None;
+        the spacing is the mesh's mean edge length."""
+        return [
+            None if b.surface_shape is None else _SmoothSurface(b, 2.0 * self.model.widths[i], str(self.device))
+            for i, b in enumerate(self.bodies)
+        ]
 
     @property
     def _dm_inv(self):
@@ -942,6 +1049,7 @@ class SolverFem(PointSolver):
         self._fragments = None
         self._surfaces = None
         self._contact_mesh = None
+        self._smooth_surfaces = self._new_smooth_surfaces()  # drawn again from the restored topology
 
     def check_method_contact(self) -> None:
         """Raises FeatureNotAvailableError when these bodies cannot take part in contact between methods (the
@@ -1008,17 +1116,19 @@ class SolverFem(PointSolver):
         return self._surfaces
 
     def surfaces(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Per body: (vertex ids [k] into the solver's vertices, outward triangles [f, 3] indexing those ids). Each
-        connected piece of a body is a closed surface with its own vertices."""
+        """Per body: the boundary faces of its elements, (vertex ids [k] into the solver's vertices, outward
+        triangles [f, 3] indexing those ids). Each connected piece of a body is a closed surface with its own
+        vertices. (The drawn surface of a body with smooth crack surfaces is its MeshView in :meth:`views`.)"""
         return [(ids, faces) for ids, faces, _, _ in self._surface_data()]
 
     def views(self) -> list:
         """Per body: a PointsView of its input mesh vertices (a fixed count over an animation: the copies that
         fracture adds along cracks appear only in the surface; world positions [m], velocities [m/s], widths = half
         the mean edge length [m]; attributes displacement [m], fragment, plastic_strain when plastic; the reactions
-        [N] of its boundary conditions) and a MeshView
-        "<name>_surface" of its piece surfaces (face attributes fragment, crack); a MeshView "<name>_render" per
-        embedded render mesh."""
+        [N] of its boundary conditions) and a MeshView "<name>_surface" of its pieces (face attributes fragment,
+        crack): the boundary faces of its elements, or for a body that can fracture with crack_surfaces="smooth" its
+        input surface with smooth crack surfaces (:class:`_SmoothSurface`); a MeshView "<name>_render" per embedded
+        render mesh."""
         import warp as wp
 
         from ..kernels.fem import elements as ke
@@ -1030,6 +1140,8 @@ class SolverFem(PointSolver):
         frag_e = self._element_fragments()
         frag_v = np.zeros(self.point_count, dtype=np.int64)
         frag_v[self._tets_h.ravel()] = np.repeat(frag_e, 4)
+        used = np.zeros(self.point_count, dtype=bool)
+        used[self._tets_h.ravel()] = True
         eq_v = None
         if self.plastic:
             ep = self._plastic_strain.numpy().astype(np.float64)
@@ -1059,6 +1171,21 @@ class SolverFem(PointSolver):
                     reactions={cond: r for (body, cond), r in reactions.items() if body == b.name},
                 )
             )
+            smooth = self._smooth_surfaces[i]
+            if smooth is not None:
+                end = int(self.body_offsets[i + 1])
+                out.append(
+                    smooth.view(
+                        self._body_topology_version[i],
+                        self._rest_h[lo:end],
+                        frag_v[lo:end],
+                        used[lo:end],
+                        x[lo:end],
+                        v[lo:end],
+                        (ids - lo, faces, frag_f, crack_f),
+                    )
+                )
+                continue
             out.append(
                 MeshView(
                     name=f"{b.name}_surface",
