@@ -11,6 +11,7 @@ pdsim.presets (its behaviour column is tests/test_guide_materials.py's).
 from __future__ import annotations
 
 import importlib.util
+import json
 import pathlib
 import re
 import subprocess
@@ -107,9 +108,55 @@ def test_guide_python_blocks_run(tmp_path, monkeypatch):
     assert "FemPlasticity" in refused[0][1]
 
 
+# Appended to the guide's Blender block: renders the last frame (the ball is through the pane, which has crack faces)
+# from above and reports the crack faces Blender reads on that frame and whose slots the guide's material took.
+BLENDER_CHECK = """
+import json, math, os, mathutils, numpy
+scene.frame_set(scene.frame_end)
+depsgraph = bpy.context.evaluated_depsgraph_get()
+pane = bpy.data.objects["pane_surface"]
+attribute = pane.evaluated_get(depsgraph).data.attributes["crack"]
+values = numpy.zeros(len(attribute.data), dtype=numpy.int32)
+attribute.data.foreach_get("value", values)
+crack = {"crack_faces": int(values.sum()), "domain": attribute.domain}  # before the render frees the evaluated mesh
+world = bpy.data.worlds.new("sky")
+world.node_tree.nodes["Background"].inputs[0].default_value = (0.8, 0.8, 0.8, 1.0)
+world.node_tree.nodes["Background"].inputs[1].default_value = 0.3
+scene.world = world
+sun = bpy.data.objects.new("sun", bpy.data.lights.new("sun", "SUN"))
+sun.data.energy = 2.0
+sun.rotation_euler = (math.radians(20), 0.0, 0.0)
+scene.collection.objects.link(sun)
+camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
+scene.collection.objects.link(camera)
+scene.camera = camera
+camera.location = (0.0, -0.25, 0.95)
+camera.rotation_euler = (mathutils.Vector((0.0, 0.0, 0.5)) - camera.location).to_track_quat("-Z", "Y").to_euler()
+scene.render.engine = "CYCLES"
+scene.cycles.device = "CPU"
+scene.cycles.samples = 4
+scene.render.resolution_x, scene.render.resolution_y = 128, 96
+scene.view_settings.view_transform = "Standard"
+scene.render.filepath = os.path.abspath("crack.png")
+bpy.ops.render.render(write_still=True)
+slots = sorted({slot.material.name for slot in pane.material_slots})
+print("CHECK " + json.dumps({**crack, "slots": slots}))
+"""
+
+
+def _orange_pixels(path) -> int:
+    """Pixels in the crack faces' orange, counted as tools/make_gallery.py counts them."""
+    spec = importlib.util.spec_from_file_location("make_gallery", GUIDE.parents[1] / "tools" / "make_gallery.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.orange_pixels(str(path))
+
+
 def test_guide_blender_block(tmp_path, monkeypatch):
     """The guide's Blender block imports the guide's first cache in Blender (bpy, in a subprocess: bpy ships its own
-    USD libraries) and prints the frame range 0..1 and 24 fps."""
+    USD libraries) and prints the frame range 0..1 and 24 fps. Its crack material works on a frame with cracks: the
+    pane's surface has crack faces on the last frame (the per-face ``crack`` attribute, read on that frame), its slots
+    hold the guide's material only, and a small Cycles render of the pane shows orange pixels."""
     if importlib.util.find_spec("bpy") is None:
         pytest.skip('bpy (Blender as a Python module) is not installed: pip install -e ".[blender]"')
     blocks = _python_blocks()
@@ -119,10 +166,19 @@ def test_guide_blender_block(tmp_path, monkeypatch):
     namespace["build_scene"]().run("first.usdc", frames=FRAMES, progress=False, device="cpu")
     code = next(code for _, marker, code in blocks if marker == "blender")
     proc = subprocess.run(
-        [sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300, check=False
+        [sys.executable, "-c", code + BLENDER_CHECK],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
     )
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     assert re.search(rf"^0 {FRAMES} 24\b", proc.stdout, re.MULTILINE), proc.stdout[-2000:]
+    check = json.loads(next(ln for ln in proc.stdout.splitlines() if ln.startswith("CHECK "))[len("CHECK ") :])
+    assert check["domain"] == "FACE" and check["crack_faces"] > 0, check
+    assert check["slots"] == ["surface_and_crack"], check
+    assert _orange_pixels(tmp_path / "crack.png") > 0
 
 
 def test_guide_material_table_matches_the_presets():

@@ -13,6 +13,7 @@ Usage:
     python tools/make_gallery.py                        # every scene, then docs/gallery.md
     python tools/make_gallery.py --scenes glass_pane,drop_shatter --work /tmp/gallery   # some scenes only
     python tools/make_gallery.py --render-only          # re-render from the caches of an earlier run in --work
+    python tools/make_gallery.py --blender-only         # only the teaser's Blender still, from its cache in --work
 
 Results of each scene go to ``<work>/<scene>.json``; docs/gallery.md is written from every JSON present in --work,
 so partial runs add up.
@@ -54,10 +55,7 @@ VIEWS: dict[str, dict] = {
     "lattice_3d_tear": {"camera": "-90,30"},
 }
 # What the preview run shows that differs from the scene's description (seen on the gallery's own stills).
-NOTES: dict[str, str] = {
-    "fem_plastic_bar": "At the preview mesh size (4 cm, two elements across the rod) the bend concentrates in a hinge "
-    "just above the clamp, so the rod keeps a tilt rather than a curve.",
-}
+NOTES: dict[str, str] = {}
 
 for _case in "abcdefg":  # plane lattices: seen from above, coloured by the first-gradient strain measure
     VIEWS[f"lattice_case_{_case}"] = {"camera": "-90,75", "color": "pe1", "no_ground": True}
@@ -175,6 +173,7 @@ BLENDER = textwrap.dedent(
     """
     import math, sys
     import bpy
+    import numpy
 
     path, frame, out = sys.argv[1], int(sys.argv[2]), sys.argv[3]
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -198,16 +197,34 @@ BLENDER = textwrap.dedent(
     for ob in scene.objects:  # a body's particles stay hidden where its surface is drawn (as pdsim preview does)
         if ob.type == "POINTCLOUD" and (ob.name + "_surface" in names or ob.name + "_render" in names):
             ob.hide_render = True
-    for ob in scene.objects:  # a light grey for the bodies, orange for the crack faces
+    # A light grey for the bodies, orange for the crack faces. The crack faces are picked by the per-face attribute
+    # `crack` (1 on crack faces), which the Mesh Sequence Cache modifier reads every frame; the material indices of
+    # the cache's surface / crack subsets are read only once, at import (frame 0, no cracks yet), so one material
+    # takes every slot and mixes its colour from the attribute.
+    look = bpy.data.materials.new("surface_and_crack")
+    nodes, links = look.node_tree.nodes, look.node_tree.links
+    attribute = nodes.new("ShaderNodeAttribute")
+    attribute.attribute_name = "crack"
+    mix = nodes.new("ShaderNodeMix")
+    mix.data_type = "RGBA"
+    mix.inputs["A"].default_value = (0.7, 0.72, 0.75, 1)
+    mix.inputs["B"].default_value = (0.9, 0.35, 0.08, 1)
+    links.new(attribute.outputs["Fac"], mix.inputs["Factor"])
+    links.new(mix.outputs["Result"], nodes["Principled BSDF"].inputs["Base Color"])
+    for ob in scene.objects:
         if ob.type == "MESH" and ob.data.materials:
-            for slot, mat in enumerate(ob.data.materials):
-                if mat is None:
-                    continue
-                mat.use_nodes = True
-                bsdf = mat.node_tree.nodes.get("Principled BSDF")
-                if bsdf is not None:
-                    crack = "crack" in mat.name.lower()
-                    bsdf.inputs["Base Color"].default_value = (0.9, 0.35, 0.08, 1) if crack else (0.7, 0.72, 0.75, 1)
+            for slot in ob.material_slots:
+                slot.material = look
+    scene.frame_set(frame)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    cracked = 0
+    for ob in scene.objects:
+        crack = ob.evaluated_get(depsgraph).data.attributes.get("crack") if ob.type == "MESH" else None
+        if crack is not None:
+            values = numpy.zeros(len(crack.data), dtype=numpy.int32)
+            crack.data.foreach_get("value", values)
+            cracked += int(values.sum())
+    print("CRACK FACES", cracked, flush=True)
     camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
     scene.collection.objects.link(camera)
     scene.camera = camera
@@ -217,7 +234,6 @@ BLENDER = textwrap.dedent(
     direction = mathutils.Vector(target) - camera.location
     camera.rotation_euler = direction.to_track_quat("-Z", "Y").to_euler()
     camera.data.lens = 35
-    scene.frame_set(frame)
     scene.render.filepath = out
     bpy.ops.render.render(write_still=True)
     print("RENDERED", flush=True)
@@ -225,8 +241,20 @@ BLENDER = textwrap.dedent(
 )
 
 
-def blender_still(cache: str, frame: int, out: str) -> float:
-    """Cycles still of ``frame`` of the cache (bpy in a child process, away from usd-core's pxr); returns seconds."""
+def orange_pixels(path: str) -> int:
+    """Number of pixels of a PNG in the crack faces' orange (hue 10-45 degrees, saturation > 0.4, value > 0.25)."""
+    import numpy as np
+    from PIL import Image
+
+    hsv = np.asarray(Image.open(path).convert("RGB").convert("HSV"), dtype=np.float64) / 255.0
+    hue = hsv[..., 0] * 360.0
+    return int(np.count_nonzero((hue >= 10.0) & (hue <= 45.0) & (hsv[..., 1] > 0.4) & (hsv[..., 2] > 0.25)))
+
+
+def blender_still(cache: str, frame: int, out: str) -> dict:
+    """Cycles still of ``frame`` of the cache (bpy in a child process, away from usd-core's pxr); returns its render
+    time, the number of crack faces on that frame and the number of orange pixels of the image. A frame with crack
+    faces and no orange pixel is an error: the crack shading did not reach the render."""
     from pxr import Usd, UsdGeom
 
     stage = Usd.Stage.Open(cache)
@@ -244,7 +272,13 @@ def blender_still(cache: str, frame: int, out: str) -> float:
     )
     if proc.returncode != 0 or "RENDERED" not in proc.stdout:
         raise RuntimeError("Blender render failed: " + (proc.stdout + proc.stderr)[-2000:])
-    return time.perf_counter() - t0
+    seconds = time.perf_counter() - t0
+    line = next(ln for ln in proc.stdout.splitlines() if ln.startswith("CRACK FACES "))
+    crack_faces = int(line.split()[-1])
+    orange = orange_pixels(out)
+    if crack_faces and not orange:
+        raise RuntimeError(f"Blender still {out}: frame {frame} has {crack_faces} crack faces but no orange pixel")
+    return {"blender_seconds": seconds, "blender_crack_faces": crack_faces, "blender_orange_pixels": orange}
 
 
 def _doc(module) -> tuple[str, str]:
@@ -301,8 +335,15 @@ def write_markdown(work: str, images: str, path: str) -> None:
             "",
         ]
         if r.get("blender"):
+            crack = ""
+            if "blender_crack_faces" in r:
+                crack = (
+                    f"; crack faces orange through an Attribute node reading the per-face `crack` primvar: "
+                    f"{r['blender_crack_faces']:,} crack faces on this frame, {r['blender_orange_pixels']:,} orange "
+                    "pixels"
+                )
             lines += [
-                f"Blender (Cycles, 32 samples, frame {r['blender_frame']}, {r['blender_seconds']:.0f} s):",
+                f"Blender (Cycles, 32 samples, frame {r['blender_frame']}, {r['blender_seconds']:.0f} s{crack}):",
                 "",
                 f"![{name} in Blender]({rel}/{r['blender']})",
                 "",
@@ -346,6 +387,7 @@ def main(argv=None) -> int:
     p.add_argument("--markdown", default=os.path.join(ROOT, "docs", "gallery.md"), help="the page to write")
     p.add_argument("--render-only", action="store_true", help="render the caches of an earlier run")
     p.add_argument("--no-blender", action="store_true", help="skip the Blender still of the teaser")
+    p.add_argument("--blender-only", action="store_true", help="only the teaser's Blender still, from its cache")
     p.add_argument("--run-one", metavar="SCENE", help=argparse.SUPPRESS)
     p.add_argument("--cache", help=argparse.SUPPRESS)
     p.add_argument("--frames", type=int, help=argparse.SUPPRESS)
@@ -362,6 +404,8 @@ def main(argv=None) -> int:
         if unknown:
             p.error(f"unknown scenes {unknown}; the gallery scenes are {names}")
         names = wanted
+    if args.blender_only:
+        names, args.render_only, args.no_blender = [TEASER], True, False
     failed = []
     for name in names:
         cache = os.path.join(args.work, f"{name}.usdc")
@@ -374,11 +418,12 @@ def main(argv=None) -> int:
             result = _child(name, cache)
             result["machine"] = _machine()
         if "error" not in result:
-            result.update(render(name, cache, args.images, result))
+            if not args.blender_only:
+                result.update(render(name, cache, args.images, result))
             if name == TEASER and not args.no_blender:
                 frame = min(VIEWS.get(name, {}).get("still", result["frames"]), result["frames"])
                 out = os.path.join(args.images, f"{name}_blender.png")
-                result["blender_seconds"] = blender_still(cache, frame, out)
+                result.update(blender_still(cache, frame, out))
                 result["blender"], result["blender_frame"] = os.path.basename(out), frame
             print(
                 f"gallery: {name}: {result['wall_seconds']:.1f} s run, {result['render_seconds']:.1f} s render",
