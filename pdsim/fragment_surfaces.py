@@ -685,6 +685,27 @@ def _on_planes(inc, plane_eq, points, src, dst, spacing):
     return out
 
 
+def _independent_choice(rows, cols, prio, count, size) -> np.ndarray:
+    """Luby-style choice of operations whose zones do not meet: operation ``rows[i]`` touches item ``cols[i]`` (items
+    0..size-1), ``prio`` [count] orders them (smaller first, distinct). In passes, every open operation that is the
+    smallest on all its items wins, and the items of the winners close their rivals. Returns bool [count]."""
+    chosen = np.zeros(count, dtype=bool)
+    open_ = np.ones(count, dtype=bool)
+    blocked = np.zeros(size, dtype=bool)
+    while open_.any():
+        live = open_[rows]
+        best = np.full(size, np.inf)
+        np.minimum.at(best, cols[live], prio[rows[live]])
+        win = open_.copy()
+        np.logical_and.at(win, rows, best[cols] == prio[rows])
+        chosen |= win
+        blocked[cols[win[rows]]] = True
+        hit = np.zeros(count, dtype=bool)
+        np.logical_or.at(hit, rows, blocked[cols])
+        open_ &= ~hit
+    return chosen
+
+
 def _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle, plane_eq=None):
     """One round of edge collapses on the complex (see :func:`clean_complex`). Returns (triangles after the round
     [f, 3], mask [f] of the triangles that keep an area, number of collapses; 0: nothing left to do)."""
@@ -728,20 +749,7 @@ def _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle
     zone = adj[src].tocoo()
     rows = np.concatenate([zone.row, np.arange(len(src))])
     cols = np.concatenate([zone.col, src])
-    chosen = np.zeros(len(src), dtype=bool)
-    open_ = np.ones(len(src), dtype=bool)
-    blocked = np.zeros(n_v, dtype=bool)
-    while open_.any():  # Luby-style passes: local minima win, their zones block their rivals
-        live = open_[rows]
-        best = np.full(n_v, np.inf)
-        np.minimum.at(best, cols[live], prio[rows[live]])
-        win = open_.copy()
-        np.logical_and.at(win, rows, best[cols] == prio[rows])
-        chosen |= win
-        blocked[cols[win[rows]]] = True
-        hit = np.zeros(len(src), dtype=bool)
-        np.logical_or.at(hit, rows, blocked[cols])
-        open_ &= ~hit
+    chosen = _independent_choice(rows, cols, prio, len(src), n_v)
     src, dst = src[chosen], dst[chosen]
     # Link condition in every shell that holds the source.
     sv = np.unique(shell[:, None] * n_v + tri)  # (shell, vertex) pairs present
@@ -863,20 +871,7 @@ def _flip_round(points, tri, shell, patch, sliver_angle):
     prio = amin[sliver][cand] + 1e-9 * group[cand] / max(group.max(), 1)
     faces = np.concatenate([sliver[cand], t2[cand]])
     rows = np.tile(np.arange(len(cand)), 2)
-    chosen = np.zeros(len(cand), dtype=bool)
-    open_ = np.ones(len(cand), dtype=bool)
-    blocked = np.zeros(f_count, dtype=bool)
-    while open_.any():
-        live = open_[rows]
-        best = np.full(f_count, np.inf)
-        np.minimum.at(best, faces[live], prio[rows[live]])
-        win = open_.copy()
-        np.logical_and.at(win, rows, best[faces] == prio[rows])
-        chosen |= win
-        blocked[faces[win[rows]]] = True
-        hit = np.zeros(len(cand), dtype=bool)
-        np.logical_or.at(hit, rows, blocked[faces])
-        open_ &= ~hit
+    chosen = _independent_choice(rows, faces, prio, len(cand), f_count)
     pick = cand[chosen]
     g_ok = np.zeros(group.max() + 1, dtype=bool)
     g_ok[group[pick]] = True
@@ -986,21 +981,7 @@ def _relax_round(points, tri, patch, plane_eq, sliver_angle, max_turn=30.0, surf
     # Independent moves: no two moved vertices share a triangle (smallest angle first).
     cand, target, best_step, prio = cand[move], target[move], best_step[move], old_min[move]
     ring = vt[cand].tocoo()
-    chosen = np.zeros(len(cand), dtype=bool)
-    open_ = np.ones(len(cand), dtype=bool)
-    blocked = np.zeros(len(tri), dtype=bool)
-    prio = prio + 1e-12 * np.arange(len(cand))
-    while open_.any():
-        live = open_[ring.row]
-        best = np.full(len(tri), np.inf)
-        np.minimum.at(best, ring.col[live], prio[ring.row[live]])
-        win = open_.copy()
-        np.logical_and.at(win, ring.row, best[ring.col] == prio[ring.row])
-        chosen |= win
-        blocked[ring.col[win[ring.row]]] = True
-        hit = np.zeros(len(cand), dtype=bool)
-        np.logical_or.at(hit, ring.row, blocked[ring.col])
-        open_ &= ~hit
+    chosen = _independent_choice(ring.row, ring.col, prio + 1e-12 * np.arange(len(cand)), len(cand), len(tri))
     c = cand[chosen]
     points[c] += best_step[chosen][:, None] * (target[chosen] - points[c])
     return int(chosen.sum())
