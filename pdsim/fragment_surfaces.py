@@ -568,7 +568,7 @@ def partition_regions(
 # of its input triangle (coplanar input triangles share one); a crack face's patch is its pair of regions.
 
 SLIVER_ANGLE = 5.0  # triangles with a smaller angle [degrees] are slivers
-RELAX_TURN = 30.0
+RELAX_TURN = 30.0  # largest turn [degrees] of a triangle when the rest-space clean-up moves a vertex
 DEFORMED_ROUNDS = 16  # rounds of edge flips, then of vertex moves, per frame against slivers made by the motion
 SHORT_EDGE = 0.3  # edges shorter than this many spacings are collapsed
 _MAX_CLEAN_ROUNDS = 40
