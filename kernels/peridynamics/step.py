@@ -8,28 +8,18 @@ Formulas (kernels/peridynamics/bonds.py gives the notation and the elastic model
 
 - Elastic + plastic force: A_kj / (4 w) = Lambda P_k + b_k (e - e^p_kj), so
   f_k = sum_j 2 (w V beta G^dil Lambda (P_k + P_j) + w V beta G^dev (b_k (e - e^p_kj) + b_j (e - e^p_jk))) n,
-  the derivative of W_k = c0 theta_k^2 + b_k sum_j w V beta G^dev (e - e^p_kj)^2 (e^p_kj: plastic extension) with
-  theta_k = d_k sum_j w V beta G^dil (e - e^p_kj) Lambda, the dilatation of the elastic extensions: W_k depends on
-  e - e^p only, so plastic flow leaves no stress behind.
-- Plasticity (ordinary state-based after Mitchell 2011, with a finite-strain volumetric split): the deviatoric part
-  of a bond's elastic extension is e^d - e^p = e - e^p - Lambda L theta_p / 3 with theta_p / 3 = J^(1/3) - 1 and
-  J = det F the volume ratio of the family's deformation F = I + G K^-1, G = sum_live w V beta du xi^T,
-  K = sum_live w V beta xi xi^T (the shape tensor), all from the dilatation loop. J is exact for every affine
-  deformation of any family (surface or cracked), so e^d - e^p vanishes bond by bond under an isotropic expansion
-  (hydrostatic load never yields) and an isochoric stretch of any size (J = 1) counts as deviatoric in full. The
-  family's mean extension, 3 sum w L e Lambda V beta / sum w L^2 V beta, is exact only for the isotropic expansion:
-  it reads 0.086 for the isochoric stretch diag(l, l^-1/2, l^-1/2) at l = 1.3 (0.011 at l = 1.1), which as a
-  volumetric split held that much of a pulled bar's plastic stretch elastic, as a spurious pressure of kappa theta or
-  a loss of volume (docs/accuracy.md). Where the live family does not span space (det K < 1e-2 (tr K / 3)^3, a
-  particle left with a sheet or a line of bonds), theta_p = 0. Trial deviatoric force t_j = alpha_j (e^d_j - e^p_j),
-  alpha_j = 2 w b_k G^dev; ||t||^2 = sum_j t_j^2 V_j beta_j, accumulated in the dilatation loop as a quadratic in
-  theta_p / 3 (no second pass over the family);
+  the derivative of W_k = c0 theta_k^2 + b_k sum_j w V beta G^dev (e - e^p_kj)^2 (e^p_kj: plastic extension).
+- Plasticity (ordinary state-based, Mitchell 2011): per bond the deviatoric extension e^d = e - Lambda theta_p L / 3
+  with theta_p = 3 sum_live w L e Lambda V beta / sum_live w L^2 V beta, which vanishes bond by bond under any
+  isotropic expansion for every particle (the supplement's e - (delta/4) Lambda theta does so only on average over a
+  full family, so a yield check on it would yield under pure hydrostatic load). Trial deviatoric
+  force t_j = alpha_j (e^d_j - e^p_j), alpha_j = 2 w b_k G^dev; ||t||^2 = sum_j t_j^2 V_j beta_j;
   yield when ||t||^2 / 2 > psi0_k = s_k 10 sigma_Y(eps_p)^2 / (3 pi delta^5) (s_k: the family's share of the
   continuum norm, 1 in the bulk); then t <- t sqrt(2 psi0) / ||t|| and e^p_j = e^d_j - t_j / alpha_j.
   Linear hardening sigma_Y = sigma_Y0 + H eps_p with the equivalent plastic strain
   eps_p = sqrt(5 sum_j w (e^p_j)^2 V_j beta_j / m_k) (equal to the uniaxial plastic strain for isochoric flow).
   The return mapping runs in the dilatation kernel, right after a yielding particle's family sums (its bonds'
-  (n, e, Lambda) are then still in cache), and recomputes theta_k from the new plastic extensions.
+  (n, e, Lambda) are then still in cache, and the volumetric sums of theta_p come with the dilatation's loop).
 - Fracture: a live bond breaks for good when its stretch (its elastic stretch, s - (e^p_kj + e^p_jk) / (2 L), for
   a yielding material) exceeds s_c,kj - alpha min(s_min,k, s_min,j) (Silling-Askari compressive bonus, s_min the
   particle's most compressive live stretch, <= 0, from this step's dilatation pass), or, for a ductile material,
@@ -91,14 +81,13 @@ def make_step_kernels(fracture: bool, plastic: bool):
         bond_reverse: wp.array(dtype=wp.int32),
         bond_plastic_reverse: wp.array(dtype=float),
     ):
-        """theta_k = d_k sum_live w (e - e^p) Lambda V beta G^dil for particle k = first + tid (e^p = 0 where the
-        material does not yield); caches each live bond's (n, e) and Lambda for the later passes and, with fracture,
-        the particle's most compressive live stretch (for the compressive bonus). With plasticity, a yielding particle
-        (k < plastic_particle_count) also sums its family's deformation (G, K) and the trial norm's terms in the same
-        loop, then runs the return mapping on the bonds it just cached (the plastic update: it writes its own bonds'
-        plastic extensions and its own equivalent plastic strain, mirrors each new extension e^p_kj into
+        """theta_k = d_k sum_live w e Lambda V beta G^dil for particle k = first + tid; caches each live bond's (n, e)
+        and Lambda for the later passes and, with fracture, the particle's most compressive live stretch (for the
+        compressive bonus). With plasticity, a yielding particle (k < plastic_particle_count) then runs the return
+        mapping of its deviatoric force state on the bonds it just cached (the plastic update: it writes its own
+        bonds' plastic extensions and its own equivalent plastic strain, and mirrors each new extension e^p_kj into
         ``bond_plastic_reverse`` at the reverse bond j -> k, the one slot of that array bond k -> j owns, which no
-        kernel reads before the force pass, and recomputes theta_k with the new extensions).
+        kernel reads before the force pass).
 
         The deformed bond is eta = xi + (u_j - u_k) with xi the reference bond, and the extension is evaluated as
         e = |eta| - L = (2 xi . du + du . du) / (|eta| + L), which keeps float32's relative precision at any strain
@@ -112,18 +101,8 @@ def make_step_kernels(fracture: bool, plastic: bool):
         if wp.static(PLASTIC):
             if k < plastic_particle_count:
                 yields = 1
-        # yielding particles: rows of G = sum w V beta du xi^T and K = sum w V beta xi xi^T over the live family, and
-        # the trial norm ||t||^2 / (4 b^2 delta) = sum c (x - u y)^2 = na - 2 nb y + nc y^2 with x = e - e^p,
-        # u = Lambda L, y = theta_p / 3 and c = (w V beta G^dev)^2 / (w V beta L) (V beta = w V beta L / delta)
-        gx = wp.vec3(0.0)
-        gy = wp.vec3(0.0)
-        gz = wp.vec3(0.0)
-        kx = wp.vec3(0.0)
-        ky = wp.vec3(0.0)
-        kz = wp.vec3(0.0)
-        na = float(0.0)
-        nb = float(0.0)
-        nc = float(0.0)
+        num = float(0.0)  # plastic volumetric strain: sum w L e Lambda V beta over the live family
+        den = float(0.0)  # and sum w L^2 V beta
         for q in range(family_offsets[k], family_offsets[k + 1]):
             if wp.static(FRACTURE):
                 if bond_alive[q] == wp.uint8(0):
@@ -143,78 +122,60 @@ def make_step_kernels(fracture: bool, plastic: bool):
             bond_lambda[q] = lam
             if wp.static(FRACTURE):
                 smin = wp.min(smin, e / L)
-            x = e
+            acc += bond_wv_dil[q] * e * lam
             if wp.static(PLASTIC):
                 if yields != 0:
-                    x = e - bond_plastic[q]
-                    wv = bond_wv[q]
-                    wx = xi * wv
-                    gx += du[0] * wx
-                    gy += du[1] * wx
-                    gz += du[2] * wx
-                    kx += xi[0] * wx
-                    ky += xi[1] * wx
-                    kz += xi[2] * wx
-                    wd = bond_wv_dev[q]
-                    c = wd * wd / (wv * L)
-                    u = lam * L
-                    cx = c * x
-                    na += cx * x
-                    nb += cx * u
-                    nc += c * u * u
-            acc += bond_wv_dil[q] * x * lam
+                    wl = bond_wv[q] * L
+                    num += wl * e * lam
+                    den += wl * L
+        th = dil_d[k] * acc
+        theta[k] = th
         bk = dev_b[k]
+        bp[k] = wp.vec2(bk, dil_coef[k] * th)
         if wp.static(FRACTURE):
             stretch_min[k] = smin
         if wp.static(PLASTIC):
             if yields != 0:
-                # Return mapping (module docstring). K is scaled to a unit mean eigenvalue before the determinant
-                # test and the inverse (its entries scale as h^5: float32 would underflow in det K at mm spacings);
-                # J - 1 = tr H + (tr^2 H - tr H^2) / 2 + det H and J^(1/3) - 1 = (J - 1) / (j^2 + j + 1),
-                # j = J^(1/3), keep the relative precision of small strains.
+                # Return mapping (module docstring). theta_p = 3 num / den is exactly 3 zeta under any isotropic
+                # expansion zeta, for every particle (surface or cracked), so the deviatoric extension
+                # e^d = e - Lambda theta_p L / 3 vanishes bond by bond and hydrostatic load never yields.
+                # ||t||^2 = sum alpha^2 (e^d - e^p)^2 V beta with alpha = 2 b G^dev w and V beta = w V beta L / delta,
+                # evaluated as delta sum (2 b w V beta G^dev (e^d - e^p))^2 / (w V beta L): one division per bond.
                 delta = horizon[k]
                 sigma_y = yield_stress[k] + hardening[k] * eqps[k]
                 psi0 = psi_scale[k] * 10.0 * sigma_y * sigma_y / (3.0 * wp.pi * wp.pow(delta, 5.0))
-                th3 = float(0.0)  # theta_p / 3 = J^(1/3) - 1
-                tk = kx[0] + ky[1] + kz[2]
-                if tk > 0.0:  # some live bond
-                    sk = 3.0 / tk
-                    km = wp.matrix_from_rows(kx, ky, kz) * sk
-                    if wp.determinant(km) > 1.0e-2:
-                        hm = wp.matrix_from_rows(gx, gy, gz) * sk * wp.inverse(km)
-                        tr = wp.trace(hm)
-                        jm1 = tr + 0.5 * (tr * tr - wp.trace(hm * hm)) + wp.determinant(hm)
-                        jc = 1.0 + jm1
-                        cb = wp.sign(jc) * wp.pow(wp.abs(jc), 1.0 / 3.0)
-                        th3 = jm1 / (cb * cb + cb + 1.0)
-                # ||t||^2 / 2 > psi0 as quad > psi0 / (2 b^2 delta) (b^2 alone would overflow float32 at mm horizons)
-                quad = na - 2.0 * nb * th3 + nc * th3 * th3
-                q_yield = psi0 / bk / bk / (2.0 * delta)
-                if quad > q_yield:
-                    r = wp.sqrt(q_yield / quad)
+                th3 = float(0.0)  # theta_p / 3
+                if den > 0.0:
+                    th3 = num / den
+                two_b = 2.0 * bk
+                norm2 = float(0.0)
+                for q in range(family_offsets[k], family_offsets[k + 1]):
+                    live = int(1)
+                    if wp.static(FRACTURE):
+                        live = int(bond_alive[q])
+                    if live != 0:
+                        L = bond_geom[q][3]
+                        ed = bond_ne[q][3] - bond_lambda[q] * th3 * L
+                        a = two_b * bond_wv_dev[q] * (ed - bond_plastic[q])
+                        norm2 += a * a / (bond_wv[q] * L)
+                norm2 = norm2 * delta
+                if 0.5 * norm2 > psi0:
+                    r = wp.sqrt(2.0 * psi0 / norm2)
                     ep2 = float(0.0)
-                    acc_new = float(0.0)
                     for q in range(family_offsets[k], family_offsets[k + 1]):
                         live = int(1)
                         if wp.static(FRACTURE):
                             live = int(bond_alive[q])
                         ep = bond_plastic[q]
                         if live != 0:
-                            eq = bond_ne[q][3]
-                            lq = bond_lambda[q]
-                            ed = eq - lq * th3 * bond_geom[q][3]
+                            ed = bond_ne[q][3] - bond_lambda[q] * th3 * bond_geom[q][3]
                             ep = ed - r * (ed - ep)
                             bond_plastic[q] = ep
                             bond_plastic_reverse[bond_reverse[q]] = ep
-                            acc_new += bond_wv_dil[q] * (eq - ep) * lq
                         ep2 += bond_wv[q] * ep * ep
-                    acc = acc_new
                     m = weighted_volume[k]
                     if m > 0.0:
                         eqps[k] = wp.sqrt(5.0 * ep2 / m)
-        th = dil_d[k] * acc
-        theta[k] = th
-        bp[k] = wp.vec2(bk, dil_coef[k] * th)
 
     @wp.kernel(module="unique")
     def force(
@@ -300,7 +261,7 @@ def make_step_kernels(fracture: bool, plastic: bool):
         energy_density: wp.array(dtype=float),
     ):
         """Elastic energy density W_k = c0 theta_k^2 + b_k sum_live w V beta G^dev (e - e^p)^2 [J/m^3] at particle
-        k = first + tid (theta_k: the dilatation pass's, of the elastic extensions e - e^p)."""
+        k = first + tid."""
         k = first + wp.tid()
         acc = float(0.0)
         for q in range(family_offsets[k], family_offsets[k + 1]):

@@ -60,7 +60,7 @@ class PeridynamicModel:
 @dataclass
 class PeridynamicState:
     """Per-step data of the bonds (displacements, velocities and accelerations live in the solver's PointKinematics):
-    dilatation theta [-] (of the elastic extensions e - e^p where the material yields),
+    dilatation theta [-],
     bp = (b_k, P_k) per particle, force density [N/m^3]; per bond the deformed (n, e) and Lambda cached by the
     dilatation pass for the force pass."""
 
