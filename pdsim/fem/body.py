@@ -205,12 +205,10 @@ def mesh_surface(mesh: TetMesh, name: str) -> SolidShape:
     """The boundary of a tet mesh as a closed surface (its boundary faces on the vertices they use), for drawing
     smooth crack surfaces. ParameterError (crack_surfaces) when it is not a closed 2-manifold: an edge of the boundary
     not shared by exactly two faces of opposite directions, as where two parts of the mesh touch along an edge."""
+    from .fracture import closed_surface_defects
+
     faces = np.asarray(mesh.boundary_faces(), dtype=np.int64)
-    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    n = np.int64(mesh.vertex_count)
-    key = directed[:, 0] * n + directed[:, 1]
-    unique = np.unique(key)
-    if len(unique) != len(key) or not np.isin(directed[:, 1] * n + directed[:, 0], unique).all():
+    if closed_surface_defects(faces):
         raise ParameterError(
             "crack_surfaces",
             "smooth",
