@@ -56,7 +56,12 @@ class Material:
         fracture_energy: G0 [J/m^2], > 0; the critical stretch follows from it and the horizon. Give this or
             ``critical_stretch``, not both; neither means the material never breaks.
         critical_stretch: s_c [-], > 0, used as given (independent of the horizon).
-        compressive_bonus: alpha >= 0 of the Silling-Askari rule s0 = s_c - alpha s_min (compression strengthens).
+        compressive_bonus: alpha >= 0 of the Silling-Askari rule s0 = s_c - alpha s_min (compression strengthens;
+            s_min <= 0 is the most compressive live stretch of the bond's two particles).
+        compressive_bonus_cap: k >= 0, an upper bound on that bonus relative to the bond's own critical stretch:
+            s0 = s_c + min(-alpha s_min, k s_c), so no bond holds beyond (1 + k) s_c however hard its neighbourhood
+            is squeezed (a ball pressed into a brittle plate otherwise stretches the material under it far beyond
+            s_c before it breaks). None (default): no bound (the plain Silling-Askari rule).
         failure_plastic_strain: ductile failure: a stretched bond also breaks once the equivalent plastic strain of
             one of its particles passes this value (> 0; needs yield_stress).
         anisotropy: optional :class:`Anisotropy`.
@@ -89,6 +94,7 @@ class Material:
     fracture_energy: float | None = None
     critical_stretch: float | None = None
     compressive_bonus: float = 0.0
+    compressive_bonus_cap: float | None = None
     failure_plastic_strain: float | None = None
     anisotropy: Anisotropy | None = None
     strength_weibull_modulus: float | None = None
@@ -120,6 +126,12 @@ class Material:
             "compressive_bonus",
             check_range("compressive_bonus", self.compressive_bonus, 0.0, None, lo_open=False),
         )
+        if self.compressive_bonus_cap is not None:
+            object.__setattr__(
+                self,
+                "compressive_bonus_cap",
+                check_range("compressive_bonus_cap", self.compressive_bonus_cap, 0.0, None, lo_open=False),
+            )
         if self.failure_plastic_strain is not None:
             if self.yield_stress is None:
                 raise ParameterError(

@@ -291,3 +291,46 @@ def test_brittle_wall_shatters_ductile_wall_bends_then_tears():
     assert most_brittle_fragments >= 5
     assert ductile_torn
     assert ductile_before_tear[0] > 0.1 and ductile_before_tear[1] > 2.0 * 0.01
+
+
+@pytest.mark.parametrize(
+    ("alpha", "cap", "threshold"),
+    [(1.0, None, 0.06), (1.0, 10.0, 0.06), (1.0, 1.0, 0.02), (0.5, 1.0, 0.02), (0.5, 3.0, 0.035)],
+)
+def test_compressive_bonus_cap_sets_the_breaking_stretch(alpha, cap, threshold):
+    """A block of 6 x 6 x 6 particles given the homogeneous deformation x -> (1 - 0.05) x, z -> (1 + 0.045) z in one
+    go: every particle's most compressive live stretch is s_min = -0.05 (its bonds along x), so a bond breaks in the
+    first force pass exactly when its stretch exceeds s0 = s_c + min(-alpha s_min, k s_c) (s_c = 0.01; k =
+    Material.compressive_bonus_cap, no bound when None): 0.06 with the full bonus (nothing breaks: the largest
+    stretch, along z, is 0.045), 0.02 with alpha = 1 or 0.5 and k = 1, 0.035 with alpha = 0.5 and k = 3 (the bonus
+    0.025 is below the cap). The broken bonds are compared one by one with that rule on the exact bond stretches (no
+    bond lies within 5e-4 of the threshold)."""
+    material = pdsim.Material(
+        density=1000.0,
+        youngs_modulus=1.0e6,
+        poisson_ratio=0.25,
+        critical_stretch=0.01,
+        compressive_bonus=alpha,
+        compressive_bonus_cap=cap,
+    )
+    body = pdsim.PeridynamicBody(pdsim.box((6 * H, 6 * H, 6 * H)), material, H)
+    solver = pdsim.SolverPeridynamics([body])
+    m = solver.model
+    X = m.rest_host.astype(np.float64)
+    grad = np.diag([-0.05, 0.0, 0.045])
+    solver.set_displacements(X @ grad.T)
+    off = m.family_offsets.numpy().astype(np.int64)
+    owner = np.repeat(np.arange(m.particle_count), np.diff(off))
+    xi = X[m.family_neighbors.numpy()[: off[-1]]] - X[owner]
+    stretch = np.linalg.norm(xi @ (np.eye(3) + grad).T, axis=1) / np.linalg.norm(xi, axis=1) - 1.0
+    assert stretch.min() == pytest.approx(-0.05) and stretch.max() == pytest.approx(0.045)
+    assert np.abs(stretch - threshold).min() > 5.0e-4
+    broken = ~solver.bond_alive()
+    np.testing.assert_array_equal(broken, stretch > threshold)
+    assert broken.any() == (threshold < 0.045)
+
+
+@pytest.mark.parametrize("cap", [-0.5, float("nan"), float("inf"), "a lot"])
+def test_compressive_bonus_cap_rejects_bad_values(cap):
+    with pytest.raises(pdsim.ParameterError, match=r"compressive_bonus_cap=.*allowed"):
+        pdsim.Material(1000.0, 1.0e6, 0.25, critical_stretch=0.01, compressive_bonus=1.0, compressive_bonus_cap=cap)

@@ -22,7 +22,8 @@ Formulas (kernels/peridynamics/bonds.py gives the notation and the elastic model
   (n, e, Lambda) are then still in cache, and the volumetric sums of theta_p come with the dilatation's loop).
 - Fracture: a live bond breaks for good when its stretch (its elastic stretch, s - (e^p_kj + e^p_jk) / (2 L), for
   a yielding material) exceeds s_c,kj - alpha min(s_min,k, s_min,j) (Silling-Askari compressive bonus, s_min the
-  particle's most compressive live stretch, <= 0, from this step's dilatation pass), or, for a ductile material,
+  particle's most compressive live stretch, <= 0, from this step's dilatation pass; with Material.compressive_bonus_cap
+  k the min is floored at -(k / alpha) s_c,kj, so the bonus is at most k s_c,kj), or, for a ductile material,
   when the larger equivalent plastic strain of its two particles exceeds the failure plastic strain. The test runs
   at the end of the force pass, which already holds both directions' plastic extensions; both directed copies of a
   bond see the same quantities, so they break in the same step without communication. Broken bonds are skipped by
@@ -191,6 +192,7 @@ def make_step_kernels(fracture: bool, plastic: bool):
         bond_alive: wp.array(dtype=wp.uint8),
         bond_critical_stretch: wp.array(dtype=float),
         bonus_alpha: wp.array(dtype=float),
+        bonus_floor: wp.array(dtype=float),
         stretch_min: wp.array(dtype=float),
         eqps: wp.array(dtype=float),
         failure_eqps: wp.array(dtype=float),
@@ -208,11 +210,13 @@ def make_step_kernels(fracture: bool, plastic: bool):
         f = wp.vec3(0.0)
         smin_k = float(0.0)
         alpha_k = float(0.0)
+        floor_k = float(0.0)
         eqps_k = float(0.0)
         fail_k = float(0.0)
         if wp.static(FRACTURE):
             smin_k = stretch_min[k]
             alpha_k = bonus_alpha[k]
+            floor_k = bonus_floor[k]
             if wp.static(PLASTIC):
                 eqps_k = eqps[k]
                 fail_k = failure_eqps[k]
@@ -239,7 +243,8 @@ def make_step_kernels(fracture: bool, plastic: bool):
                     if q < plastic_bond_count:
                         if c[3] > 0.0 and wp.max(eqps_k, eqps[j]) > fail_k:
                             broke = 1
-                sc = bond_critical_stretch[q] - alpha_k * wp.min(smin_k, stretch_min[j])
+                sc0 = bond_critical_stretch[q]
+                sc = sc0 - alpha_k * wp.max(wp.min(smin_k, stretch_min[j]), -floor_k * sc0)
                 if c[3] - 0.5 * ep_sum > sc * bond_geom[q][3]:
                     broke = 1
                 if broke != 0:

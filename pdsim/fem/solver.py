@@ -347,7 +347,8 @@ class SolverFem(PointSolver):
     def requested_features(cls, bodies, context: SolverContext) -> dict:
         """The scene-level requests, plus per body: plasticity (FemPlasticity), fracture (tensile_strength), loads,
         and the Material fields the FEM does not read (yield_stress, hardening_modulus, failure_plastic_strain,
-        fracture_energy, critical_stretch, compressive_bonus, strength_weibull_modulus, debris_damping, anisotropy:
+        fracture_energy, critical_stretch, compressive_bonus, compressive_bonus_cap, strength_weibull_modulus,
+        debris_damping, anisotropy:
         peridynamic settings with FEM counterparts named by :meth:`instead`)."""
         asked = super().requested_features(bodies, context)
         for b in bodies:
@@ -363,7 +364,7 @@ class SolverFem(PointSolver):
                     asked.setdefault("material_plasticity", f"body '{b.name}': Material.{field}={getattr(m, field)!r}")
             if getattr(m, "hardening_modulus", 0.0):
                 asked.setdefault("material_plasticity", f"body '{b.name}': Material.hardening_modulus")
-            for field in ("fracture_energy", "critical_stretch", "strength_weibull_modulus"):
+            for field in ("fracture_energy", "critical_stretch", "compressive_bonus_cap", "strength_weibull_modulus"):
                 if getattr(m, field, None) is not None:
                     asked.setdefault("material_fracture", f"body '{b.name}': Material.{field}={getattr(m, field)!r}")
             for field in ("compressive_bonus", "debris_damping"):

@@ -45,6 +45,7 @@ class PeridynamicModel:
     bond_critical_stretch: object = None  # s_c per bond (anisotropy and unbreakable regions applied) [-]
     bond_alive_initial: object = None  # uint8 per bond: 0 for bonds cut by notches
     bonus_alpha: object = None  # compressive bonus alpha per particle [-]
+    bonus_floor: object = None  # compressive_bonus_cap / alpha per particle (1e30: no cap) [-]
     failure_eqps: object = None  # ductile failure plastic strain per particle [-]
     yield_stress: object = None  # sigma_Y0 per plastic particle [Pa]
     hardening: object = None  # H per plastic particle [Pa]
@@ -335,6 +336,7 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
             bond_critical_stretch=bond_sc,
             bond_alive_initial=alive,
             bonus_alpha=arr(per_particle([b.material.compressive_bonus for b in bodies])),
+            bonus_floor=arr(per_particle([_bonus_floor(b.material) for b in bodies])),
             failure_eqps=arr(fail_h),
         )
         if any(b.material.debris_damping > 0.0 for b in bodies):  # kernels/peridynamics/damping.py
@@ -430,3 +432,11 @@ def _cut_bonds(cut, first: int, count: int, rest, offsets, neighbors, alive, dev
             inputs=[first, mesh.id, rest, offsets, neighbors, alive],
             device=device,
         )
+
+
+def _bonus_floor(material) -> float:
+    """Material.compressive_bonus_cap k as a floor on the compressive stretch the bonus reads: the force kernel
+    takes s0 = s_c - alpha max(s_min, -(k / alpha) s_c), which is s_c + min(-alpha s_min, k s_c); 1e30 (no floor)
+    without a cap or a bonus, which leaves the plain rule's arithmetic unchanged."""
+    cap, alpha = material.compressive_bonus_cap, material.compressive_bonus
+    return 1.0e30 if cap is None or alpha <= 0.0 else min(cap / alpha, 1.0e30)

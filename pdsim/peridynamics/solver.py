@@ -309,6 +309,7 @@ class SolverPeridynamics(PointSolver):
                 alive,
                 m.bond_critical_stretch if frac else f1,
                 m.bonus_alpha if frac else f1,
+                m.bonus_floor if frac else f1,
                 s.stretch_min if frac else f1,
                 s.eqps if m.plastic else f1,
                 m.failure_eqps if frac else f1,
