@@ -86,19 +86,24 @@ triangles (same positions) and crack faces are pieces of the region boundaries:
    is reproduced to about 1e-3 h, and vertices next to clamped particles stay put (default cantilever: 0.0015 h).
    Vertex velocities are the time derivative of this map, ``v_v = c' + w x R (X_v - Xc) + sum_k phi_vk (v_k - c' -
    w x R (X_k - Xc))`` with the mean velocity c' and the best-fit angular velocity w of the region's particles.
-9. **Drawn surface** (:meth:`FragmentSurfaces.drawn`). Material that crumbles without separating (particles with
-   damage below the chip threshold whose neighbours move apart by up to their spacing) squeezes the triangles
-   embedded in it. Each frame whose crack faces hold a triangle with an angle under 5 degrees gets rounds of edge
-   flips (as in step 6, now at the current positions) and then of vertex moves (step 6's relaxation, with no plane
-   constraint, turns of up to 60 degrees and steps down to a tenth of the way; then the obtuse corners of flat caps
-   moved away from their long side, and the relaxation again) before it is written. This depends on
-   the frame's positions only (a resumed run draws the same), keeps the vertex count (velocities stay those of step
-   8) and changes the faces only on such frames. Measured on the brittle wall of tests/test_pd_render_surfaces.py
-   (h = 1 cm, frames 0-8): no crack triangle under 5 degrees at rest or as drawn, on the lattice (smallest 5.08
-   degrees at rest, 5.00 drawn; before the relaxation and the drawn-surface pass: 2.35 at rest and 0.28 drawn, 6-36
-   slivers per frame) and with
-   jittered particles (5.12 and 5.10; before the off-surface move of step 3b: 0.12 degrees, up to 180 slivers per
-   frame); no triangle is longer than 2.7 h at rest.
+9. **Drawn surface** (:meth:`FragmentSurfaces.drawn`). Material that stretches or crumbles without separating
+   (particles with damage below the chip threshold whose neighbours move apart by up to their spacing) stretches and
+   squeezes the triangles embedded in it. Each frame, edges drawn longer than 3 h are split at their rest-space
+   midpoints (a triangle with one, two or three long sides splits in two, three or four; conforming, so shells stay
+   closed), and the new vertices are embedded in the particles exactly as in step 8 (their own MLS shape functions),
+   so the drawn surface keeps following the material at about the particle spacing; this repeats until no edge is
+   longer than 3 h. Then, if the crack faces hold a triangle with an angle under 5 degrees, rounds of edge flips
+   (as in step 6, now at the current positions) and of vertex moves (step 6's relaxation, with no plane constraint,
+   turns of up to 60 degrees and steps down to a tenth of the way; then the obtuse corners of flat caps moved away
+   from their long side, and the relaxation again) remove them before the frame is written; an added vertex left
+   with three triangles at a sliver (inside the triangle of its neighbours) is then removed. Splits and clean-up
+   alternate up to three times. This depends on the frame's positions only (a resumed run draws the same). The
+   faces and vertex count change only on frames that need it; velocities of added vertices are those of step 8 at
+   their rest points. Measured on the brittle wall of tests/test_pd_render_surfaces.py (h = 1 cm, frames 0-8): no
+   crack triangle under 5 degrees at rest or as drawn, on the lattice (smallest 5.08 degrees at rest, 5.00 drawn;
+   before the relaxation and this pass: 2.35 at rest and 0.28 drawn, 6-36 slivers per frame) and with jittered
+   particles (5.12 and 5.10; before the off-surface move of step 3b: 0.12 degrees, up to 180 slivers per frame); no
+   triangle is longer than 2.6 h at rest and 3.0 h as drawn (4.2 h before the splits).
 
 USD: one ``UsdGeom.Mesh`` per body at ``/World/<body>_surface`` holds every shell. It carries the uniform (per-face)
 int primvars ``fragment`` (the fragment label; chips carry their particle's fragment) and ``crack`` (1 on crack
@@ -571,6 +576,9 @@ def partition_regions(
 SLIVER_ANGLE = 5.0  # triangles with a smaller angle [degrees] are slivers
 RELAX_TURN = 30.0  # largest turn [degrees] of a triangle when the rest-space clean-up moves a vertex
 DEFORMED_ROUNDS = 16  # rounds of edge flips, then of vertex moves, per frame against slivers made by the motion
+MAX_DRAWN_EDGE = 3.0  # drawn edges longer than this [spacings] are split at their rest-space midpoints (step 9)
+SPLIT_ROUNDS = 4  # rounds of edge splits per pass (each halves the longest edge)
+REFINE_PASSES = 3  # passes of splits and sliver clean-up per frame
 SHORT_EDGE = 0.3  # edges shorter than this many spacings are collapsed
 _MAX_CLEAN_ROUNDS = 40
 
@@ -1519,28 +1527,37 @@ class FragmentSurfaces:
     def _build_interpolation(self) -> None:
         """MLS shape functions of every vertex over the NEIGHBOR_COUNT nearest particles of its own shell, as a
         sparse matrix [vertex_count, particle_count]."""
-        from scipy.sparse import csr_matrix
         from scipy.spatial import cKDTree
 
-        h = self.spacing
         shell = self._particle_shell
         particles = np.flatnonzero(shell >= 0)
         # A fourth coordinate far apart per shell keeps every query inside the vertex's own shell.
         span = float(np.ptp(np.concatenate([self.rest_positions, self.shape.vertices]), axis=0).max())
-        lift = 10.0 * (span + h)
-        pts = np.concatenate([self.rest_positions[particles], (shell[particles] * lift)[:, None]], axis=1)
-        vtx = np.concatenate([self.rest_vertices, (self.vertex_fragment * lift)[:, None]], axis=1)
+        self._lift = 10.0 * (span + self.spacing)
+        pts = np.concatenate([self.rest_positions[particles], (shell[particles] * self._lift)[:, None]], axis=1)
+        self._tree = (cKDTree(pts), particles)
+        self._phi = self._embedding(self.rest_vertices, self.vertex_fragment)
+
+    def _embedding(self, rest_points: np.ndarray, shell: np.ndarray):
+        """MLS shape functions of rest points [m] [q, 3] of shells ``shell`` [q] over the NEIGHBOR_COUNT nearest
+        particles of their own shell: sparse [q, particle_count]."""
+        from scipy.sparse import csr_matrix
+
+        h = self.spacing
+        tree, particles = self._tree
+        part_shell = self._particle_shell
+        vtx = np.concatenate([rest_points, (shell * self._lift)[:, None]], axis=1)
         k = min(NEIGHBOR_COUNT, particles.shape[0])
-        dist, idx = cKDTree(pts).query(vtx, k=k, workers=-1)
+        dist, idx = tree.query(vtx, k=k, workers=-1)
         dist, idx = dist.reshape(len(vtx), k), idx.reshape(len(vtx), k)
         idx = particles[idx]
-        valid = shell[idx] == self.vertex_fragment[:, None]
+        valid = part_shell[idx] == shell[:, None]
         # Gaussian weights exp(-(d / (MLS_WIDTH h))^2), scaled by exp((d_min / (MLS_WIDTH h))^2) against underflow
         # (MLS shape functions do not change when all weights are scaled alike).
         d_min = np.min(np.where(valid, dist, np.inf), axis=1)
         w = np.where(valid, np.exp(-(dist**2 - d_min[:, None] ** 2) / (MLS_WIDTH * h) ** 2), 0.0)
         p = np.concatenate(
-            [np.ones((len(vtx), k, 1)), (self.rest_positions[idx] - self.rest_vertices[:, None, :]) / h], axis=2
+            [np.ones((len(vtx), k, 1)), (self.rest_positions[idx] - rest_points[:, None, :]) / h], axis=2
         )
         moment = np.einsum("vk,vki,vkj->vij", w, p, p)
         moment[:, 1:, 1:] += (_MLS_RIDGE * w.sum(axis=1))[:, None, None] * np.eye(3)
@@ -1549,8 +1566,9 @@ class FragmentSurfaces:
         y = np.linalg.solve(moment, rhs)[..., 0]
         phi = w * np.einsum("vki,vi->vk", p, y)
         rows = np.repeat(np.arange(len(vtx)), k)
-        self._phi = csr_matrix((phi.ravel(), (rows, idx.ravel())), shape=(len(vtx), self.particle_count))
-        self._phi.sum_duplicates()
+        out = csr_matrix((phi.ravel(), (rows, idx.ravel())), shape=(len(vtx), self.particle_count))
+        out.sum_duplicates()
+        return out
 
     # ------------------------------------------------------------------ motion
 
@@ -1564,33 +1582,37 @@ class FragmentSurfaces:
         rest_c, cur_c, rot = _rigid_fit(self.rest_positions[sel], x[sel], shell[sel], self.fragment_count)
         return sel, shell[sel], rest_c, cur_c, rot
 
-    def vertex_positions(self, positions) -> np.ndarray:
+    def vertex_positions(self, positions, at=None) -> np.ndarray:
         """All shells' vertices at the current particle positions: ``x_v = T(X_v) + sum_k phi_vk r_k`` (rigid fit
         of the shell's particles plus the MLS-interpolated residuals, a sparse product).
 
         Args:
             positions: particle positions [m], shape [particle_count, 3].
+            at: None (the shells' vertices), or other rest points embedded like them: (rest points [m] [q, 3],
+                shell of each [q], their shape functions from :meth:`_embedding`).
 
         Returns:
             Vertex positions [m], float64 shape [vertex_count, 3] (shell after shell, as ``rest_vertices``).
         """
+        rest_v, g, phi = (self.rest_vertices, self.vertex_fragment, self._phi) if at is None else at
         x = np.asarray(positions, dtype=np.float64)
         sel, group, rest_c, cur_c, rot = self._fit(x)
         rigid_p = cur_c[group] + np.einsum("nij,nj->ni", rot[group], self.rest_positions[sel] - rest_c[group])
         residual = np.zeros_like(x)
         residual[sel] = x[sel] - rigid_p
-        g = self.vertex_fragment
-        out = cur_c[g] + np.einsum("nij,nj->ni", rot[g], self.rest_vertices - rest_c[g])
-        return out + self._phi @ residual
+        out = cur_c[g] + np.einsum("nij,nj->ni", rot[g], rest_v - rest_c[g])
+        return out + phi @ residual
 
-    def vertex_velocities(self, positions, velocities) -> np.ndarray:
+    def vertex_velocities(self, positions, velocities, at=None) -> np.ndarray:
         """Vertex velocities [m/s], float64 [vertex_count, 3]: the time derivative of :meth:`vertex_positions`,
         ``v_v = c' + w x R (X_v - Xc) + sum_k phi_vk (v_k - c' - w x R (X_k - Xc))``, where c' is the mean velocity
         of the shell's particles and w their best-fit angular velocity (least squares, exact for a rigid motion).
 
         Args:
             positions: particle positions [m], [particle_count, 3]; velocities: particle velocities [m/s], same shape.
+            at: as in :meth:`vertex_positions`.
         """
+        rest_v, g, phi = (self.rest_vertices, self.vertex_fragment, self._phi) if at is None else at
         x = np.asarray(positions, dtype=np.float64)
         v = np.asarray(velocities, dtype=np.float64)
         if v.shape != x.shape:
@@ -1611,9 +1633,8 @@ class FragmentSurfaces:
         arm_p = np.einsum("nij,nj->ni", rot[group], self.rest_positions[sel] - rest_c[group])
         residual = np.zeros_like(v)
         residual[sel] = v[sel] - v_c[group] - np.cross(omega[group], arm_p)
-        g = self.vertex_fragment
-        arm_v = np.einsum("nij,nj->ni", rot[g], self.rest_vertices - rest_c[g])
-        return v_c[g] + np.cross(omega[g], arm_v) + self._phi @ residual
+        arm_v = np.einsum("nij,nj->ni", rot[g], rest_v - rest_c[g])
+        return v_c[g] + np.cross(omega[g], arm_v) + phi @ residual
 
     def fragment_vertex_positions(self, positions) -> list[np.ndarray]:
         """Per shell, its vertices at the current particle positions: list of [v_i, 3] arrays [m]."""
@@ -1623,39 +1644,80 @@ class FragmentSurfaces:
     # ------------------------------------------------------------------ output
     def view(self, positions, velocities=None):
         """The surface as a MeshView ``<body>_surface`` for particle ``positions`` [m] (shape [particle_count, 3])
-        and ``velocities`` [m/s] (same shape; None: no vertex velocities): vertices moved by the particles, vertex
-        velocities, topology version, faces and the per-face ``fragment`` and ``crack``."""
+        and ``velocities`` [m/s] (same shape; None: no vertex velocities): the drawn surface of :meth:`drawn`
+        (vertices moved by the particles, long edges split, slivers flipped and relaxed), vertex velocities,
+        topology version, faces and the per-face ``fragment`` and ``crack``."""
         from .output.views import MeshView
 
-        points, faces = self.drawn(self.vertex_positions(positions))
-        if self._view_faces is None or self._view_of != self.version or not np.array_equal(faces, self._view_faces):
-            self._view_faces, self._view_of = faces, self.version
+        d = self.drawn(positions)
+        if self._view_faces is None or self._view_of != self.version or not np.array_equal(d.faces, self._view_faces):
+            self._view_faces, self._view_of = d.faces, self.version
             self._view_version += 1
+        vel = None
+        if velocities is not None:
+            vel = self.vertex_velocities(positions, velocities)
+            if d.added is not None:
+                vel = np.concatenate([vel, self.vertex_velocities(positions, velocities, at=d.added)])
         return MeshView(
             name=f"{self.body_name}_surface",
-            points=points,
-            velocities=None if velocities is None else self.vertex_velocities(positions, velocities),
+            points=d.points,
+            velocities=vel,
             topology_version=self._view_version,
-            faces=faces,
-            face_attributes={"fragment": self.face_fragment, "crack": self.face_crack},
+            faces=d.faces,
+            face_attributes={"fragment": self.face_fragment[d.face_parent], "crack": self.face_crack[d.face_parent]},
         )
 
-    def drawn(self, vertices):
-        """The surface to draw at the current vertex positions ``vertices`` [m] (from :meth:`vertex_positions`):
-        slivers made by the motion are flipped away and then relaxed (their vertices move towards their neighbours;
-        step 9 of the method). Depends on the vertex positions only, not on earlier frames.
-
-        Returns:
-            (vertex positions [m] float64 [vertex_count, 3], triangles int32 [face_count, 3]); face i still belongs
-            to the same shell, patch, fragment and crack flag.
-        """
-        x = np.array(vertices, dtype=np.float64)
+    def drawn(self, positions) -> DrawnSurface:
+        """The surface to draw at particle ``positions`` [m] [particle_count, 3] (step 9 of the method): the
+        vertices of :meth:`vertex_positions`; edges drawn longer than ``MAX_DRAWN_EDGE`` spacings split at their
+        rest-space midpoints, which are embedded in the particles like every vertex; slivers made by the motion
+        flipped away and relaxed (their vertices move towards their neighbours). Depends on the positions only, not
+        on earlier frames."""
+        x = self.vertex_positions(positions)
         faces = self.faces.astype(np.int64)
-        angles = triangle_angles(x, faces[self.face_crack == 1]).min(axis=1) if self.face_crack.any() else None
-        if angles is None or angles.min() >= SLIVER_ANGLE:
-            return x, self.faces
+        parent = np.arange(len(faces))
+        rest, shell = self.rest_vertices, self.vertex_fragment
+        phis = []
+        limit = MAX_DRAWN_EDGE * self.spacing
+        for _ in range(REFINE_PASSES):
+            for _ in range(SPLIT_ROUNDS):
+                out = _split_long_edges(x, faces, limit)
+                if out is None:
+                    break
+                lo, hi, faces, from_face = out
+                mid_rest = 0.5 * (rest[lo] + rest[hi])
+                mid_shell = shell[lo]
+                at = (mid_rest, mid_shell, self._embedding(mid_rest, mid_shell))
+                phis.append(at[2])
+                x = np.concatenate([x, self.vertex_positions(positions, at=at)])
+                rest, shell = np.concatenate([rest, mid_rest]), np.concatenate([shell, mid_shell])
+                parent = parent[from_face]
+            faces, parent = self._unsliver(x, faces, parent)
+            if _longest_edge(x, faces) <= limit:
+                break
+        added = None
+        if phis:
+            from scipy.sparse import vstack
+
+            n0 = len(self.rest_vertices)
+            keep = np.ones(len(x), dtype=bool)  # added vertices that a removal left without triangles go
+            keep[n0:] = np.bincount(faces.ravel(), minlength=len(x))[n0:] > 0
+            new_index = np.cumsum(keep) - 1
+            faces, x = new_index[faces], x[keep]
+            k = keep[n0:]
+            added = (rest[n0:][k], shell[n0:][k], vstack(phis).tocsr()[np.flatnonzero(k)])
+        return DrawnSurface(x, faces.astype(np.int32), parent, added)
+
+    def _unsliver(self, x, faces, parent):
+        """Edge flips and vertex moves (in place on ``x``) against the crack triangles under SLIVER_ANGLE of the
+        drawn ``faces`` (face i descends from ``self.faces[parent[i]]``); then added vertices of three triangles
+        at such slivers are removed (:func:`_drop_three_fans`). Returns (faces, parent)."""
+        crack = self.face_crack[parent] == 1
+        if not crack.any() or triangle_angles(x, faces[crack]).min() >= SLIVER_ANGLE:
+            return faces, parent
+        face_shell, face_patch = self._face_shell[parent], self._face_patch[parent]
         for _ in range(DEFORMED_ROUNDS):
-            faces, flipped = _flip_round(x, faces, self._face_shell, self._face_patch, SLIVER_ANGLE)
+            faces, flipped = _flip_round(x, faces, face_shell, face_patch, SLIVER_ANGLE)
             if flipped == 0:
                 break
         free = np.full((int(self._face_patch.max()) + 1, 4), np.nan)  # no input plane holds in deformed space
@@ -1664,7 +1726,7 @@ class FragmentSurfaces:
                 moved = _relax_round(
                     x,
                     faces,
-                    self._face_patch,
+                    face_patch,
                     free,
                     SLIVER_ANGLE,
                     max_turn=60.0,
@@ -1673,4 +1735,122 @@ class FragmentSurfaces:
                 )
                 if moved == 0:
                     break
-        return x, faces.astype(np.int32)
+        return _drop_three_fans(x, faces, parent, face_patch, len(self.rest_vertices), SLIVER_ANGLE)
+
+
+def _drop_three_fans(x, faces, parent, face_patch, first_added, sliver_angle):
+    """Removes added vertices (index >= ``first_added``) that sit at a sliver with exactly three triangles around
+    them, all of one patch: the fan (v, a, b), (v, b, c), (v, c, a) becomes the triangle (a, b, c) (same
+    orientation and parent) when that triangle's smallest angle is larger than the fan's and the surface holds no
+    triangle on a, b, c yet. Such a vertex lies inside the triangle of its neighbours (a split followed by flips)
+    and adds no detail. Returns (faces, parent); the removed vertices keep no triangle."""
+    n = len(x)
+    amin = triangle_angles(x, faces).min(axis=1)
+    valence = np.bincount(faces.ravel(), minlength=n)
+    cand = np.unique(faces[amin < sliver_angle])
+    cand = cand[(cand >= first_added) & (valence[cand] == 3)]
+    if cand.size == 0:
+        return faces, parent
+    is_cand = np.zeros(n, dtype=bool)
+    is_cand[cand] = True
+    hit = is_cand[faces]
+    shared = hit.sum(axis=1) > 1  # fans that share a triangle are left alone
+    f_idx, corner = np.nonzero(hit)
+    v = faces[f_idx, corner]
+    order = np.argsort(v, kind="stable")
+    f_idx, corner, v = f_idx[order].reshape(-1, 3), corner[order].reshape(-1, 3), v[order].reshape(-1, 3)
+    p = faces[f_idx, (corner + 1) % 3]
+    q = faces[f_idx, (corner + 2) % 3]
+    a, b = p[:, 0], q[:, 0]
+    c = p.sum(axis=1) - a - b
+    # A closed fan: the sides p -> q form the cycle a -> b -> c -> a.
+    cycle = np.sort(q, axis=1) == np.sort(np.stack([b, c, a], axis=1), axis=1)
+    ok = cycle.all(axis=1) & ~shared[f_idx].any(axis=1)
+    ok &= (face_patch[f_idx] == face_patch[f_idx[:, :1]]).all(axis=1)
+    new = np.stack([a, b, c], axis=1)
+    ok &= triangle_angles(x, new).min(axis=1) > amin[f_idx].min(axis=1)
+    rows = np.concatenate([np.sort(faces, axis=1), np.sort(new, axis=1)])
+    row_id = np.unique(rows, axis=0, return_inverse=True)[1].reshape(-1)
+    exists = np.isin(row_id[len(faces) :], row_id[: len(faces)])
+    ok &= ~exists
+    if not ok.any():
+        return faces, parent
+    drop = np.zeros(len(faces), dtype=bool)
+    drop[f_idx[ok].ravel()] = True
+    faces = np.concatenate([faces[~drop], new[ok]])
+    parent = np.concatenate([parent[~drop], parent[f_idx[ok, 0]]])
+    return faces, parent
+
+
+@dataclass
+class DrawnSurface:
+    """A surface as drawn in one frame (:meth:`FragmentSurfaces.drawn`).
+
+    Attributes:
+        points: vertex positions [m], float64 [vertex_count + added, 3]: the shells' vertices, then the vertices
+            added on split edges.
+        faces: triangles int32 [f, 3] into ``points``.
+        face_parent: the face of :attr:`FragmentSurfaces.faces` each triangle comes from (shell, fragment, crack
+            flag), int [f].
+        added: None, or the added vertices as (rest points [m] [a, 3], shell [a], MLS shape functions), for
+            :meth:`FragmentSurfaces.vertex_velocities` ``at=``.
+    """
+
+    points: np.ndarray
+    faces: np.ndarray
+    face_parent: np.ndarray
+    added: tuple | None
+
+
+def _longest_edge(x: np.ndarray, faces: np.ndarray) -> float:
+    """Longest edge [m] of triangles ``faces`` [f, 3] at points ``x`` [v, 3] (0 without triangles)."""
+    if len(faces) == 0:
+        return 0.0
+    t = x[faces]
+    return float(np.linalg.norm(t - np.roll(t, 1, axis=1), axis=2).max())
+
+
+def _split_long_edges(x: np.ndarray, faces: np.ndarray, limit: float):
+    """Splits every edge longer than ``limit`` [m] at points ``x`` [v, 3] at its midpoint (new vertices v, v + 1,
+    ... in edge order), keeping the triangulation conforming and every triangle's orientation: a triangle with one
+    long side splits in two, with two in three (the quad left beside the corner between them split along its
+    shorter diagonal, measured at ``x`` with the new vertices at the edges' midpoints), with three in four.
+
+    Returns:
+        None when no edge is longer than ``limit``; else (low ends [e], high ends [e] of the split edges,
+        triangles int64 [f', 3], the input triangle of each [f'])."""
+    n = len(x)
+    lo, hi, side = _undirected_edges(faces, n)
+    long = np.linalg.norm(x[lo] - x[hi], axis=1) > limit
+    if not long.any():
+        return None
+    new_id = np.full(len(lo), -1, dtype=np.int64)
+    new_id[long] = n + np.arange(int(long.sum()))
+    m = new_id[side]  # m[i, j]: new vertex on side j (corners j, j + 1) of triangle i, or -1
+    count = (m >= 0).sum(axis=1)
+    # Rotate each triangle so that its marked sides come first: one mark on side 0, two on sides 0 and 1.
+    r = np.where(count == 1, np.argmax(m >= 0, axis=1), np.where(count == 2, (np.argmin(m >= 0, axis=1) + 1) % 3, 0))
+    idx = (np.arange(3)[None, :] + r[:, None]) % 3
+    c = np.take_along_axis(faces, idx, axis=1)
+    mm = np.take_along_axis(m, idx, axis=1)
+    mid = 0.5 * (x[lo[long]] + x[hi[long]])
+    xx = np.concatenate([x, mid])
+    out, src = [faces[count == 0]], [np.flatnonzero(count == 0)]
+    one = np.flatnonzero(count == 1)
+    c0, c1, c2, m0 = c[one, 0], c[one, 1], c[one, 2], mm[one, 0]
+    out += [np.stack([c0, m0, c2], 1), np.stack([m0, c1, c2], 1)]
+    src += [one, one]
+    two = np.flatnonzero(count == 2)
+    c0, c1, c2, m0, m1 = c[two, 0], c[two, 1], c[two, 2], mm[two, 0], mm[two, 1]
+    diag_a = np.linalg.norm(xx[c0] - xx[m1], axis=1) <= np.linalg.norm(xx[m0] - xx[c2], axis=1)
+    out += [
+        np.stack([m0, c1, m1], 1),
+        np.where(diag_a[:, None], np.stack([c0, m0, m1], 1), np.stack([c0, m0, c2], 1)),
+        np.where(diag_a[:, None], np.stack([c0, m1, c2], 1), np.stack([m0, m1, c2], 1)),
+    ]
+    src += [two, two, two]
+    three = np.flatnonzero(count == 3)
+    c0, c1, c2, m0, m1, m2 = (c[three, 0], c[three, 1], c[three, 2], mm[three, 0], mm[three, 1], mm[three, 2])
+    out += [np.stack([c0, m0, m2], 1), np.stack([m0, c1, m1], 1), np.stack([m2, m1, c2], 1), np.stack([m0, m1, m2], 1)]
+    src += [three] * 4
+    return lo[long], hi[long], np.concatenate(out).astype(np.int64), np.concatenate(src)

@@ -335,3 +335,70 @@ def test_scene_cache_surfaces_closed_and_topology_only_when_fragments_change(tmp
     rest = np.array(mesh.GetPointsAttr().Get(0), dtype=np.float64)
     box = trimesh.creation.box(extents=(0.2, 0.05, 0.05))
     assert np.abs(trimesh.proximity.signed_distance(box, rest)).max() < h
+
+
+def test_drawn_surface_splits_edges_stretched_past_three_spacings():
+    """Two fragments of a box (h = 5 cm), stretched 5x along x by an affine map (translated far from the origin):
+    the drawn surface has no edge longer than 3 h (the rest surface's edges reach 5 x 1.8 h there), stays closed
+    and consistently wound, encloses 5x the rest volume (the splits add vertices on the mapped surface: midpoints
+    of the rest edges, embedded in the particles), its vertices lie where the affine map sends their rest points
+    (to 5e-2 h: the MLS ridge's error grows with the
+    gradient, here 5) and the added vertices' velocities equal the affine velocity field at their rest
+    points; the fragment and crack flags of each drawn face are those of the face it was split from."""
+    import trimesh
+
+    shape = pdsim.box((0.5, 0.3, 0.25))
+    h = 0.05
+    body = _body(shape, h)
+    x = body.rest_positions
+    surf = FragmentSurfaces(shape, x, h, "box")
+    surf.update_topology((x[:, 1] > 0.02).astype(np.int64))
+    stretch = np.diag([5.0, 1.0, 1.0])
+    shift = np.array([120.0, -40.0, 7.0])
+    spin = np.array([[0.0, -2.0, 0.0], [2.0, 0.0, 0.0], [0.0, 0.0, 0.0]]) + np.diag([3.0, 0.0, 0.0])
+    moved = x @ stretch.T + shift
+    d = surf.drawn(moved)
+    t = d.points[d.faces]
+    assert np.linalg.norm(t - np.roll(t, 1, axis=1), axis=2).max() <= 3.0 * h
+    assert d.added is not None and len(d.points) > len(surf.rest_vertices)
+    rest_all = np.concatenate([surf.rest_vertices, d.added[0]])
+    np.testing.assert_allclose(d.points, rest_all @ stretch.T + shift, atol=5e-2 * h)
+    vel = surf.vertex_velocities(moved, x @ spin.T, at=d.added)
+    np.testing.assert_allclose(vel, d.added[0] @ spin.T, atol=5e-2 * h * 3.0)
+    volume = 0.0
+    for k in range(surf.fragment_count):
+        faces_k = d.faces[surf._face_shell[d.face_parent] == k]
+        mesh = trimesh.Trimesh(d.points, faces_k, process=False)
+        mesh.remove_unreferenced_vertices()
+        assert mesh.is_watertight and mesh.is_winding_consistent
+        volume += mesh.volume
+    assert volume == pytest.approx(5.0 * 0.5 * 0.3 * 0.25, rel=1e-3)
+    view = surf.view(moved)
+    np.testing.assert_array_equal(view.face_attributes["crack"], surf.face_crack[d.face_parent])
+    np.testing.assert_array_equal(view.face_attributes["fragment"], surf.face_fragment[d.face_parent])
+    assert view.face_attributes["crack"].sum() > 0
+
+
+def test_added_vertex_at_a_sliver_with_three_triangles_is_removed():
+    """An octahedron whose face (0, 1, 2) is a fan around an added vertex 6 lying just inside it, next to the side
+    (0, 1) (a flat cap of 175 degrees): the fan is replaced by the face (0, 1, 2) with its orientation, so the
+    surface is the closed octahedron again; a vertex of the input (index below first_added) stays."""
+    from pdsim.fragment_surfaces import _drop_three_fans, shells_closed, triangle_angles
+
+    x = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], dtype=np.float64)
+    octa = np.array([[0, 1, 2], [1, 3, 2], [3, 4, 2], [4, 0, 2], [1, 0, 5], [3, 1, 5], [4, 3, 5], [0, 4, 5]])
+    fan = np.array([[6, 0, 1], [6, 1, 2], [6, 2, 0]])
+    faces = np.concatenate([octa[1:], fan])
+    patch = np.arange(len(faces))
+    patch[-3:] = 99
+    parent = np.arange(len(faces))
+    cap = 0.5 * (x[0] + x[1]) + 0.02 * (x[2] - 0.5 * (x[0] + x[1]))
+    pts = np.concatenate([x, cap[None]])
+    assert triangle_angles(pts, fan).min() < 5.0
+    out, out_parent = _drop_three_fans(pts, faces, parent, patch, 6, 5.0)
+    assert len(out) == 8 and 6 not in out
+    assert shells_closed(out, np.zeros(len(out), np.int64), 7).all()
+    assert sorted(map(tuple, np.sort(out, axis=1))) == sorted(map(tuple, np.sort(octa, axis=1)))
+    assert out_parent[-1] in (7, 8, 9)
+    kept, _ = _drop_three_fans(pts, faces, parent, patch, 7, 5.0)  # vertex 6 is an input vertex: stays
+    np.testing.assert_array_equal(kept, faces)

@@ -6,7 +6,8 @@ For every mesh with a ``crack`` primvar (a peridynamic body's ``<body>_surface``
 crack (interior) triangles, the smallest interior angle among them [degrees], how many have an angle under 5
 degrees, and the longest triangle edge in particle spacings (the spacing is the width of the body's points). The
 positions and faces are the drawn ones (``Usd.Stage.Open``, values held between topology samples), so this measures
-what a renderer shows. Exits with 1 when some crack triangle has an angle under 5 degrees.
+what a renderer shows. Exits with 1 when some crack triangle has an angle under 5 degrees or some triangle is longer
+than 3 spacings (``--max-edge``).
 """
 
 from __future__ import annotations
@@ -70,6 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("cache")
     parser.add_argument("--json", help="write the rows to this JSON file")
+    parser.add_argument("--max-edge", type=float, default=3.0, help="longest edge allowed [spacings] (default 3)")
     args = parser.parse_args(argv)
     rows = measure(args.cache)
     print(f"{'mesh':32s} {'frame':>5s} {'crack tris':>10s} {'min angle':>9s} {'< 5 deg':>7s} {'longest/h':>9s}")
@@ -88,7 +90,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         with open(args.json, "w") as f:
             json.dump(rows, f, indent=1)
-    return 1 if any(r["slivers"] for r in rows) else 0
+    too_long = any(r["longest_edge_spacings"] > args.max_edge for r in rows)
+    return 1 if any(r["slivers"] for r in rows) or too_long else 0
 
 
 if __name__ == "__main__":
