@@ -15,9 +15,16 @@ Limits. With 1 to 2 particles through the pane (spacing 10 mm and 6 mm) the pane
 breaks out of the hole is mostly single particles (dust: 100 % of the broken-out material at the preview spacing, 57 %
 at the full one), and the debris damping keeps it near the hole at the preview spacing (fastest fragment back towards
 the shooter: 0 m/s, was 31 m/s) but not at the full one (29 m/s against the ball's 20 m/s; both measured with
-tools/fracture_patterns.py's fragment_metrics). A 19.5 mm pane with 3 particles through (spacing 6.5 mm), a larger or
-slower ball and other strength scatters did not give shards either: with the compressive bonus the glass under the ball
-stretches into a cone before it breaks, without it the disc under the ball is crushed.
+tools/fracture_patterns.py's fragment_metrics). Why, measured (2026-12-02, 21 variants): a rigid ball is a curvature
+the glass cannot follow (the glass under a sphere of radius R pushed along the shot stretches by about r^2 / (2 R^2),
+125 s_c at r = R / 2), so everything it touches breaks at any spacing; the full compressive bonus holds that material
+together as a stretched cone (the only shards the scene makes, 37-46 particles), and bounding it
+(Material.compressive_bonus_cap 0.25-3) turns the footprint into dust instead (100 % at both spacings). A slowed
+elastic steel ball (a peridynamic body, 0.26 or 2.1 kg) bounces off with the full bonus and pushes through a
+pulverised footprint with a bounded one; no run formed radial cracks, since the horizon (3 h = 18-30 mm) is longer
+than the pane is thick and damage spreads over it instead of localising. A 4 mm spacing (3 particles through, 16,875
+particles, 461 s of simulation) gives larger pieces (142, 93, 53 particles) but 67 % dust and 63 m/s back: shards need
+a horizon well under the ball's radius and several particles through the thickness (GPU resolution, not measured).
 
 Run:  python scenes/glass_pane.py --out glass_pane.usdc   or   pdsim run scenes/glass_pane.py --out glass_pane.usdc
 
