@@ -1020,22 +1020,24 @@ def _relax_round(
 
 def _on_input_planes(pos, own_patch, surface) -> np.ndarray:
     """Bool [c]: each point pos [c, 3] lies in an input triangle of each of its planes (``own_patch`` [c, 2] patch
-    ids, -1 for none; ``surface`` as in :func:`_relax_round`), within 1e-9 of the triangle's size."""
+    ids, -1 for none; ``surface`` as in :func:`_relax_round`), within 1e-9 of the triangle's size. Only the triangles
+    whose centroid lies within the largest centroid-to-corner distance of a point can hold it (a k-d tree query)."""
+    from scipy.spatial import cKDTree
+
     sv, sf, splane, plane_of_patch = surface
     ok = np.ones(len(pos), dtype=bool)
-    order = np.argsort(splane, kind="stable")
-    starts = np.searchsorted(splane[order], np.arange(int(splane.max()) + 2))
+    corners = sv[sf]
+    centroid = corners.mean(axis=1)
+    reach = float(np.linalg.norm(corners - centroid[:, None, :], axis=2).max()) * (1.0 + 1e-9) + 1e-300
+    pairs = cKDTree(pos).sparse_distance_matrix(cKDTree(centroid), reach, output_type="ndarray")
+    near_c, near_t = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
     for k in range(own_patch.shape[1]):
         has = own_patch[:, k] >= 0
         q = np.where(has, plane_of_patch[np.maximum(own_patch[:, k], 0)], -1)
         has &= q >= 0
-        idx = np.flatnonzero(has)
-        count = starts[q[idx] + 1] - starts[q[idx]]
-        pair_c = np.repeat(idx, count)
-        pair_t = order[
-            np.repeat(starts[q[idx]], count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-        ]
-        a, b, c = (sv[sf[pair_t, i]] for i in range(3))
+        sel = has[near_c] & (splane[near_t] == q[near_c])
+        pair_c, pair_t = near_c[sel], near_t[sel]
+        a, b, c = (corners[pair_t, i] for i in range(3))
         n = np.cross(b - a, c - a)
         nn = np.einsum("ij,ij->i", n, n)
         p = pos[pair_c]
@@ -1121,15 +1123,18 @@ def clean_complex(
     for _ in range(_MAX_CLEAN_ROUNDS):
         new, keep, collapsed = _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle, plane_eq)
         t1, s1, p1 = new[keep], shell[keep], patch[keep]
+        t0 = t1.copy()
         t1, flipped = _flip_round(points, t1, s1, p1, sliver_angle)
         if collapsed == 0 and flipped == 0:
-            backup = points.copy()
+            # vertex moves change no connectivity: the shells stay closed
             if _relax_round(points, t1, p1, plane_eq, sliver_angle, max_turn=RELAX_TURN, surface=surface) == 0:
                 break
-            if not shells_closed(t1, s1, len(points)).all():
-                points[:] = backup
-                break
-        if not shells_closed(t1, s1, len(points)).all():  # a rare configuration the checks missed: stop here
+            tri, shell, patch = t1, s1, p1
+            continue
+        # the shells this round changed must still be closed (a rare configuration the checks missed: stop here)
+        changed = np.concatenate([shell[~keep | (new != tri).any(axis=1)], s1[(t1 != t0).any(axis=1)]])
+        touched = np.isin(s1, np.unique(changed))
+        if not shells_closed(t1[touched], s1[touched], len(points)).all():
             break
         tri, shell, patch = t1, s1, p1
     return tri, shell, patch
