@@ -310,7 +310,7 @@ def stripped_check(n: int, device: str, launches: int = 20, rounds: int = 8) -> 
             theta, bp, ne, lam, f1, 0, *([f1] * 9), solver._dummy_i, f1])  # fmt: skip
         wp.launch(ks.force, dim=m.particle_count, device=d, inputs=[
             0, m.family_offsets, m.family_neighbors, m.bond_geom, ne, lam, m.bond_wv_dil, m.bond_wv_dev, bp, u8, f1, f1,
-            f1, f1, f1, 0, f1, f1, force])  # fmt: skip
+            f1, f1, f1, f1, 0, f1, f1, force])  # fmt: skip
 
     def stripped(o):
         theta, bp, ne, lam, force = o
