@@ -1,5 +1,6 @@
 """Peridynamics at large strain and rotation (CPU backend): the volumetric split of the return mapping must leave an
-isochoric plastic stretch of any size without pressure, and the dilatation must not change under a rigid rotation.
+isochoric plastic stretch of any size without pressure, and the dilatation must not change under a rigid rotation
+(the last holds; the others are a known defect).
 
 KNOWN DEFECT, expected to fail (strict xfail: a fix makes these tests pass and the xfail marks must then go). The
 dilatation and the return mapping's volumetric measure are linear in the bond extensions, so a large volume-keeping
@@ -127,17 +128,15 @@ def test_perfectly_plastic_bar_to_thirty_percent(grip_axes):
     assert np.abs(volume - 1.0).max() < 0.03
 
 
-@pytest.mark.xfail(strict=True, reason="Lambda = n . xi / L is not invariant under rotation (test docstring)")
 @pytest.mark.parametrize("angle", [90.0, 180.0])
 def test_dilatation_does_not_change_under_a_rigid_rotation(angle):
     """A steel block (centred at ORIGIN) expanded by 0.1 % and rotated rigidly by ``angle`` degrees about z must read
     the same dilatation as the block expanded without rotation (the dilatation is a scalar of the deformation, not of
-    the orientation): within 1e-3 relative on interior particles. KNOWN DEFECT: the supplement's directional factor
-    Lambda = n . xi / L (n the deformed bond direction, xi the reference bond) is the cosine of the bond's rotation,
-    a small-rotation form; measured theta 3.08e-3 unrotated, 2.80e-3 at 30 degrees, 1.03e-3 at 90 and -1.03e-3 at
-    180, so a spinning fragment's bulk stiffness is wrong (reversed for bonds turned past 90 degrees). A fix takes
-    Lambda in the particle's co-rotated frame (n . R xi / L, R the rotation of its family's fitted deformation) or
-    drops it (Lambda = 1, the linear peridynamic solid's dilatation, equal to first order in the strain)."""
+    the orientation): within 1e-3 relative on interior particles. With the supplement's directional factor
+    Lambda = n . xi / L (n the deformed bond direction, xi the reference bond: the cosine of the bond's rotation, a
+    small-rotation form) it read 3.08e-3 unrotated, 2.80e-3 at 30 degrees, 1.03e-3 at 90 and -1.03e-3 at 180, so a
+    spinning fragment's bulk stiffness was wrong; the kernels now leave Lambda out (the linear peridynamic solid's
+    dilatation, equal to first order in the strain)."""
     from scipy.spatial.transform import Rotation
 
     mat = pdsim.Material(density=7850.0, youngs_modulus=200.0e9, poisson_ratio=0.3)

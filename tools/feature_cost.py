@@ -78,7 +78,6 @@ def dilatation_stripped(
     theta: wp.array(dtype=float),
     bp: wp.array(dtype=wp.vec2),
     bond_ne: wp.array(dtype=wp.vec4),
-    bond_lambda: wp.array(dtype=float),
 ):
     """kernels/peridynamics/step.py's dilatation with the fracture and plasticity code cut out by hand."""
     k = wp.tid()
@@ -94,11 +93,9 @@ def dilatation_stripped(
         length = wp.length(eta)
         inv = 1.0 / length
         n = eta * inv
-        lam = wp.dot(n, xh)
         e = (2.0 * wp.dot(xi, du) + wp.dot(du, du)) / (length + L)
         bond_ne[q] = wp.vec4(n[0], n[1], n[2], e)
-        bond_lambda[q] = lam
-        acc += bond_wv_dil[q] * e * lam
+        acc += bond_wv_dil[q] * e
     th = dil_d[k] * acc
     theta[k] = th
     bp[k] = wp.vec2(dev_b[k], dil_coef[k] * th)
@@ -109,7 +106,6 @@ def force_stripped(
     family_offsets: wp.array(dtype=wp.int32),
     family_neighbors: wp.array(dtype=wp.int32),
     bond_ne: wp.array(dtype=wp.vec4),
-    bond_lambda: wp.array(dtype=float),
     bond_wv_dil: wp.array(dtype=float),
     bond_wv_dev: wp.array(dtype=float),
     bp: wp.array(dtype=wp.vec2),
@@ -124,7 +120,7 @@ def force_stripped(
         c = bond_ne[q]
         bpj = bp[j]
         dev = (bpk[0] + bpj[0]) * c[3]
-        s = bond_wv_dil[q] * bond_lambda[q] * (bpk[1] + bpj[1]) + bond_wv_dev[q] * dev
+        s = bond_wv_dil[q] * (bpk[1] + bpj[1]) + bond_wv_dev[q] * dev
         f += (2.0 * s) * wp.vec3(c[0], c[1], c[2])
     force_density[k] = f
 
@@ -297,33 +293,32 @@ def stripped_check(n: int, device: str, launches: int = 20, rounds: int = 8) -> 
 
     def arrays():
         return (
-            wp.zeros_like(s.theta), wp.zeros_like(s.bp), wp.zeros_like(s.bond_ne), wp.zeros_like(s.bond_lambda),
-            wp.zeros_like(s.force_density),
+            wp.zeros_like(s.theta), wp.zeros_like(s.bp), wp.zeros_like(s.bond_ne), wp.zeros_like(s.force_density),
         )  # fmt: skip
 
     va, sa = arrays(), arrays()
 
     def variant(o):
-        theta, bp, ne, lam, force = o
+        theta, bp, ne, force = o
         wp.launch(ks.dilatation, dim=m.particle_count, device=d, inputs=[
             0, u, m.family_offsets, m.family_neighbors, m.bond_geom, m.bond_wv_dil, m.dil_d, m.dil_coef, m.dev_b, u8,
-            theta, bp, ne, lam, f1, 0, *([f1] * 9), solver._dummy_i, f1])  # fmt: skip
+            theta, bp, ne, f1, 0, *([f1] * 9), solver._dummy_i, f1])  # fmt: skip
         wp.launch(ks.force, dim=m.particle_count, device=d, inputs=[
-            0, m.family_offsets, m.family_neighbors, m.bond_geom, ne, lam, m.bond_wv_dil, m.bond_wv_dev, bp, u8, f1, f1,
+            0, m.family_offsets, m.family_neighbors, m.bond_geom, ne, m.bond_wv_dil, m.bond_wv_dev, bp, u8, f1, f1,
             f1, f1, f1, f1, 0, f1, f1, force])  # fmt: skip
 
     def stripped(o):
-        theta, bp, ne, lam, force = o
+        theta, bp, ne, force = o
         wp.launch(dilatation_stripped, dim=m.particle_count, device=d, inputs=[
             u, m.family_offsets, m.family_neighbors, m.bond_geom, m.bond_wv_dil, m.dil_d, m.dil_coef, m.dev_b,
-            theta, bp, ne, lam])  # fmt: skip
+            theta, bp, ne])  # fmt: skip
         wp.launch(force_stripped, dim=m.particle_count, device=d, inputs=[
-            m.family_offsets, m.family_neighbors, ne, lam, m.bond_wv_dil, m.bond_wv_dev, bp, force])  # fmt: skip
+            m.family_offsets, m.family_neighbors, ne, m.bond_wv_dil, m.bond_wv_dev, bp, force])  # fmt: skip
 
     variant(va)
     stripped(sa)
     identical = all(np.array_equal(a.numpy(), b.numpy()) for a, b in zip(va, sa))
-    same_as_solver = np.array_equal(va[4].numpy(), s.force_density.numpy()) or True  # loads may differ: not checked
+    same_as_solver = np.array_equal(va[3].numpy(), s.force_density.numpy()) or True  # loads may differ: not checked
 
     def timed(fn, o):
         wp.synchronize_device(d)

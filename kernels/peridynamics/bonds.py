@@ -1,18 +1,20 @@
 """Bond kernels of the ordinary state-based peridynamic solid (shared/seeds/pd_supplement.txt).
 
 Notation (DESIGN.md section 2): reference bond xi = X_j - X_k, L = |xi|, deformed eta = y_j - y_k, l = |eta|,
-n = eta / l, Lambda = n . xi / L, extension e = l - L, weight w = delta / L, V_j the neighbour's volume and beta its
+n = eta / l, extension e = l - L, weight w = delta / L, V_j the neighbour's volume and beta its
 partial-volume factor. Per bond we store ``bond_geom = (xi / L, L)`` and ``bond_wv = w V_j beta``.
 
 The supplement's model, with per-particle parameters a_k, b_k, d_k (the supplement's continuum values, or the same
-matching conditions evaluated on each particle's discrete family, see pdsim/peridynamics/solver.py):
+matching conditions evaluated on each particle's discrete family, see pdsim/peridynamics/solver.py), without the
+supplement's directional factor Lambda = n . xi / L (1 to first order in the strain, but not invariant under
+rotation; pdsim/peridynamics/solver.py):
 
-    theta_k = d_k sum_j w s (n . xi) V_j          = d_k sum_j w e Lambda V_j
-    e^d_kj  = e - g_k Lambda theta_k,              g_k = (5 mu / 6) d_k / b_k    (= delta / 4 for the continuum values)
-    A_kj    = 4 w (a_k Lambda theta_k + b_k e^d_kj), a_k = kappa d_k / 2         (= 9 kappa / (8 pi delta^4))
+    theta_k = d_k sum_j w e V_j
+    e^d_kj  = e - g_k theta_k,                     g_k = (5 mu / 6) d_k / b_k    (= delta / 4 for the continuum values)
+    A_kj    = 4 w (a_k theta_k + b_k e^d_kj),      a_k = kappa d_k / 2           (= 9 kappa / (8 pi delta^4))
     f_k     = sum_j 1/2 (A_kj + A_jk) n V_j
 
-Since a_k - b_k g_k = d_k (kappa / 2 - 5 mu / 6), A_kj / (4 w) = Lambda P_k + b_k e with P_k = d_k c0 theta_k and
+Since a_k - b_k g_k = d_k (kappa / 2 - 5 mu / 6), A_kj / (4 w) = P_k + b_k e with P_k = d_k c0 theta_k and
 c0 = kappa / 2 - 5 mu / 6. The dilatation kernel writes (b_k, P_k) per particle so the force kernel gathers one vec2
 per neighbour. Both kernels are gathers over a CSR list (one thread per particle, no atomics): the CPU and the GPU
 produce the same sums in the same order.

@@ -6,12 +6,12 @@ signatures are the same for every variant; arrays of dead features are passed as
 
 Formulas (kernels/peridynamics/bonds.py gives the notation and the elastic model):
 
-- Elastic + plastic force: A_kj / (4 w) = Lambda P_k + b_k (e - e^p_kj), so
-  f_k = sum_j 2 (w V beta G^dil Lambda (P_k + P_j) + w V beta G^dev (b_k (e - e^p_kj) + b_j (e - e^p_jk))) n,
+- Elastic + plastic force: A_kj / (4 w) = P_k + b_k (e - e^p_kj), so
+  f_k = sum_j 2 (w V beta G^dil (P_k + P_j) + w V beta G^dev (b_k (e - e^p_kj) + b_j (e - e^p_jk))) n,
   the derivative of W_k = c0 theta_k^2 + b_k sum_j w V beta G^dev (e - e^p_kj)^2 (e^p_kj: plastic extension).
-- Plasticity (ordinary state-based, Mitchell 2011): per bond the deviatoric extension e^d = e - Lambda theta_p L / 3
-  with theta_p = 3 sum_live w L e Lambda V beta / sum_live w L^2 V beta, which vanishes bond by bond under any
-  isotropic expansion for every particle (the supplement's e - (delta/4) Lambda theta does so only on average over a
+- Plasticity (ordinary state-based, Mitchell 2011): per bond the deviatoric extension e^d = e - theta_p L / 3
+  with theta_p = 3 sum_live w L e V beta / sum_live w L^2 V beta, which vanishes bond by bond under any
+  isotropic expansion for every particle (the supplement's e - (delta/4) theta does so only on average over a
   full family, so a yield check on it would yield under pure hydrostatic load). Trial deviatoric
   force t_j = alpha_j (e^d_j - e^p_j), alpha_j = 2 w b_k G^dev; ||t||^2 = sum_j t_j^2 V_j beta_j;
   yield when ||t||^2 / 2 > psi0_k = s_k 10 sigma_Y(eps_p)^2 / (3 pi delta^5) (s_k: the family's share of the
@@ -19,7 +19,7 @@ Formulas (kernels/peridynamics/bonds.py gives the notation and the elastic model
   Linear hardening sigma_Y = sigma_Y0 + H eps_p with the equivalent plastic strain
   eps_p = sqrt(5 sum_j w (e^p_j)^2 V_j beta_j / m_k) (equal to the uniaxial plastic strain for isochoric flow).
   The return mapping runs in the dilatation kernel, right after a yielding particle's family sums (its bonds'
-  (n, e, Lambda) are then still in cache, and the volumetric sums of theta_p come with the dilatation's loop).
+  (n, e) are then still in cache, and the volumetric sums of theta_p come with the dilatation's loop).
 - Fracture: a live bond breaks for good when its stretch (its elastic stretch, s - (e^p_kj + e^p_jk) / (2 L), for
   a yielding material) exceeds s_c,kj - alpha min(s_min,k, s_min,j) (Silling-Askari compressive bonus, s_min the
   particle's most compressive live stretch, <= 0, from this step's dilatation pass; with Material.compressive_bonus_cap
@@ -67,7 +67,6 @@ def make_step_kernels(fracture: bool, plastic: bool):
         theta: wp.array(dtype=float),
         bp: wp.array(dtype=wp.vec2),
         bond_ne: wp.array(dtype=wp.vec4),
-        bond_lambda: wp.array(dtype=float),
         stretch_min: wp.array(dtype=float),
         plastic_particle_count: int,
         bond_wv: wp.array(dtype=float),
@@ -82,8 +81,8 @@ def make_step_kernels(fracture: bool, plastic: bool):
         bond_reverse: wp.array(dtype=wp.int32),
         bond_plastic_reverse: wp.array(dtype=float),
     ):
-        """theta_k = d_k sum_live w e Lambda V beta G^dil for particle k = first + tid; caches each live bond's (n, e)
-        and Lambda for the later passes and, with fracture, the particle's most compressive live stretch (for the
+        """theta_k = d_k sum_live w e V beta G^dil for particle k = first + tid; caches each live bond's (n, e)
+        for the later passes and, with fracture, the particle's most compressive live stretch (for the
         compressive bonus). With plasticity, a yielding particle (k < plastic_particle_count) then runs the return
         mapping of its deviatoric force state on the bonds it just cached (the plastic update: it writes its own
         bonds' plastic extensions and its own equivalent plastic strain, and mirrors each new extension e^p_kj into
@@ -102,7 +101,7 @@ def make_step_kernels(fracture: bool, plastic: bool):
         if wp.static(PLASTIC):
             if k < plastic_particle_count:
                 yields = 1
-        num = float(0.0)  # plastic volumetric strain: sum w L e Lambda V beta over the live family
+        num = float(0.0)  # plastic volumetric strain: sum w L e V beta over the live family
         den = float(0.0)  # and sum w L^2 V beta
         for q in range(family_offsets[k], family_offsets[k + 1]):
             if wp.static(FRACTURE):
@@ -117,17 +116,15 @@ def make_step_kernels(fracture: bool, plastic: bool):
             length = wp.length(eta)
             inv = 1.0 / length
             n = eta * inv
-            lam = wp.dot(n, xh)
             e = (2.0 * wp.dot(xi, du) + wp.dot(du, du)) / (length + L)
             bond_ne[q] = wp.vec4(n[0], n[1], n[2], e)
-            bond_lambda[q] = lam
             if wp.static(FRACTURE):
                 smin = wp.min(smin, e / L)
-            acc += bond_wv_dil[q] * e * lam
+            acc += bond_wv_dil[q] * e
             if wp.static(PLASTIC):
                 if yields != 0:
                     wl = bond_wv[q] * L
-                    num += wl * e * lam
+                    num += wl * e
                     den += wl * L
         th = dil_d[k] * acc
         theta[k] = th
@@ -139,7 +136,7 @@ def make_step_kernels(fracture: bool, plastic: bool):
             if yields != 0:
                 # Return mapping (module docstring). theta_p = 3 num / den is exactly 3 zeta under any isotropic
                 # expansion zeta, for every particle (surface or cracked), so the deviatoric extension
-                # e^d = e - Lambda theta_p L / 3 vanishes bond by bond and hydrostatic load never yields.
+                # e^d = e - theta_p L / 3 vanishes bond by bond and hydrostatic load never yields.
                 # ||t||^2 = sum alpha^2 (e^d - e^p)^2 V beta with alpha = 2 b G^dev w and V beta = w V beta L / delta,
                 # evaluated as delta sum (2 b w V beta G^dev (e^d - e^p))^2 / (w V beta L): one division per bond.
                 delta = horizon[k]
@@ -156,7 +153,7 @@ def make_step_kernels(fracture: bool, plastic: bool):
                         live = int(bond_alive[q])
                     if live != 0:
                         L = bond_geom[q][3]
-                        ed = bond_ne[q][3] - bond_lambda[q] * th3 * L
+                        ed = bond_ne[q][3] - th3 * L
                         a = two_b * bond_wv_dev[q] * (ed - bond_plastic[q])
                         norm2 += a * a / (bond_wv[q] * L)
                 norm2 = norm2 * delta
@@ -169,7 +166,7 @@ def make_step_kernels(fracture: bool, plastic: bool):
                             live = int(bond_alive[q])
                         ep = bond_plastic[q]
                         if live != 0:
-                            ed = bond_ne[q][3] - bond_lambda[q] * th3 * bond_geom[q][3]
+                            ed = bond_ne[q][3] - th3 * bond_geom[q][3]
                             ep = ed - r * (ed - ep)
                             bond_plastic[q] = ep
                             bond_plastic_reverse[bond_reverse[q]] = ep
@@ -185,7 +182,6 @@ def make_step_kernels(fracture: bool, plastic: bool):
         family_neighbors: wp.array(dtype=wp.int32),
         bond_geom: wp.array(dtype=wp.vec4),
         bond_ne: wp.array(dtype=wp.vec4),
-        bond_lambda: wp.array(dtype=float),
         bond_wv_dil: wp.array(dtype=float),
         bond_wv_dev: wp.array(dtype=float),
         bp: wp.array(dtype=wp.vec2),
@@ -235,7 +231,7 @@ def make_step_kernels(fracture: bool, plastic: bool):
                     ep_j = bond_plastic_reverse[q]  # e^p_jk, kept beside bond q (no gather)
                     dev = dev - bpk[0] * ep_k - bpj[0] * ep_j
                     ep_sum = ep_k + ep_j
-            s = bond_wv_dil[q] * bond_lambda[q] * (bpk[1] + bpj[1]) + bond_wv_dev[q] * dev
+            s = bond_wv_dil[q] * (bpk[1] + bpj[1]) + bond_wv_dev[q] * dev
             f += (2.0 * s) * wp.vec3(c[0], c[1], c[2])
             if wp.static(FRACTURE):
                 broke = int(0)

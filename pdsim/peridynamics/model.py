@@ -62,14 +62,13 @@ class PeridynamicModel:
 class PeridynamicState:
     """Per-step data of the bonds (displacements, velocities and accelerations live in the solver's PointKinematics):
     dilatation theta [-],
-    bp = (b_k, P_k) per particle, force density [N/m^3]; per bond the deformed (n, e) and Lambda cached by the
-    dilatation pass for the force pass."""
+    bp = (b_k, P_k) per particle, force density [N/m^3]; per bond the deformed (n, e) cached by the dilatation pass
+    for the force pass."""
 
     theta: object
     bp: object
     force_density: object
     bond_ne: object
-    bond_lambda: object
     bond_alive: object = None  # uint8 per bond (fracture)
     stretch_min: object = None  # most compressive live stretch per particle, this step (fracture)
     bond_plastic: object = None  # plastic extension per plastic bond [m]
@@ -141,7 +140,6 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
     bp = wp.zeros(n, dtype=wp.vec2, device=device)
     nb = bond_wv.shape[0]
     bond_ne = wp.zeros(nb, dtype=wp.vec4, device=device)
-    bond_lambda = wp.zeros(nb, dtype=float, device=device)
     u8, f1, i1 = placeholders(device)
     f_dil = np.ones((n, 3))
     f_dev = np.ones((n, 3))
@@ -150,7 +148,7 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
     dev_cont = math.pi * delta_h**5 * zeta**2 * ((1.0 + nu) ** 2 / 5.0 - 2.0 * nu * (1.0 + nu) / 3.0 + nu**2)
 
     def elastic_sums(scale, theta_out):
-        """Writes sum_j w e Lambda V beta into theta_out and caches the bonds' (n, e) for the displacements
+        """Writes sum_j w e V beta into theta_out and caches the bonds' (n, e) for the displacements
         rest * (scale - 1) of a homogeneous deformation
         (the elastic kernels with d = 1, c0 = 0, b = 1)."""
         pos = wp.array((rest_h * (scale - 1.0)).astype(np.float32), dtype=wp.vec3, device=device)
@@ -160,7 +158,7 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
             ks.dilatation,
             dim=n,
             device=device,
-            inputs=[*inputs, theta_out, bp, bond_ne, bond_lambda, f1, *no_plasticity],
+            inputs=[*inputs, theta_out, bp, bond_ne, f1, *no_plasticity],
         )
 
     for axis in range(3):

@@ -22,8 +22,11 @@ Particles near a free surface have truncated families and would be too soft (the
 docs/accuracy.md measures all three.
 
 The model's elastic energy density is W_k = c0 theta_k^2 + b_k sum_j w e^2 V_j beta_j with c0 = kappa/2 - 5 mu/6.
-Its derivative with respect to each bond extension (Lambda held fixed) is exactly the supplement's force state, so
-the integrator conserves energy up to the dependence of Lambda on rotation, which is negligible at small strain.
+Its derivative with respect to each bond extension is exactly the force state, so the integrator conserves energy.
+The dilatation theta_k = d_k sum_j w e V_j beta_j takes no directional factor: the supplement's Lambda = n . xi / L
+(the cosine of the bond's rotation, 1 to first order in the strain) made a rotated body read a wrong dilatation,
+reversed past 90 degrees (tests/test_pd_large_strain.py; docs/accuracy.md). Without it the model is the linear
+peridynamic solid's dilatation with the supplement's constants: the same to first order, and objective.
 """
 
 from __future__ import annotations
@@ -127,7 +130,6 @@ class SolverPeridynamics(PointSolver):
             bp=wp.zeros(n, dtype=wp.vec2, device=d),
             force_density=wp.zeros(n, dtype=wp.vec3, device=d),
             bond_ne=wp.zeros(max(m.bond_count, 1), dtype=wp.vec4, device=d),
-            bond_lambda=wp.zeros(max(m.bond_count, 1), dtype=float, device=d),
         )
         self.force = self.state.force_density
         self.inv_mass = m.inv_density
@@ -290,7 +292,6 @@ class SolverPeridynamics(PointSolver):
                 s.theta,
                 s.bp,
                 s.bond_ne,
-                s.bond_lambda,
                 s.stretch_min if frac else f1,
                 *plastic_args,
             ],
@@ -302,7 +303,6 @@ class SolverPeridynamics(PointSolver):
                 m.family_neighbors,
                 m.bond_geom,
                 s.bond_ne,
-                s.bond_lambda,
                 m.bond_wv_dil,
                 m.bond_wv_dev,
                 s.bp,
@@ -388,7 +388,7 @@ class SolverPeridynamics(PointSolver):
 
         s = self.state
         out = {"kinematics": self.kinematics_checkpoint(), "bonds": {}}
-        for name in ("theta", "bp", "force_density", "bond_ne", "bond_lambda", "bond_alive", "stretch_min"):
+        for name in ("theta", "bp", "force_density", "bond_ne", "bond_alive", "stretch_min"):
             out["bonds"][name] = array_state(getattr(s, name))
         out["bonds"]["bond_plastic"] = array_state(s.bond_plastic)
         out["bonds"]["eqps"] = array_state(s.eqps)
