@@ -151,3 +151,26 @@ def test_dilatation_does_not_change_under_a_rigid_rotation(angle):
     rot = Rotation.from_euler("z", angle, degrees=True).as_matrix()
     solver.set_positions(ORIGIN + 1.001 * (X - ORIGIN) @ rot.T)
     np.testing.assert_allclose(solver.dilatation()[interior], reference, rtol=1e-3)
+
+
+def test_spinning_vibrating_block_conserves_energy():
+    """An undamped block (E = 1 MPa, nu = 0.4, so the dilatation term counts; centred at ORIGIN) released from a 1 %
+    expansion while spinning at 60 rad/s about z, integrated over 412 degrees of rotation at 0.3 x the stable step:
+    kinetic plus strain energy stays within 0.5 % of its start at every 0.01 s (measured 0.14 %). With the
+    supplement's directional factor Lambda the bulk force was no longer the derivative of the energy once bonds had
+    turned, and the energy wandered by 2.5 % (0.975 at 103 degrees)."""
+    mat = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.4)
+    body = pdsim.PeridynamicBody(pdsim.box((0.1, 0.1, 0.1), center=tuple(ORIGIN)), mat, 0.01)
+    solver = pdsim.SolverPeridynamics([body])
+    r = body.rest_positions - ORIGIN
+    solver.set_positions(ORIGIN + 1.01 * r)
+    solver.set_velocities(np.cross([0.0, 0.0, 60.0], r))
+    dt = 0.3 * solver.stable_time_step()
+    e0 = solver.kinetic_energy() + solver.strain_energy()
+    worst = 0.0
+    for _ in range(12):
+        for _ in range(int(0.01 / dt)):
+            solver.step(dt)
+        worst = max(worst, abs((solver.kinetic_energy() + solver.strain_energy()) / e0 - 1.0))
+    print(f"\nlargest energy deviation {worst:.2e}")
+    assert worst < 5.0e-3
