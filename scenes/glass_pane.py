@@ -12,27 +12,27 @@ is not slowed down) flies along +y through the pane's centre. Each frame advance
 frames: 4 ms shown over 2 s).
 
 Limits. With 1 to 2 particles through the pane (spacing 10 mm and 6 mm) the pane does not shatter into shards: what
-breaks out of the hole is mostly single particles (dust: 100 % of the broken-out material at the preview spacing, 57 %
-at the full one), and the debris damping keeps it near the hole at the preview spacing (fastest fragment back towards
-the shooter: 0 m/s, was 31 m/s) but not at the full one (29 m/s against the ball's 20 m/s; both measured with
-tools/fracture_patterns.py's fragment_metrics). Why, measured (2026-12-02, 21 variants): a rigid ball is a curvature
-the glass cannot follow (the glass under a sphere of radius R pushed along the shot stretches by about r^2 / (2 R^2),
-125 s_c at r = R / 2), so everything it touches breaks at any spacing; the full compressive bonus holds that material
-together as a stretched cone (the only shards the scene makes, 37-46 particles), and bounding it
-(Material.compressive_bonus_cap 0.25-3) turns the footprint into dust instead (100 % at both spacings). A slowed
-elastic steel ball (a peridynamic body, 0.26 or 2.1 kg) bounces off with the full bonus and pushes through a
-pulverised footprint with a bounded one; no run formed radial cracks, since the horizon (3 h = 18-30 mm) is longer
-than the pane is thick and damage spreads over it instead of localising. A 4 mm spacing (3 particles through, 16,875
-particles, 461 s of simulation) gives larger pieces (142, 93, 53 particles) but 67 % dust and 63 m/s back: shards need
-a horizon well under the ball's radius and several particles through the thickness (GPU resolution, not measured).
+breaks out of the hole is single particles and pairs (dust: 100 % of the broken-out material at both spacings; 49 and
+89 particles), and the debris damping keeps it slow at the preview spacing (fastest fragment back towards the shooter
+4.9 m/s, ball 20 m/s) but not at the full one (20.3 m/s; measured with tools/fracture_patterns.py's fragment_metrics,
+2026-12-02). Why (21 variants measured the same day, with the peridynamic dilatation's former directional factor,
+which then left 57 % dust and a few cone-shaped shards of 37-46 particles at the full spacing): a rigid ball is a
+curvature the glass cannot follow (the glass under a sphere of radius R pushed along the shot stretches by about
+r^2 / (2 R^2), 125 s_c at r = R / 2), so everything it touches breaks at any spacing; bounding the compressive bonus
+(Material.compressive_bonus_cap 0.25-3) turns the footprint into dust. A slowed elastic steel ball (a peridynamic
+body, 0.26 or 2.1 kg) bounces off with the full bonus and pushes through a pulverised footprint with a bounded one;
+no run formed radial cracks, since the horizon (3 h = 18-30 mm) is longer than the pane is thick and damage spreads
+over it instead of localising. A 4 mm spacing (3 particles through, 16,875 particles, 461 s of simulation) gave larger
+pieces (142, 93, 53 particles) but 67 % dust and 63 m/s back: shards need a horizon well under the ball's radius and
+several particles through the thickness (GPU resolution, not measured).
 
 Run:  python scenes/glass_pane.py --out glass_pane.usdc   or   pdsim run scenes/glass_pane.py --out glass_pane.usdc
 
-Run time (CPU only, the 2-core development machine shared with other jobs; no GPU measured): full resolution (5,000
-particles, 136 steps per frame) 1,416 s wall, `/usr/bin/time pdsim run scenes/glass_pane.py --out glass.usdc
---quiet`, 2026-12-02, load average 2.3-3.6 with another simulation on the same cores (the late frames, where the
-fragments' surfaces are rebuilt, took about 45 s each); preview (PREVIEW: 1,800 particles, 239 steps per frame) 54 s,
-`python tools/make_gallery.py --scenes glass_pane`.
+Run time (CPU only, the 2-core development machine; no GPU measured): full resolution (5,000 particles, 136 steps per
+frame) 378 s wall, 668 MB peak memory, `/usr/bin/time -v pdsim run scenes/glass_pane.py --out glass.usdc --quiet`,
+2026-12-02, load average 0.2-1.5 (the fragments' surface rebuilds take most of it: the simulation alone is about 65 s);
+preview (PREVIEW: 1,800 particles, 239 steps per frame): `python tools/make_gallery.py --scenes glass_pane`, time in
+docs/gallery.md.
 """
 
 import numpy as np
