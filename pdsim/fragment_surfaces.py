@@ -578,7 +578,8 @@ RELAX_TURN = 30.0  # largest turn [degrees] of a triangle when the rest-space cl
 DEFORMED_ROUNDS = 16  # rounds of edge flips, then of vertex moves, per frame against slivers made by the motion
 MAX_DRAWN_EDGE = 3.0  # drawn edges longer than this [spacings] are split at their rest-space midpoints (step 9)
 SPLIT_ROUNDS = 4  # rounds of edge splits per pass (each halves the longest edge)
-REFINE_PASSES = 3  # passes of splits and sliver clean-up per frame
+REFINE_PASSES = 6  # passes of splits and sliver clean-up per frame
+UNSLIVER_ROUNDS = 3  # rounds of flips, moves and merges of added vertices per clean-up
 SHORT_EDGE = 0.3  # edges shorter than this many spacings are collapsed
 _MAX_CLEAN_ROUNDS = 40
 
@@ -715,9 +716,10 @@ def _independent_choice(rows, cols, prio, count, size) -> np.ndarray:
     return chosen
 
 
-def _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle, plane_eq=None):
+def _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle, plane_eq=None, movable=None):
     """One round of edge collapses on the complex (see :func:`clean_complex`). Returns (triangles after the round
-    [f, 3], mask [f] of the triangles that keep an area, number of collapses; 0: nothing left to do)."""
+    [f, 3], mask [f] of the triangles that keep an area, number of collapses; 0: nothing left to do). With
+    ``movable`` (bool [v]) only those vertices may move onto a neighbour."""
     from scipy.sparse import csr_matrix
 
     n_v = points.shape[0]
@@ -747,6 +749,9 @@ def _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle
     if plane_eq is not None:  # or: the target lies on every input plane of the source (crack patches may slide)
         u_into_v |= _on_planes(inc, plane_eq, points, eu, ev, spacing)
         v_into_u |= _on_planes(inc, plane_eq, points, ev, eu, spacing)
+    if movable is not None:
+        u_into_v &= movable[eu]
+        v_into_u &= movable[ev]
     ok = u_into_v | v_into_u
     src = np.where(u_into_v, eu, ev)[ok]
     dst = np.where(u_into_v, ev, eu)[ok]
@@ -1714,32 +1719,49 @@ class FragmentSurfaces:
         return DrawnSurface(x, faces.astype(np.int32), parent, added)
 
     def _unsliver(self, x, faces, parent):
-        """Edge flips and vertex moves (in place on ``x``) against the crack triangles under SLIVER_ANGLE of the
-        drawn ``faces`` (face i descends from ``self.faces[parent[i]]``); then added vertices of three triangles
-        at such slivers are removed (:func:`_drop_three_fans`). Returns (faces, parent)."""
-        crack = self.face_crack[parent] == 1
-        if not crack.any() or triangle_angles(x, faces[crack]).min() >= SLIVER_ANGLE:
-            return faces, parent
+        """Against the crack triangles under SLIVER_ANGLE of the drawn ``faces`` (face i descends from
+        ``self.faces[parent[i]]``), up to UNSLIVER_ROUNDS times: edge flips, vertex moves (in place on ``x``), then
+        edge collapses that merge added vertices into a neighbour; last, added vertices of three triangles at such
+        slivers are removed (:func:`_drop_three_fans`). Returns (faces, parent)."""
         face_shell, face_patch = self._face_shell[parent], self._face_patch[parent]
-        for _ in range(DEFORMED_ROUNDS):
-            faces, flipped = _flip_round(x, faces, face_shell, face_patch, SLIVER_ANGLE)
-            if flipped == 0:
-                break
         free = np.full((int(self._face_patch.max()) + 1, 4), np.nan)  # no input plane holds in deformed space
-        for caps in (False, True, False):
+        movable = np.arange(len(x)) >= len(self.rest_vertices)  # only added vertices merge into a neighbour
+        for _ in range(UNSLIVER_ROUNDS):
+            crack = self.face_crack[parent] == 1
+            if not crack.any() or triangle_angles(x, faces[crack]).min() >= SLIVER_ANGLE:
+                return faces, parent
             for _ in range(DEFORMED_ROUNDS):
-                moved = _relax_round(
-                    x,
-                    faces,
-                    face_patch,
-                    free,
-                    SLIVER_ANGLE,
-                    max_turn=60.0,
-                    steps=(0.1, 0.25, 0.5, 1.0),
-                    caps=caps,
-                )
-                if moved == 0:
+                faces, flipped = _flip_round(x, faces, face_shell, face_patch, SLIVER_ANGLE)
+                if flipped == 0:
                     break
+            for caps in (False, True, False):
+                for _ in range(DEFORMED_ROUNDS):
+                    moved = _relax_round(
+                        x,
+                        faces,
+                        face_patch,
+                        free,
+                        SLIVER_ANGLE,
+                        max_turn=60.0,
+                        steps=(0.1, 0.25, 0.5, 1.0),
+                        caps=caps,
+                    )
+                    if moved == 0:
+                        break
+            # what is left: added vertices that crushed material brought next to others (needles) or onto a line
+            # between them (caps) merge into a neighbour (edge collapses as in step 6)
+            merged = 0
+            for _ in range(DEFORMED_ROUNDS):
+                new, keep, collapsed = _collapse_round(
+                    x, faces, face_shell, face_patch, self.spacing, SHORT_EDGE, SLIVER_ANGLE, movable=movable
+                )
+                if collapsed == 0:
+                    break
+                merged += collapsed
+                faces, parent = new[keep], parent[keep]
+                face_shell, face_patch = face_shell[keep], face_patch[keep]
+            if merged == 0:
+                break
         return _drop_three_fans(x, faces, parent, face_patch, len(self.rest_vertices), SLIVER_ANGLE)
 
 
