@@ -95,15 +95,18 @@ triangles (same positions) and crack faces are pieces of the region boundaries:
    longer than 3 h. Then, if the crack faces hold a triangle with an angle under 5 degrees, rounds of edge flips
    (as in step 6, now at the current positions) and of vertex moves (step 6's relaxation, with no plane constraint,
    turns of up to 60 degrees and steps down to a tenth of the way; then the obtuse corners of flat caps moved away
-   from their long side, and the relaxation again) remove them before the frame is written; an added vertex left
-   with three triangles at a sliver (inside the triangle of its neighbours) is then removed. Splits and clean-up
-   alternate up to three times. This depends on the frame's positions only (a resumed run draws the same). The
-   faces and vertex count change only on frames that need it; velocities of added vertices are those of step 8 at
-   their rest points. Measured on the brittle wall of tests/test_pd_render_surfaces.py (h = 1 cm, frames 0-8): no
-   crack triangle under 5 degrees at rest or as drawn, on the lattice (smallest 5.08 degrees at rest, 5.00 drawn;
-   before the relaxation and this pass: 2.35 at rest and 0.28 drawn, 6-36 slivers per frame) and with jittered
-   particles (5.12 and 5.10; before the off-surface move of step 3b: 0.12 degrees, up to 180 slivers per frame); no
-   triangle is longer than 2.6 h at rest and 3.0 h as drawn (4.2 h before the splits).
+   from their long side, and the relaxation again) remove them before the frame is written. Added vertices still at
+   a sliver (crushed material brings midpoints next to each other or onto a line between their neighbours) merge
+   into a neighbour by the edge collapses of step 6, in drawn space, and the flips and moves run again (up to three
+   rounds); an added vertex left with three triangles at a sliver (inside the triangle of its neighbours) is then
+   removed. Splits and clean-up alternate up to six times. This depends on the frame's positions only (a resumed
+   run draws the same). The faces and vertex count change only on frames that need it; velocities of added
+   vertices are those of step 8 at their rest points. Measured on the brittle wall of
+   tests/test_pd_render_surfaces.py (h = 1 cm, frames 0-8): no crack triangle under 5 degrees at rest or as drawn,
+   on the lattice (smallest 5.08 degrees at rest, 5.00 drawn; before the relaxation and this pass: 2.35 at rest
+   and 0.28 drawn, 6-36 slivers per frame) and with jittered particles (5.12 and 5.10; before the off-surface move
+   of step 3b: 0.12 degrees, up to 180 slivers per frame); no triangle is longer than 2.6 h at rest and 3.0 h as
+   drawn (4.2 h before the splits).
 
 USD: one ``UsdGeom.Mesh`` per body at ``/World/<body>_surface`` holds every shell. It carries the uniform (per-face)
 int primvars ``fragment`` (the fragment label; chips carry their particle's fragment) and ``crack`` (1 on crack
