@@ -21,8 +21,8 @@ frame) 91 s wall, 540 MB peak memory, `/usr/bin/time -v pdsim run scenes/metal_d
 2026-12-02, load average about 1; preview (PREVIEW: 1,458 particles): `python tools/make_gallery.py --scenes
 metal_dent_tear`, time in docs/gallery.md. At the preview spacing 29 % of the plate breaks out (421 particles, in 295
 fragments, the largest of 10 particles; fastest fragment back up 5.3 m/s against the ball's 3 m/s); with the
-peridynamic dilatation's former directional factor it was 6 % (86 single particles), since that factor softened the
-bulk response of the bonds the ball turns over (docs/accuracy.md).
+peridynamic dilatation's former directional factor, which misread the volume change of bonds that turn
+(docs/accuracy.md), it was 6 % (86 single particles); which is closer to a real plate is not measured.
 """
 
 import numpy as np
