@@ -402,3 +402,28 @@ def test_added_vertex_at_a_sliver_with_three_triangles_is_removed():
     assert out_parent[-1] in (7, 8, 9)
     kept, _ = _drop_three_fans(pts, faces, parent, patch, 7, 5.0)  # vertex 6 is an input vertex: stays
     np.testing.assert_array_equal(kept, faces)
+
+
+def test_drawn_merge_moves_only_added_vertices():
+    """The drawn pass's merge (an edge collapse with ``movable``): a needle made by an added vertex 6 lying 1e-3 h from
+    an input vertex 0 of a closed octahedron (the face (0, 1, 2) split into a fan around 6) is merged by moving 6 onto
+    0, leaving the closed octahedron. The same collapse happens with no restriction, and none when only the input
+    vertices may move (6 may not, and 0 may not leave its other faces' patches for the fan's)."""
+    from pdsim.fragment_surfaces import _collapse_round, shells_closed
+
+    x = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], dtype=np.float64)
+    octa = np.array([[0, 1, 2], [1, 3, 2], [3, 4, 2], [4, 0, 2], [1, 0, 5], [3, 1, 5], [4, 3, 5], [0, 4, 5]])
+    faces = np.concatenate([octa[1:], [[6, 0, 1], [6, 1, 2], [6, 2, 0]]])
+    shell = np.zeros(len(faces), dtype=np.int64)
+    patch = np.arange(len(faces))
+    patch[-3:] = 99
+    h = 1.0
+    pts = np.concatenate([x, (x[0] + 1e-3 * (x[1] + x[2] - 2 * x[0]))[None]])
+    added = np.arange(7) >= 6
+    new, keep, count = _collapse_round(pts, faces, shell, patch, h, 0.3, 5.0, movable=added)
+    assert count == 1
+    out = new[keep]
+    assert 6 not in out and len(out) == 8
+    assert shells_closed(out, np.zeros(len(out), np.int64), 7).all()
+    assert _collapse_round(pts, faces, shell, patch, h, 0.3, 5.0)[2] == 1
+    assert _collapse_round(pts, faces, shell, patch, h, 0.3, 5.0, movable=~added)[2] == 0
