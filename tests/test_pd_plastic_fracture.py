@@ -330,6 +330,72 @@ def test_compressive_bonus_cap_sets_the_breaking_stretch(alpha, cap, threshold):
     assert broken.any() == (threshold < 0.045)
 
 
+def _shear_break(alpha, cap, s_c):
+    """The simple shear gamma at which the compressive-bonus rule first breaks a bond along the stretching principal
+    direction: the principal stretches of x -> x + gamma y are lambda = sqrt(1 + gamma^2 / 4) +- gamma / 2, and the
+    rule breaks once lambda_1 - 1 > s_c + min(alpha (1 - lambda_2), k s_c) (bisection)."""
+    lo, hi = 0.0, 1.0
+    for _ in range(60):
+        g = 0.5 * (lo + hi)
+        l1 = math.sqrt(1.0 + 0.25 * g * g) + 0.5 * g
+        bonus = alpha * (1.0 - 1.0 / l1)
+        if cap is not None:
+            bonus = min(bonus, cap * s_c)
+        lo, hi = (g, hi) if l1 - 1.0 <= s_c + bonus else (lo, g)
+    return lo
+
+
+@pytest.mark.parametrize(
+    ("alpha", "cap", "gamma_break"),
+    [(0.0, None, 0.0199), (0.25, None, 0.0264), (1.0, None, 0.2002), (1.0, 3.0, 0.0785)],
+)
+def test_compressive_bonus_in_simple_shear(alpha, cap, gamma_break):
+    """What the compressive bonus does in pure shear, where a brittle solid breaks at a principal tension equal to
+    its tensile strength: under simple shear gamma a particle's most compressive bond shortens by about gamma / 2,
+    which raises every bond's limit by alpha gamma / 2, while the most stretched bond stretches by about gamma / 2.
+    Without the bonus the block breaks at gamma = 2 s_c (0.0199 for s_c = 0.01, finite strain); with alpha = 0.25
+    at 0.0264; with the full bonus (alpha = 1) the two cancel to first order and the block holds until the
+    second-order excess lambda_1 + lambda_2 - 2 = gamma^2 / 4 reaches s_c, gamma = 2 sqrt(s_c) = 0.2002 (ten times
+    the unbonused shear strain: the full bonus makes a coarse brittle body far stronger in shear than in tension,
+    which is what holds the teaser's plug together, docs/fracture.md); a cap k = 3 bounds it, gamma = 0.0785. The
+    analytic thresholds (from the principal stretches) are bracketed within 10 %: at 0.9 gamma_break no bond has
+    broken, at 1.1 gamma_break some have, and at both the broken bonds are exactly those the rule breaks on the
+    exact bond stretches."""
+    s_c = 0.01
+    assert _shear_break(alpha, cap, s_c) == pytest.approx(gamma_break, abs=1.0e-4)
+    material = pdsim.Material(
+        density=1000.0,
+        youngs_modulus=1.0e6,
+        poisson_ratio=0.25,
+        critical_stretch=s_c,
+        compressive_bonus=alpha,
+        compressive_bonus_cap=cap,
+    )
+    for factor, breaks in ((0.9, False), (1.1, True)):
+        solver = pdsim.SolverPeridynamics(
+            [pdsim.PeridynamicBody(pdsim.box((6 * H, 6 * H, 6 * H), center=(40.0, -25.0, 3.0)), material, H)]
+        )
+        m = solver.model
+        X = m.rest_host.astype(np.float64)
+        grad = np.zeros((3, 3))
+        grad[0, 1] = factor * gamma_break
+        solver.set_displacements((X - X.mean(axis=0)) @ grad.T)
+        off = m.family_offsets.numpy().astype(np.int64)
+        owner = np.repeat(np.arange(m.particle_count), np.diff(off))
+        nbr = m.family_neighbors.numpy()[: off[-1]]
+        xi = X[nbr] - X[owner]
+        stretch = np.linalg.norm(xi @ (np.eye(3) + grad).T, axis=1) / np.linalg.norm(xi, axis=1) - 1.0
+        smin = np.minimum(np.minimum.reduceat(stretch, off[:-1]), 0.0)
+        bonus = -alpha * np.minimum(smin[owner], smin[nbr])
+        if cap is not None:
+            bonus = np.minimum(bonus, cap * s_c)
+        limit = s_c + bonus
+        assert np.abs(stretch - limit).min() > 1.0e-5
+        broken = ~solver.bond_alive()
+        np.testing.assert_array_equal(broken, stretch > limit)
+        assert broken.any() == breaks
+
+
 @pytest.mark.parametrize("cap", [-0.5, float("nan"), float("inf"), "a lot"])
 def test_compressive_bonus_cap_rejects_bad_values(cap):
     with pytest.raises(pdsim.ParameterError, match=r"compressive_bonus_cap=.*allowed"):
