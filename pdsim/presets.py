@@ -32,6 +32,11 @@ from .materials import Anisotropy, Material
 from .validate import check_range, check_vec3
 
 STIFFNESS_SCALE = 1.0e-4  # Young's modulus (and stresses) of the animation presets over the real ones
+# Silling-Askari compressive bonus alpha of the brittle presets (s0 = s_c - alpha s_min). It makes them unbreakable
+# in uniaxial compression (nu < alpha) while keeping them about as weak in pure shear as in tension: simple shear
+# breaks them at 1.33 times the unbonused shear strain, where alpha = 1 would hold them to 2 sqrt(s_c) instead of
+# 2 s_c, ten times it at s_c = 0.01 (tests/test_pd_plastic_fracture.py, test_compressive_bonus_in_simple_shear).
+COMPRESSIVE_BONUS = 0.25
 
 # Typical tensile strengths [Pa] of the real materials (for spacing_for_strength and the guide's table); wood: across
 # the grain (the strength that splitting along the grain needs).
@@ -48,8 +53,8 @@ def glass(*, real: bool = False) -> Material:
     Real values and typical ranges: density 2500 kg/m^3 (2440-2530); E = 70 GPa (68-74); nu = 0.22 (0.21-0.24);
     fracture toughness K_Ic 0.7-0.8 MPa m^0.5, so G = K_Ic^2 / E = 8 J/m^2 (7-10); tensile (bending) strength of
     annealed glass 30-100 MPa, set by surface flaws (Weibull modulus of the strength about 5-10); compressive strength
-    about 1 GPa (compressive_bonus 1: bonds in compression hold longer, so a hit does not crush the contact zone to
-    dust).
+    about 1 GPa (compressive_bonus 0.25, :data:`COMPRESSIVE_BONUS`: bonds in compression hold longer, so a hit does
+    not crush the contact zone to dust).
 
     Animation values (``real=False``): E = 7 MPa (1e-4 of the real one: 53 m/s wave speed, about 400 steps per frame
     at 24 fps and h = 1 cm); critical_stretch 0.005 instead of G: the real G gives s_c = 5.6e-5 at h = 1 cm, and with a
@@ -62,7 +67,7 @@ def glass(*, real: bool = False) -> Material:
             youngs_modulus=70.0e9,
             poisson_ratio=0.22,
             fracture_energy=8.0,
-            compressive_bonus=1.0,
+            compressive_bonus=COMPRESSIVE_BONUS,
             name="glass",
         )
     return Material(
@@ -70,7 +75,7 @@ def glass(*, real: bool = False) -> Material:
         youngs_modulus=70.0e9 * STIFFNESS_SCALE,
         poisson_ratio=0.22,
         critical_stretch=0.005,
-        compressive_bonus=1.0,
+        compressive_bonus=COMPRESSIVE_BONUS,
         name="glass",
     )
 
@@ -80,7 +85,7 @@ def concrete(*, real: bool = False) -> Material:
 
     Real values and typical ranges: density 2400 kg/m^3 (2200-2500); E = 30 GPa (25-40); nu = 0.2 (0.15-0.22);
     fracture energy G_F = 120 J/m^2 (70-150); tensile strength 2-4 MPa (Weibull modulus about 8-12); compressive
-    strength 20-50 MPa (compressive_bonus 1). Its characteristic length E G_F / f_t^2 is about 0.4 m: the spacing at
+    strength 20-50 MPa (compressive_bonus 0.25). Its characteristic length E G_F / f_t^2 is about 0.4 m: the spacing at
     which the real G_F gives the real tensile strength is 11 cm (:func:`spacing_for_strength`), affordable for a wall
     or a slab.
 
@@ -95,7 +100,7 @@ def concrete(*, real: bool = False) -> Material:
             youngs_modulus=30.0e9,
             poisson_ratio=0.2,
             fracture_energy=120.0,
-            compressive_bonus=1.0,
+            compressive_bonus=COMPRESSIVE_BONUS,
             name="concrete",
         )
     return Material(
@@ -103,7 +108,7 @@ def concrete(*, real: bool = False) -> Material:
         youngs_modulus=30.0e9 * STIFFNESS_SCALE,
         poisson_ratio=0.2,
         critical_stretch=0.002,
-        compressive_bonus=1.0,
+        compressive_bonus=COMPRESSIVE_BONUS,
         name="concrete",
     )
 
@@ -281,6 +286,7 @@ def spacing_for_strength(material: Material, tensile_strength: float, *, horizon
 
 
 __all__ = [
+    "COMPRESSIVE_BONUS",
     "PRESETS",
     "STIFFNESS_SCALE",
     "TENSILE_STRENGTH",
