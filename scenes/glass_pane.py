@@ -30,15 +30,16 @@ A thicker pane does not shatter either (2026-12-02, second round, spacing 10 mm,
 settings: `python tools/fracture_patterns.py --scene scenes/glass_pane.py --scene-args '{"spacing": 0.01, "frames":
 16, "thickness": 0.03, "radius": 0.05}' --plane 0 2 --centre 3 -2 0.6 --half-width 0.1 --variants all "all, no
 bonus"`, and the same with "speed": 2.0, "duration": 0.008 and "radius" 0.05 or 0.15). A 30 mm pane (3 particles
-through) hit by a 5 cm ball at 20 m/s, as the teaser's wall is: with the compressive bonus the glass under the ball
-tents forward and frees one plug of 216 particles (so 19.7 % dust, but single particles spall back at up to 88 m/s,
-4.4 times the ball; another seed, tried outside the tool, freed no plug at all); without the bonus the ball punches
-out a plug of dust (100 % of 421 particles). At 2 m/s over 8 ms (ball radius 5 or 15 cm) the bonus keeps the pane
-whole (it bends, nothing breaks out) and without it the ball punches out dust (100 % and 97 %). No run formed radial
-cracks: the load that bends a 30 mm pane to its strength (tens of kN) sits on a contact a few millimetres across,
-smaller than a particle, so the particles under the ball fail before the plate bends. A prototype (not kept) that
-took the bonus from the particle's dilatation instead of its most compressed bond, so that the stretched face of a
-bent plate gets none, gave the same plug or tent.
+through) hit by a 5 cm ball at 20 m/s, as the teaser's wall is: with the full compressive bonus, which holds sheared
+glass together (docs/fracture.md), the glass under the ball tents forward and frees one plug of 216 particles (so
+19.7 % dust, but single particles spall back at up to 88 m/s, 4.4 times the ball; another seed, tried outside the
+tool, freed no plug at all); without the bonus the ball punches out a plug of dust (100 % of 421 particles). At 2
+m/s over 8 ms (ball radius 5 or 15 cm) the bonus keeps the pane whole (it bends, nothing breaks out) and without it
+the ball punches out dust (100 % and 97 %). No run formed radial cracks: the load that bends a 30 mm pane to its
+strength (tens of kN) sits on a contact a few millimetres across, smaller than a particle, so the particles under
+the ball fail before the plate bends. A prototype (not kept) that took the bonus from the particle's dilatation
+instead of its most compressed bond, so that the stretched face of a bent plate gets none, gave the same plug or
+tent.
 
 Run:  python scenes/glass_pane.py --out glass_pane.usdc   or   pdsim run scenes/glass_pane.py --out glass_pane.usdc
 
