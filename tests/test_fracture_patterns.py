@@ -280,3 +280,33 @@ def test_teaser_brittle_wall_breaks_into_shards_not_dust():
     assert r["broken_out"] > 100
     dust, slow, lattice_free = fp.must_show(r)
     assert dust and slow and lattice_free
+
+
+def test_cubic_lattice_test_finds_lattice_directions_in_any_plane():
+    """cubic_lattice_test (a tilted tile's crack faces): in the plane x = const its K4 mean is (3 + A4) / 4, so it is
+    the A4 test; 300 normals spread at random over a plane pass (tilted 30 and 20 degrees, as scenes/drop_shatter.py,
+    and x = const); normals of cracks along the lattice planes (the world axes projected onto the plane, 3-degree
+    scatter) fail by more than 10 standard errors; normals far out of the plane are left out."""
+    rng = np.random.default_rng(5)
+    a, b = math.radians(30.0), math.radians(20.0)
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, math.cos(a), -math.sin(a)], [0.0, math.sin(a), math.cos(a)]])
+    ry = np.array([[math.cos(b), 0.0, math.sin(b)], [0.0, 1.0, 0.0], [-math.sin(b), 0.0, math.cos(b)]])
+    rot = ry @ rx
+    for normal in (rot @ np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])):
+        e1 = np.cross(normal, [0.0, 0.0, 1.0] if abs(normal[2]) < 0.9 else [1.0, 0.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(normal, e1)
+        phi = rng.uniform(0.0, 2.0 * np.pi, 300)
+        spread = np.outer(np.cos(phi), e1) + np.outer(np.sin(phi), e2)
+        r = fp.cubic_lattice_test(spread, normal)
+        assert r["passes"] and r["faces"] == 300, r
+        axes = np.eye(3)[rng.integers(0, 3, 300)] * rng.choice([-1.0, 1.0], 300)[:, None]
+        axes = axes + rng.normal(0.0, math.radians(3.0), axes.shape)
+        r = fp.cubic_lattice_test(axes, normal)
+        assert not r["passes"] and min(abs(r["z4"]), abs(r["z8"])) > 10.0, r
+        assert r["faces"] < 300  # the axes nearly along the plane's normal are out
+    phi = rng.uniform(0.0, 2.0 * np.pi, 200)
+    wall = np.stack([np.zeros_like(phi), np.cos(phi), np.sin(phi)], axis=1)
+    a4 = fp.lattice_test(phi)[0]
+    k4 = np.mean(np.sum(wall**4, axis=1))
+    assert k4 == pytest.approx(0.75 + 0.25 * a4, abs=1.0e-12)

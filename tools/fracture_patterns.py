@@ -29,6 +29,8 @@ tests/test_fracture_patterns.py (straight cuts at 0, 22.5 and 30 degrees are rec
     python tools/fracture_patterns.py --variants baseline all --seeds --no-layered
     python tools/fracture_patterns.py --scene scenes/glass_pane.py --scene-args '{"spacing": 0.01}' --plane 0 2 \
         --centre 3 -2 0.6 --half-width 0.1 --variants baseline all     # another brittle scene (figures only)
+    python tools/fracture_patterns.py --scene scenes/drop_shatter.py --shot 0 0 -6 \
+        --plane-normal 0.2962 -0.5 0.8138 --variants scene all        # a dropped tile: its fall, its tilted plane
 """
 
 from __future__ import annotations
@@ -153,6 +155,40 @@ def lattice_test(phi):
     return a4, a8, psi, float(np.mean((psi < 7.5) | (psi > 37.5)))
 
 
+def cubic_lattice_test(normals, plane_normal, *, samples=36_000):
+    """The lattice-direction test for crack faces across a plane of any orientation (a tilted tile), against the
+    simple cubic lattice of the world axes: the normals with an in-plane share >= IN_PLANE_SHARE are projected onto
+    the plane and normalised, and the cubic invariants K4 = sum n_i^4 and K8 = sum n_i^8 (the only functions of a
+    direction that the cubic symmetry keeps, to eighth order) are averaged over them. Directions spread evenly over
+    the plane give the means and spreads of a reference set (``samples`` angles evenly spaced over half a turn), and
+    the test passes when both means lie within HARMONIC_SIGMAS standard errors (reference spread / sqrt(N)) of the
+    reference. In the plane x = const, K4 = (3 + cos 4 phi) / 4 and K8 = (35 + 28 cos 4 phi + cos 8 phi) / 64: the
+    test is then the A4 / A8 test of lattice_test. Returns {z4, z8 (the two means' distances in standard errors),
+    faces, passes}."""
+    m = np.asarray(plane_normal, dtype=np.float64)
+    m = m / np.linalg.norm(m)
+    normals = np.asarray(normals, dtype=np.float64)
+    inplane = normals - np.outer(normals @ m, m)
+    share = np.linalg.norm(inplane, axis=1)
+    keep = share >= IN_PLANE_SHARE
+    n = inplane[keep] / share[keep, None]
+    e1 = np.cross(m, np.eye(3)[int(np.argmin(np.abs(m)))])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(m, e1)
+    t = np.arange(samples) * (np.pi / samples)
+    ref = np.outer(np.cos(t), e1) + np.outer(np.sin(t), e2)
+    out = {"faces": len(n)}
+    for name, power in (("z4", 4), ("z8", 8)):
+        r = np.sum(ref**power, axis=1)
+        spread = float(r.std())
+        if len(n) == 0 or spread < 1.0e-9:
+            out[name] = float("nan")
+            continue
+        out[name] = float((np.sum(n**power, axis=1).mean() - r.mean()) / (spread / math.sqrt(len(n))))
+    out["passes"] = bool(len(n) > 0 and all(abs(out[k]) <= HARMONIC_SIGMAS for k in ("z4", "z8")))
+    return out
+
+
 def fragment_metrics(solver, body_index=0, *, shot=(3.0, 0.0, 0.0)):
     """Fragment figures of one body at the solver's current state (module docstring); ``shot`` is the ball's
     velocity [m/s] (the shooter lies behind it)."""
@@ -242,10 +278,14 @@ def patterned_scene(build, material_overrides, body_options):
         pdsim.Scene.add_peridynamic_body = add
 
 
-def measure_scene(build, plane, centre, half_width, variants_, *, damping_per_step=None):
-    """Figures of another brittle scene (one peridynamic body hit by the scene's first collider) per variant
-    (name -> (material overrides, body options)). ``damping_per_step``: when given, the variants' debris_damping is
-    replaced by this value over the scene's time step (c dt), so one setting carries over between scenes."""
+def measure_scene(build, plane, centre, half_width, variants_, *, damping_per_step=None, shot=None, plane_normal=None):
+    """Figures of another brittle scene (one peridynamic body hit by the scene's first collider) per variant (name
+    -> (material overrides, body options); overrides None: the scene as it ships, the --variants name "scene").
+    ``damping_per_step``: when given, the variants' debris_damping is replaced by this value over the scene's time
+    step (c dt), so one setting carries over between scenes. ``shot``: the impact velocity [m/s] when the scene has
+    no projectile (a body dropped on the ground: its fall), so "back" is the fastest fragment against it.
+    ``plane_normal``: the rest normal of the plane the cracks cross when it is not a plane of world axes (a tilted
+    tile): the crack test is then cubic_lattice_test over all face particles."""
     out = {}
     dt = None
     if damping_per_step is not None:
@@ -253,16 +293,31 @@ def measure_scene(build, plane, centre, half_width, variants_, *, damping_per_st
         s = scene.build_solvers(device="cpu")[0]
         dt = scene.frame_time / max(1, math.ceil(scene.frame_time / (scene.time_step_safety * s.stable_time_step())))
     for name, (overrides, bo) in variants_.items():
-        mo = dict(overrides)
-        if dt is not None and mo.get("debris_damping"):
-            mo["debris_damping"] = damping_per_step / dt
-        scene = patterned_scene(build, mo, bo)
+        if overrides is None:  # the scene as it ships
+            scene = build()
+        else:
+            mo = dict(overrides)
+            if dt is not None and mo.get("debris_damping"):
+                mo["debris_damping"] = damping_per_step / dt
+            scene = patterned_scene(build, mo, bo)
         solver, wall = run_scene(scene)
-        r = fragment_metrics(solver, shot=scene.colliders[0].velocity)
-        r.update(crack_test(solver, plane, centre, half_width), wall_s=wall)
+        r = fragment_metrics(solver, shot=scene.colliders[0].velocity if shot is None else shot)
+        if plane_normal is None:
+            r.update(crack_test(solver, plane, centre, half_width), wall_s=wall)
+            print(name, _row(name, r), flush=True)
+        else:
+            r.update(cubic_lattice_test(crack_normals(solver)[1], plane_normal), wall_s=wall)
+            print(name, _cubic_row(name, r), flush=True)
         out[name] = r
-        print(name, _row(name, r), flush=True)
     return out
+
+
+def _cubic_row(name, r):
+    return (
+        f"| {name} | {r['broken_out']} ({100 * r['broken_out_share']:.1f} %) | {r['fragments']} | "
+        f"{100 * r['dust']:.1f} % | {100 * r['top5']:.1f} % | {r['singles']} | {r['back']:.2f} / {r['ball']:.1f} | "
+        f"{r['z4']:+.1f} / {r['z8']:+.1f} ({r['faces']}) | {'yes' if r['passes'] else 'NO'} | {r['wall_s']:.0f} s |"
+    )
 
 
 def _row(name, r):
@@ -489,6 +544,8 @@ def main(argv=None):
     p.add_argument("--centre", nargs=3, type=float, default=[0.0, 0.0, 0.0], help="centre of the crack test [m]")
     p.add_argument("--half-width", type=float, default=TEST_HALF_WIDTH, help="half width of the crack test [m]")
     p.add_argument("--damping-per-step", type=float, default=0.01, help="debris damping c dt for --scene")
+    p.add_argument("--shot", nargs=3, type=float, default=None, help="impact velocity [m/s] of --scene (no projectile)")
+    p.add_argument("--plane-normal", nargs=3, type=float, default=None, help="rest normal of a tilted crack plane")
     args = p.parse_args(argv)
     if args.scene:
         import importlib.util
@@ -499,6 +556,8 @@ def main(argv=None):
         spec.loader.exec_module(module)
         keywords = json.loads(args.scene_args)
         table = {k: v for k, v in variants().items() if k in args.variants}
+        if "scene" in args.variants:  # the scene's own settings, unpatched
+            table = {"scene": (None, None), **table}
         return measure_scene(
             lambda: module.build_scene(**keywords),
             tuple(args.plane),
@@ -506,6 +565,8 @@ def main(argv=None):
             args.half_width,
             table,
             damping_per_step=args.damping_per_step,
+            shot=args.shot,
+            plane_normal=args.plane_normal,
         )
     if args.load:
         sections = load_sections(args.load, args.variants, args.seeds, not args.no_layered)
