@@ -53,8 +53,8 @@ def glass(*, real: bool = False) -> Material:
     Real values and typical ranges: density 2500 kg/m^3 (2440-2530); E = 70 GPa (68-74); nu = 0.22 (0.21-0.24);
     fracture toughness K_Ic 0.7-0.8 MPa m^0.5, so G = K_Ic^2 / E = 8 J/m^2 (7-10); tensile (bending) strength of
     annealed glass 30-100 MPa, set by surface flaws (Weibull modulus of the strength about 5-10); compressive strength
-    about 1 GPa (compressive_bonus 0.25, :data:`COMPRESSIVE_BONUS`: bonds in compression hold longer, so a hit does
-    not crush the contact zone to dust).
+    about 1 GPa (compressive_bonus 0.25, :data:`COMPRESSIVE_BONUS`: bonds in a compressed neighbourhood hold longer,
+    and uniaxial compression alone breaks none).
 
     Animation values (``real=False``): E = 7 MPa (1e-4 of the real one: 53 m/s wave speed, about 400 steps per frame
     at 24 fps and h = 1 cm); critical_stretch 0.005 instead of G: the real G gives s_c = 5.6e-5 at h = 1 cm, and with a
