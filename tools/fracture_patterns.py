@@ -536,7 +536,8 @@ the teaser's holds fragments together: with 200 / s instead of 60 / s one seed o
 Use the same three settings: `strength_weibull_modulus=4` with any seed, `debris_damping` c with c dt of about
 0.01 for the scene's step dt (the teaser: 60 / s at dt = 1.7e-4 s), and `sampling="jittered",
 jitter=0.5` on the brittle bodies, with `compressive_bonus=1` for impacts (knowing that it also makes the material
-far stronger in shear, above). `tools/fracture_patterns.py --scene` measures another scene with the same figures.
+far stronger in shear, above; capped at 3 s_c with `compressive_bonus_cap=3` it made the glass pane shatter at 4 mm,
+below). `tools/fracture_patterns.py --scene` measures another scene with the same figures.
 
 The other brittle gallery scenes, as they ship, at full resolution and their last frame (`--variants scene`;
 the commands are in each scene's docstring; 2026-12-02):
