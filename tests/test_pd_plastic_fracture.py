@@ -400,3 +400,34 @@ def test_compressive_bonus_in_simple_shear(alpha, cap, gamma_break):
 def test_compressive_bonus_cap_rejects_bad_values(cap):
     with pytest.raises(pdsim.ParameterError, match=r"compressive_bonus_cap=.*allowed"):
         pdsim.Material(1000.0, 1.0e6, 0.25, critical_stretch=0.01, compressive_bonus=1.0, compressive_bonus_cap=cap)
+
+
+@pytest.mark.parametrize("name", ["glass", "concrete"])
+def test_brittle_presets_hold_in_uniaxial_compression(name):
+    """The brittle presets' compressive bonus (pdsim.presets.COMPRESSIVE_BONUS = 0.25, above their Poisson's ratio)
+    keeps uniaxial compression from breaking them: under x -> (1 - eps) x, y, z -> (1 + nu eps) (y, z) the most
+    stretched bond (lateral) stretches by nu eps while every limit rises by alpha eps, so no bond breaks at eps = 5
+    and 30 times the critical stretch; without the bonus the same block breaks at 8 s_c (nu eps = 1.76 and 1.6 s_c,
+    over s_c). Block of 6^3 particles at (40, -25, 3) m, each strain applied to a fresh solver in one go."""
+    from pdsim import presets
+
+    for alpha, factors, breaks in ((None, (5.0, 30.0), False), (0.0, (8.0,), True)):
+        material = presets.preset(name)
+        assert material.compressive_bonus == presets.COMPRESSIVE_BONUS > material.poisson_ratio
+        if alpha is not None:
+            material = pdsim.Material(
+                density=material.density,
+                youngs_modulus=material.youngs_modulus,
+                poisson_ratio=material.poisson_ratio,
+                critical_stretch=material.critical_stretch,
+                compressive_bonus=alpha,
+            )
+        for factor in factors:
+            eps = factor * material.critical_stretch
+            body = pdsim.PeridynamicBody(pdsim.box((6 * H, 6 * H, 6 * H), center=(40.0, -25.0, 3.0)), material, H)
+            solver = pdsim.SolverPeridynamics([body])
+            X = solver.model.rest_host.astype(np.float64)
+            nu = material.poisson_ratio
+            grad = np.diag([-eps, nu * eps, nu * eps])
+            solver.set_displacements((X - X.mean(axis=0)) @ grad.T)
+            assert (~solver.bond_alive()).any() == breaks, (name, alpha, factor)
