@@ -18,3 +18,12 @@ def mark_points_inside_mesh(
     if q.result:
         if q.sign < 0.0:
             inside[i] = 1
+
+
+def points_inside_mesh(mesh: wp.Mesh, points: wp.array, max_dist: float) -> wp.array:
+    """Launches :func:`mark_points_inside_mesh` over ``points`` (on the mesh's device); returns the int32 mask."""
+    inside = wp.zeros(points.shape[0], dtype=wp.int32, device=points.device)
+    wp.launch(
+        mark_points_inside_mesh, dim=points.shape[0], inputs=[mesh.id, points, max_dist, inside], device=points.device
+    )
+    return inside

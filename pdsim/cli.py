@@ -14,12 +14,23 @@ and leaves the cache of the finished frames readable; ``--resume`` continues fro
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import os
+import signal
 import sys
+import threading
+import warnings
 
-from . import __version__
+import warp as wp
+
+from . import __version__, sweep
+from .checkpoint import StopRequest, signal_exit_code
+from .default_scene import build_scene as build_default_scene
+from .device import resolve_device
 from .errors import InstabilityError, ParameterError, PdsimError
+from .explain import explain_scene
+from .output.preview import write_preview
+from .scene import Scene
+from .scene_script import load_scene_script
 
 EXIT_DIVERGED = 3  # exit status when the watchdog stops a diverging run
 
@@ -131,10 +142,6 @@ def _number(field: str, text: str | None, kind, allowed: str):
 
 
 def _preview(args) -> int:
-    import warp as wp
-
-    from .output.preview import write_preview
-
     if args.out is None:
         raise ParameterError("out", None, "a path ending in .png (still), .gif or .mp4 (animation)")
     fps = _number("fps", args.fps, float, "a number of frames per second in (0, 1000]")
@@ -154,7 +161,7 @@ def _preview(args) -> int:
         supersample=supersample,
         ground=not args.no_ground,
         shadows=not args.no_shadows,
-        device=_resolve_device(args.device),
+        device=resolve_device(args.device),
     )
     frames = result.frames
     span = f"frame {frames[0]}" if len(frames) == 1 else f"{len(frames)} frames ({frames[0]}..{frames[-1]})"
@@ -203,34 +210,6 @@ def _add_run_options(r: argparse.ArgumentParser):
     r.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def load_scene_script(path: str):
-    """Imports a scene script and returns its ``build_scene`` callable."""
-    if not path.endswith(".py"):
-        raise ParameterError("scene", path, "a Python scene script (*.py)")
-    if not os.path.isfile(path):
-        raise ParameterError("scene", path, "an existing file")
-    folder = os.path.dirname(os.path.abspath(path))
-    if folder not in sys.path:  # as when the script runs on its own: its folder's modules import
-        sys.path.insert(0, folder)
-    spec = importlib.util.spec_from_file_location("pdsim_user_scene", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    build = getattr(module, "build_scene", None)
-    if not callable(build):
-        raise ParameterError("scene", path, "a script that defines build_scene() returning a pdsim.Scene")
-    return build
-
-
-def _resolve_device(name: str | None) -> str | None:
-    if name != "cuda":
-        return name
-    import warp as wp
-
-    if wp.get_cuda_device_count() == 0:
-        raise ParameterError("device", "cuda", "'cpu' on this machine (no CUDA device found)")
-    return "cuda"
-
-
 def _run_settings(args) -> dict:
     """Scene.run keyword arguments of the run options (one-line ParameterErrors for bad values)."""
     settings = {}
@@ -272,8 +251,6 @@ def _frames(text: str | None) -> int | None:
 
 
 def _wedge(args) -> int:
-    from . import sweep
-
     if not args.settings:
         raise ParameterError("set", None, "at least one --set NAME=V1,V2,... (the settings to vary)")
     if args.out is None:
@@ -292,7 +269,7 @@ def _wedge(args) -> int:
         args.out,
         scheduler=args.scheduler,
         frames=_frames(args.frames),
-        device=_resolve_device(args.device),
+        device=resolve_device(args.device),
         workers=workers,
     )
     failed = [r for r in records if "failed" in r]
@@ -308,8 +285,6 @@ def _wedge(args) -> int:
 
 
 def _bench(args) -> int:
-    from . import sweep
-
     if args.what in (None, "-h", "--help"):
         print("usage: pdsim bench accuracy [--quick] [--scheduler tcp://HOST:8786] [--workers N] [--out DIR] ...")
         return 0 if args.what else 2
@@ -323,14 +298,6 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 
 
 def _execute(build_scene, args) -> int:
-    import signal
-    import warnings
-
-    import warp as wp
-
-    from .checkpoint import StopRequest, signal_exit_code
-    from .scene import Scene
-
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING  # no per-module load lines; warnings and errors still show
     settings = _run_settings(args)
@@ -338,12 +305,10 @@ def _execute(build_scene, args) -> int:
     if not isinstance(scene, Scene):
         raise ParameterError("build_scene()", type(scene).__name__, "a function returning a pdsim.Scene")
     if getattr(args, "explain", False):
-        from .explain import explain_scene
-
         print(
             explain_scene(
                 scene,
-                _resolve_device(args.device) or "cpu",
+                resolve_device(args.device) or "cpu",
                 dt=args.dt,
                 dt_factor=settings.get("dt_factor", 1.0),
                 check_interval=settings.get("check_interval", 16),
@@ -361,7 +326,7 @@ def _execute(build_scene, args) -> int:
         report = scene.run(
             out,
             frames=args.frames,
-            device=_resolve_device(args.device),
+            device=resolve_device(args.device),
             dt=args.dt,
             progress=not args.quiet,
             stop=stop,
@@ -401,8 +366,6 @@ def _execute(build_scene, args) -> int:
 
 def _is_main_thread() -> bool:
     """Signal handlers can be installed from the main thread only."""
-    import threading
-
     return threading.current_thread() is threading.main_thread()
 
 
@@ -444,10 +407,7 @@ def main(argv: list[str] | None = None) -> int:
             return _wedge(args)
         if args.command == "bench":
             return _bench(args)
-        if args.scene:
-            build = load_scene_script(args.scene)
-        else:
-            from .default_scene import build_scene as build
+        build = load_scene_script(args.scene) if args.scene else build_default_scene
         return _execute(build, args)
     except PdsimError as exc:
         print(f"pdsim: error: {exc}", file=sys.stderr)

@@ -17,11 +17,18 @@ from __future__ import annotations
 import contextlib
 import copy
 import math
+import sys
 import time
 
-import numpy as np
+import warp as wp
 
+from .bodies import PointBody
+from .divergence import attach_watchdogs, schedule_watchdogs
 from .errors import ParameterError
+from .run import method_contact, rest_bounds, speed_limit
+from .scene_script import load_scene_script
+from .solver import PointSolver
+from .timestep import frame_steps
 
 __all__ = ["capture_launches", "explain_scene", "scene_plan"]
 
@@ -55,8 +62,6 @@ def _dim(value):
 def capture_launches():
     """Context manager recording every ``warp.launch`` (kernel key and dim) and every hash-grid build, array copy and
     mesh refit made inside it; yields a :class:`LaunchRecord`. The launches still run."""
-    import warp as wp
-
     record = LaunchRecord()
     launch, copy_fn = wp.launch, wp.copy
     grid_build, mesh_refit = wp.HashGrid.build, wp.Mesh.refit
@@ -94,20 +99,14 @@ def capture_launches():
 
 # -- device state ---------------------------------------------------------------------------------------------------
 def _is_warp_array(obj) -> bool:
-    import warp as wp
-
     return isinstance(obj, wp.array)
 
 
 def _array_bytes(a) -> int:
-    import warp as wp
-
     return int(a.size) * int(wp.types.type_size_in_bytes(a.dtype))
 
 
 def _dtype_name(a) -> str:
-    import warp as wp
-
     name = wp.types.type_repr(a.dtype) if hasattr(wp.types, "type_repr") else getattr(a.dtype, "__name__", "?")
     return name.rpartition(".")[2]
 
@@ -115,8 +114,6 @@ def _dtype_name(a) -> str:
 def _walk_state(root, prefix: str, out: dict, seen: set, depth: int = 0):
     """Collects Warp arrays (``out``: id -> (path, array)) and other Warp objects reachable from ``root`` through
     attributes, dicts, lists and tuples of pdsim objects (not into numpy arrays or bodies)."""
-    import warp as wp
-
     if depth > 6 or id(root) in seen:
         return
     seen.add(id(root))
@@ -131,8 +128,6 @@ def _walk_state(root, prefix: str, out: dict, seen: set, depth: int = 0):
     elif isinstance(root, (list, tuple)):
         items = [(f"{prefix}[{i}]", v) for i, v in enumerate(root)]
     elif type(root).__module__.startswith(("pdsim", "kernels")) and hasattr(root, "__dict__"):
-        from .bodies import PointBody
-
         if isinstance(root, PointBody) or type(root).__name__.endswith("Body"):
             return  # bodies hold host data (numpy)
         items = [(f"{prefix}.{k}" if prefix else k, v) for k, v in vars(root).items()]
@@ -145,8 +140,6 @@ def _walk_state(root, prefix: str, out: dict, seen: set, depth: int = 0):
 def device_state(solver) -> dict:
     """The Warp arrays a solver holds: ``arrays`` (list of dicts: path, dtype, shape, bytes; aliases counted once),
     ``total_bytes``, ``objects`` (hash grids and meshes: path and type; their memory is not counted)."""
-    import warp as wp
-
     found: dict = {}
     _walk_state(solver, "", found, set())
     arrays, objects, by_ptr = [], [], {}
@@ -232,8 +225,6 @@ def _solver_label(solver, index: int) -> str:
 
 def _one_step(rec, labels, solvers, coupling, step_dt) -> None:
     """One step of every solver, as Scene.advance_frame takes it (the launches go to ``rec`` under each owner)."""
-    from .solver import PointSolver
-
     coupled = [(lab, s) for lab, s in zip(labels, solvers) if isinstance(s, PointSolver)]
     for lab, s in zip(labels, solvers):
         if not isinstance(s, PointSolver):
@@ -257,18 +248,6 @@ def _one_step(rec, labels, solvers, coupling, step_dt) -> None:
             s.end_step(step_dt)
 
 
-def _scene_bounds(scene):
-    """World corners of the bodies at rest and of the projectiles' start (as Scene.run computes them)."""
-    corners = []
-    for b in scene.bodies:
-        x = np.asarray(
-            getattr(b, "point_rest_positions", None) if hasattr(b, "point_rest_positions") else b.rest_positions
-        )
-        corners += [x.min(axis=0), x.max(axis=0)]
-    corners += [np.asarray(c.pose(0.0)[0]) for c in scene.colliders if hasattr(c, "pose")]
-    return np.min(corners, axis=0), np.max(corners, axis=0)
-
-
 def scene_plan(
     scene,
     device: str | None = "cpu",
@@ -286,10 +265,6 @@ def scene_plan(
 
     The solvers are built and watched as Scene.run builds and watches them; one step is taken untimed (work the
     watchdog defers to the next step shows from the second step on), then one step is recorded."""
-    import warp as wp
-
-    from .solver import PointSolver
-
     if not getattr(scene, "bodies", None):
         raise ParameterError("scene", scene, "a pdsim.Scene with at least one body")
     if dt is not None and not (dt > 0.0 and math.isfinite(dt)):
@@ -307,19 +282,15 @@ def scene_plan(
     build_seconds = time.perf_counter() - t0
     stable_dt = min(s.stable_time_step() for s in solvers)
     frame_dt = float(scene.frame_time)
-    chosen = min(dt_factor * scene.time_step_safety * stable_dt, frame_dt) if dt is None else float(dt)
-    substeps = max(1, math.ceil(frame_dt / chosen - 1.0e-9))
-    step_dt = frame_dt / substeps
-    speed_limit = work._speed_limit(solvers) if hasattr(work, "_speed_limit") else math.inf
+    steps = frame_steps(frame_dt, stable_dt, scene.time_step_safety, dt=dt, dt_factor=dt_factor)
+    substeps, step_dt = steps.substeps, steps.dt
+    limit = speed_limit(work, solvers)
 
     labels = [_solver_label(s, i) for i, s in enumerate(solvers)]
-    coupling = work.method_contact(solvers)
-    watched = hasattr(work, "_attach_watchdogs") and hasattr(work, "_schedule_watchdogs")
-    if watched:  # as Scene.run: a watchdog per solver with mass, checking every check_interval steps
-        dogs = work._attach_watchdogs(solvers, dt=step_dt, stable_dt=stable_dt, bounds=_scene_bounds(work))
-        work._schedule_watchdogs(
-            solvers, dogs, dt=step_dt, speed_limit=speed_limit, every=int(check_interval), stop=None
-        )
+    coupling = method_contact(work, solvers)
+    # as the run: a watchdog per solver with mass, checking every check_interval steps
+    dogs = attach_watchdogs(work, solvers, dt=step_dt, stable_dt=stable_dt, bounds=rest_bounds(work))
+    schedule_watchdogs(solvers, dogs, dt=step_dt, speed_limit=limit, every=int(check_interval), stop=None)
     states = [device_state(s) for s in solvers]  # what the run holds before its first step
     with capture_launches() as first:  # untimed: the first step (work deferred to the next step is not in it)
         _one_step(first, labels, solvers, coupling, step_dt)
@@ -329,14 +300,14 @@ def scene_plan(
         for lab, s in zip(labels, solvers):
             check_rec.owner = lab
             if getattr(s, "watchdog", None) is not None:
-                s.check_state(speed_limit)
+                s.check_state(limit)
     with capture_launches() as frame_rec:  # the frame-end check Scene.run makes after each frame
         for lab, s in zip(labels, solvers):
             frame_rec.owner = lab
             dog = getattr(s, "watchdog", None)
             if dog is not None:
                 dog.full_check = True
-            s.check_state(speed_limit)
+            s.check_state(limit)
     wp.synchronize()
 
     out_solvers = []
@@ -375,7 +346,7 @@ def scene_plan(
         "dt_factor": float(dt_factor),
         "substeps_per_frame": substeps,
         "check_interval": int(check_interval),
-        "watchdog": bool(watched),
+        "watchdog": any(d is not None for d in dogs),
         "build_seconds": build_seconds,
         "solvers": out_solvers,
         "method_contact_kernels": rec.kernels("method_contact"),
@@ -516,14 +487,10 @@ def explain_scene(
     """What ``scene`` will run, as text: per solver (one per method) its bodies, live features, the kernels one step
     launches in order with their dims (recorded by wrapping ``warp.launch`` during a step of freshly built solvers,
     watched as Scene.run watches them), the watchdog's checks, the device arrays allocated (bytes), and the time step
-    and substeps per frame (the policy of Scene.run; ``dt`` and ``dt_factor`` as ``pdsim run --dt`` and
+    and substeps per frame (the rule of pdsim.timestep; ``dt`` and ``dt_factor`` as ``pdsim run --dt`` and
     ``--dt-factor``; ``check_interval`` as ``--check-interval``). The scene is not modified."""
     return format_plan(scene_plan(scene, device, dt=dt, dt_factor=dt_factor, check_interval=check_interval))
 
 
 if __name__ == "__main__":  # pragma: no cover - python -m pdsim.explain scenes/x.py [device]
-    import sys
-
-    from .cli import load_scene_script
-
     print(explain_scene(load_scene_script(sys.argv[1])(), sys.argv[2] if len(sys.argv) > 2 else "cpu"))

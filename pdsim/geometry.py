@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import io
 import os
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
 
 from .errors import GeometryError, ParameterError
 from .validate import check_range
@@ -86,8 +88,6 @@ def load_mesh(path: str | os.PathLike, *, scale: float = 1.0, translate=(0.0, 0.
         translate: offset added after scaling [m].
         name: body label; defaults to the file's stem.
     """
-    import trimesh
-
     path = os.fspath(path)
     suffix = os.path.splitext(path)[1].lower()
     if suffix not in MESH_SUFFIXES:
@@ -116,10 +116,6 @@ def _load_trimesh(path: str, suffix: str):
     sequence is valid Latin-1, and the geometry is ASCII), so a comment with one non-UTF-8 byte (a Latin-1 degree
     sign or accent from an older exporter) does not send trimesh to its optional charset detector
     (charset_normalizer, which may not be installed). Other formats go to trimesh as files."""
-    import io
-
-    import trimesh
-
     if suffix not in TEXT_MESH_SUFFIXES:
         return trimesh.load(path, force="mesh", process=True)
     with open(path, "rb") as f:
@@ -134,8 +130,6 @@ def _load_trimesh(path: str, suffix: str):
 
 def shape_from_arrays(vertices, faces, *, name: str = "mesh") -> SolidShape:
     """Builds a :class:`SolidShape` from vertex [n, 3] and triangle [m, 3] arrays (validated like a loaded file)."""
-    import trimesh
-
     try:
         v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
         f_raw = np.asarray(faces, dtype=np.float64).reshape(-1, 3)
@@ -160,8 +154,6 @@ def _vec3(field: str, value) -> np.ndarray:
 
 def box(size, *, center=(0.0, 0.0, 0.0), name: str = "box") -> SolidShape:
     """An axis-aligned box with edge lengths ``size`` [m] (each > 0) centred at ``center`` [m]."""
-    import trimesh
-
     s = _vec3("size", size)
     if np.any(s <= 0.0):
         raise ParameterError("size", tuple(size), "three edge lengths > 0")
@@ -172,8 +164,6 @@ def box(size, *, center=(0.0, 0.0, 0.0), name: str = "box") -> SolidShape:
 
 def sphere(radius: float, *, center=(0.0, 0.0, 0.0), subdivisions: int = 4, name: str = "sphere") -> SolidShape:
     """A sphere of ``radius`` [m] (> 0), an icosphere with ``subdivisions`` levels (1..7)."""
-    import trimesh
-
     r = check_range("radius", radius, 0.0, None)
     if int(subdivisions) != subdivisions or not 1 <= subdivisions <= 7:
         raise ParameterError("subdivisions", subdivisions, "an integer in [1, 7]")
@@ -186,8 +176,6 @@ def cylinder(
     radius: float, height: float, *, center=(0.0, 0.0, 0.0), axis: str = "z", sections: int = 64, name="cylinder"
 ) -> SolidShape:
     """A cylinder of ``radius`` and ``height`` [m] (both > 0) along ``axis`` ('x', 'y' or 'z')."""
-    import trimesh
-
     r = check_range("radius", radius, 0.0, None)
     h = check_range("height", height, 0.0, None)
     if axis not in ("x", "y", "z"):

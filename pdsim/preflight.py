@@ -30,16 +30,23 @@ from __future__ import annotations
 import math
 import os
 import re
+import tempfile
 import time
 import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import memory
+from .colliders import BoxProjectile, MeshCollider, MeshProjectile, SphereProjectile, _rotate, collider_names
+from .device import default_device
 from .errors import GeometryError, ParameterError
+from .fem.mesh import quality_problem
+from .geometry import SolidShape
+from .sampling import points_inside
+from .timestep import MAX_SUBSTEPS_PER_FRAME, chosen_step, estimated_stable_step
 from .validate import check_frames, check_range, check_time_step, format_bytes, unit_hint
 
-MAX_SUBSTEPS_PER_FRAME = 10_000_000
 MAX_INDEX = 2**31 - 1  # particles, vertices, bonds and elements are indexed with int32 on the device
 
 # Memory model: peak resident bytes of Scene.build_solvers on the CPU backend, fitted on cubes of 1.7e3 to 1.1e5
@@ -53,9 +60,6 @@ LATTICE_BYTES_PER_POINT = 200
 LATTICE_BYTES_PER_LINK = 24
 HOST_BYTES_PER_POINT_ON_DEVICE = 400  # host arrays kept beside a CUDA solver's (rest positions, volumes, masses)
 CACHE_BYTES_PER_POINT_FRAME = 80  # measured 55 to 85 B per point and frame (points, velocities, primvars, surfaces)
-PD_STEP_COEFFICIENT = (
-    0.3  # Silling-Askari step ~ 0.3 m h / c_p (measured 0.55 / 0.92 / 1.76 h / c_p at m = 1.5 / 3 / 6)
-)
 FLOAT32_LIMIT = 1.0e30  # largest peridynamic constant accepted (float32 holds 3.4e38; kernels multiply it further)
 
 
@@ -87,50 +91,6 @@ class PreflightReport:
     warnings: list = field(default_factory=list)
 
 
-# ------------------------------------------------------------------------------------------------------ resources
-def free_host_memory() -> float | None:
-    """Host memory available to this process [B]: psutil's ``available`` when installed, else MemAvailable of
-    /proc/meminfo, lowered to the cgroup's limit minus its usage when a container sets one; None when unknown."""
-    free = None
-    try:
-        import psutil
-
-        free = float(psutil.virtual_memory().available)
-    except ImportError:
-        try:
-            with open("/proc/meminfo") as f:
-                for line in f:
-                    if line.startswith("MemAvailable:"):
-                        free = float(line.split()[1]) * 1024.0
-                        break
-        except OSError:
-            free = None
-    for limit_file, usage_file in (
-        ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
-        ("/sys/fs/cgroup/memory/memory.limit_in_bytes", "/sys/fs/cgroup/memory/memory.usage_in_bytes"),
-    ):
-        try:
-            with open(limit_file) as f:
-                limit = f.read().strip()
-            with open(usage_file) as f:
-                usage = float(f.read().strip())
-        except (OSError, ValueError):
-            continue
-        if limit.isdigit() and float(limit) < 2.0**60:  # "max" or a huge number: no limit
-            room = max(float(limit) - usage, 0.0)
-            free = room if free is None else min(free, room)
-        break
-    return free
-
-
-def free_device_memory(device) -> float | None:
-    """Free memory of a CUDA device [B] (``wp.get_device(device).free_memory``); None on the CPU."""
-    import warp as wp
-
-    d = wp.get_device(device)
-    return float(d.free_memory) if d.is_cuda else None
-
-
 # ---------------------------------------------------------------------------------------------------------- names
 def usd_identifier(name: str) -> str:
     """The USD prim name pdsim writes for ``name``: pxr's Tf.MakeValidIdentifier, without importing pxr (each byte of
@@ -145,8 +105,6 @@ def prim_names(bodies, colliders=(), ground=None) -> list[tuple[str, str]]:
     """(prim path, what writes it) of everything a scene writes: per body its points ``/World/<name>``, its surface
     ``<name>_surface`` (peridynamics, FEM) and render mesh ``<name>_render`` (FEM with a render mesh); the ground
     ``/World/ground``; the colliders under ``/World/colliders``."""
-    from .colliders import collider_names
-
     out = []
     for b in bodies:
         name = str(b.name)
@@ -240,8 +198,6 @@ def _solid(body):
     """(sample points [m] [k, 3], their volumes [m^3] [k], closed surface SolidShape) of a body with mass: the
     particles and the input shape (peridynamics), or the element centroids and the boundary of the mesh (FEM; its
     vertices lie on its surface, where an inside test is ambiguous); None for other methods."""
-    from .geometry import SolidShape
-
     method = _method(body)
     if method == "peridynamics":
         return np.asarray(body.rest_positions), np.asarray(body.volumes), body.shape
@@ -270,8 +226,6 @@ def check_output(out) -> str:
         raise ParameterError("out", out, "a path in an existing folder")
     if os.path.isdir(out):
         raise ParameterError("out", out, "a file path, not a folder")
-    import tempfile
-
     try:
         fd, probe = tempfile.mkstemp(dir=folder, prefix=".pdsim-write-test-")
         os.close(fd)
@@ -309,27 +263,9 @@ def _check_float32(body) -> None:
         )
 
 
-def _stable_step(body) -> float:
-    """Estimated explicit stable step of a body [s] without the safety factor: 0.3 m h / c_p (peridynamics),
-    0.5 h_min / c_p (FEM, its explicit limit; times implicit_step_ratio with the implicit integrator), inf (lattice)."""
-    method = _method(body)
-    cp = float(getattr(getattr(body, "material", None), "p_wave_speed", math.inf))
-    if method == "peridynamics":
-        return PD_STEP_COEFFICIENT * body.horizon_factor * body.spacing / cp
-    if method == "fem":
-        from .fem.mesh import element_heights
-
-        h_min = float(np.min(element_heights(body.mesh.vertices, body.mesh.tets)))
-        dt = 0.5 * h_min / cp
-        if getattr(body, "integrator", "explicit") == "implicit":
-            dt *= float(getattr(body, "implicit_step_ratio", 1.0))
-        return dt
-    return math.inf
-
-
 def _check_substeps(scene, dt, report: PreflightReport, dt_factor: float = 1.0) -> None:
     frame_time = float(scene.frame_time)
-    steps = [(_stable_step(b), b) for b in scene.bodies]
+    steps = [(estimated_stable_step(b), b) for b in scene.bodies]
     dt_est, binding = min(steps, key=lambda s: s[0]) if steps else (math.inf, None)
     report.dt_estimate = dt_est
     if dt is not None:
@@ -344,7 +280,7 @@ def _check_substeps(scene, dt, report: PreflightReport, dt_factor: float = 1.0) 
             )
         report.dt = dt
     else:
-        report.dt = min(dt_factor * scene.time_step_safety * dt_est, frame_time)
+        report.dt = chosen_step(frame_time, dt_est, scene.time_step_safety, dt_factor=dt_factor)
         substeps = frame_time / report.dt if report.dt > 0.0 else math.inf
         if substeps > MAX_SUBSTEPS_PER_FRAME and dt_factor < 1.0 and substeps * dt_factor <= MAX_SUBSTEPS_PER_FRAME:
             raise ParameterError(
@@ -375,10 +311,10 @@ def _check_memory(scene, device: str, report: PreflightReport) -> None:
     if on_cuda:
         report.device_bytes = total
         report.host_bytes = float(report.points * HOST_BYTES_PER_POINT_ON_DEVICE)
-        report.free_device_bytes = free_device_memory(device)
+        report.free_device_bytes = memory.free_device_memory(device)
     else:
         report.host_bytes = total
-    report.free_host_bytes = free_host_memory()
+    report.free_host_bytes = memory.free_host_memory()
     checks = [("host", report.host_bytes, report.free_host_bytes)]
     if on_cuda:
         checks.insert(0, (f"{device} device", report.device_bytes, report.free_device_bytes))
@@ -422,8 +358,6 @@ def _check_counts(scene, report: PreflightReport) -> None:
 
 
 def _check_fem_quality(scene) -> None:
-    from .fem.mesh import quality_problem
-
     for b in scene.bodies:
         mesh = getattr(b, "mesh", None) if _method(b) == "fem" else None
         if mesh is None or getattr(mesh, "checked", True):
@@ -460,8 +394,6 @@ def _check_ground(scene) -> None:
 def _inside_shape(shape, points: np.ndarray, device: str) -> np.ndarray:
     """Bool mask of ``points`` inside a closed SolidShape: a bounding-box filter, then the exact winding-number test
     (pdsim.sampling.points_inside) on the points in the box only."""
-    from .sampling import points_inside
-
     lo, hi = shape.bounds
     mask = np.all((points > lo) & (points < hi), axis=1)
     if mask.any():
@@ -491,8 +423,6 @@ def _check_overlaps(scene, device: str) -> None:
                     f"'{a.name}' ({vol:.3g} m^3, {vol / float(vols.sum()):.1%} of its volume) lie inside '{b.name}', "
                     f"e.g. at ({where}) m; move them apart (bodies may touch, not interpenetrate)"
                 )
-    from .colliders import collider_names
-
     for c, label in zip(scene.colliders, collider_names(scene.colliders)):
         test = _collider_inside(c, device)
         if test is None:
@@ -510,9 +440,6 @@ def _check_overlaps(scene, device: str) -> None:
 
 def _collider_inside(c, device: str):
     """A function points [k, 3] -> bool mask of the points inside a collider's volume at t = 0, or None."""
-    from .colliders import BoxProjectile, MeshCollider, MeshProjectile, SphereProjectile, _rotate
-    from .geometry import SolidShape
-
     if isinstance(c, SphereProjectile):
         p, _ = c.pose(0.0)
         r = float(c.sphere_radius)
@@ -533,17 +460,10 @@ def _collider_inside(c, device: str):
     return None
 
 
-def free_disk_space(folder: str) -> float:
-    """Free space [B] of the file system that holds ``folder`` (shutil.disk_usage)."""
-    import shutil
-
-    return float(shutil.disk_usage(folder).free)
-
-
 def _check_disk(out: str, frames: int, report: PreflightReport) -> None:
     folder = os.path.dirname(os.path.abspath(out))
     need = float((frames + 1) * report.points * CACHE_BYTES_PER_POINT_FRAME)
-    free = free_disk_space(folder)
+    free = memory.free_disk_space(folder)
     report.cache_bytes, report.free_disk_bytes = need, free
     if need > free:
         raise ParameterError(
@@ -606,8 +526,6 @@ def preflight(
         _check_float32(b)
     _check_counts(scene, report)
     if device is None:
-        from .scene import default_device
-
         device = default_device()
     _check_memory(scene, str(device), report)
     _check_substeps(scene, dt, report, check_range("dt_factor", dt_factor, 0.0, None))
@@ -625,9 +543,6 @@ __all__ = [
     "PreflightReport",
     "check_output",
     "check_prim_names",
-    "free_device_memory",
-    "free_disk_space",
-    "free_host_memory",
     "preflight",
     "prim_names",
     "usd_identifier",

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import warp as wp
 
+from . import memory
 from .errors import GeometryError, ParameterError
 from .geometry import SolidShape
+from .kernels import sampling as ks
 from .validate import check_range, format_bytes, unit_hint
 
 MAX_LATTICE_POINTS = 200_000_000
@@ -41,9 +44,7 @@ def check_lattice_size(shape: SolidShape, spacing: float, *, free_bytes: float |
         )
     need = total * SAMPLING_BYTES_PER_CANDIDATE
     if free_bytes is None:
-        from .preflight import free_host_memory
-
-        free_bytes = free_host_memory()
+        free_bytes = memory.free_host_memory()
     if free_bytes is not None and need > free_bytes:
         raise ParameterError(
             "spacing",
@@ -71,10 +72,6 @@ def points_inside(shape: SolidShape, points: np.ndarray, *, device: str = "cpu")
     """Exact inside test (generalised winding number against the closed mesh, a Warp mesh query): bool mask [n].
     Mesh and points are taken relative to the shape's centre before they become float32, so the test is as exact
     anywhere in the world as at the origin."""
-    import warp as wp
-
-    from .kernels import sampling as ks
-
     centre = 0.5 * (shape.bounds[0] + shape.bounds[1])
     with wp.ScopedDevice(device):
         mesh = wp.Mesh(
@@ -83,10 +80,8 @@ def points_inside(shape: SolidShape, points: np.ndarray, *, device: str = "cpu")
             support_winding_number=True,
         )
         pts = wp.array((points - centre).astype(np.float32), dtype=wp.vec3)
-        inside = wp.zeros(len(points), dtype=wp.int32)
         max_dist = float(np.linalg.norm(shape.extent)) * 2.0 + 1.0
-        wp.launch(ks.mark_points_inside_mesh, dim=len(points), inputs=[mesh.id, pts, max_dist, inside])
-        return inside.numpy().astype(bool)
+        return ks.points_inside_mesh(mesh, pts, max_dist).numpy().astype(bool)
 
 
 def fill_solid(shape: SolidShape, spacing: float, *, device: str = "cpu") -> tuple[np.ndarray, np.ndarray]:

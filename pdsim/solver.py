@@ -21,13 +21,14 @@ adds its own state (bonds, plastic state, contact, topology after fracture, latt
 
 from __future__ import annotations
 
+import importlib
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
 
-from .errors import FeatureNotAvailableError
+from .errors import FeatureNotAvailableError, ParameterError
 
 
 @dataclass
@@ -149,8 +150,6 @@ def array_state(array) -> np.ndarray:
 
 def assign_state(array, values, name: str = "array") -> None:
     """Copies checkpointed ``values`` (numpy) into the Warp ``array`` in place (same shape required)."""
-    from .errors import ParameterError
-
     if array is None or values is None:
         if (array is None) != (values is None):
             raise ParameterError(name, "checkpoint", "the state of a solver built from the same scene")
@@ -356,8 +355,6 @@ def solver_for(body) -> type:
     method = getattr(body, "method", "")
     if method not in SOLVERS:
         # importing the method's package registers its solver
-        import importlib
-
         importlib.import_module(f"pdsim.{method}") if method else None
     if method not in SOLVERS:
         raise FeatureNotAvailableError(f"no solver for bodies of method {method!r} ({type(body).__name__})")

@@ -45,16 +45,29 @@ the keyword settings), so a typo fails at once with :class:`pdsim.ParameterError
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 import inspect
 import itertools
 import json
 import math
 import os
 import re
+import socket
+import sys
 import time
 from contextlib import contextmanager
 
+import numpy as np
+import warp as wp
+
+from . import validation
 from .errors import ParameterError
+from .fem.body import INTEGRATORS, MEASURES
+from .materials import Material
+from .peridynamics.body import SURFACE_CORRECTIONS
+from .scene import Scene
+from .scene_script import load_scene_script
+from .validate import check_frames, check_range
 
 __all__ = [
     "apply_settings",
@@ -133,10 +146,6 @@ def _client(scheduler, workers: int | None):
 def _warm_worker() -> str:
     """Imports pdsim's methods and loads their kernels in a worker with tiny runs, so that no point's time includes
     the first imports of its process (Warp's kernel cache on disk makes the loads quick)."""
-    import warp as wp
-
-    from . import validation
-
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING
     validation.cantilever(1, method="fem")
@@ -146,8 +155,6 @@ def _warm_worker() -> str:
 
 
 def _worker_id() -> str:
-    import socket
-
     return f"{socket.gethostname()}:{os.getpid()}"
 
 
@@ -167,8 +174,6 @@ def grid_points(grid) -> list[dict]:
 
 
 def _problem_function(problem):
-    from . import validation
-
     if isinstance(problem, str):
         if problem not in validation.PROBLEMS:
             raise ParameterError("problem", problem, "one of " + ", ".join(sorted(validation.PROBLEMS)))
@@ -191,8 +196,6 @@ def _check_knobs(function, points: list[dict]) -> None:
 
 def _run_point(problem, knobs: dict) -> dict:
     """One sweep point, in a worker: runs the problem and returns its record (or a failure record)."""
-    from . import validation
-
     try:
         rec = validation.run_problem(problem, **knobs)
     except Exception as exc:  # noqa: BLE001 - a failing point is reported, the sweep goes on
@@ -321,8 +324,6 @@ def _split_settings(build_scene, variant: dict) -> tuple[dict, dict]:
 
 
 def _replace_material(material, field_name: str, value, setting: str):
-    from .materials import Material
-
     fields = {f.name for f in dataclasses.fields(Material)}
     if field_name not in fields:
         raise ParameterError("setting", setting, "material.FIELD with FIELD one of " + ", ".join(sorted(fields)))
@@ -332,8 +333,6 @@ def _replace_material(material, field_name: str, value, setting: str):
 
 
 def _set_scene(scene, attr: str, value, setting: str) -> None:
-    from .validate import check_frames, check_range
-
     if attr == "fps":
         real_time = math.isclose(scene.frame_time * scene.fps, 1.0, rel_tol=1e-12)
         scene.fps = check_range("fps", value, 0.0, 1000.0, hi_open=False)
@@ -348,8 +347,6 @@ def _set_scene(scene, attr: str, value, setting: str) -> None:
     elif attr == "time_step_safety":
         scene.time_step_safety = check_range("time_step_safety", value, 0.0, 1.0, hi_open=False)
     elif attr == "gravity":
-        import numpy as np
-
         g = np.asarray(value, dtype=np.float64)
         if g.shape != (3,) or not np.all(np.isfinite(g)):
             raise ParameterError(setting, value, "3 finite numbers [m/s^2]")
@@ -360,15 +357,11 @@ def _set_scene(scene, attr: str, value, setting: str) -> None:
 
 
 def _check_body_value(body, attr: str, value, setting: str):
-    from .validate import check_range
-
     if attr in ("damping",):
         return check_range(setting, value, 0.0, None, lo_open=False)
     if attr == "horizon_factor":
         return check_range(setting, value, 1.5, 8.0, lo_open=False, hi_open=False)
     if attr == "surface_correction":
-        from .peridynamics.body import SURFACE_CORRECTIONS
-
         if value not in SURFACE_CORRECTIONS:
             raise ParameterError(setting, value, " or ".join(map(repr, SURFACE_CORRECTIONS)))
         return value
@@ -377,14 +370,10 @@ def _check_body_value(body, attr: str, value, setting: str):
             raise ParameterError(setting, value, "true or false")
         return value
     if attr == "measure":
-        from .fem.body import MEASURES
-
         if value not in MEASURES:
             raise ParameterError(setting, value, " or ".join(map(repr, MEASURES)))
         return value
     if attr == "integrator":
-        from .fem.body import INTEGRATORS
-
         if value not in INTEGRATORS:
             raise ParameterError(setting, value, " or ".join(map(repr, INTEGRATORS)))
         return value
@@ -450,8 +439,6 @@ def apply_settings(scene, settings: dict) -> None:
 def build_variant(build_scene, variant: dict):
     """Builds a scene for one wedge variant: keyword settings go to ``build_scene``, dotted ones are applied
     after (:func:`apply_settings`)."""
-    from .scene import Scene
-
     keywords, after = _split_settings(build_scene, variant)
     scene = build_scene(**keywords)
     if not isinstance(scene, Scene):
@@ -471,10 +458,6 @@ def _slug(variant: dict) -> str:
 
 def _run_variant(scene_script: str, variant: dict, out_path: str, frames, device: str | None) -> dict:
     """One wedge variant, in a worker: builds the scene, runs it to ``out_path``; returns what it did."""
-    import warp as wp
-
-    from .cli import load_scene_script
-
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING
     rec = {"settings": dict(variant), "worker": _worker_id()}
@@ -525,9 +508,6 @@ def run_wedge(
     Each record: ``settings``, ``path``, ``frames_written``, ``dt`` [s], ``substeps_per_frame``, ``seconds``
     (the run's wall time), ``summary``, ``worker``; a failed variant has ``failed`` instead of ``path``.
     """
-    from .cli import load_scene_script
-    from .validate import check_frames
-
     script = os.path.abspath(os.fspath(scene_script))
     build = load_scene_script(script)
     variants = wedge_variants(settings)
@@ -570,14 +550,12 @@ def bench_accuracy(argv=None) -> int:
     pdsim is installed from (options: ``--quick``, ``--scheduler tcp://host:8786``, ``--workers N``, ``--out DIR``,
     ``--no-peers``, ``--from-json``); raises ParameterError where the checkout's tools/ folder is not beside the
     package (a wheel install)."""
-    import importlib.util
 
     path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tools", "accuracy_map.py")
     if not os.path.isfile(path):
         raise ParameterError("bench accuracy", path, "a pdsim source checkout with tools/accuracy_map.py")
     spec = importlib.util.spec_from_file_location("pdsim_accuracy_map", path)
     module = importlib.util.module_from_spec(spec)
-    import sys
 
     sys.modules[spec.name] = module
     spec.loader.exec_module(module)

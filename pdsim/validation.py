@@ -33,13 +33,22 @@ from __future__ import annotations
 
 import math
 import os
+import platform
+import resource
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+import warp as wp
+
+import pdsim
 
 from .errors import ParameterError
+from .fem import FemBody, SolverFem
+from .fem.mesh import box_tet_mesh
+from .lattice import Lattice, LatticeBody, LatticeKind, LatticeNeighbourhood, SolverLattice
+from .materials import Material
 
 __all__ = [
     "PROBLEMS",
@@ -78,8 +87,6 @@ class _Meter:
     several tasks in one process at once (threads) the peak is shared between them."""
 
     def __enter__(self):
-        import warp as wp
-
         wp.config.quiet = True
         wp.config.log_level = wp.LOG_WARNING
         wp.init()  # Warp's start-up is not the problem's run time
@@ -96,8 +103,6 @@ class _Meter:
         self.seconds = time.perf_counter() - self.t0
         peak = _status_kb("VmHWM")
         if peak is None:
-            import resource
-
             peak = float(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
         self.peak_mb = peak / 1024.0
         self.memory_mb = (peak - (self.rss0 or 0.0)) / 1024.0 if self.rss0 is not None else float("nan")
@@ -161,8 +166,6 @@ def pd_wave_speed(
 
     Returns the record (module docstring) with ``error`` = |speed / sqrt(E/rho) - 1|.
     """
-    import pdsim
-
     n = _check_int("n", n, 2)
     knobs = {
         "n": n,
@@ -230,8 +233,6 @@ def pd_bar_stiffness(
 
     Returns the record with ``error`` = |E_eff / E - 1|.
     """
-    import pdsim
-
     n = _check_int("n", n, 2)
     nu = poisson_ratio
     knobs = {
@@ -298,8 +299,6 @@ def pd_energy_density(
     Returns the record with ``error`` = the larger of |W_exp / ref - 1| and |W_shear / ref - 1|, and ``expansion``,
     ``shear`` and ``dilatation`` (theta / 3 zeta) ratios.
     """
-    import pdsim
-
     knobs = {"m": m, "surface_correction": surface_correction, "spacing": horizon / m}
     with _Meter() as meter:
         mat = pdsim.Material(density=RHO, youngs_modulus=E_SOFT, poisson_ratio=0.25)
@@ -389,8 +388,6 @@ def pd_crack_speed(
     ``mean_speed_ratio`` (the tip's mean speed over its run over c_R), ``crack_length`` [m], and ``error`` =
     max(0, speed_ratio - 1): zero while the bound holds (this problem checks a bound; it has no reference value).
     """
-    import pdsim
-
     n = _check_int("n", n, 10)
     nu = 0.25
     length, height = 0.1, 0.05
@@ -521,8 +518,6 @@ def cantilever(
 
     Returns the record with ``error`` = |deflection / Timoshenko - 1| and ``steps`` (0 for a static solve).
     """
-    import pdsim
-
     n = _check_int("n", n, 1)
     _check_choice("method", method, ("fem", "pd"))
     t, L = CANTILEVER_T, CANTILEVER_L
@@ -547,9 +542,6 @@ def cantilever(
     steps = 0
     with _Meter() as meter:
         if method == "fem":
-            from .fem import FemBody, SolverFem
-            from .fem.mesh import box_tet_mesh
-
             mesh = box_tet_mesh((L, t, t), (8 * n, n, n), center=(0.5 * L, 0.0, 0.0))
             dynamic = integrator != "static"
             body = FemBody(
@@ -625,10 +617,6 @@ def fem_patch_test(n: int = 3, *, measure: str = "linear", precision: str = "flo
 
     Returns the record with ``error`` = max interior |u - A X| / max |A X|.
     """
-    from .fem import FemBody, SolverFem
-    from .fem.mesh import box_tet_mesh
-    from .materials import Material
-
     n = _check_int("n", n, 3)
     knobs = {"n": n, "measure": measure, "precision": precision, "spacing": 1.0 / n}
     with _Meter() as meter:
@@ -668,8 +656,6 @@ def lattice_laplace(n: int = 9, *, lattice: str = "square", gradient: int = 1, a
 
     Returns the record with ``error`` = max |u - u_exact| / a over the followers, and ``steps``.
     """
-    from .lattice import Lattice, LatticeBody, LatticeKind, LatticeNeighbourhood, SolverLattice
-
     n = _check_int("n", n, 5)
     _check_choice("lattice", lattice, ("square", "hexagonal"))
     _check_choice("gradient", gradient, (1, 2))
@@ -831,14 +817,10 @@ def run_problem(problem: str | Callable[..., dict], *args, **knobs) -> dict:
 
 def machine() -> str:
     """One line naming the CPU, the core count, Python and Warp (for the headers of generated docs)."""
-    import platform
-
     cpu = platform.processor() or "unknown CPU"
     try:
         with open("/proc/cpuinfo") as f:
             cpu = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
     except (OSError, StopIteration):
         pass
-    import warp as wp
-
     return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, Warp {wp.__version__}, CPU backend"

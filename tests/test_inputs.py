@@ -535,9 +535,9 @@ def test_memory_check_fails_before_sampling_a_huge_lattice(monkeypatch):
     and the spacing that fits (free memory patched to 100 MB: a 1 m cube at 2 mm has 1.25e8 lattice points)."""
     import time
 
-    from pdsim import preflight
+    from pdsim import memory
 
-    monkeypatch.setattr(preflight, "free_host_memory", lambda: 1.0e8)
+    monkeypatch.setattr(memory, "free_host_memory", lambda: 1.0e8)
     t0 = time.perf_counter()
     with pytest.raises(pdsim.ParameterError) as ei:
         pdsim.PeridynamicBody(pdsim.box((1.0, 1.0, 1.0), name="slab"), _material(), spacing=0.002)

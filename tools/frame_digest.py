@@ -74,7 +74,9 @@ def main(argv=None) -> int:
     parser.add_argument("--frames", type=int, default=3)
     parser.add_argument("--scenes", help="comma-separated scene names (default: every gallery scene)")
     parser.add_argument("--one", help=argparse.SUPPRESS)
-    parser.add_argument("--compare", nargs=2, metavar=("A", "B"), help="compare two digest files; exit 1 if they differ")
+    parser.add_argument(
+        "--compare", nargs=2, metavar=("A", "B"), help="compare two digest files; exit 1 if they differ"
+    )
     args = parser.parse_args(argv)
     if args.compare:
         with open(args.compare[0]) as fa, open(args.compare[1]) as fb:
@@ -92,7 +94,10 @@ def main(argv=None) -> int:
     for name in names:
         proc = subprocess.run(
             [sys.executable, os.path.abspath(__file__), "--one", name, "--frames", str(args.frames)],
-            capture_output=True, text=True, check=False, cwd=ROOT,
+            capture_output=True,
+            text=True,
+            check=False,
+            cwd=ROOT,
         )
         line = next((ln for ln in proc.stdout.splitlines() if ln.startswith("DIGEST ")), None)
         result[name] = json.loads(line[7:]) if line else {"error": (proc.stdout + proc.stderr)[-400:]}

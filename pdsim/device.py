@@ -1,0 +1,22 @@
+"""The Warp device a run uses when none is named."""
+
+from __future__ import annotations
+
+import warp as wp
+
+from .errors import ParameterError
+
+
+def default_device() -> str:
+    """'cuda' when a CUDA device is present, else 'cpu'."""
+    return "cuda" if wp.get_cuda_device_count() > 0 else "cpu"
+
+
+def resolve_device(name: str | None) -> str | None:
+    """``name`` checked against this machine: 'cuda' without a CUDA device raises ParameterError; None stays None
+    (the run's default, :func:`default_device`)."""
+    if name != "cuda":
+        return name
+    if wp.get_cuda_device_count() == 0:
+        raise ParameterError("device", "cuda", "'cpu' on this machine (no CUDA device found)")
+    return "cuda"

@@ -1,0 +1,482 @@
+"""Running a scene: the frame loop that drives a :class:`pdsim.Scene`'s solvers and streams each finished frame to a
+USD cache, with the watchdog, checkpoints and resume.
+
+:func:`run_scene` is what ``Scene.run`` and ``pdsim run`` call. It checks the run's settings and the scene
+(pdsim.preflight), builds the solvers, takes the time step from pdsim.timestep, attaches the watchdogs
+(pdsim.divergence), opens the cache (pdsim.output.UsdCache) and its writer, then loops over the frames
+(:func:`_frame_loop`). :func:`advance_frame` is one frame of steps of a set of solvers; :func:`method_contact` the
+contact between methods.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+from tqdm import tqdm
+
+from .checkpoint import CHECKPOINT_FORMAT, RunInterrupted, checkpoint_path, load_checkpoint, save_checkpoint
+from .colliders import collider_names
+from .contact import MethodContact
+from .divergence import attach_watchdogs, schedule_watchdogs
+from .errors import InstabilityError, ParameterError
+from .frame_graph import FrameGraphs
+from .output import UsdCache
+from .output.writer import ViewWriter
+from .preflight import preflight
+from .solver import PointSolver
+from .timestep import frame_steps
+from .validate import check_frames, check_range, check_time_step
+
+
+@dataclass
+class RunReport:
+    """What a run did: frames written, substeps per frame, time step [s], wall time [s], particle count."""
+
+    path: str
+    frames_written: int
+    substeps_per_frame: int
+    dt: float
+    stable_dt: float
+    wall_seconds: float
+    particle_count: int
+    bond_count: int
+    summary: str = ""  # what the solvers simulated, e.g. "2560 particles, 309440 bonds"
+    first_frame: int = 0  # first frame this run wrote (after --resume: the frame after the checkpoint's)
+    checks: int = 0  # watchdog checks made
+
+
+@dataclass
+class _Options:
+    """A run's settings after their checks (Scene.run's arguments)."""
+
+    out: str
+    frames: int
+    dt: float | None
+    dt_factor: float
+    check_interval: int
+    checkpoint_interval_s: float | None
+
+
+def _check_options(scene, out, frames, dt, dt_factor, check_interval, checkpoint_interval_s, color_attribute):
+    out = os.fspath(out)
+    if os.path.splitext(out)[1].lower() not in (".usdc", ".usda", ".usd"):
+        raise ParameterError("out", out, "a path ending in .usdc, .usda or .usd")
+    if not os.path.isdir(os.path.dirname(os.path.abspath(out))):
+        raise ParameterError("out", out, "a path in an existing folder")
+    if os.path.isdir(out):
+        raise ParameterError("out", out, "a file path, not a folder")
+    frame_count = scene.frames if frames is None else check_frames(frames)
+    if dt is not None:
+        dt = check_time_step(dt)
+    dt_factor = check_range("dt_factor", dt_factor, 0.0, None)
+    if dt is not None and dt_factor != 1.0:
+        raise ParameterError("dt_factor", dt_factor, f"1 when dt={dt!r} is given (give one of the two)")
+    if isinstance(check_interval, bool) or int(check_interval) != check_interval or check_interval < 1:
+        raise ParameterError("check_interval", check_interval, "an integer >= 1 (steps between watchdog checks)")
+    if checkpoint_interval_s is not None:
+        checkpoint_interval_s = check_range("checkpoint_interval_s", checkpoint_interval_s, 0.0, None, lo_open=False)
+    if color_attribute is not None and not isinstance(color_attribute, str):
+        raise ParameterError("color_attribute", color_attribute, "an attribute name such as 'damage', or None")
+    return _Options(out, frame_count, dt, dt_factor, int(check_interval), checkpoint_interval_s)
+
+
+def rest_bounds(scene) -> tuple[np.ndarray, np.ndarray]:
+    """World bounds [m] of the bodies at rest and of the projectiles' start (they size the ground's quad)."""
+    corners = []
+    for b in scene.bodies:
+        x = np.asarray(
+            getattr(b, "point_rest_positions", None) if hasattr(b, "point_rest_positions") else b.rest_positions
+        )
+        corners += [x.min(axis=0), x.max(axis=0)]
+    corners += [np.asarray(c.pose(0.0)[0]) for c in scene.colliders if hasattr(c, "pose")]
+    return np.min(corners, axis=0), np.max(corners, axis=0)
+
+
+def speed_limit(scene, solvers) -> float:
+    """A speed no particle of a sane run reaches: 20 times the largest of the solvers' speed scales (wave, initial and
+    prescribed speeds) and a free fall through 1 km. An explicit run past its stable step grows exponentially and
+    exceeds it within a few steps."""
+    fall = math.sqrt(2.0 * float(np.linalg.norm(scene.gravity)) * 1.0e3)
+    return 20.0 * max([fall] + [s.speed_scale() for s in solvers])
+
+
+class _FrameRun:
+    """One run's open cache, writer, solvers and watchdogs: writes frames and checkpoints."""
+
+    def __init__(self, scene, solvers, watchdogs, steps, options, bounds, names, fingerprint):
+        self.scene, self.solvers, self.watchdogs, self.steps = scene, solvers, watchdogs, steps
+        self.options, self.bounds, self.fingerprint = options, bounds, fingerprint
+        self.rigid = [(c, n) for c, n in zip(scene.colliders, names)]
+        if scene.ground is not None:
+            self.rigid.append((scene.ground, None))
+        self.ck_path = checkpoint_path(options.out)
+        self.cache = self.writer = None
+        self.frame = 0  # the frame being simulated
+
+    def write_frame(self, frame: int) -> None:
+        t = frame * self.scene.frame_time
+        views = [v for s in self.solvers for v in s.views()]
+        for collider, name in self.rigid:
+            view = collider.view(t, bounds=self.bounds)
+            if name is not None:
+                view.name = name
+            views.append(view)
+        self.writer.write(frame, views)
+        self.cache.end_frame(frame, time=t)
+
+    def write_checkpoint(self, frame: int, substep: int):
+        """The run's state after ``substep`` steps of frame ``frame + 1`` (frame ``frame`` finished)."""
+        if self.options.checkpoint_interval_s is None:
+            return None
+        self.cache.save()  # the top-level layer on disk reaches ``frame``: a resume reopens the cache there
+        state = {
+            "format": CHECKPOINT_FORMAT,
+            "fingerprint": self.fingerprint,
+            "run": {
+                "frame": frame,
+                "substep": substep,
+                "dt": self.steps.dt,
+                "substeps": self.steps.substeps,
+                "frames": self.options.frames,
+                "cache_run": self.cache.run_id,
+            },
+            "writer": self.writer.checkpoint(),
+            "solvers": {str(i): s.checkpoint() for i, s in enumerate(self.solvers)},
+            "watchdogs": {str(i): ({} if w is None else w.checkpoint()) for i, w in enumerate(self.watchdogs)},
+            "colliders": _collider_states(self.scene.colliders),
+        }
+        return save_checkpoint(self.ck_path, state)
+
+
+def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, limit, bar, stop, on_frame) -> None:
+    """Frames ``start + 1 .. frames``: step, write, checkpoint when due or asked to stop (RunInterrupted)."""
+    frames, every = run.options.frames, run.options.checkpoint_interval_s
+    last_checkpoint = time.monotonic()
+    for frame in range(start + 1, frames + 1):
+        run.frame = frame
+        for w in run.watchdogs:
+            if w is not None:
+                w.frame = frame
+        try:
+            advance_checked(
+                run.scene, run.solvers, run.steps.dt, run.steps.substeps, coupling, limit, first=first_substep
+            )
+        except RunInterrupted as exc:
+            done = getattr(exc, "in_frame", None)
+            if done is None:
+                raise
+            # stopped at a step boundary inside the frame, ``done`` steps into it
+            written = run.write_checkpoint(frame - 1, first_substep + done)
+            raise RunInterrupted(exc.signal, checkpoint=written, last_frame=frame - 1) from None
+        first_substep = 0
+        run.write_frame(frame)
+        if on_frame is not None:
+            on_frame(frame, run.solvers)
+        bar.update(1)
+        stopping = stop is not None and stop.requested
+        due = every is not None and time.monotonic() - last_checkpoint >= every
+        if (stopping or due) and frame < frames:
+            written = run.write_checkpoint(frame, 0)
+            last_checkpoint = time.monotonic()
+            if stopping:
+                raise RunInterrupted(stop.signal, checkpoint=written, last_frame=frame)
+
+
+def run_scene(
+    scene,
+    out,
+    *,
+    frames=None,
+    device=None,
+    dt=None,
+    dt_factor=1.0,
+    progress=True,
+    save_interval_s=0.0,
+    color_attribute=None,
+    color_range=None,
+    fragments_as_prims=False,
+    resume=False,
+    checkpoint_interval_s=60.0,
+    check_interval=16,
+    stop=None,
+    on_frame=None,
+) -> RunReport:
+    """Simulates ``scene`` and writes its USD cache to ``out``; the arguments and what the run guarantees are those
+    of :meth:`pdsim.Scene.run`."""
+    options = _check_options(scene, out, frames, dt, dt_factor, check_interval, checkpoint_interval_s, color_attribute)
+    out = options.out
+    names = collider_names(scene.colliders)
+    wall0 = time.perf_counter()
+    preflight(scene, device=device, out=out, dt=options.dt, frames=options.frames)  # before anything is allocated
+    solvers = scene.build_solvers(device=device, check=False)
+    stable_dt = min(s.stable_time_step() for s in solvers)
+    steps = frame_steps(
+        scene.frame_time, stable_dt, scene.time_step_safety, dt=options.dt, dt_factor=options.dt_factor, warn=True
+    )
+    limit = speed_limit(scene, solvers)
+    bounds = rest_bounds(scene)
+    fingerprint = _fingerprint(scene, solvers, names)
+    start, first_substep, cache_run, state = 0, 0, None, None
+    if resume:
+        state = load_checkpoint(checkpoint_path(out))
+        start, first_substep, cache_run = _restore_run(scene, state, solvers, fingerprint, steps, options.frames)
+    watchdogs = attach_watchdogs(scene, solvers, dt=steps.dt, stable_dt=stable_dt, bounds=bounds)
+    schedule_watchdogs(solvers, watchdogs, dt=steps.dt, speed_limit=limit, every=options.check_interval, stop=stop)
+    if resume:
+        for i, w in enumerate(watchdogs):
+            if w is not None:
+                w.restore(state["watchdogs"][str(i)])
+    run = _FrameRun(scene, solvers, watchdogs, steps, options, bounds, names, fingerprint)
+    run.frame = start
+    metadata = {"frameTime": scene.frame_time, "timeScale": scene.frame_time * scene.fps, "scene": str(scene.name)}
+    try:
+        run.cache = UsdCache(
+            out,
+            fps=scene.fps,
+            up_axis=scene.up_axis,
+            save_interval_s=save_interval_s,
+            metadata=metadata,
+            append_frame=start if resume else None,
+            append_run=cache_run,
+        )
+    except (ValueError, FileNotFoundError) as exc:
+        if not resume:
+            raise
+        raise ParameterError(
+            "resume", out, f"a cache holding the run the checkpoint belongs to, at its frame {start} ({exc})"
+        ) from None
+    with run.cache as cache:
+        run.writer = ViewWriter(
+            cache,
+            color_attribute=color_attribute,
+            color_range=color_range,
+            fragments_as_prims=fragments_as_prims,
+            velocity_scale=scene.frame_time * scene.fps,  # velocities per played second (USD's time codes per second)
+        )
+        if resume:
+            run.writer.restore(state["writer"])
+        coupling = method_contact(scene, solvers)
+        if not resume:
+            run.write_frame(0)
+        bar = _progress(options.frames - start, enabled=progress, desc=f"pdsim {scene.name}")
+        try:
+            _frame_loop(
+                run, start, first_substep, coupling=coupling, limit=limit, bar=bar, stop=stop, on_frame=on_frame
+            )
+        except InstabilityError as exc:
+            raise InstabilityError(f"{exc}; {frames_note(cache.top_level_path, run.frame - 1)}") from exc
+        except KeyboardInterrupt as exc:
+            last = -1 if cache.last_frame is None else cache.last_frame
+            exc.cache = str(cache.top_level_path)
+            exc.last_frame = last
+            exc.note = frames_note(cache.top_level_path, last)
+            raise
+        finally:
+            bar.close()
+        written = cache.frames_written
+    if run.ck_path.is_file():
+        run.ck_path.unlink()
+    return RunReport(
+        path=out,
+        frames_written=written,
+        substeps_per_frame=steps.substeps,
+        dt=steps.dt,
+        stable_dt=stable_dt,
+        wall_seconds=time.perf_counter() - wall0,
+        particle_count=sum(s.point_count for s in solvers),
+        bond_count=sum(s.bond_count for s in solvers),
+        summary="; ".join(s.summary() for s in solvers),
+        first_frame=start + 1 if resume else 0,
+        checks=sum(w.checks for w in watchdogs if w is not None),
+    )
+
+
+# -- stepping -----------------------------------------------------------------------------------------------------
+def advance_checked(scene, solvers, dt, substeps, coupling, limit, *, first=0):
+    """One frame from sub-step ``first``: solvers without mass (the lattice) advance the whole frame (when ``first``
+    is 0), the others ``substeps - first`` steps (:func:`advance_frame`; their watchdogs check every few steps inside
+    it and may raise a stop request), then every solver's ``check_state`` (the frame-end check, with the watchdogs'
+    strain pass)."""
+    points = [s for s in solvers if isinstance(s, PointSolver)]
+    for s in points:
+        if s.watchdog is not None:
+            s.watchdog.frame_start_step = int(s.step_count)
+    graphs = frame_graphs(solvers, scene.graph_capture)
+    if first == 0:
+        for s in solvers:
+            if not isinstance(s, PointSolver):
+                _frame_alone(s, dt, substeps, graphs)
+    if points and substeps > first:
+        advance_frame(points, dt, substeps - first, coupling, graphs=graphs)
+    for s in solvers:
+        if s.watchdog is not None:
+            s.watchdog.full_check = True
+        s.check_state(limit)
+
+
+def method_contact(scene, solvers):
+    """Contact between bodies of different methods (pdsim.contact.MethodContact): on when the scene holds a particle
+    method and a mesh method and contact is not switched off; None otherwise."""
+    if scene.contact is False:
+        return None
+    particles = [s for s in solvers if callable(getattr(s, "contact_particles", None))]
+    meshes = [s for s in solvers if callable(getattr(s, "contact_mesh", None))]
+    if not particles or not meshes:
+        return None
+    return MethodContact(particles, meshes)
+
+
+def frame_graphs(solvers, graph_capture):
+    """The FrameGraphs (pdsim/frame_graph.py) of a run's solvers, following the scene's ``graph_capture``: kept on the
+    first solver (it lives as long as the solvers do) for the same set of solvers."""
+    first = solvers[0]
+    cached = getattr(first, "_frame_graphs", None)
+    if cached is None or len(cached[0]) != len(solvers) or any(a is not b for a, b in zip(cached[0], solvers)):
+        device = first.kin.device if hasattr(first, "kin") else first.device
+        cached = (list(solvers), FrameGraphs(device, graph_capture))
+        first._frame_graphs = cached
+    return cached[1]
+
+
+def _frame_alone(solver, dt: float, substeps: int, graphs=None) -> None:
+    """A frame of a solver without mass (the lattice: a frame of its own steps), replayed as a graph where ``graphs``
+    can."""
+    if graphs is None:
+        solver.simulate(dt, substeps)
+    else:
+        graphs.advance([solver], dt, substeps, None, lambda: solver.simulate(dt, substeps))
+
+
+def advance_frame(solvers, dt: float, substeps: int, coupling=None, graphs=None) -> None:
+    """One frame of ``substeps`` steps of ``dt`` [s]: the solvers of methods with mass step together, phase by phase,
+    so that ``coupling`` (contact between methods) acts within each step; the others (the lattice) advance by a frame.
+    The frame's tables (projectile poses, the watchdog's collider speeds) are written to the device first; no step
+    reads the device. ``graphs`` (a pdsim.frame_graph.FrameGraphs) replays the steps as a captured graph where it
+    can; None launches them from the host."""
+    coupled = [s for s in solvers if isinstance(s, PointSolver)]
+    for s in solvers:
+        if not isinstance(s, PointSolver):
+            _frame_alone(s, dt, substeps, graphs)
+    if not coupled:
+        return
+    for s in coupled:
+        s.begin_frame(dt, substeps)
+
+    def run_steps():
+        if len(coupled) == 1 and coupling is None:
+            coupled[0].simulate(dt, substeps)
+            return
+        for _ in range(substeps):
+            for s in coupled:
+                s.begin_step(dt)
+            for s in coupled:
+                s.compute_forces()
+            if coupling is not None:
+                coupling.apply(dt)
+            for s in coupled:
+                s.end_step(dt)
+
+    if graphs is None:
+        run_steps()
+    else:
+        graphs.advance(coupled, dt, substeps, coupling, run_steps)
+
+
+# -- checkpoints and resume -----------------------------------------------------------------------------------------
+def frames_note(top, last: int) -> str:
+    """Where the finished frames are, for messages: the cache (resumed runs included) holds frames 0..last."""
+    top = os.fspath(top)
+    return f"{top} holds frames 0..{last}" if last >= 0 else f"{top} holds no finished frame"
+
+
+def _fingerprint(scene, solvers, names) -> dict:
+    """What a checkpoint must match to be resumed by this scene (plain JSON values)."""
+    bodies = []
+    for b in scene.bodies:
+        count = getattr(b, "point_count", None)
+        if count is None:
+            count = getattr(b, "particle_count", 0)
+        bodies.append([str(b.name), str(getattr(type(b), "method", "")), int(count)])
+    return {
+        "scene": str(scene.name),
+        "fps": float(scene.fps),
+        "frame_time": float(scene.frame_time),
+        "solvers": [type(s).__name__ for s in solvers],
+        "bodies": bodies,
+        "colliders": [str(n) for n in names],
+        "ground": scene.ground is not None,
+    }
+
+
+def _restore_run(scene, state, solvers, fingerprint, steps, frame_count):
+    """Checks a checkpoint against this scene and puts it back: (last finished frame, sub-steps done in the next one,
+    the run id of the cache it was written with)."""
+    if state.get("format") != CHECKPOINT_FORMAT:
+        raise ParameterError(
+            "resume",
+            f"a checkpoint of format {state.get('format')!r}",
+            f"a checkpoint of format {CHECKPOINT_FORMAT} (this version of pdsim's; rerun without --resume)",
+        )
+    saved = json.loads(json.dumps(state.get("fingerprint", {})))
+    mine = json.loads(json.dumps(fingerprint))
+    if saved != mine:
+        diff = sorted(k for k in set(saved) | set(mine) if saved.get(k) != mine.get(k))
+        raise ParameterError(
+            "resume",
+            f"a checkpoint of another scene (differs in {', '.join(diff)})",
+            "a checkpoint written by this scene (same bodies, colliders, fps and frame time)",
+        )
+    run = state["run"]
+    frame, substep = int(run["frame"]), int(run["substep"])
+    if frame >= frame_count:
+        raise ParameterError("frames", frame_count, f"more than {frame} (the checkpoint's last finished frame)")
+    if not (int(run["substeps"]) == steps.substeps and float(run["dt"]) == steps.dt):
+        if substep:
+            raise ParameterError(
+                "dt", steps.dt, f"the checkpoint's time step {float(run['dt']):.6g} s (it stopped inside a frame)"
+            )
+        warnings.warn(
+            f"resuming with a time step of {steps.dt:.3g} s where the checkpoint ran {float(run['dt']):.3g} s: the "
+            "frames differ from those of an uninterrupted run",
+            stacklevel=4,
+        )
+    for i, s in enumerate(solvers):
+        s.restore(state["solvers"][str(i)])
+    _restore_colliders(scene.colliders, state.get("colliders", {}))
+    return frame, substep, str(run["cache_run"])
+
+
+def _collider_states(colliders) -> dict:
+    """The colliders' state a resumed run needs: each projectile's last evaluated pose (its velocity over the next
+    step is taken from it)."""
+    out = {}
+    for i, c in enumerate(colliders):
+        last = getattr(c, "_last", None)
+        if last is not None:
+            out[str(i)] = {"time": float(last[0]), "position": np.asarray(last[1]), "rotation": np.asarray(last[2])}
+    return out
+
+
+def _restore_colliders(colliders, states: dict) -> None:
+    for i, c in enumerate(colliders):
+        st = states.get(str(i))
+        if st is not None and hasattr(c, "_last"):
+            c._last = (float(st["time"]), np.asarray(st["position"]), np.asarray(st["rotation"]))
+
+
+class _NoProgress:
+    def update(self, n):
+        pass
+
+    def close(self):
+        pass
+
+
+def _progress(total: int, *, enabled: bool, desc: str):
+    return tqdm(total=total, desc=desc, unit="frame", dynamic_ncols=True) if enabled else _NoProgress()

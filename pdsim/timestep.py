@@ -1,0 +1,94 @@
+"""The time-step rule, in one place: the run (pdsim.run), ``pdsim run --explain`` (pdsim.explain) and the pre-flight
+checks (pdsim.preflight) all take the step from here.
+
+The rule: the automatic step is ``time_step_safety`` x the smallest stable step of the scene's solvers, times the
+user's ``dt_factor``, and at most one frame; a user ``dt`` replaces it. The frame is then cut into
+``substeps = ceil(frame_time / step)`` equal steps, so the step used is ``frame_time / substeps`` <= the chosen step.
+
+Before the solvers exist (the pre-flight), the stable step is estimated from the bodies: 0.3 m h / c_p for a
+peridynamic body (m = horizon / spacing), 0.5 h_min / c_p for an FEM body (times ``implicit_step_ratio`` with the
+implicit integrator), no limit for the lattice.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from .fem.mesh import element_heights
+
+MAX_SUBSTEPS_PER_FRAME = 10_000_000
+# Silling-Askari step ~ 0.3 m h / c_p (measured 0.55 / 0.92 / 1.76 h / c_p at m = 1.5 / 3 / 6: docs/stability.md)
+PD_STEP_COEFFICIENT = 0.3
+
+
+@dataclass(frozen=True)
+class FrameSteps:
+    """How a frame is stepped: ``dt`` [s] (frame_time / substeps), ``substeps`` per frame, the ``stable_dt`` [s] it
+    was derived from and the ``automatic`` step [s] (time_step_safety x stable_dt)."""
+
+    dt: float
+    substeps: int
+    stable_dt: float
+    automatic: float
+
+    @property
+    def factor(self) -> float:
+        """The step used over the automatic one (1 at the automatic step)."""
+        return self.dt / self.automatic if self.automatic > 0.0 and math.isfinite(self.automatic) else 1.0
+
+
+def chosen_step(frame_time: float, stable_dt: float, safety: float, *, dt=None, dt_factor: float = 1.0) -> float:
+    """The step [s] before the frame is cut into substeps: ``dt`` when given, else
+    ``min(dt_factor * safety * stable_dt, frame_time)``."""
+    if dt is not None:
+        return float(dt)
+    return min(dt_factor * (safety * stable_dt), frame_time)
+
+
+def substeps_for(frame_time: float, step: float) -> int:
+    """Substeps of a frame of ``frame_time`` [s] at a step of at most ``step`` [s] (at least 1)."""
+    return max(1, math.ceil(frame_time / step - 1.0e-9))
+
+
+def frame_steps(
+    frame_time: float, stable_dt: float, safety: float, *, dt=None, dt_factor: float = 1.0, warn: bool = False
+) -> FrameSteps:
+    """The rule (module docstring) for a frame of ``frame_time`` [s]; ``warn`` warns when the step is past the
+    automatic one (``dt_factor`` > 1) or a user ``dt`` is past the stable estimate (the watchdog still catches a
+    divergence)."""
+    automatic = safety * stable_dt
+    step = chosen_step(frame_time, stable_dt, safety, dt=dt, dt_factor=dt_factor)
+    if warn and dt is None and dt_factor > 1.0:
+        warnings.warn(
+            f"dt_factor={dt_factor:g}: the time step is {dt_factor:g}x the automatic one ({automatic:.3g} s, "
+            f"{safety:g} x the stable estimate {stable_dt:.3g} s); the watchdog stops the run if it diverges",
+            stacklevel=4,
+        )
+    elif warn and dt is not None and dt > stable_dt:
+        warnings.warn(
+            f"time step {dt:.3g} s exceeds the stable estimate {stable_dt:.3g} s; the watchdog checks the run for "
+            "divergence every few steps",
+            stacklevel=4,
+        )
+    substeps = substeps_for(frame_time, step)
+    return FrameSteps(dt=frame_time / substeps, substeps=substeps, stable_dt=stable_dt, automatic=automatic)
+
+
+def estimated_stable_step(body) -> float:
+    """A body's stable explicit step [s] estimated before its solver is built, without the safety factor (module
+    docstring); inf for bodies without mass (the lattice)."""
+    method = getattr(type(body), "method", "")
+    cp = float(getattr(getattr(body, "material", None), "p_wave_speed", math.inf))
+    if method == "peridynamics":
+        return PD_STEP_COEFFICIENT * body.horizon_factor * body.spacing / cp
+    if method == "fem":
+        h_min = float(np.min(element_heights(body.mesh.vertices, body.mesh.tets)))
+        dt = 0.5 * h_min / cp
+        if getattr(body, "integrator", "explicit") == "implicit":
+            dt *= float(getattr(body, "implicit_step_ratio", 1.0))
+        return dt
+    return math.inf
