@@ -47,6 +47,42 @@ TENSILE_STRENGTH = {
 }
 
 
+def _brittle(name, density, youngs_modulus, poisson_ratio, *, fracture_energy, critical_stretch, real) -> Material:
+    """A brittle preset: the real ``youngs_modulus`` [Pa] and ``fracture_energy`` [J/m^2] with ``real``, else the
+    modulus times STIFFNESS_SCALE and a ``critical_stretch`` [-]; both with the COMPRESSIVE_BONUS."""
+    strength = {"fracture_energy": fracture_energy} if real else {"critical_stretch": critical_stretch}
+    return Material(
+        density=density,
+        youngs_modulus=youngs_modulus if real else youngs_modulus * STIFFNESS_SCALE,
+        poisson_ratio=poisson_ratio,
+        compressive_bonus=COMPRESSIVE_BONUS,
+        name=name,
+        **strength,
+    )
+
+
+def _metal(
+    name, density, youngs_modulus, poisson_ratio, real_plasticity, *, hardening_ratio, failure, real
+) -> Material:
+    """A ductile preset: with ``real`` the real modulus [Pa] and ``real_plasticity`` (yield stress, hardening modulus
+    [Pa]); else the modulus times STIFFNESS_SCALE, a yield strain of 1 % and a hardening modulus of
+    ``hardening_ratio`` times the modulus. ``failure``: the plastic strain at which bonds tear [-]."""
+    if real:
+        e, yield_stress, hardening = youngs_modulus, *real_plasticity
+    else:
+        e = youngs_modulus * STIFFNESS_SCALE
+        yield_stress, hardening = 0.01 * e, hardening_ratio * e
+    return Material(
+        density=density,
+        youngs_modulus=e,
+        poisson_ratio=poisson_ratio,
+        yield_stress=yield_stress,
+        hardening_modulus=hardening,
+        failure_plastic_strain=failure,
+        name=name,
+    )
+
+
 def glass(*, real: bool = False) -> Material:
     """Soda-lime (float, window) glass: brittle.
 
@@ -61,23 +97,7 @@ def glass(*, real: bool = False) -> Material:
     wave speed 100x lower a strain 100x larger keeps an impact's strain over the breaking strain (v / (c s_c)) at its
     real value. 0.5 % stays invisible before the break.
     """
-    if real:
-        return Material(
-            density=2500.0,
-            youngs_modulus=70.0e9,
-            poisson_ratio=0.22,
-            fracture_energy=8.0,
-            compressive_bonus=COMPRESSIVE_BONUS,
-            name="glass",
-        )
-    return Material(
-        density=2500.0,
-        youngs_modulus=70.0e9 * STIFFNESS_SCALE,
-        poisson_ratio=0.22,
-        critical_stretch=0.005,
-        compressive_bonus=COMPRESSIVE_BONUS,
-        name="glass",
-    )
+    return _brittle("glass", 2500.0, 70.0e9, 0.22, fracture_energy=8.0, critical_stretch=0.005, real=real)
 
 
 def concrete(*, real: bool = False) -> Material:
@@ -94,23 +114,7 @@ def concrete(*, real: bool = False) -> Material:
     below glass's; raised 20x (less than glass's 90x) it keeps concrete the weaker, crumblier of the two brittle
     presets at animation speeds.
     """
-    if real:
-        return Material(
-            density=2400.0,
-            youngs_modulus=30.0e9,
-            poisson_ratio=0.2,
-            fracture_energy=120.0,
-            compressive_bonus=COMPRESSIVE_BONUS,
-            name="concrete",
-        )
-    return Material(
-        density=2400.0,
-        youngs_modulus=30.0e9 * STIFFNESS_SCALE,
-        poisson_ratio=0.2,
-        critical_stretch=0.002,
-        compressive_bonus=COMPRESSIVE_BONUS,
-        name="concrete",
-    )
+    return _brittle("concrete", 2400.0, 30.0e9, 0.2, fracture_energy=120.0, critical_stretch=0.002, real=real)
 
 
 def wood(*, real: bool = False, grain=(1.0, 0.0, 0.0)) -> Material:
@@ -192,26 +196,7 @@ def steel(*, real: bool = False) -> Material:
     several percent here, which would flatten a part with the real yield strain; 1 % keeps the spring-back invisible.
     Hardening H = 0.005 E (the real H / E); failure_plastic_strain 0.4 (real).
     """
-    if real:
-        return Material(
-            density=7850.0,
-            youngs_modulus=210.0e9,
-            poisson_ratio=0.3,
-            yield_stress=250.0e6,
-            hardening_modulus=1.0e9,
-            failure_plastic_strain=0.4,
-            name="steel",
-        )
-    e = 210.0e9 * STIFFNESS_SCALE
-    return Material(
-        density=7850.0,
-        youngs_modulus=e,
-        poisson_ratio=0.3,
-        yield_stress=0.01 * e,
-        hardening_modulus=0.005 * e,
-        failure_plastic_strain=0.4,
-        name="steel",
-    )
+    return _metal("steel", 7850.0, 210.0e9, 0.3, (250.0e6, 1.0e9), hardening_ratio=0.005, failure=0.4, real=real)
 
 
 def aluminium(*, real: bool = False) -> Material:
@@ -225,26 +210,7 @@ def aluminium(*, real: bool = False) -> Material:
     yield stress 69 kPa (1 % yield strain, for the reason given under :func:`steel`); H = 0.007 E (the real H / E);
     failure_plastic_strain 0.25 (real).
     """
-    if real:
-        return Material(
-            density=2700.0,
-            youngs_modulus=69.0e9,
-            poisson_ratio=0.33,
-            yield_stress=275.0e6,
-            hardening_modulus=0.5e9,
-            failure_plastic_strain=0.25,
-            name="aluminium",
-        )
-    e = 69.0e9 * STIFFNESS_SCALE
-    return Material(
-        density=2700.0,
-        youngs_modulus=e,
-        poisson_ratio=0.33,
-        yield_stress=0.01 * e,
-        hardening_modulus=0.007 * e,
-        failure_plastic_strain=0.25,
-        name="aluminium",
-    )
+    return _metal("aluminium", 2700.0, 69.0e9, 0.33, (275.0e6, 0.5e9), hardening_ratio=0.007, failure=0.25, real=real)
 
 
 PRESETS = {
