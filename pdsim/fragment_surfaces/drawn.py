@@ -34,7 +34,7 @@ from .cleanup import (
     triangle_angles,
 )
 
-__all__ = ["DrawnSurface", "drawn_surface"]
+__all__ = ["DrawnSurface", "drawn_surface", "longest_edge"]
 
 DEFORMED_ROUNDS = 16  # rounds of edge flips, then of vertex moves, per frame against slivers made by the motion
 MAX_DRAWN_EDGE = 3.0  # drawn edges longer than this [spacings] are split at their rest-space midpoints
@@ -100,7 +100,7 @@ def drawn_surface(
             rest, shell = np.concatenate([rest, mid_rest]), np.concatenate([shell, mid_shell])
             parent = parent[from_face]
         faces, parent = _unsliver(x, faces, parent, face_shell, face_patch, face_crack, len(rest_vertices), spacing)
-        if _longest_edge(x, faces) <= limit:
+        if longest_edge(x, faces) <= limit:
             break
     added = None
     if phis:
@@ -206,7 +206,7 @@ def _drop_three_fans(x, faces, parent, face_patch, first_added, sliver_angle):
     return faces, parent
 
 
-def _longest_edge(x: np.ndarray, faces: np.ndarray) -> float:
+def longest_edge(x: np.ndarray, faces: np.ndarray) -> float:
     """Longest edge [m] of triangles ``faces`` [f, 3] at points ``x`` [v, 3] (0 without triangles)."""
     if len(faces) == 0:
         return 0.0
