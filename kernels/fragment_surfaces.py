@@ -1,4 +1,5 @@
-"""Kernels for fragment surfaces (pdsim/fragment_surfaces.py): signed distances of grid points to a closed mesh."""
+"""Kernels for fragment surfaces (pdsim/fragment_surfaces/regions.py): signed distances of grid points to a closed
+mesh."""
 
 import warp as wp
 
@@ -18,3 +19,9 @@ def signed_distance_to_solid(
     distance[i] = max_dist
     if q.result:
         distance[i] = q.sign * wp.length(wp.mesh_eval_position(mesh, q.face, q.u, q.v) - p)
+
+
+def signed_distances(mesh_id, points, max_dist: float, distance):
+    """Launches :func:`signed_distance_to_solid` over ``points`` (vec3 [n]) on the current device: distance [m]
+    float [n] of each point to the closed mesh ``mesh_id`` (a wp.Mesh id), negative inside."""
+    wp.launch(signed_distance_to_solid, dim=len(points), inputs=[mesh_id, points, max_dist, distance])

@@ -6,9 +6,9 @@ Every node starts as its own label; then, until nothing changes:
     jump:  every node follows its labels to a node that labels itself (a root) and takes that root
 
 Labels only decrease and always name a node of the same component, so the loop ends with every node labelled by the
-smallest node index of its component. The loop runs on the device: pdsim/graph.py captures it with
-``wp.capture_while`` (a conditional node of a CUDA graph; a loop over the recorded operations on the CPU) and reads
-only the result.
+smallest node index of its component. The loop runs on the device (:func:`label_components`: the loop is
+``wp.capture_while``, a conditional node of a CUDA graph when captured; a loop over the recorded operations on the
+CPU), and the caller reads only the result.
 """
 
 from typing import Any
@@ -71,3 +71,30 @@ def count_live(alive: wp.array(dtype=Any), count: wp.array(dtype=wp.int32)):
     e = wp.tid()
     if int(alive[e]) != 0:
         wp.atomic_add(count, 0, 1)
+
+
+def label_components(offsets, neighbors, alive, labels, changed, node_count: int, device):
+    """Launches the labelling of the ``node_count`` nodes: :func:`label_init`, then iterations of
+    :func:`label_clear`, :func:`label_hook` and :func:`label_jump` while changed[0] is set (``wp.capture_while``).
+    Afterwards labels[i] is the smallest node index of node i's component.
+
+    Args:
+        offsets: CSR row starts, int32 [node_count + 1]; neighbors: neighbour node of each edge, int32.
+        alive: per-edge flag (uint8 or int32, nonzero is alive).
+        labels: int32 [>= node_count], written; changed: int32 [1], the loop's flag.
+        device: Warp device of the launches.
+    """
+
+    def iteration():
+        wp.launch(label_clear, dim=1, inputs=[changed], device=device)
+        wp.launch(label_hook, dim=node_count, inputs=[offsets, neighbors, alive, labels, changed], device=device)
+        wp.launch(label_jump, dim=node_count, inputs=[labels, changed], device=device)
+
+    wp.launch(label_init, dim=node_count, inputs=[labels, changed], device=device)
+    wp.capture_while(changed, iteration)
+
+
+def count_live_edges(alive, count, edge_count: int, device):
+    """Launches :func:`count_live` over the first ``edge_count`` entries of ``alive``: count[0] += the number of
+    nonzero entries (int32 [1], zeroed by the caller)."""
+    wp.launch(count_live, dim=edge_count, inputs=[alive, count], device=device)

@@ -21,6 +21,11 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+import warp as wp
+from scipy.sparse import coo_matrix, csr_matrix
+from scipy.sparse.csgraph import connected_components as scipy_components
+
+from .kernels import graph as kg
 
 __all__ = ["DeviceLabeller", "FragmentTracker", "connected_components", "fragment_labels"]
 
@@ -34,9 +39,6 @@ def connected_components(node_count: int, first, second) -> np.ndarray:
     """Component label of each of ``node_count`` nodes joined by the edges (first[e], second[e]) (undirected), as
     int64 [node_count]; components are numbered 0, 1, ... in the order of their smallest node. The one labeller of
     pdsim: peridynamic fragments, FEM pieces and lattice fragments all come from it."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components as scipy_components
-
     a = np.asarray(first, dtype=np.int64).ravel()
     b = np.asarray(second, dtype=np.int64).ravel()
     graph = coo_matrix((np.ones(a.shape[0], dtype=np.int8), (a, b)), shape=(node_count, node_count)).tocsr()
@@ -75,9 +77,6 @@ def fragment_labels(family_offsets, family_neighbors, bond_alive, body_offsets=N
     Raises:
         ValueError: inconsistent array shapes, or a live bond joining two bodies.
     """
-    from scipy.sparse import csr_matrix
-    from scipy.sparse.csgraph import connected_components
-
     offsets = _as_numpy(family_offsets).astype(np.int64, copy=False).ravel()
     n = offsets.shape[0] - 1
     if n < 0:
@@ -106,7 +105,7 @@ def fragment_labels(family_offsets, family_neighbors, bond_alive, body_offsets=N
         (np.ones(int(live_before[-1]), dtype=np.int8), neighbors[:bond_count][live], live_before[offsets]),
         shape=(n, n),
     )
-    _, component = connected_components(graph, directed=True, connection="weak")
+    _, component = scipy_components(graph, directed=True, connection="weak")
     # Smallest particle index of each component (np.unique's first occurrence).
     _, first = np.unique(component, return_index=True)
     return labels_from_roots(first[component], body_offsets, compact=compact)
@@ -157,8 +156,6 @@ class DeviceLabeller:
     _warned = False  # the host-loop warning was given (class-wide: once per process)
 
     def __init__(self, offsets, neighbors, alive, device=None):
-        import warp as wp
-
         self.device = wp.get_device(device if device is not None else alive.device)
 
         def on_device(a):
@@ -175,30 +172,13 @@ class DeviceLabeller:
         self._graph = None
 
     def _launch_all(self):
-        import warp as wp
-
-        from .kernels import graph as kg
-
-        n, d = self.node_count, self.device
-
-        def iteration():
-            wp.launch(kg.label_clear, dim=1, inputs=[self.changed], device=d)
-            wp.launch(
-                kg.label_hook,
-                dim=n,
-                inputs=[self.offsets, self.neighbors, self.alive, self.labels, self.changed],
-                device=d,
-            )
-            wp.launch(kg.label_jump, dim=n, inputs=[self.labels, self.changed], device=d)
-
-        wp.launch(kg.label_init, dim=n, inputs=[self.labels, self.changed], device=d)
-        wp.capture_while(self.changed, iteration)
+        kg.label_components(
+            self.offsets, self.neighbors, self.alive, self.labels, self.changed, self.node_count, self.device
+        )
 
     def roots(self):
         """Labels the components now (``alive`` as it is); returns the int32 Warp array [node_count] of each node's
         smallest component member."""
-        import warp as wp
-
         if self.node_count <= 0:
             return self.labels[:0]
         if self.device.is_cuda and not wp.is_conditional_graph_supported():
@@ -283,8 +263,6 @@ class FragmentTracker:
         Returns:
             True when the labels differ from those returned by the previous call.
         """
-        import warp as wp
-
         if isinstance(bond_alive, wp.array):
             return self._update_on_device(bond_alive, live_bond_count)
         alive = _as_numpy(bond_alive).ravel()[: self.bond_count]
@@ -304,10 +282,6 @@ class FragmentTracker:
     def _update_on_device(self, bond_alive, live_bond_count) -> bool:
         """:meth:`update` for a Warp array: the live bonds are counted on the device (one number read) and, when
         their number dropped, labelled there (:class:`DeviceLabeller`; one label per particle read)."""
-        import warp as wp
-
-        from .kernels import graph as kg
-
         n = self.labels.shape[0]
         if self.bond_count == 0 or n == 0:
             return False
@@ -315,7 +289,7 @@ class FragmentTracker:
             if self._count is None:
                 self._count = wp.zeros(1, dtype=wp.int32, device=bond_alive.device)
             self._count.zero_()
-            wp.launch(kg.count_live, dim=self.bond_count, inputs=[bond_alive, self._count], device=bond_alive.device)
+            kg.count_live_edges(bond_alive, self._count, self.bond_count, bond_alive.device)
             live_bond_count = int(self._count.numpy()[0])
         count = int(live_bond_count)
         if count == self.live_bond_count:

@@ -383,7 +383,8 @@ def test_added_vertex_at_a_sliver_with_three_triangles_is_removed():
     """An octahedron whose face (0, 1, 2) is a fan around an added vertex 6 lying just inside it, next to the side
     (0, 1) (a flat cap of 175 degrees): the fan is replaced by the face (0, 1, 2) with its orientation, so the
     surface is the closed octahedron again; a vertex of the input (index below first_added) stays."""
-    from pdsim.fragment_surfaces import _drop_three_fans, shells_closed, triangle_angles
+    from pdsim.fragment_surfaces import shells_closed, triangle_angles
+    from pdsim.fragment_surfaces.drawn import _drop_three_fans
 
     x = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], dtype=np.float64)
     octa = np.array([[0, 1, 2], [1, 3, 2], [3, 4, 2], [4, 0, 2], [1, 0, 5], [3, 1, 5], [4, 3, 5], [0, 4, 5]])
@@ -409,7 +410,8 @@ def test_drawn_merge_moves_only_added_vertices():
     an input vertex 0 of a closed octahedron (the face (0, 1, 2) split into a fan around 6) is merged by moving 6 onto
     0, leaving the closed octahedron. The same collapse happens with no restriction, and none when only the input
     vertices may move (6 may not, and 0 may not leave its other faces' patches for the fan's)."""
-    from pdsim.fragment_surfaces import _collapse_round, shells_closed
+    from pdsim.fragment_surfaces import shells_closed
+    from pdsim.fragment_surfaces.cleanup import _collapse_round
 
     x = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], dtype=np.float64)
     octa = np.array([[0, 1, 2], [1, 3, 2], [3, 4, 2], [4, 0, 2], [1, 0, 5], [3, 1, 5], [4, 3, 5], [0, 4, 5]])

@@ -17,24 +17,15 @@ import json
 import sys
 
 import numpy as np
+from pxr import Usd, UsdGeom
 
-SLIVER = 5.0  # degrees
-
-
-def _angles(points: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    t = points[tri]
-    out = np.empty(tri.shape)
-    for i in range(3):
-        a, b = t[:, (i + 1) % 3] - t[:, i], t[:, (i + 2) % 3] - t[:, i]
-        cos = np.einsum("ij,ij->i", a, b) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300)
-        out[:, i] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-    return out
+from pdsim.fragment_surfaces import triangle_angles
+from pdsim.fragment_surfaces.cleanup import SLIVER_ANGLE
+from pdsim.fragment_surfaces.drawn import longest_edge
 
 
 def measure(path: str) -> list[dict]:
     """One row per (mesh, frame): mesh, frame, crack_triangles, min_angle, slivers, longest_edge_spacings."""
-    from pxr import Usd, UsdGeom
-
     stage = Usd.Stage.Open(path)
     rows = []
     for prim in stage.Traverse():
@@ -51,16 +42,15 @@ def measure(path: str) -> list[dict]:
             points = np.array(mesh.GetPointsAttr().Get(frame), dtype=np.float64)
             tri = np.array(mesh.GetFaceVertexIndicesAttr().Get(frame), dtype=np.int64).reshape(-1, 3)
             crack = np.array(crack_var.Get(frame)) == 1
-            t = points[tri]
-            longest = float(np.linalg.norm(t - np.roll(t, 1, axis=1), axis=2).max()) / spacing if len(tri) else 0.0
-            amin = _angles(points, tri[crack]).min(axis=1) if crack.any() else np.zeros(0)
+            longest = longest_edge(points, tri) / spacing
+            amin = triangle_angles(points, tri[crack]).min(axis=1) if crack.any() else np.zeros(0)
             rows.append(
                 {
                     "mesh": str(prim.GetPath()),
                     "frame": int(frame),
                     "crack_triangles": int(crack.sum()),
                     "min_angle": float(amin.min()) if amin.size else None,
-                    "slivers": int((amin < SLIVER).sum()),
+                    "slivers": int((amin < SLIVER_ANGLE).sum()),
                     "longest_edge_spacings": longest,
                 }
             )
@@ -84,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     angles = [r["min_angle"] for r in rows if r["min_angle"] is not None]
     print(
         f"over {len(rows)} mesh samples: smallest crack angle {min(angles) if angles else float('nan'):.2f} degrees, "
-        f"{sum(r['slivers'] for r in rows)} crack triangles under {SLIVER:g} degrees, longest edge "
+        f"{sum(r['slivers'] for r in rows)} crack triangles under {SLIVER_ANGLE:g} degrees, longest edge "
         f"{max((r['longest_edge_spacings'] for r in rows), default=0.0):.2f} spacings"
     )
     if args.json:

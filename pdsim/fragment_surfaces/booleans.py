@@ -1,0 +1,235 @@
+"""The boolean build of fragment surfaces (steps 3a, 4 and 5 of the method in :mod:`pdsim.fragment_surfaces`):
+the refined input surface, each region clipped by it with manifold3d's exact mesh booleans, and all clipped shells
+joined into one complex whose cracks are triangulated once.
+
+3a. **Refined input** (:func:`refine_surface`). Before the clip, the input surface is refined to edges of about h
+    with manifold3d's ``refine_to_length`` (planar subdivision: planes stay planes, box edges and corners stay sharp;
+    an input whose edges are all at most h is kept as it is). An unbroken body is this refined surface, so it bends
+    with the particles everywhere, not only at the input's vertices.
+4. **Clip** (:func:`clip_regions`). ``region ∩ input surface`` (manifold3d, every triangle of both meshes its own
+   face id so that manifold3d keeps the triangulations) gives each region's shell. Faces from the input are outer
+   faces, the rest are crack faces (told apart by manifold3d's original ids; the source triangle tells the region
+   across a crack face and the input plane of an outer face).
+5. **Shared complex** (:func:`shared_complex`). All shells' vertices that coincide (within 1e-9 h) become one vertex,
+   and each crack is triangulated once: the lower region's crack triangles, reversed, replace the higher region's (a
+   shell whose sides do not match keeps its own, checked). The two sides of a crack thus use the very same
+   triangles. Then the slivers go (step 6, pdsim/fragment_surfaces/cleanup.py). Where two sides of a crack still
+   differ (manifold3d resolves a crack point exactly on an input plane differently in the two booleans) those shells
+   keep their own crack triangles.
+"""
+
+from __future__ import annotations
+
+import manifold3d
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..graph import connected_components
+from .cleanup import clean_complex, shells_closed
+
+__all__ = ["clip_regions", "input_manifold", "plane_groups", "refine_surface", "shared_complex"]
+
+
+def plane_groups(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Plane id of each triangle, int64 shape [f]: triangles of vertices [m] [v, 3] / faces [f, 3] share an id when
+    their planes agree (unit normal to 1e-9, offset to 1e-9 of the mesh size). Degenerate triangles get their own."""
+    t = vertices[faces]
+    n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    norm = np.linalg.norm(n, axis=1)
+    ok = norm > 0.0
+    n = n / np.where(ok, norm, 1.0)[:, None]
+    size = float(np.ptp(vertices, axis=0).max()) or 1.0
+    offset = np.einsum("ij,ij->i", n, t[:, 0]) / size
+    key = np.round(np.concatenate([n, offset[:, None]], axis=1) * 1e9).astype(np.int64)
+    key[~ok] = np.stack([np.arange(len(faces))[~ok]] * 4, axis=1) + (1 << 40)
+    return np.unique(key, axis=0, return_inverse=True)[1].reshape(-1).astype(np.int64)
+
+
+def _manifold(vertices: np.ndarray, faces: np.ndarray):
+    """The manifold3d solid of vertices [m] [v, 3] and triangles [f, 3], every triangle its own face id (so that
+    manifold3d's output tells the source triangle of each face)."""
+    f = np.ascontiguousarray(faces, dtype=np.uint64)
+    mesh = manifold3d.Mesh64(
+        np.ascontiguousarray(vertices, dtype=np.float64), f, face_id=np.arange(len(f), dtype=np.uint64)
+    )
+    return manifold3d.Manifold(mesh)
+
+
+def refine_surface(vertices: np.ndarray, faces: np.ndarray, spacing: float):
+    """The input surface refined to edges of about ``spacing`` h [m] with manifold3d's ``refine_to_length``: every
+    edge longer than h is split into equal pieces and each triangle is filled by planar subdivision, so planes stay
+    planes and sharp edges stay sharp (the surface is unchanged, only the triangles are smaller).
+
+    Returns:
+        (vertices [m] float64 [v, 3], triangles int64 [f, 3], plane id of each triangle int64 [f] (see
+        :func:`plane_groups`, computed on the input triangles and inherited by their pieces)).
+    """
+    groups = plane_groups(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64))
+    t = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
+    if np.linalg.norm(t - np.roll(t, 1, axis=1), axis=2).max() <= spacing:  # fine already: the input itself
+        return np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64), groups
+    solid = _manifold(vertices, faces)
+    if solid.status() != manifold3d.Error.NoError:
+        raise ValueError(f"manifold3d rejects the input mesh ({solid.status()})")
+    mesh = solid.refine_to_length(float(spacing)).to_mesh64()
+    v = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3].copy()
+    f = np.asarray(mesh.tri_verts, dtype=np.int64).reshape(-1, 3)
+    origin = np.asarray(mesh.face_id, dtype=np.int64)
+    return v, f, groups[origin]
+
+
+def _merge_coincident(points: np.ndarray, owner: np.ndarray, tol: float) -> np.ndarray:
+    """Global vertex id of each point [m] [p, 3]: points of different shells (``owner`` [p]) closer than ``tol`` [m]
+    are one vertex; points of the same shell stay apart. Returns int64 [p]."""
+    pairs = cKDTree(points).query_pairs(tol, output_type="ndarray")
+    pairs = pairs[owner[pairs[:, 0]] != owner[pairs[:, 1]]] if len(pairs) else pairs.reshape(0, 2)
+    return connected_components(points.shape[0], pairs[:, 0], pairs[:, 1])
+
+
+def input_manifold(surface, name: str):
+    """The (refined) input surface ``surface`` = (vertices [m] [v, 3], triangles [f, 3], plane ids [f]) as a
+    manifold3d solid marked as an original, every triangle its own face id.
+
+    Raises:
+        ValueError: manifold3d rejects the mesh (``name`` is the shape's name in the message).
+    """
+    v, f, _ = surface
+    solid = _manifold(v, f)
+    if solid.status() != manifold3d.Error.NoError:
+        raise ValueError(f"'{name}': manifold3d rejects the input mesh ({solid.status()})")
+    return solid.as_original()
+
+
+def clip_regions(regions, solid, plane: np.ndarray, spacing: float, simplify: float, body_name: str):
+    """Region ∩ input surface for every region (step 4; manifold3d).
+
+    Args:
+        regions: per region (vertices [m] [v, 3], triangles [f, 3], region across each triangle [f]), from
+            :func:`pdsim.fragment_surfaces.regions.partition_regions`.
+        solid: the input surface from :func:`input_manifold`; plane: plane id of each of its triangles [f_in].
+        spacing: particle spacing h [m]; simplify: manifold3d's simplification tolerance [spacings] (0: none).
+        body_name: the body's name, for the error message.
+
+    Returns:
+        Per region (vertices [m] [v, 3], triangles [f, 3], region across each triangle [f] (-1 on outer faces),
+        plane id of each triangle [f] (-1 on crack faces)).
+
+    Raises:
+        RuntimeError: a region is not a manifold.
+    """
+    solid_id = solid.original_id()
+    empty = (np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64))
+    pieces = []
+    for k, (rv, rf, racross) in enumerate(regions):
+        if rf.shape[0] == 0:
+            pieces.append(empty)
+            continue
+        region_solid = _manifold(rv, rf)
+        if region_solid.status() != manifold3d.Error.NoError:
+            raise RuntimeError(f"region {k} of '{body_name}' is not a manifold ({region_solid.status()})")
+        piece = region_solid ^ solid
+        if simplify > 0.0:
+            piece = piece.simplify(simplify * spacing)
+        piece = piece.to_mesh64()
+        tri = np.asarray(piece.tri_verts, dtype=np.int64).reshape(-1, 3)
+        if tri.size == 0:
+            pieces.append(empty)
+            continue
+        run_start = np.asarray(piece.run_index, dtype=np.int64) // 3
+        run_id = np.asarray(piece.run_original_id, dtype=np.int64)
+        outer = np.repeat(run_id == solid_id, np.diff(run_start))
+        src = np.asarray(piece.face_id, dtype=np.int64)
+        across = np.where(outer, -1, racross[np.where(outer, 0, np.minimum(src, len(racross) - 1))])
+        planes = np.where(outer, plane[np.where(outer, np.minimum(src, len(plane) - 1), 0)], -1)
+        pieces.append((np.asarray(piece.vert_properties, dtype=np.float64)[:, :3], tri, across, planes))
+    return pieces
+
+
+def shared_complex(pieces, k_count: int, surface, spacing: float, *, simplify: float, clean: bool):
+    """All regions' shells as one complex (vertices shared between shells), crack faces shared by both sides and
+    slivers removed (steps 5-6).
+
+    Args:
+        pieces: per region, from :func:`clip_regions`; k_count: number of regions.
+        surface: the (refined) input surface (vertices [m], triangles, plane id per triangle).
+        spacing: particle spacing h [m].
+        simplify: > 0 when the pieces were simplified: the sides are then kept independent (no sharing, no clean-up).
+        clean: remove slivers (:func:`pdsim.fragment_surfaces.cleanup.clean_complex`).
+
+    Returns:
+        (points [m] [p, 3], tri [f, 3], shell [f], crack flag [f], patch [f], shared, clean_failed); a patch is an
+        input plane or the crack between one pair of regions. ``clean_failed`` is True when the clean-up left a
+        shell open (its result is then dropped), False when it succeeded, None when it did not run.
+    """
+    vcount = np.array([p[0].shape[0] for p in pieces], dtype=np.int64)
+    fcount = np.array([p[1].shape[0] for p in pieces], dtype=np.int64)
+    voff = np.concatenate([[0], np.cumsum(vcount)])
+    points = np.concatenate([p[0] for p in pieces])
+    tri = np.concatenate([p[1] for p in pieces]) + np.repeat(voff[:-1], fcount)[:, None]
+    shell = np.repeat(np.arange(k_count), fcount)
+    across = np.concatenate([p[2] for p in pieces])
+    planes = np.concatenate([p[3] for p in pieces])
+    crack = (across >= 0).astype(np.int32)
+    plane_count = int(surface[2].max()) + 1
+
+    def patches(shell, across, planes):
+        lo, hi = np.minimum(shell, across), np.maximum(shell, across)
+        patch = np.where(across >= 0, plane_count + lo * k_count + hi, planes)
+        return np.unique(patch, return_inverse=True)[1].reshape(-1)
+
+    if simplify > 0.0:  # independent sides: no sharing, no clean-up
+        return points, tri, shell, crack, patches(shell, across, planes), False, None
+    gid = _merge_coincident(points, np.repeat(np.arange(k_count), vcount), 1e-9 * spacing)
+    used, gid = np.unique(gid, return_inverse=True)
+    first = np.zeros(len(used), dtype=np.int64)
+    first[gid[::-1]] = np.arange(len(gid))[::-1]
+    points = points[first]
+    tri = gid[tri]
+    # One triangulation per crack: the lower region's triangles, reversed, replace the higher region's.
+    primary = (across >= 0) & (shell < across)
+    secondary = (across >= 0) & (shell > across)
+    copies = tri[primary][:, [0, 2, 1]]
+    tri2 = np.concatenate([tri[~secondary], copies])
+    shell2 = np.concatenate([shell[~secondary], across[primary]])
+    across2 = np.concatenate([across[~secondary], shell[primary]])
+    planes2 = np.concatenate([planes[~secondary], planes[primary]])
+    closed = shells_closed(tri2, shell2, len(points))
+    if not closed.all():  # sides that do not match: those shells keep their own crack triangles
+        bad = ~closed
+        drop_copy = np.concatenate([np.zeros((~secondary).sum(), bool), bad[across[primary]]])
+        restore = secondary & bad[shell]
+        tri2 = np.concatenate([tri2[~drop_copy], tri[restore]])
+        shell2 = np.concatenate([shell2[~drop_copy], shell[restore]])
+        across2 = np.concatenate([across2[~drop_copy], across[restore]])
+        planes2 = np.concatenate([planes2[~drop_copy], planes[restore]])
+        if not shells_closed(tri2, shell2, len(points)).all():
+            return (
+                np.concatenate([p[0] for p in pieces]),
+                np.concatenate([p[1] for p in pieces]) + np.repeat(voff[:-1], fcount)[:, None],
+                shell,
+                crack,
+                patches(shell, across, planes),
+                False,
+                None,
+            )
+    patch = patches(shell2, across2, planes2)
+    if clean:
+        is_crack_patch = np.zeros(int(patch.max()) + 1, dtype=bool)
+        is_crack_patch[patch[across2 >= 0]] = True
+        plane_of_patch = np.full(len(is_crack_patch), -1, dtype=np.int64)
+        plane_of_patch[patch[across2 < 0]] = planes2[across2 < 0]
+        tri3, shell3, patch3 = clean_complex(
+            points,
+            tri2,
+            shell2,
+            patch,
+            spacing,
+            crack_patch=is_crack_patch,
+            surface=(*surface, plane_of_patch),
+        )
+        if shells_closed(tri3, shell3, len(points)).all():
+            # crack flag of each surviving triangle: look it up through its patch
+            crack3 = is_crack_patch[patch3].astype(np.int32)
+            return points, tri3, shell3, crack3, patch3, True, False
+        return points, tri2, shell2, (across2 >= 0).astype(np.int32), patch, True, True
+    return points, tri2, shell2, (across2 >= 0).astype(np.int32), patch, True, None

@@ -1,0 +1,530 @@
+"""Sliver clean-up of the shell complex (step 6 of the method in :mod:`pdsim.fragment_surfaces`), and the mesh
+checks the surfaces share.
+
+The complex holds all fragments' shells at once: vertices shared between shells where they coincide, so the two sides
+of a crack use the same vertices and the same triangles (pdsim/fragment_surfaces/booleans.py builds it). Patches: an
+outer face's patch is the plane of its input triangle (coplanar input triangles share one); a crack face's patch is
+its pair of regions.
+
+The booleans cut triangles near their corners and marching tetrahedra puts crack points near grid vertices, which
+leaves needles and caps. Rounds of edge collapses (:func:`_collapse_round`: edges shorter than 0.3 h and the shortest
+side of every triangle with an angle under 5 degrees) and edge flips (:func:`_flip_round`: the longest side of such a
+triangle, inside one patch; a flip never creates an edge the shell has in either direction, and one round never
+creates the same edge twice) remove them, so both sides of a crack change alike. A collapse moves a vertex onto a
+neighbour only if the neighbour lies on every input plane of the vertex (its cracks may slide: a crack's rim moves
+along a box edge or across a face, both sides alike), so outer faces stay exactly on the input surface, sharp edges
+and corners stay put and the volumes still add up exactly; the link condition keeps every shell a closed 2-manifold.
+What the link condition blocks (needles at crack junctions on the outer surface, where the ends of a short edge have
+three common neighbours) is then relaxed (:func:`_relax_round`): the vertices of the remaining slivers move towards
+the mean of their neighbours, projected onto their input planes (a rim vertex slides in its face or along its
+crease, a corner stays), when that widens the smallest angle around them and turns no triangle by more than 30
+degrees; moves change no connectivity, so the shells stay closed and still partition the solid. Faceted curved
+inputs (a sphere whose facets are smaller than h) keep more slivers, since no vertex may leave its facet.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.spatial import cKDTree
+
+__all__ = ["SHORT_EDGE", "SLIVER_ANGLE", "clean_complex", "shells_closed", "triangle_angles"]
+
+SLIVER_ANGLE = 5.0  # triangles with a smaller angle [degrees] are slivers
+RELAX_TURN = 30.0  # largest turn [degrees] of a triangle when the rest-space clean-up moves a vertex
+SHORT_EDGE = 0.3  # edges shorter than this many spacings are collapsed
+_MAX_CLEAN_ROUNDS = 40
+
+
+def _corner_angles(t: np.ndarray) -> np.ndarray:
+    """Interior angles [degrees], float64 shape [f, 3], of triangles given by their corners [m] [f, 3, 3] (angle at
+    corner i)."""
+    out = np.empty(t.shape[:2], dtype=np.float64)
+    for i in range(3):
+        a = t[:, (i + 1) % 3] - t[:, i]
+        b = t[:, (i + 2) % 3] - t[:, i]
+        cos = np.einsum("ij,ij->i", a, b) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300)
+        out[:, i] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return out
+
+
+def triangle_angles(points: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """Interior angles [degrees], float64 shape [f, 3] (angle at corner i of each triangle of ``tri`` [f, 3])."""
+    return _corner_angles(points[tri])
+
+
+def shells_closed(tri: np.ndarray, shell: np.ndarray, vertex_count: int) -> np.ndarray:
+    """Per shell, whether its triangles form a closed, consistently oriented surface: every directed edge occurs
+    once and its reverse once. ``tri`` [f, 3] global vertex ids, ``shell`` [f] shell index; returns bool
+    [shell.max() + 1] (True for shells without triangles)."""
+    count = int(shell.max()) + 1 if len(shell) else 0
+    a = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
+    b = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
+    s = np.tile(shell, 3)
+    key = (s * vertex_count + a) * vertex_count + b
+    rev = (s * vertex_count + b) * vertex_count + a
+    uk, counts = np.unique(key, return_counts=True)
+    bad_edge = (counts[np.searchsorted(uk, key)] != 1) | ~np.isin(rev, uk)
+    bad = np.zeros(count, dtype=bool)
+    bad[s[bad_edge]] = True
+    return ~bad
+
+
+def _undirected_edges(tri: np.ndarray, vertex_count: int):
+    """Unique undirected edges of ``tri`` [f, 3]: (low ends [e], high ends [e], edge of each triangle side [f, 3]);
+    side j of a triangle joins its corners j and j + 1."""
+    a = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
+    b = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
+    key = np.minimum(a, b) * vertex_count + np.maximum(a, b)
+    uk, inverse = np.unique(key, return_inverse=True)
+    return uk // vertex_count, uk % vertex_count, inverse.reshape(3, -1).T
+
+
+def _on_planes(inc, plane_eq, points, src, dst, spacing):
+    """Bool [c]: ``dst`` lies (within 1e-7 h) on the plane of every input-plane patch of ``src`` (``inc``: vertex x
+    patch incidence, ``plane_eq`` [p, 4] unit normal and offset of each patch, NaN for crack patches)."""
+    rows = inc[src].tocoo()
+    eq = plane_eq[rows.col]
+    dist = np.abs(np.einsum("ij,ij->i", eq[:, :3], points[dst[rows.row]]) - eq[:, 3])
+    bad = ~np.isnan(eq[:, 0]) & ~(dist <= 1e-7 * spacing)
+    out = np.ones(len(src), dtype=bool)
+    out[rows.row[bad]] = False
+    return out
+
+
+def _independent_choice(rows, cols, prio, count, size) -> np.ndarray:
+    """Luby-style choice of operations whose zones do not meet: operation ``rows[i]`` touches item ``cols[i]`` (items
+    0..size-1), ``prio`` [count] orders them (smaller first, distinct). In passes, every open operation that is the
+    smallest on all its items wins, and the items of the winners close their rivals. Returns bool [count]."""
+    chosen = np.zeros(count, dtype=bool)
+    open_ = np.ones(count, dtype=bool)
+    blocked = np.zeros(size, dtype=bool)
+    while open_.any():
+        live = open_[rows]
+        best = np.full(size, np.inf)
+        np.minimum.at(best, cols[live], prio[rows[live]])
+        win = open_.copy()
+        np.logical_and.at(win, rows, best[cols] == prio[rows])
+        chosen |= win
+        blocked[cols[win[rows]]] = True
+        hit = np.zeros(count, dtype=bool)
+        np.logical_or.at(hit, rows, blocked[cols])
+        open_ &= ~hit
+    return chosen
+
+
+def _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle, plane_eq=None, movable=None):
+    """One round of edge collapses on the complex (see :func:`clean_complex`). Returns (triangles after the round
+    [f, 3], mask [f] of the triangles that keep an area, number of collapses; 0: nothing left to do). With
+    ``movable`` (bool [v]) only those vertices may move onto a neighbour."""
+    n_v = points.shape[0]
+    lo, hi, side_edge = _undirected_edges(tri, n_v)
+    length = np.linalg.norm(points[lo] - points[hi], axis=1)
+    cand = length < short_edge * spacing
+    angles = triangle_angles(points, tri)
+    sliver = angles.min(axis=1) < sliver_angle
+    if sliver.any():  # the shortest side of every sliver (needles and caps), up to one spacing
+        side_len = length[side_edge[sliver]]
+        shortest = side_edge[sliver][np.arange(sliver.sum()), np.argmin(side_len, axis=1)]
+        cand[shortest[length[shortest] < spacing]] = True
+    if not cand.any():
+        return tri, np.ones(len(tri), dtype=bool), 0
+    e_idx = np.flatnonzero(cand)
+    # Direction: u -> v only if every patch of u is a patch of v (u then moves within its own patches).
+    p_count = int(patch.max()) + 1
+    inc = csr_matrix((np.ones(3 * len(tri)), (tri.T.ravel(), np.tile(patch, 3))), shape=(n_v, p_count))
+    inc.data[:] = 1.0
+    inc.sum_duplicates()
+    inc.data[:] = 1.0
+    n_patch = np.asarray(inc.sum(axis=1)).ravel()
+    eu, ev = lo[e_idx], hi[e_idx]
+    common = np.asarray(inc[eu].multiply(inc[ev]).sum(axis=1)).ravel()
+    u_into_v = common == n_patch[eu]
+    v_into_u = common == n_patch[ev]
+    if plane_eq is not None:  # or: the target lies on every input plane of the source (crack patches may slide)
+        u_into_v |= _on_planes(inc, plane_eq, points, eu, ev, spacing)
+        v_into_u |= _on_planes(inc, plane_eq, points, ev, eu, spacing)
+    if movable is not None:
+        u_into_v &= movable[eu]
+        v_into_u &= movable[ev]
+    ok = u_into_v | v_into_u
+    src = np.where(u_into_v, eu, ev)[ok]
+    dst = np.where(u_into_v, ev, eu)[ok]
+    prio = length[e_idx][ok] + 1e-12 * spacing * np.arange(ok.sum()) / max(ok.sum(), 1)
+    if src.size == 0:
+        return tri, np.ones(len(tri), dtype=bool), 0
+    # Independent collapses: the zones (source and its neighbours) of two chosen collapses never meet.
+    adj = csr_matrix((np.ones(2 * len(lo)), (np.concatenate([lo, hi]), np.concatenate([hi, lo]))), shape=(n_v, n_v))
+    zone = adj[src].tocoo()
+    rows = np.concatenate([zone.row, np.arange(len(src))])
+    cols = np.concatenate([zone.col, src])
+    chosen = _independent_choice(rows, cols, prio, len(src), n_v)
+    src, dst = src[chosen], dst[chosen]
+    # Link condition in every shell that holds the source.
+    sv = np.unique(shell[:, None] * n_v + tri)  # (shell, vertex) pairs present
+    s_of, v_of = sv // n_v, sv % n_v
+    order = np.argsort(v_of, kind="stable")
+    starts = np.searchsorted(v_of[order], np.arange(n_v + 1))
+    per = starts[src + 1] - starts[src]
+    c_rep = np.repeat(np.arange(len(src)), per)
+    pos_in = np.arange(per.sum()) - np.repeat(np.cumsum(per) - per, per)
+    shells_c = s_of[order][starts[src][c_rep] + pos_in]
+    a_dir = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
+    b_dir = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
+    s_dir = np.tile(shell, 3)
+    row_key = np.searchsorted(sv, s_dir * n_v + a_dir)
+    nbr = csr_matrix((np.ones(len(a_dir)), (row_key, b_dir)), shape=(len(sv), n_v))
+    nbr.data[:] = 1.0
+    nbr.sum_duplicates()
+    nbr.data[:] = 1.0
+    su = np.searchsorted(sv, shells_c * n_v + src[c_rep])
+    dst_key = shells_c * n_v + dst[c_rep]
+    sd = np.minimum(np.searchsorted(sv, dst_key), len(sv) - 1)
+    dst_in_shell = sv[sd] == dst_key
+    edge_in_shell = np.asarray(nbr[su, dst[c_rep]]).ravel() > 0
+    common_nbrs = np.asarray(nbr[su].multiply(nbr[sd]).sum(axis=1)).ravel()
+    shell_size = np.bincount(s_of, minlength=int(shell.max()) + 1)[shells_c]
+    good = np.where(dst_in_shell, edge_in_shell & (common_nbrs == 2) & (shell_size > 6), True)
+    link_ok = np.ones(len(src), dtype=bool)
+    np.logical_and.at(link_ok, c_rep, good)
+    src, dst = src[link_ok], dst[link_ok]
+    if src.size == 0:
+        return tri, np.ones(len(tri), dtype=bool), 0
+    # Geometry: no triangle that keeps its area may turn by more than 60 degrees (slivers and triangles of short
+    # edges only, whose normals mean little, may).
+    moved = np.arange(n_v)
+    moved[src] = dst
+    new = moved[tri]
+    touched = np.any(new != tri, axis=1)
+    degenerate = (new[:, 0] == new[:, 1]) | (new[:, 1] == new[:, 2]) | (new[:, 2] == new[:, 0])
+    check = np.flatnonzero(touched & ~degenerate)
+    t_old, t_new = points[tri[check]], points[new[check]]
+    n_old = np.cross(t_old[:, 1] - t_old[:, 0], t_old[:, 2] - t_old[:, 0])
+    n_new = np.cross(t_new[:, 1] - t_new[:, 0], t_new[:, 2] - t_new[:, 0])
+    dot = np.einsum("ij,ij->i", n_old, n_new)
+    significant = ~sliver[check] & (length[side_edge[check]].max(axis=1) >= short_edge * spacing)
+    turned = (dot <= 0.5 * np.linalg.norm(n_old, axis=1) * np.linalg.norm(n_new, axis=1)) & significant
+    if turned.any():
+        which = np.full(n_v, -1)
+        which[src] = np.arange(len(src))
+        bad_src = which[tri[check[turned]]]
+        keep = np.ones(len(src), dtype=bool)
+        keep[bad_src[bad_src >= 0]] = False
+        src, dst = src[keep], dst[keep]
+        moved = np.arange(n_v)
+        moved[src] = dst
+        new = moved[tri]
+        degenerate = (new[:, 0] == new[:, 1]) | (new[:, 1] == new[:, 2]) | (new[:, 2] == new[:, 0])
+    return new, ~degenerate, len(src)
+
+
+def _flip_round(points, tri, shell, patch, sliver_angle):
+    """One round of edge flips (see :func:`clean_complex`): the longest side ab of a sliver (a, b, c) whose twin
+    (b, a, d) in the same shell lies in the same patch becomes cd, giving (c, a, d) and (d, b, c), when cd is not an
+    edge of that shell yet, both new triangles keep the old orientation and the smaller angle grows. A flip is done in
+    every shell holding the pair (both sides of a crack) or in none. Returns (triangles [f, 3], number of flips)."""
+    n_v = points.shape[0]
+    f_count = len(tri)
+    angles = triangle_angles(points, tri)
+    amin = angles.min(axis=1)
+    sliver = np.flatnonzero(amin < sliver_angle)
+    if sliver.size == 0:
+        return tri, 0
+    # The longest side of a sliver is opposite its largest angle: corner j's opposite side joins j + 1 and j + 2.
+    j = np.argmax(angles[sliver], axis=1)
+    a = tri[sliver, (j + 1) % 3]
+    b = tri[sliver, (j + 2) % 3]
+    c = tri[sliver, j]
+    # Twin: the triangle of the same shell holding the directed edge b -> a.
+    da = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
+    db = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
+    dapex = np.concatenate([tri[:, 2], tri[:, 0], tri[:, 1]])
+    dface = np.tile(np.arange(f_count), 3)
+    dkey = (np.tile(shell, 3) * n_v + da) * n_v + db
+    order = np.argsort(dkey)
+    skey = dkey[order]
+    want = (shell[sliver] * n_v + b) * n_v + a
+    pos = np.minimum(np.searchsorted(skey, want), len(skey) - 1)
+    found = skey[pos] == want
+    t2 = np.where(found, dface[order][pos], 0)
+    d = np.where(found, dapex[order][pos], 0)
+    ok = found & (patch[t2] == patch[sliver]) & (c != d)
+    # cd must not be an edge of the shell already (either direction).
+    for e0, e1 in ((c, d), (d, c)):
+        ekey = (shell[sliver] * n_v + e0) * n_v + e1
+        pos2 = np.minimum(np.searchsorted(skey, ekey), len(skey) - 1)
+        ok &= skey[pos2] != ekey
+    # Geometry: orientation kept and the smaller angle grows.
+    t_new1 = np.stack([c, a, d], axis=1)
+    t_new2 = np.stack([d, b, c], axis=1)
+    n_old = np.cross(points[b] - points[a], points[c] - points[a]) + np.cross(
+        points[a] - points[b], points[d] - points[b]
+    )
+    for tn in (t_new1, t_new2):
+        p = points[tn]
+        n_new = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        ok &= np.einsum("ij,ij->i", n_new, n_old) > 0.0
+    new_min = np.minimum(triangle_angles(points, t_new1).min(axis=1), triangle_angles(points, t_new2).min(axis=1))
+    ok &= new_min > np.minimum(amin[sliver], amin[t2]) + 1e-6
+    # All shells or none: group the candidates by (edge, patch).
+    group_key = (np.minimum(a, b) * n_v + np.maximum(a, b)) * (int(patch.max()) + 1) + patch[sliver]
+    _, group = np.unique(group_key, return_inverse=True)
+    group = group.reshape(-1)
+    all_ok = np.ones(group.max() + 1, dtype=bool)
+    np.logical_and.at(all_ok, group, ok)
+    ok &= all_ok[group]
+    cand = np.flatnonzero(ok)
+    if cand.size == 0:
+        return tri, 0
+    # Each triangle in at most one flip (smallest angle first; the copies of one flip win together).
+    prio = amin[sliver][cand] + 1e-9 * group[cand] / max(group.max(), 1)
+    faces = np.concatenate([sliver[cand], t2[cand]])
+    rows = np.tile(np.arange(len(cand)), 2)
+    chosen = _independent_choice(rows, faces, prio, len(cand), f_count)
+    pick = cand[chosen]
+    g_ok = np.zeros(group.max() + 1, dtype=bool)
+    g_ok[group[pick]] = True
+    g_cnt = np.bincount(group[cand], minlength=group.max() + 1)
+    g_pick = np.bincount(group[pick], minlength=group.max() + 1)
+    pick = pick[g_pick[group[pick]] == g_cnt[group[pick]]]  # every copy of the flip was chosen
+    # Two flips of one round may not create the same edge in one shell: keep the first flip of each such edge (and
+    # drop every copy of a flip that loses in some shell).
+    new_key = (shell[sliver[pick]] * n_v + np.minimum(c[pick], d[pick])) * n_v + np.maximum(c[pick], d[pick])
+    _, first_of = np.unique(new_key, return_index=True)
+    dup = np.ones(len(pick), dtype=bool)
+    dup[first_of] = False
+    if dup.any():
+        bad_group = np.zeros(group.max() + 1, dtype=bool)
+        bad_group[group[pick[dup]]] = True
+        pick = pick[~bad_group[group[pick]]]
+    out = tri.copy()
+    out[sliver[pick]] = t_new1[pick]
+    out[t2[pick]] = t_new2[pick]
+    return out, len(pick)
+
+
+def _relax_round(
+    points, tri, patch, plane_eq, sliver_angle, max_turn=30.0, surface=None, steps=(0.25, 0.5, 1.0), caps=False
+):
+    """One round of vertex moves against the slivers that collapses and flips leave (see :func:`clean_complex`).
+
+    The ends of the shortest side of every sliver move towards the mean of their neighbours, projected onto the
+    planes of their input patches (a vertex on one input plane slides in it, on two along their crease; on three
+    or more, or with no plane equations, it stays put; crack patches may bend a little, both sides alike). A move
+    (the largest of ``steps`` of the way) is taken when the smallest angle of the vertex's triangles grows and none
+    of them (but slivers) turns by more than ``max_turn`` degrees; moved vertices share no triangle. With ``surface``
+    (input vertices [m], triangles, plane id per triangle, plane id per patch (-1: crack)) a vertex must also stay
+    inside an input triangle of each of its planes (a facet's plane reaches beyond the facet). ``points`` [v, 3] is
+    changed in place. With ``caps`` the candidates are instead the obtuse corners of the slivers, moved away from
+    the long side to a fifth of its length from it (where the neighbours' mean does not help a flat cap). Returns
+    the number of vertices moved."""
+    n_v = points.shape[0]
+    angles = triangle_angles(points, tri)
+    amin = angles.min(axis=1)
+    sliver = np.flatnonzero(amin < sliver_angle)
+    if sliver.size == 0 or plane_eq is None:
+        return 0
+    cand = np.unique(tri[sliver])  # needles: the ends of the short side move; caps: the corner by the long side
+    # Input planes of each candidate (at most two allowed).
+    p_count = plane_eq.shape[0]
+    inc = csr_matrix((np.ones(3 * len(tri)), (tri.T.ravel(), np.tile(patch, 3))), shape=(n_v, p_count))
+    inc.sum_duplicates()
+    rows = inc[cand].tocoo()
+    planar = ~np.isnan(plane_eq[rows.col, 0])
+    r_row, r_eq = rows.row[planar], plane_eq[rows.col[planar]]
+    n_planes = np.bincount(r_row, minlength=len(cand))
+    keep = n_planes <= 2
+    # Neighbour means.
+    a = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
+    b = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
+    adj = csr_matrix((np.ones(len(a)), (a, b)), shape=(n_v, n_v))
+    adj.data[:] = 1.0
+    adj.sum_duplicates()
+    adj.data[:] = 1.0
+    adj = adj.maximum(adj.T).tocsr()
+    deg = np.asarray(adj[cand].sum(axis=1)).ravel()
+    target = (adj[cand] @ points) / np.maximum(deg, 1.0)[:, None]
+    if caps:  # the obtuse corner C of each sliver, away from its long side AB
+        j = np.argmax(angles[sliver], axis=1)
+        corner, end_a, end_b = tri[sliver, j], tri[sliver, (j + 1) % 3], tri[sliver, (j + 2) % 3]
+        ab = points[end_b] - points[end_a]
+        length = np.linalg.norm(ab, axis=1)
+        along = np.einsum("ij,ij->i", points[corner] - points[end_a], ab) / np.maximum(length, 1e-300) ** 2
+        foot = points[end_a] + along[:, None] * ab
+        away = points[corner] - foot
+        height = np.linalg.norm(away, axis=1)
+        ok = height > 1e-9 * length
+        goal = foot + away / np.maximum(height, 1e-300)[:, None] * (0.2 * length)[:, None]
+        first = np.unique(corner[ok], return_index=True)[1]
+        pick = np.isin(cand, corner[ok][first])
+        where = np.searchsorted(corner[ok][first], cand[pick])
+        cand, target, keep = cand[pick], goal[ok][first][where], keep[pick]
+        rows = inc[cand].tocoo()
+        planar = ~np.isnan(plane_eq[rows.col, 0])
+        r_row, r_eq = rows.row[planar], plane_eq[rows.col[planar]]
+    # Project onto the planes: x = target - N^T (N N^T)^+ (N target - d), N the [k, 3] plane normals.
+    normals = np.zeros((len(cand), 2, 3))
+    offsets = np.zeros((len(cand), 2))
+    slot = np.arange(len(r_row)) - np.searchsorted(r_row, r_row)
+    ok_slot = slot < 2
+    normals[r_row[ok_slot], slot[ok_slot]] = r_eq[ok_slot, :3]
+    offsets[r_row[ok_slot], slot[ok_slot]] = r_eq[ok_slot, 3]
+    own_patch = np.full((len(cand), 2), -1, dtype=np.int64)
+    own_patch[r_row[ok_slot], slot[ok_slot]] = rows.col[planar][ok_slot]
+    gram = np.einsum("cij,ckj->cik", normals, normals)
+    resid = np.einsum("cij,cj->ci", normals, target) - offsets
+    target = target - np.einsum("cji,cj->ci", normals, np.einsum("cij,cj->ci", np.linalg.pinv(gram), resid))
+    cand, target, own_patch = cand[keep], target[keep], own_patch[keep]
+    if cand.size == 0:
+        return 0
+    # Triangles around each candidate, and the moves that help.
+    vt = csr_matrix((np.ones(3 * len(tri)), (tri.T.ravel(), np.tile(np.arange(len(tri)), 3))), shape=(n_v, len(tri)))
+    vt.sum_duplicates()
+    ring = vt[cand].tocoo()
+    c_of, f_of = ring.row, ring.col
+    old_min = np.full(len(cand), np.inf)
+    np.minimum.at(old_min, c_of, amin[f_of])
+    t_old = points[tri[f_of]]
+    n_old = np.cross(t_old[:, 1] - t_old[:, 0], t_old[:, 2] - t_old[:, 0])
+    best_step = np.zeros(len(cand))
+    for step in steps:
+        pos = points[cand] + step * (target - points[cand])
+        t_new = t_old.copy()
+        corner = tri[f_of] == cand[c_of][:, None]
+        t_new[corner] = np.repeat(pos[c_of], corner.sum(axis=1), axis=0)
+        n_new = np.cross(t_new[:, 1] - t_new[:, 0], t_new[:, 2] - t_new[:, 0])
+        cos_ok = np.einsum("ij,ij->i", n_old, n_new) >= np.cos(np.radians(max_turn)) * np.linalg.norm(
+            n_old, axis=1
+        ) * np.linalg.norm(n_new, axis=1)
+        a_new = np.full(len(cand), np.inf)
+        np.minimum.at(a_new, c_of, _min_angles(t_new))
+        turned = np.zeros(len(cand), dtype=bool)
+        np.logical_or.at(turned, c_of, ~cos_ok & (_min_angles(t_old) >= sliver_angle))
+        better = (a_new > old_min + 1e-6) & ~turned
+        if surface is not None:
+            better &= _on_input_planes(pos, own_patch, surface)
+        best_step = np.where(better, step, best_step)
+    move = best_step > 0.0
+    if not move.any():
+        return 0
+    # Independent moves: no two moved vertices share a triangle (smallest angle first).
+    cand, target, best_step, prio = cand[move], target[move], best_step[move], old_min[move]
+    ring = vt[cand].tocoo()
+    chosen = _independent_choice(ring.row, ring.col, prio + 1e-12 * np.arange(len(cand)), len(cand), len(tri))
+    c = cand[chosen]
+    points[c] += best_step[chosen][:, None] * (target[chosen] - points[c])
+    return int(chosen.sum())
+
+
+def _on_input_planes(pos, own_patch, surface) -> np.ndarray:
+    """Bool [c]: each point pos [c, 3] lies in an input triangle of each of its planes (``own_patch`` [c, 2] patch
+    ids, -1 for none; ``surface`` as in :func:`_relax_round`), within 1e-9 of the triangle's size. Only the triangles
+    whose centroid lies within the largest centroid-to-corner distance of a point can hold it (a k-d tree query)."""
+    sv, sf, splane, plane_of_patch = surface
+    ok = np.ones(len(pos), dtype=bool)
+    corners = sv[sf]
+    centroid = corners.mean(axis=1)
+    reach = float(np.linalg.norm(corners - centroid[:, None, :], axis=2).max()) * (1.0 + 1e-9) + 1e-300
+    pairs = cKDTree(pos).sparse_distance_matrix(cKDTree(centroid), reach, output_type="ndarray")
+    near_c, near_t = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
+    for k in range(own_patch.shape[1]):
+        has = own_patch[:, k] >= 0
+        q = np.where(has, plane_of_patch[np.maximum(own_patch[:, k], 0)], -1)
+        has &= q >= 0
+        sel = has[near_c] & (splane[near_t] == q[near_c])
+        pair_c, pair_t = near_c[sel], near_t[sel]
+        a, b, c = (corners[pair_t, i] for i in range(3))
+        n = np.cross(b - a, c - a)
+        nn = np.einsum("ij,ij->i", n, n)
+        p = pos[pair_c]
+        bary = [
+            np.einsum("ij,ij->i", np.cross(c - b, p - b), n),
+            np.einsum("ij,ij->i", np.cross(a - c, p - c), n),
+            np.einsum("ij,ij->i", np.cross(b - a, p - a), n),
+        ]
+        inside = np.all(np.stack(bary, axis=1) >= -1e-9 * nn[:, None], axis=1)
+        found = np.zeros(len(pos), dtype=bool)
+        np.logical_or.at(found, pair_c, inside)
+        ok &= found | ~has
+    return ok
+
+
+def _min_angles(t: np.ndarray) -> np.ndarray:
+    """Smallest interior angle [degrees] of triangles given by their corners [m] [f, 3, 3]."""
+    return _corner_angles(t).min(axis=1)
+
+
+def clean_complex(
+    points,
+    tri,
+    shell,
+    patch,
+    spacing,
+    *,
+    short_edge=SHORT_EDGE,
+    sliver_angle=SLIVER_ANGLE,
+    crack_patch=None,
+    surface=None,
+):
+    """Removes slivers from the shell complex by edge collapses that keep every shell a closed 2-manifold.
+
+    Candidates are edges shorter than ``short_edge`` spacings and the shortest side (up to one spacing) of every
+    triangle with an angle below ``sliver_angle`` [degrees]. A collapse moves one end u onto the other end v (no new
+    positions: outer faces stay exactly on the input surface, sharp edges and corners stay put) and is allowed when
+
+    - every patch of u is a patch of v (u stays on its planes and cracks: interior points may move onto rims,
+      creases and junctions, never the reverse), or, given ``crack_patch``, v lies on the plane of every input
+      patch of u (u's cracks may then slide: a crack's rim moves along a box edge or across a face, both sides
+      alike, while outer faces stay on the input planes and volumes still add up),
+    - in every shell holding u and v, the edge uv exists and u and v share exactly two neighbours (the link
+      condition, which keeps the shell a 2-manifold), and the shell has more than 6 vertices,
+    - no remaining triangle turns by more than 60 degrees.
+
+    Collapses of one round have disjoint neighbourhoods (chosen shortest first), so they are checked and applied
+    together, vectorised; the two sides of a crack share vertices and triangles, so both sides collapse alike. Each
+    round also flips edges (:func:`_flip_round`); when neither collapses nor flips are left, the vertices of the
+    remaining slivers are moved (:func:`_relax_round`; ``points`` is changed in place) and the rounds go on.
+
+    Args:
+        points: vertex positions [m], float64 [v, 3].
+        tri: triangles (global vertex ids), int64 [f, 3]; shell: shell of each triangle, int [f];
+        patch: patch id of each triangle, int [f].
+        spacing: particle spacing h [m].
+        surface: (input vertices [m], triangles, plane id per triangle, plane id per patch (-1 on crack patches)):
+            lets the vertices of slivers left over slide within the input surface (see :func:`_relax_round`); None:
+            only vertices off the input planes move.
+        crack_patch: bool [patch count], True for crack patches (the others are planar input patches); None: the
+            strict patch rule only.
+
+    Returns:
+        (tri, shell, patch) after the collapses (triangles that became degenerate removed).
+    """
+    plane_eq = None
+    if crack_patch is not None:  # unit normal and offset of every input-plane patch (NaN: crack patches)
+        p_count = int(patch.max()) + 1
+        t = points[tri]
+        n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        normal = np.stack([np.bincount(patch, n[:, a], p_count) for a in range(3)], axis=1)
+        normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
+        offset = np.einsum("ij,ij->i", normal[patch], t.mean(axis=1))
+        offset = np.bincount(patch, offset, p_count) / np.maximum(np.bincount(patch, minlength=p_count), 1)
+        plane_eq = np.concatenate([normal, offset[:, None]], axis=1)
+        plane_eq[np.asarray(crack_patch, dtype=bool)] = np.nan
+    for _ in range(_MAX_CLEAN_ROUNDS):
+        new, keep, collapsed = _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle, plane_eq)
+        t1, s1, p1 = new[keep], shell[keep], patch[keep]
+        t0 = t1.copy()
+        t1, flipped = _flip_round(points, t1, s1, p1, sliver_angle)
+        if collapsed == 0 and flipped == 0:
+            # vertex moves change no connectivity: the shells stay closed
+            if _relax_round(points, t1, p1, plane_eq, sliver_angle, max_turn=RELAX_TURN, surface=surface) == 0:
+                break
+            tri, shell, patch = t1, s1, p1
+            continue
+        # the shells this round changed must still be closed (a rare configuration the checks missed: stop here)
+        changed = np.concatenate([shell[~keep | (new != tri).any(axis=1)], s1[(t1 != t0).any(axis=1)]])
+        touched = np.isin(s1, np.unique(changed))
+        if not shells_closed(t1[touched], s1[touched], len(points)).all():
+            break
+        tri, shell, patch = t1, s1, p1
+    return tri, shell, patch
