@@ -1,4 +1,4 @@
-"""Figures of lattice runs in the style of shared/seeds/pbd_lattice.txt: configurations at chosen steps over a
+"""Figures of lattice runs in the style of dell'Erba 2018 (docs/lattice.md): configurations at chosen steps over a
 contour plot of a per-particle field (PE1, PE2, ...), and trajectories of chosen particles. Everything is read back
 from the USD cache a scene wrote (``/World/<body>`` points with the lattice primvars), so a plot shows exactly what
 the cache holds. matplotlib and pxr are imported on first use.
