@@ -36,14 +36,24 @@ tests/test_fracture_patterns.py (straight cuts at 0, 22.5 and 30 degrees are rec
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import importlib.util
+import json
 import math
 import os
+import platform
 import sys
 import time
 
 import numpy as np
+import warp as wp
+
+import pdsim
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "scenes"))
+import four_walls  # noqa: E402 (scenes/four_walls.py, on the path above)
+
 DUST_PARTICLES = 8  # a fragment of fewer particles does not read as a shard on screen
 TOP_FRAGMENTS = 5
 HARMONIC_SIGMAS = 3.0  # |A4| and |A8| at most this many standard errors sqrt(1 / (2 N)) of N uniform angles
@@ -53,16 +63,13 @@ TEST_HALF_WIDTH = 0.105  # [m] crack faces with |y|, |z| below this (3 spacings 
 
 
 def _scenes():
-    sys.path.insert(0, os.path.join(ROOT, "scenes"))
-    import four_walls
-
+    """The teaser's scene module, scenes/four_walls.py."""
     return four_walls
 
 
 def variants():
     """name -> (material overrides, body options) applied to the teaser's brittle wall: the baseline is the lattice
     wall without the pattern settings, "all" is the teaser's wall (scenes/four_walls.py)."""
-    four_walls = _scenes()
     p = four_walls.BRITTLE_PATTERN
     weibull = {"strength_weibull_modulus": p["strength_weibull_modulus"], "strength_seed": p["strength_seed"]}
     damp = {"debris_damping": p["debris_damping"]}
@@ -85,9 +92,6 @@ PLAIN = {"strength_weibull_modulus": None, "debris_damping": 0.0}  # the pattern
 def brittle_wall_scene(material_overrides=None, body_options=None, *, spacing=0.01, layered=False, frames=40):
     """The teaser's (layered, when ``layered``) brittle wall alone with the ball, as in scenes/four_walls.py, with
     the pattern settings off except ``material_overrides`` and ``body_options`` (PeridynamicBody keywords)."""
-    import dataclasses
-
-    four_walls = _scenes()
     mat = four_walls.wall_materials()[1 if layered else 0]
     mat = dataclasses.replace(mat, **{**PLAIN, **(material_overrides or {})})
     options = dict(body_options or {})
@@ -259,10 +263,6 @@ def measure(material_overrides=None, body_options=None, *, spacing=0.01, layered
 def patterned_scene(build, material_overrides, body_options):
     """Calls ``build()`` (a scene script's build_scene) with every brittle peridynamic body (a material that breaks
     and does not yield) given ``material_overrides`` and ``body_options``, and the pattern settings off otherwise."""
-    import dataclasses
-
-    import pdsim
-
     add = pdsim.Scene.add_peridynamic_body
 
     def patched(self, shape, material, spacing, **options):
@@ -658,9 +658,6 @@ def main(argv=None):
     p.add_argument("--plane-normal", nargs=3, type=float, default=None, help="rest normal of a tilted crack plane")
     args = p.parse_args(argv)
     if args.scene:
-        import importlib.util
-        import json
-
         spec = importlib.util.spec_from_file_location("scene_module", args.scene)
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
@@ -685,9 +682,7 @@ def main(argv=None):
     if args.doc:
         png = os.path.splitext(args.doc)[0] + ".png"
         plot(sections[ISO], png)
-        import platform
-
-        machine = f"{platform.machine()} ({os.cpu_count()} cores shared with other jobs), Warp {_warp_version()} CPU"
+        machine = f"{platform.machine()} ({os.cpu_count()} cores shared with other jobs), Warp {wp.__version__} CPU"
         command = "python tools/fracture_patterns.py " + " ".join(argv if argv is not None else sys.argv[1:])
         if args.load:  # the figures come from the run that saved them
             command = f"python tools/fracture_patterns.py --doc {args.doc} --save {args.load}"
@@ -747,12 +742,6 @@ def _save(folder, name, r):
     if folder:
         os.makedirs(folder, exist_ok=True)
         np.savez(os.path.join(folder, name + ".npz"), **{k: np.asarray(v) for k, v in r.items()})
-
-
-def _warp_version():
-    import warp
-
-    return warp.__version__
 
 
 if __name__ == "__main__":

@@ -11,7 +11,7 @@ the cache) is what docs/gallery.md reports, with the simulator's own summary lin
 
 Usage:
     python tools/make_gallery.py                        # every scene, then docs/gallery.md
-    python tools/make_gallery.py --scenes glass_pane,drop_shatter --work /tmp/gallery   # some scenes only
+    python tools/make_gallery.py --scenes glass_pane,drop_shatter --work build/gallery   # some scenes only
     python tools/make_gallery.py --render-only          # re-render from the caches of an earlier run in --work
     python tools/make_gallery.py --blender-only         # only the teaser's Blender still, from its cache in --work
 
@@ -28,10 +28,16 @@ import json
 import math
 import os
 import platform
+import re
 import subprocess
 import sys
 import textwrap
 import time
+
+import numpy as np
+import warp as wp
+from PIL import Image
+from pxr import Usd, UsdGeom
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = os.path.join(ROOT, "scenes")
@@ -127,8 +133,6 @@ def load_scene_module(name: str):
 
 def run_one(name: str, out: str, frames: int | None) -> dict:
     """Runs scene ``name`` at preview resolution into ``out`` (in this process); returns what the run did."""
-    import warp as wp
-
     wp.config.quiet = True
     t0 = time.perf_counter()
     module = load_scene_module(name)
@@ -269,9 +273,6 @@ BLENDER = textwrap.dedent(
 
 def orange_pixels(path: str) -> int:
     """Number of pixels of a PNG in the crack faces' orange (hue 10-45 degrees, saturation > 0.4, value > 0.25)."""
-    import numpy as np
-    from PIL import Image
-
     hsv = np.asarray(Image.open(path).convert("RGB").convert("HSV"), dtype=np.float64) / 255.0
     hue = hsv[..., 0] * 360.0
     return int(np.count_nonzero((hue >= 10.0) & (hue <= 45.0) & (hsv[..., 1] > 0.4) & (hsv[..., 2] > 0.25)))
@@ -281,8 +282,6 @@ def blender_still(cache: str, frame: int, out: str) -> dict:
     """Cycles still of ``frame`` of the cache (bpy in a child process, away from usd-core's pxr); returns its render
     time, the number of crack faces on that frame and the number of orange pixels of the image. A frame with crack
     faces and no orange pixel is an error: the crack shading did not reach the render."""
-    from pxr import Usd, UsdGeom
-
     stage = Usd.Stage.Open(cache)
     box = UsdGeom.BBoxCache(0, [UsdGeom.Tokens.default_]).ComputeWorldBound(stage.GetPseudoRoot()).ComputeAlignedRange()
     lo, hi = box.GetMin(), box.GetMax()
@@ -387,8 +386,6 @@ def _machine_record(value) -> dict:
     """The machine record of a result (results of the first version of this tool hold it as one sentence)."""
     if isinstance(value, dict):
         return value
-    import re
-
     text = str(value or "")
     load = re.search(r"load average ([0-9., ]+?) when", text)
     date = re.search(r"\((\d{4}-\d\d-\d\d \d\d:\d\d UTC)\)", text)
