@@ -7,20 +7,10 @@ tilted 30 degrees about x and 20 degrees about y so that one corner strikes firs
 (3, -2, 0.2) m, already falling at 6 m/s, under gravity, onto a ground plane with friction 0.5. Each frame advances
 0.24 s / frames of simulated time (48 frames: 0.24 s shown over 2 s).
 
-Fracture figures at full resolution and the last frame (the teaser's brittle-wall figures, docs/fracture.md;
-`python tools/fracture_patterns.py --scene scenes/drop_shatter.py --shot 0 0 -6 --plane-normal 0.2962 -0.5 0.8138
---variants scene`, 2026-12-02): 373 particles (15.6 %) break out of the main piece, in 75 fragments; 20.4 % of that
-is dust (fragments of fewer than 8 particles, 72 of them single particles) and the 5 largest fragments hold 81.2 %;
-no fragment moves up faster than 0.77 m/s (the tile lands at 6 m/s); and the crack faces show no lattice direction
-(the cubic test over 1,072 faces: the means of K4 and K8 lie 0.2 and 1.0 standard errors from a uniform spread over
-the tile's plane, bound 3).
+At full resolution the tile breaks into shards (little dust, no fragment thrown up fast, no lattice direction in the
+cracks): the fracture figures and their command are in docs/fracture.md, "Tile drop".
 
 Run:  python scenes/drop_shatter.py --out drop_shatter.usdc   or   pdsim run scenes/drop_shatter.py --out drop.usdc
-
-Run time (CPU only, the 2-core development machine shared with other jobs, load average 2-5; no GPU measured):
-full resolution (2,396 particles, 302 steps per frame) 273 s wall, `/usr/bin/time pdsim run scenes/drop_shatter.py
---out drop.usdc --quiet`; preview (PREVIEW: 302 particles) 16-19 s, `python tools/make_gallery.py --scenes
-drop_shatter`.
 """
 
 import numpy as np

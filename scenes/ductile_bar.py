@@ -1,9 +1,7 @@
 """A ductile dog-bone bar pulled apart: it yields, necks at its waist and tears in two.
 
 The grips' speed ramps up over 0.15 s and the waist is 8 % thinner than the gauge section, so the plastic flow
-localises at the waist (a sudden pull tore this perfectly plastic bar next to its grips). Run time on a 2-core CPU
-(no GPU, 2026-12-01): 82 s at its own spacing (10 mm, 36 frames; in two halves from frame 36), 28 s at the preview
-spacing (12.5 mm, 30 frames).
+localises at the waist (a sudden pull tears this perfectly plastic bar next to its grips).
 
 Run:  python scenes/ductile_bar.py --out ductile_bar.usdc   or   pdsim run scenes/ductile_bar.py --out ductile_bar.usdc
 """

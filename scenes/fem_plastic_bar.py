@@ -1,5 +1,5 @@
-"""A soft metal-like rod bent permanently: clamped at its base, its top is pushed sideways, then let go; the rod
-springs back only partly and keeps a bend (tetrahedral FEM with the slides' plasticity rule, implicit integrator).
+"""A soft metal-like rod bent permanently: clamped at its base, its top is pushed sideways, then let go; the rod springs
+back only partly and keeps a bend (tetrahedral FEM with FemPlasticity's yield / creep / max rule, implicit integrator).
 
 The rod (radius 4 cm, height 1 m, meshed by fTetWild) stands on the ground, its lowest 5 cm clamped. Its top 5 cm are
 pushed along x at 0.6 m/s for 0.75 s (0.45 m) and then released; being moved as one piece, the top stays upright, so

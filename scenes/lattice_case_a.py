@@ -1,4 +1,4 @@
-"""Lattice case a of shared/seeds/pbd_lattice.txt: tensile test with release (Table 1): 10x10 square, Figure 3's
+"""Lattice case a of dell'Erba 2018 (docs/lattice.md): tensile test with release (Table 1): 10x10 square, Figure 3's
 8-neighbour (Chebyshev) shell, left column clamped, right column pulled at 1.2 units/step (case a's text; Table 1
 says 0.35: ``case_a_scene(speed=0.35)``) for 10 steps then released into followers, 401 steps; tracks the central
 particle j = 67 (Figures 5, 6, 8, 9). The rows next to the frame lag the middle ones.

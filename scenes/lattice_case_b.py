@@ -1,4 +1,4 @@
-"""Lattice case b of shared/seeds/pbd_lattice.txt: the Poisson effect: case a without release (leaders stop after 10
+"""Lattice case b of dell'Erba 2018 (docs/lattice.md): the Poisson effect: case a without release (leaders stop after 10
 steps at 1.2 units/step), 100 steps, mixed-coordinate rule K = 0.01 /unit; the central particle j = 67, above the
 axis, moves down (Figures 10, 11).
 

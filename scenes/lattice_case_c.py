@@ -1,4 +1,4 @@
-"""Lattice case c of shared/seeds/pbd_lattice.txt: the importance of the gradient: case b with second-gradient
+"""Lattice case c of dell'Erba 2018 (docs/lattice.md): the importance of the gradient: case b with second-gradient
 neighbours and a two-layer frame, beside case b's specimen; j = 67 contracts less (Figures 12, 13).
 
 Parameters: scenes/lattice_paper.py and docs/lattice.md. Writes the USD cache and the PNG figures (PE1 and PE2 contour

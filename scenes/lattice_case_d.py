@@ -1,6 +1,6 @@
-"""Lattice case d of shared/seeds/pbd_lattice.txt: simple fracture: square 15x13 specimen (Figure 3's Chebyshev shells)
-pulled at 1.2 units/step for 10 steps, links lost beyond 4.0 / 6.0 units (shell 1 / 2), fictitious points at the rest
-offset; first and second gradient; tracks j = 103, which rebounds after the crack with the second gradient only
+"""Lattice case d of dell'Erba 2018 (docs/lattice.md): simple fracture: square 15x13 specimen (Figure 3's Chebyshev
+shells) pulled at 1.2 units/step for 10 steps, links lost beyond 4.0 / 6.0 units (shell 1 / 2), fictitious points at the
+rest offset; first and second gradient; tracks j = 103, which rebounds after the crack with the second gradient only
 (Figures 14, 15, 16). Table 1's reading: ``case_d_scene(metric="coordination", speed=TABLE1_SPEED,
 distances=TABLE1_DISTANCES)``.
 

@@ -1,4 +1,4 @@
-"""Lattice case e of shared/seeds/pbd_lattice.txt: Saint-Venant's principle: four internal leaders of a 20x20 square
+"""Lattice case e of dell'Erba 2018 (docs/lattice.md): Saint-Venant's principle: four internal leaders of a 20x20 square
 diverge along the bisectors at 0.35 units/step (Table 1) for 10 steps; remote particles stay at rest (Figure 17,
 step 9).
 

@@ -1,4 +1,4 @@
-"""Lattice case f of shared/seeds/pbd_lattice.txt: the lattice decides the fracture: hexagonal 15x17 specimen (first
+"""Lattice case f of dell'Erba 2018 (docs/lattice.md): the lattice decides the fracture: hexagonal 15x17 specimen (first
 and second gradient) beside the square one, averaging frame rule, Table 1's 0.35 units/step and thresholds 2.0 / 2.5
 units, 400 steps; the hexagonal tracked particle j = 133 rebounds (Figures 18-21).
 

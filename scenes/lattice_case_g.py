@@ -1,5 +1,5 @@
-"""Lattice case g of shared/seeds/pbd_lattice.txt: the frame rule: hexagonal fracture, second gradient, averaging frame
-rule against the single-follower rule (0.35 units/step, thresholds 2.0 / 2.5 units, as case f); with averaging two
+"""Lattice case g of dell'Erba 2018 (docs/lattice.md): the frame rule: hexagonal fracture, second gradient, averaging
+frame rule against the single-follower rule (0.35 units/step, thresholds 2.0 / 2.5 units, as case f); with averaging two
 frame points stay between the pieces (Figure 22).
 
 Parameters: scenes/lattice_paper.py and docs/lattice.md. Writes the USD cache and the PNG figures (PE1 and PE2 contour

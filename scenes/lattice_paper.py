@@ -1,4 +1,4 @@
-"""The reference cases a-g of shared/seeds/pbd_lattice.txt (and a 3D tear) as ready-made lattice bodies and scenes;
+"""The reference cases a-g of dell'Erba 2018 (docs/lattice.md) (and a 3D tear) as ready-made lattice bodies and scenes;
 the scripts scenes/lattice_*.py run them. Lengths in lattice units (spacing 1, the paper's "units", read as metres),
 leader speeds in units per step, one step per frame.
 

@@ -8,21 +8,11 @@ bonds break past an equivalent plastic strain of 0.5) lies level at (3, -2, 0.5)
 unbreakable. The ball (radius 6 cm, kinematic: it is not slowed down) comes down on the plate's centre at 3 m/s,
 about a tenth of the plate's wave speed. Each frame advances 1/120 s of simulated time (5x slow motion).
 
-No petals at affordable resolutions: at the preview spacing, a hardening modulus of 20 kPa (with the ball at 3 m/s or
-at 1 m/s) and, at spacing 7.5 mm, a plate half as thick (1.5 cm) with that hardening and failure at a plastic strain
-of 1.0 (5,832 particles, 109 s on the CPU) all shear through around the ball's rim and punch out a round hole
-(``build_scene(thickness=..., speed=..., metal_options={"hardening_modulus": ...})``). Petals need a plate thin
-against the ball with several particles through it, which is a GPU-sized run.
+Petals need a plate thin against the ball with several particles through it, which is a GPU-sized run; the variants
+tried on the CPU (``build_scene(thickness=..., speed=..., metal_options={"hardening_modulus": ...})``) are in
+docs/fracture.md, "Metal plate".
 
 Run:  python scenes/metal_dent_tear.py --out metal.usdc   or   pdsim run scenes/metal_dent_tear.py --out metal.usdc
-
-Run time (CPU only, the 2-core development machine; no GPU measured): full resolution (4,800 particles, 49 steps per
-frame) 91 s wall, 540 MB peak memory, `/usr/bin/time -v pdsim run scenes/metal_dent_tear.py --out metal.usdc --quiet`,
-2026-12-02, load average about 1; preview (PREVIEW: 1,458 particles): `python tools/make_gallery.py --scenes
-metal_dent_tear`, time in docs/gallery.md. At the preview spacing 29 % of the plate breaks out (421 particles, in 295
-fragments, the largest of 10 particles; fastest fragment back up 5.3 m/s against the ball's 3 m/s); with the
-peridynamic dilatation's former directional factor, which misread the volume change of bonds that turn
-(docs/accuracy.md), it was 6 % (86 single particles); which is closer to a real plate is not measured.
 """
 
 import numpy as np

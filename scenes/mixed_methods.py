@@ -8,11 +8,6 @@ MPa, critical stretch 0.03 % with Weibull scatter of modulus 4 and the compressi
 top at 5 m/s, 45 degrees from the vertical. Each frame advances 1/120 s of simulated time (5x slow motion).
 
 Run:  python scenes/mixed_methods.py --out mixed.usdc   or   pdsim run scenes/mixed_methods.py --out mixed.usdc
-
-Run time (CPU only, the 2-core development machine shared with other jobs, load average 1-4; no GPU measured):
-full resolution (1,045 particles and 11,520 tetrahedra, 198 steps per frame) 304 s wall, `/usr/bin/time pdsim run
-scenes/mixed_methods.py --out mixed.usdc --quiet`; preview (PREVIEW: 280 particles, 1,440 tetrahedra) 51 s and
-58 s in two runs, `python tools/make_gallery.py --scenes mixed_methods`.
 """
 
 import numpy as np

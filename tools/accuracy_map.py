@@ -20,15 +20,23 @@ import importlib.util
 import json
 import math
 import os
+import subprocess
 import sys
+import tempfile
 import time
+from importlib.metadata import version
 
 import numpy as np
+import warp as wp
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 
+import pdsim  # noqa: E402
 from pdsim import validation  # noqa: E402
+from pdsim.fem import FemBody, SolverFem  # noqa: E402
+from pdsim.fem.mesh import box_tet_mesh  # noqa: E402
+from pdsim.sweep import run_sweeps  # noqa: E402
 
 BEGIN, END = "<!-- accuracy_map:begin -->", "<!-- accuracy_map:end -->"
 LAMMPS_PERI = os.path.join(HERE, "lammps_peri.py")
@@ -109,8 +117,6 @@ def newton_available() -> bool:
 
 
 def _newton_version() -> str:
-    from importlib.metadata import version
-
     return "newton " + version("newton")
 
 
@@ -119,11 +125,6 @@ def lammps_wave_speed(n: int = 5, *, horizon_factor: float = 3.015, dt_factor: f
     dt_factor x pdsim's stable estimate for this bar). LAMMPS has no surface correction: its "none" is the
     supplement's constants with its own partial volumes. The family is built by a first ``run 0`` at rest, then the
     pulse is imposed with ``displace_atoms`` and ``velocity``; seconds are LAMMPS's whole process (set-up included)."""
-    import subprocess
-    import tempfile
-
-    import pdsim
-
     argv, env, describe = _lammps_command()
     width, length, pulse, x0, amp = 0.1, 3.0, 0.48, 0.8, 1.0e-4
     h = width / n
@@ -204,8 +205,6 @@ NEWTON_DT_FACTOR = 0.3  # of pdsim's explicit step for the mesh; SolverSemiImpli
 
 
 def _scale_kernel():
-    import warp as wp
-
     @wp.kernel
     def load_and_damp(
         qd: wp.array(dtype=wp.vec3),
@@ -228,11 +227,6 @@ def newton_cantilever(n: int = 2) -> dict:
     (the tip load and the damping applied after each step as v <- (v + dt f / m) / (1 + c dt): symplectic Euler
     with an external force), at 0.7 x pdsim's explicit step for the mesh."""
     import newton
-    import warp as wp
-
-    import pdsim
-    from pdsim.fem import FemBody, SolverFem
-    from pdsim.fem.mesh import box_tet_mesh
 
     t, L, F = validation.CANTILEVER_T, validation.CANTILEVER_L, validation.CANTILEVER_F
     mat = pdsim.Material(density=validation.RHO, youngs_modulus=validation.E_SOFT, poisson_ratio=0.0)
@@ -302,8 +296,6 @@ def run_map(scheduler=None, *, quick=False, peers=True, newton=False, workers=No
     """Runs the plan (and the installed peers) as one batch of Dask tasks; returns the records (each with its
     ``series``) and the peers' status {name: "ran" | "not installed"}."""
     import cloudpickle
-
-    from pdsim.sweep import run_sweeps
 
     if __name__ != "__main__":  # loaded by path: send this module's functions by value to the workers
         cloudpickle.register_pickle_by_value(sys.modules[__name__])

@@ -21,6 +21,7 @@ import platform
 import sys
 
 import numpy as np
+import warp as wp
 
 import pdsim
 
@@ -69,8 +70,6 @@ def machine() -> str:
                     break
     except OSError:
         pass
-    import warp as wp
-
     return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, Warp {wp.__version__}, CPU backend"
 
 
@@ -187,8 +186,6 @@ def critical_step_ratio(nu: float, steps: int = 2000) -> float:
 
 
 def main(argv=None):
-    import warp as wp
-
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", default="docs")
     p.add_argument("--quick", action="store_true", help="smaller sweeps (for a smoke run)")

@@ -31,13 +31,18 @@ import tempfile
 import time
 
 import numpy as np
+import warp as wp
+
+import pdsim
+from pdsim.frame_graph import FrameGraphs
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes"))
+import four_walls  # noqa: E402 (scenes/four_walls.py, on the path above)
 
 SPACING = 1.0e-3
 
 
 def _init(device: str):
-    import warp as wp
-
     wp.config.quiet = True
     if hasattr(wp, "LOG_WARNING"):
         wp.config.log_level = wp.LOG_WARNING
@@ -48,11 +53,6 @@ def _init(device: str):
 def bench_pd(n: int, frames: int, substeps: int, device: str, json_out: str | None = None) -> dict:
     """Bond visits per second of the n^3 block, step by step and replayed as a graph (see the module docstring); the
     result so far is written to ``json_out`` after the build and after each mode."""
-    import warp as wp
-
-    import pdsim
-    from pdsim.frame_graph import FrameGraphs
-
     dev = _init(device)
     material = pdsim.Material(density=1000.0, youngs_modulus=1.0e9, poisson_ratio=0.25)
     t0 = time.perf_counter()
@@ -107,9 +107,6 @@ def bench_four_walls(spacing: float, frames: int, device: str, json_out: str | N
     """Build and run times of scenes/four_walls.py at ``spacing`` [m] for ``frames`` frames; the wall time of each
     frame (simulation, checks and the cache's writing) is added as it finishes, and written to ``json_out`` then, so
     that a run stopped by a time limit still leaves its finished frames' times."""
-    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes"))
-    import four_walls
-
     dev = _init(device)
     t0 = time.perf_counter()
     scene = four_walls.build_scene(spacing=spacing)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import hashlib
+import importlib.util
 import inspect
 import os
 import subprocess
@@ -27,8 +28,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import trimesh
+import warp as wp
 
 import pdsim
+import pdsim.fem.mesh
+import pdsim.preflight
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "errors.md"
@@ -142,10 +147,8 @@ def _beam(scene, name="beam", center=(0.15, 0.0, 0.5), spacing=0.05):
 
 def _run(scene, ws: Workspace, out=None, *, dt=None, frames=None):
     """What Scene.run does with the pre-flight: the checks, then the run (CPU, quiet)."""
-    from pdsim.preflight import preflight
-
     out = ws.out if out is None else out
-    preflight(scene, device="cpu", out=out, dt=dt, frames=frames)
+    pdsim.preflight.preflight(scene, device="cpu", out=out, dt=dt, frames=frames)
     scene.run(out, device="cpu", dt=dt, frames=frames, progress=False)
 
 
@@ -160,8 +163,6 @@ def _patched(module, name, value):
 
 
 def _box_mesh_text(extents=(0.3, 0.2, 0.1), *, open_faces=0, scale=1.0) -> str:
-    import trimesh
-
     m = trimesh.creation.box(extents=np.asarray(extents) * scale)
     faces = m.faces[: len(m.faces) - open_faces]
     return trimesh.exchange.obj.export_obj(trimesh.Trimesh(m.vertices, faces, process=False))
@@ -559,9 +560,7 @@ def _(ws):
       "a surface the mesher can fill (thicker, or a smaller edge_length)", pdsim.GeometryError,
       "fTetWild crashed (SIGABRT)", "thicken the part", needs_ftetwild=True)  # fmt: skip
 def _(ws):
-    from pdsim.fem import mesh
-
-    with _patched(mesh, "_CHILD_TEST_HOOK", "import os; os.abort()"):
+    with _patched(pdsim.fem.mesh, "_CHILD_TEST_HOOK", "import os; os.abort()"):
         pdsim.FemBody(pdsim.box((0.3, 0.2, 0.1), name="bracket"), _material(), edge_length=0.05)
 
 
@@ -640,9 +639,7 @@ def _(ws):
       "a scene that fits the free memory", pdsim.ParameterError, "spacing=0.01", "GB of free host memory",
       "spacing >=")  # fmt: skip
 def _(ws):
-    from pdsim import preflight
-
-    with _patched(preflight, "free_host_memory", lambda: 8.0e9):
+    with _patched(pdsim.preflight, "free_host_memory", lambda: 8.0e9):
         scene = pdsim.Scene(fps=24.0, frames=2)
         scene.add_peridynamic_body(pdsim.box((0.46, 0.46, 0.46)), _material(), 0.01, horizon_factor=8.0, name="block")
         _run(scene, ws)
@@ -651,11 +648,9 @@ def _(ws):
 @case("disk_full", A_RUN, "a cache larger than the free disk space (1 MB free)", "a folder with room for the cache",
       pdsim.ParameterError, "room for the cache", "1 MB free")  # fmt: skip
 def _(ws):
-    from pdsim import preflight
-
     scene = pdsim.Scene(fps=24.0, frames=48)
     scene.add_peridynamic_body(pdsim.box((0.2, 0.2, 0.2)), _material(), spacing=0.02, name="block")
-    with _patched(preflight, "free_disk_space", lambda folder: 1.0e6):
+    with _patched(pdsim.preflight, "free_disk_space", lambda folder: 1.0e6):
         _run(scene, ws)
 
 
@@ -841,13 +836,9 @@ def skip_reason(c: Case) -> str | None:
     if c.run_preflight and not run_calls_preflight():
         return "Scene.run does not call pdsim.preflight.preflight yet"
     if c.needs_ftetwild:
-        import importlib.util
-
         if importlib.util.find_spec("pytetwild") is None:
             return "pytetwild is not installed"
     if c.skip_with_cuda:
-        import warp as wp
-
         if wp.get_cuda_device_count() > 0:
             return "this machine has a CUDA device"
     return None
@@ -906,8 +897,6 @@ def doc_messages(text: str) -> dict[str, str]:
 def run_all() -> dict[str, str]:
     """Runs every case that can run here; {case id: message}. Cases that need Scene.run to call the pre-flight take
     the message of their scene-API twin (the same check) until it does."""
-    import warp as wp
-
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING
     twins = {"cli_dt_tiny": "dt_tiny", "cli_out_read_only": "out_read_only"}

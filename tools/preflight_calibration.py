@@ -19,8 +19,12 @@ import json
 import subprocess
 import sys
 import tempfile
+from pathlib import Path
 
 import numpy as np
+import warp as wp
+
+import pdsim
 
 CHILD = r"""
 import json, resource, sys, time
@@ -75,10 +79,6 @@ def main() -> None:
         r = measure("fem", n, 0, "none")
         print(f"FEM {r['elements']} elements: {r['bytes'] / r['elements']:.0f} B per element (vertices included)")
 
-    import warp as wp
-
-    import pdsim
-
     wp.config.quiet = True
 
     code = (
@@ -90,8 +90,6 @@ def main() -> None:
     print(f"fill_solid: {float(out):.0f} B per lattice point")
 
     with tempfile.TemporaryDirectory() as tmp:
-        from pathlib import Path
-
         scene = pdsim.Scene(frames=4, fps=1000.0)
         mat = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3, critical_stretch=0.01)
         scene.add_peridynamic_body(pdsim.box((0.16,) * 3, center=(0, 0, 1)), mat, spacing=0.01)

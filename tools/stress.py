@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import inspect
 import json
 import math
 import os
@@ -56,13 +57,19 @@ import platform
 import shutil
 import sys
 import tempfile
+import textwrap
 import time
 import warnings
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+import warp as wp
+from pxr import Usd, UsdGeom
 
 import pdsim
+from pdsim.default_scene import build_scene
+from pdsim.kinematics import Watchdog
+from pdsim.lattice import Lattice, LatticeBody, LatticeFracture, LatticeRuleMixedCoordinate
 
 SPACING = 0.01  # [m] of the peridynamic blocks; FEM cells and lattice spacing alike
 BLOCK = (0.08, 0.08, 0.04)  # [m]
@@ -114,8 +121,6 @@ def _timed_scene(build, dt_factor: float = 1.0, steps: int = STEPS, frames: int 
 
 def _no_preflight(scene) -> dict:
     """build_solvers(check=False) where the scene has the pre-flight checks (they run again in Scene.run)."""
-    import inspect
-
     return {"check": False} if "check" in inspect.signature(scene.build_solvers).parameters else {}
 
 
@@ -263,8 +268,6 @@ def lattice_case(relaxation: float, k: float, twist: bool = False):
     """A 12 x 5 x 5 simple-cubic block (spacing 1 cm) with fracture and the mixed-coordinate rule, clamped at one end
     and pulled at 0.1 spacing a step at the other (``twist``: the other end's points turned 360 degrees about the
     bar's axis by leader paths over 72 steps)."""
-    from pdsim.lattice import Lattice, LatticeBody, LatticeFracture, LatticeRuleMixedCoordinate
-
     def build():
         scene = pdsim.Scene(fps=24, frames=FRAMES, name="lattice")
         h = SPACING
@@ -426,8 +429,6 @@ def _gravity_potential(solver) -> float:
 
 def _cache_finite(path) -> bool:
     """Every point of every Points and Mesh prim at every time sample of the cache is finite."""
-    from pxr import Usd, UsdGeom
-
     stage = Usd.Stage.Open(str(path))
     for prim in stage.Traverse():
         if prim.IsA(UsdGeom.PointBased):
@@ -517,8 +518,6 @@ def run_case(case: Case, folder: str) -> Record:
         rec.extra["compressed_pct"] = audit.get("compressed", 0.0)
     path = out if os.path.exists(out) else None
     if path is not None:
-        from pxr import Usd
-
         stage = Usd.Stage.Open(path)
         rec.last_frame = int(stage.GetEndTimeCode())
         finite = _cache_finite(path)
@@ -701,8 +700,6 @@ def markdown(records, *, command: str, wall: float) -> str:
 
 def _wrap(paragraph: str, width: int = 120) -> str:
     """Prose paragraphs wrapped at ``width`` (tables, headings and indented lines as they are)."""
-    import textwrap
-
     if not paragraph or paragraph.startswith(("|", "#", " ")) or "\n" in paragraph:
         return paragraph
     return textwrap.fill(paragraph, width=width, break_long_words=False, break_on_hyphens=False)
@@ -714,8 +711,6 @@ def overhead(frames: int = 12, repeats: int = 5, *, log=print) -> dict:
     frame ends only), alternated ``repeats`` times; the fastest of each (process CPU time: Warp's CPU kernels run on
     the calling thread, and other processes on a shared machine then disturb the figure less than the wall time).
     Returns the times [s] and the overhead."""
-    from pdsim.default_scene import build_scene
-
     folder = tempfile.mkdtemp(prefix="pdsim_overhead_")
     times = {"watchdog": [], "none": []}
     real = pdsim.Scene._attach_watchdogs
@@ -758,8 +753,6 @@ def overhead(frames: int = 12, repeats: int = 5, *, log=print) -> dict:
 def _check_costs(scene, steps_per_frame: int) -> dict:
     """CPU time [ms] of one fast check, one frame-end check and one step of ``scene``'s solver, and the share of a
     frame the checks take (a frame: steps_per_frame steps, a fast check every 16, a frame-end check)."""
-    from pdsim.kinematics import Watchdog
-
     solver = scene.build_solvers(device="cpu", **_no_preflight(scene))[0]
     dt = scene.frame_time / steps_per_frame
     watchdog = Watchdog(solver, energy_floor=1.0e-9)
@@ -784,8 +777,6 @@ def _check_costs(scene, steps_per_frame: int) -> dict:
 
 
 def _warp_version() -> str:
-    import warp as wp
-
     return wp.config.version
 
 
@@ -801,8 +792,6 @@ def main(argv=None) -> int:
     )
     p.add_argument("--from-json", metavar="FILE", help="only write the markdown of the records of an earlier run")
     args = p.parse_args(argv)
-    import warp as wp
-
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING
     if args.overhead:
