@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import ParameterError
-from .kinematics import WATCH_COLLIDERS
+from .kernels.watchdog import WATCH_COLLIDERS
 from .validate import check_range
 
 CONTACT_NEIGHBOR_BUDGET = 12

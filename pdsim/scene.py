@@ -711,7 +711,7 @@ class Scene:
     def _attach_watchdogs(self, solvers, *, dt, stable_dt, bounds) -> list:
         """A pdsim.kinematics.Watchdog on every solver with mass (None for the others), with the scene's energy
         tolerance, projectile speeds and cause finder."""
-        from .kinematics import TOTAL_TOLERANCE, Watchdog
+        from .watchdog import TOTAL_TOLERANCE, Watchdog
         from .solver import PointSolver
 
         speeds = self._scene_speeds(bounds)

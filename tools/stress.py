@@ -758,7 +758,7 @@ def overhead(frames: int = 12, repeats: int = 5, *, log=print) -> dict:
 def _check_costs(scene, steps_per_frame: int) -> dict:
     """CPU time [ms] of one fast check, one frame-end check and one step of ``scene``'s solver, and the share of a
     frame the checks take (a frame: steps_per_frame steps, a fast check every 16, a frame-end check)."""
-    from pdsim.kinematics import Watchdog
+    from pdsim.watchdog import Watchdog
 
     solver = scene.build_solvers(device="cpu", **_no_preflight(scene))[0]
     dt = scene.frame_time / steps_per_frame
