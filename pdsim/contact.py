@@ -17,9 +17,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
 
 from .errors import ParameterError
-from .kernels.watchdog import WATCH_COLLIDERS
+from .kernels import contact as kc
 from .validate import check_range
 
 CONTACT_NEIGHBOR_BUDGET = 12
@@ -146,8 +147,6 @@ class ParticleContact:
         floor_factor: float = 0.6,
         shield_interior: bool = True,
     ):
-        import warp as wp
-
         rest = np.asarray(rest_positions, dtype=np.float64)
         if rest.ndim != 2 or rest.shape[1] != 3 or len(rest) == 0:
             raise ParameterError("rest_positions", f"array of shape {rest.shape}", "an array of shape (n, 3), n >= 1")
@@ -207,18 +206,11 @@ class ParticleContact:
         self._count = wp.zeros(n, dtype=wp.int32, device=d)
 
     def _mark_exposed_at_rest(self, dim: int):
-        import warp as wp
-
-        from .kernels import contact as kc
-
         grid = wp.HashGrid(dim, dim, dim, device=self.device)
         cell = float(SHIELD_FACTOR * 2.0 * self.radius.numpy().max())
         grid.build(self.rest_positions, cell)
-        wp.launch(
-            kc.count_lattice_neighbors,
-            dim=self.particle_count,
-            inputs=[grid.id, self.rest_positions, self.body_id, self.radius, SHIELD_FACTOR, SHIELD_COUNT, self.exposed],
-            device=self.device,
+        kc.mark_exposed_at_rest(
+            grid.id, self.rest_positions, self.body_id, self.radius, SHIELD_FACTOR, SHIELD_COUNT, self.exposed, self.device
         )
 
     def update_exposure(self, family_offsets, family_neighbors, bond_alive):
@@ -227,26 +219,18 @@ class ParticleContact:
         [n + 1] and int32 [bond_count]) and live flags (uint8 [bond_count]); rows must match this object's. A bond
         pass (cost about one force pass over the family); a family cut at a horizon below 2.05 h exposes everything,
         which is safe."""
-        import warp as wp
-
-        from .kernels import contact as kc
-
         if not self.shield_interior:
             return
-        wp.launch(
-            kc.count_live_lattice_bonds,
-            dim=self.particle_count,
-            inputs=[
-                family_offsets,
-                family_neighbors,
-                bond_alive,
-                self.rest_positions,
-                self.radius,
-                SHIELD_FACTOR,
-                SHIELD_COUNT,
-                self.exposed,
-            ],
-            device=self.device,
+        kc.mark_exposed_by_cracks(
+            family_offsets,
+            family_neighbors,
+            bond_alive,
+            self.rest_positions,
+            self.radius,
+            SHIELD_FACTOR,
+            SHIELD_COUNT,
+            self.exposed,
+            self.device,
         )
 
     def exposed_mask(self) -> np.ndarray:
@@ -288,51 +272,38 @@ class ParticleContact:
         particles only: ``kind`` int32 [n], 0 = free; all free when None). Call it after the bond force density and
         before the kick. Rebuilds the hash grid on ``positions`` (measured: the rebuild is about 5 % of the call; the
         query dominates). Updates the stiffness cap's scale for the next call (one call of lag). No allocation."""
-        import warp as wp
-
-        from .kernels import contact as kc
-
-        force_kernel, _ = kc.make_particle_contact_kernels(self.shield_interior)
         self._build_grid(positions)
-        wp.launch(
-            force_kernel,
-            dim=self.particle_count,
-            inputs=[
-                self.grid.id,
-                positions,
-                velocities,
-                self.rest_positions,
-                self.body_id,
-                self.radius,
-                self.volume,
-                self.mass,
-                self.modulus,
-                self._all_free if kind is None else kind,
-                self.exposed,
-                self.query_radius,
-                self.distance_factor,
-                self.bonded_factor,
-                self.damping_ratio,
-                self.friction,
-                self.floor_factor,
-                float(CONTACT_NEIGHBOR_BUDGET),
-                self._scale,
-                force_density,
-                self._position_delta,
-                self._velocity_delta,
-                self._scale_out,
-            ],
-            device=self.device,
+        kc.particle_contact_forces(
+            self.shield_interior,
+            self.grid.id,
+            positions,
+            velocities,
+            self.rest_positions,
+            self.body_id,
+            self.radius,
+            self.volume,
+            self.mass,
+            self.modulus,
+            self._all_free if kind is None else kind,
+            self.exposed,
+            self.query_radius,
+            self.distance_factor,
+            self.bonded_factor,
+            self.damping_ratio,
+            self.friction,
+            self.floor_factor,
+            float(CONTACT_NEIGHBOR_BUDGET),
+            self._scale,
+            force_density,
+            self._position_delta,
+            self._velocity_delta,
+            self._scale_out,
+            self.device,
         )
         wp.copy(self._scale_next, self._scale)
         wp.copy(self._scale, self._scale_out)
         if self.floor_factor > 0.0:
-            wp.launch(
-                kc.apply_contact_projection,
-                dim=self.particle_count,
-                inputs=[displacements, velocities, self._position_delta, self._velocity_delta],
-                device=self.device,
-            )
+            kc.hard_floor(displacements, velocities, self._position_delta, self._velocity_delta, self.device)
 
     def _build_grid(self, positions):
         cell = GRID_CELL_FACTOR * self.query_radius
@@ -344,33 +315,25 @@ class ParticleContact:
     # -- diagnostics ---------------------------------------------------------------------------------------------
     def diagnostics(self, positions) -> ContactDiagnostics:
         """Penalty energy, stiffness row sum and contact count per particle at ``positions`` (vec3 [n], [m])."""
-        import warp as wp
-
-        from .kernels import contact as kc
-
-        _, energy_kernel = kc.make_particle_contact_kernels(self.shield_interior)
         self._build_grid(positions)
-        wp.launch(
-            energy_kernel,
-            dim=self.particle_count,
-            inputs=[
-                self.grid.id,
-                positions,
-                self.rest_positions,
-                self.body_id,
-                self.radius,
-                self.volume,
-                self.modulus,
-                self.exposed,
-                self.query_radius,
-                self.distance_factor,
-                self.bonded_factor,
-                self._scale_next,  # after apply(): the scale its force pass applied (the forces' potential)
-                self._energy,
-                self._row_sum,
-                self._count,
-            ],
-            device=self.device,
+        kc.particle_contact_energies(
+            self.shield_interior,
+            self.grid.id,
+            positions,
+            self.rest_positions,
+            self.body_id,
+            self.radius,
+            self.volume,
+            self.modulus,
+            self.exposed,
+            self.query_radius,
+            self.distance_factor,
+            self.bonded_factor,
+            self._scale_next,  # after apply(): the scale its force pass applied (the forces' potential)
+            self._energy,
+            self._row_sum,
+            self._count,
+            self.device,
         )
         return ContactDiagnostics(
             energy=self._energy.numpy().astype(np.float64),
@@ -425,35 +388,19 @@ class MethodContact:
             ms.contact_mesh()
 
     def _mesh(self, solver):
-        import warp as wp
-
-        from .kernels import contact as kc
-
         points, faces, version = solver.contact_mesh()
         entry = self._meshes.get(id(solver))
         if entry is None or entry[0] != version:
             positions = wp.zeros(points.shape[0], dtype=wp.vec3, device=points.device)
-            wp.launch(
-                kc.gather_positions,
-                dim=points.shape[0],
-                inputs=[points, solver.kin.rest, solver.kin.u, positions],
-                device=points.device,
-            )
+            kc.surface_positions(points, solver.kin.rest, solver.kin.u, positions)
             entry = [version, points, faces, positions, wp.Mesh(points=positions, indices=faces)]
             self._meshes[id(solver)] = entry
         else:
-            wp.launch(
-                kc.gather_positions,
-                dim=points.shape[0],
-                inputs=[points, solver.kin.rest, solver.kin.u, entry[3]],
-                device=points.device,
-            )
+            kc.surface_positions(points, solver.kin.rest, solver.kin.u, entry[3])
             entry[4].refit()
         return entry
 
     def _force_scale(self, solver):
-        import warp as wp
-
         scale = self._to_force.get(id(solver))
         if scale is None:
             scale = wp.array(
@@ -464,49 +411,38 @@ class MethodContact:
 
     def apply(self, dt: float) -> None:
         """Adds the contact forces of the current state into the solvers' force arrays (step length ``dt`` [s])."""
-        import warp as wp
-
-        from .kernels import contact as kc
-
         rate = (0.25 / float(dt)) ** 2
         for ms in self.mesh_solvers:
             _, m_points, m_faces, _, mesh = self._mesh(ms)
             m_work = self._work_account(ms)
             for ps in self.particle_solvers:
                 p_points, p_radius = ps.contact_particles()
-                wp.launch(
-                    kc.particle_mesh_contact,
-                    dim=p_points.shape[0],
-                    inputs=[
-                        p_points,
-                        ps.kin.rest,
-                        ps.kin.u,
-                        ps.kin.v,
-                        ps.kin.mass,
-                        self._force_scale(ps),
-                        p_radius,
-                        mesh.id,
-                        m_points,
-                        m_faces,
-                        ms.kin.v,
-                        ms.kin.mass,
-                        rate,
-                        self.damping_ratio,
-                        ps.force,
-                        ms.force,
-                        float(dt),
-                        self._work_account(ps),
-                        m_work,
-                        WATCH_COLLIDERS,
-                    ],
-                    device=ps.kin.u.device,
+                kc.particle_mesh_forces(
+                    p_points,
+                    ps.kin.rest,
+                    ps.kin.u,
+                    ps.kin.v,
+                    ps.kin.mass,
+                    self._force_scale(ps),
+                    p_radius,
+                    mesh.id,
+                    m_points,
+                    m_faces,
+                    ms.kin.v,
+                    ms.kin.mass,
+                    rate,
+                    self.damping_ratio,
+                    ps.force,
+                    ms.force,
+                    dt,
+                    self._work_account(ps),
+                    m_work,
+                    ps.kin.u.device,
                 )
 
     def _work_account(self, solver):
         """The array the contact work done on ``solver``'s points goes to: its watchdog's work account (slot
         WATCH_COLLIDERS: work done by other bodies), or a scratch array when it has no watchdog."""
-        import warp as wp
-
         watchdog = getattr(solver, "watchdog", None)
         if watchdog is not None:
             return watchdog.acc
