@@ -13,8 +13,7 @@ c_b of its rest distance and a bonded pair at rest feels exactly nothing. The fo
     C_kj = 2 C_k C_j / (C_k + C_j)  (contact modulus [N/m^6]),  v_n = (v_k - v_j) . n,
 
 (float32 range: C reaches 4e22 N/m^6 for steel at h = 4 mm and 5e26 for glass at h = 0.5 mm, so C_kj is evaluated
-as 2 / (1 / C_k + 1 / C_j) and only products C_kj V_j [N/m^4] are formed; the product C_k C_j overflowed to inf and
-the first contact of any stiff body gave an infinite force),
+as 2 / (1 / C_k + 1 / C_j) and only products C_kj V_j [N/m^4] are formed: the product C_k C_j would overflow to inf),
 
 with the normal dashpot c^n_kj = 2 zeta sqrt(C_kj m_red / (V_k V_j)) (damping ratio zeta of the pair's relative
 oscillation, m_red the reduced mass) clamped so the normal force never pulls (no adhesion), and regularised Coulomb
@@ -29,8 +28,7 @@ Silling-Askari sum, hence to the stable step) is capped at its budget B_k = n_b 
 contacts (n_b = 12 by default, so B_k = S_k, one interior bond row sum): every pair term is scaled by
 s_kj = min(s_k, s_j), s_k = min(1, B_k / sum_j C_kj V_j), with s_k taken from the previous pass (one step of lag,
 double-buffered so no thread reads a value another writes). The scale is symmetric, so momentum stays exact; it is 1
-until a particle has more than the budget's worth of contacts (measured: at most 5 contacts per particle in a steel
-plate, h = 4 mm, hit by a 300 m/s sphere; at most 3 in the fracture runs of docs/stability.md), so ordinary contact is
+until a particle has more than the budget's worth of contacts, so ordinary contact (a few contacts per particle) is
 unchanged, and the contact's stable step sqrt(2 rho_k / B_k) is a bound on the contact springs rather than an
 assumption about how many there are.
 
@@ -41,9 +39,8 @@ the same pass as the force and applied by a second, per-particle kernel, so ever
 positions.
 
 The force kernel is a gather (one thread per particle, no atomics) over a ``wp.HashGrid`` built on current positions
-with cells twice the query radius (the largest contact distance): measured on the CPU (27^3 lattice, radius h), a
-query then visits at most 8 cells and about 56 candidates, 2.4x faster than cells equal to the query radius (up to
-27 cells); 1.5x and 2.5x were no better. Optionally only "exposed" particles (within two lattice shells of a surface
+with cells twice the query radius (the largest contact distance): a query then visits at most 8 cells instead of up
+to 27 with cells equal to the query radius. Optionally only "exposed" particles (within two lattice shells of a surface
 or crack) take part, through a grouped hash grid (see make_particle_contact_kernels).
 """
 
@@ -76,8 +73,7 @@ def contact_pair_distance(
 def contact_pair_modulus(ck: float, cj: float):
     """Pair contact modulus C_kj = 2 C_k C_j / (C_k + C_j) [N/m^6], evaluated as 2 / (1 / C_k + 1 / C_j): exactly
     symmetric in k and j, and free of the float32 overflow of the product C_k C_j (C is 4e22 N/m^6 for steel at
-    h = 4 mm, 5e26 for glass at h = 0.5 mm: the product overflowed to inf, and the first contact gave an infinite
-    force)."""
+    h = 4 mm, 5e26 for glass at h = 0.5 mm: the product would be inf)."""
     return 2.0 / (1.0 / ck + 1.0 / cj)
 
 
@@ -132,8 +128,8 @@ _contact_kernel_cache = {}
 def make_particle_contact_kernels(shielded: bool):
     """(force, energy_and_stiffness) kernels for particle contact, built once per variant. With ``shielded`` only
     exposed particles (group EXPOSED of a grouped hash grid, see count_lattice_neighbors) take part; interior
-    particles, which no foreign particle can reach through two exposed layers, are skipped (measured: 3.5x faster on
-    a 27^3 cube, 38 % exposed). The energy kernel follows the same rule, so it is the potential of the forces."""
+    particles, which no foreign particle can reach through two exposed layers, are skipped. The energy kernel follows
+    the same rule, so it is the potential of the forces."""
     key = bool(shielded)
     if key in _contact_kernel_cache:
         return _contact_kernel_cache[key]
@@ -245,6 +241,8 @@ def make_particle_contact_kernels(shielded: bool):
             position_delta[k] = s * dx
             velocity_delta[k] = s * dv
 
+    # Warp kernels cannot take a function argument, so this kernel repeats the pair loop of particle_contact_force
+    # (same candidates, same contact distance): its energy is the potential of exactly those forces.
     @wp.kernel(module="unique")
     def particle_contact_energy_and_stiffness(
         grid: wp.uint64,

@@ -31,7 +31,7 @@ is a bound whatever the number of contacts."""
 
 
 GRID_CELL_FACTOR = 2.0
-"""Hash grid cell size over the query radius (see kernels/contact.py for the measurement behind it)."""
+"""Hash grid cell size over the query radius: a query visits at most 8 cells (kernels/contact.py)."""
 
 SHIELD_FACTOR = 2.05
 SHIELD_COUNT = 32
@@ -54,8 +54,8 @@ def bond_stiffness_row_sum(bulk_modulus, shear_modulus, horizon):
     """Continuum Silling-Askari row sum of an interior particle's bonds [N/m^4] (the sum evaluated by
     kernels/peridynamics/bonds.compute_stiffness_row_sum with the supplement's constants, integrals over the full
     sphere):
-    S = (60 mu + 81/4 |kappa/2 - 5 mu/6|) / delta^2. Measured on a 0.3 m cube (h = 0.02 m, nu = 0 to 0.45): the
-    discrete sums lie between 0.65 S (surface particles) and 1.24 S (edges), interior particles at 0.90 S."""
+    S = (60 mu + 81/4 |kappa/2 - 5 mu/6|) / delta^2. The discrete sums of a lattice body scatter about it: below S
+    for surface particles, above it at edges."""
     kappa = np.asarray(bulk_modulus, dtype=np.float64)
     mu = np.asarray(shear_modulus, dtype=np.float64)
     delta = np.asarray(horizon, dtype=np.float64)
@@ -103,15 +103,14 @@ class ParticleContact:
             1.35 lattice constants): bodies at rest keep 1.35 h between particle centres (0.35 h between their cells),
             but the second particle layer then reaches the hollows between four surface particles (1.22 h away), so
             a surface no longer has holes. With 1.0 (cells touch) a lattice offset by half a spacing lets particles
-            sink into the hollows and slip through at 0.17 of the P-wave speed of approach (measured on two cubes:
-            1.35 holds to 0.40; head-on, both hold with the hard floor). 1.0 is 1.6x cheaper (fewer hash-grid
-            candidates).
+            sink into the hollows and slip through at a far lower speed of approach than with 1.35 (head-on, both
+            hold with the hard floor); 1.0 is cheaper (fewer hash-grid candidates).
         bonded_factor: fraction of the reference distance below which particles of the same body repel, in (0, 1];
             default 0.9 (LAMMPS, EMU).
         stiffness_scale: multiplies the contact modulus, > 0. The default (1) gives C_k (2 r_k)^3 = S_k / 12 with
             S_k the continuum bond row sum (bond_stiffness_row_sum): a facing surface particle (bond sum about
             0.94 S) with two contacts reaches about the body's largest bond sum (1.13 S), so the solver's stable step
-            is practically unchanged in ordinary impacts (see the tests for measured figures).
+            is practically unchanged in ordinary impacts.
         damping_ratio: normal damping as a fraction of the pair's critical damping, >= 0; default 0.02 (0.1 lost
             40 % of the energy in a collision of cubes with offset lattices, 0 gained up to 0.3 %).
         friction: Coulomb coefficient between particles, >= 0; default 0.
@@ -120,8 +119,8 @@ class ParticleContact:
             stay 0.6 R apart however fast they hit head-on.
         shield_interior: only particles within two lattice shells of a surface take part ("exposed": fewer than 32
             particles of their own body within 2.05 h, the two full shells of a simple-cubic lattice point); no
-            foreign particle reaches the interior through two exposed layers, and skipping it made the contact pass
-            2x faster on two 27 x 27 x 14 slabs (48 % exposed), 3.5x on a 27^3 cube (38 %). Exposure is fixed at
+            foreign particle reaches the interior through two exposed layers, and skipping it makes the contact pass
+            cheaper in proportion to the interior's share. Exposure is fixed at
             construction; after bonds break call ``update_exposure`` (crack faces become exposed), or leave this off
             for bodies that can break. Default True. Off, every particle takes part and, as in LAMMPS, interior
             particles of one body also repel when compressed below bonded_factor of their rest distance.
@@ -210,7 +209,14 @@ class ParticleContact:
         cell = float(SHIELD_FACTOR * 2.0 * self.radius.numpy().max())
         grid.build(self.rest_positions, cell)
         kc.mark_exposed_at_rest(
-            grid.id, self.rest_positions, self.body_id, self.radius, SHIELD_FACTOR, SHIELD_COUNT, self.exposed, self.device
+            grid.id,
+            self.rest_positions,
+            self.body_id,
+            self.radius,
+            SHIELD_FACTOR,
+            SHIELD_COUNT,
+            self.exposed,
+            self.device,
         )
 
     def update_exposure(self, family_offsets, family_neighbors, bond_alive):
@@ -270,8 +276,8 @@ class ParticleContact:
         the frame of this object's rest positions) and ``velocities`` [m/s] (vec3 [n]; the half-step velocities of
         velocity Verlet), then applies the hard-floor projection to ``displacements`` and ``velocities`` (free
         particles only: ``kind`` int32 [n], 0 = free; all free when None). Call it after the bond force density and
-        before the kick. Rebuilds the hash grid on ``positions`` (measured: the rebuild is about 5 % of the call; the
-        query dominates). Updates the stiffness cap's scale for the next call (one call of lag). No allocation."""
+        before the kick. Rebuilds the hash grid on ``positions`` (the query, not the rebuild, dominates the call's
+        cost). Updates the stiffness cap's scale for the next call (one call of lag). No allocation."""
         self._build_grid(positions)
         kc.particle_contact_forces(
             self.shield_interior,

@@ -28,8 +28,8 @@ class PointKinematics:
     """Displacements, velocities and accelerations of ``point_count`` points, with their boundary conditions and
     loads.
 
-    ``watchdog`` (a :class:`pdsim.watchdog.Watchdog`, set by it) is told of every step, kick and load evaluation so that it can
-    account for the energy put in; None (default) costs nothing.
+    ``watchdog`` (a :class:`pdsim.watchdog.Watchdog`, set by it) is told of every step, kick and load evaluation so
+    that it can account for the energy put in; None (default) costs nothing.
 
     Args:
         bodies: the solver's PointBody instances, in the order of their points.

@@ -35,10 +35,9 @@ ENERGY_FACTOR = 2.0
 TOTAL_TOLERANCE = {"automatic": 0.25, "larger": 0.5}
 """The frame-end check trips when kinetic + strain + contact + gravitational energy exceeds
 E(0) + W + tolerance (|E(0)| + W + |U_g|) + floor, the tolerance 25 % at or below the automatic step and 50 % above it.
-Velocity Verlet conserves a shadow energy, not the energy measured at the step ends: measured on a block whose
-velocities are white noise (the worst case, its highest modes excited), the measured energy sits 2-3 % above E(0) at
-the automatic step, 6-10 % at 1.5x and 15-20 % at 2x, and stays there; a divergence that grows slowly, just past the
-stable step, passes the tolerance within a few frames."""
+Velocity Verlet conserves a shadow energy, not the energy measured at the step ends, which sits a few percent above
+E(0) at the automatic step, more at larger steps, and stays there (docs/stability.md); a divergence that grows slowly,
+just past the stable step, passes the tolerance within a few frames."""
 
 STRAIN_LIMITS = {"bond stretch": (-0.9, 19.0), "volume ratio": (0.1, 20.0)}
 """Strain blow-up: the stretch of every live peridynamic bond (|eta| / |xi| - 1) and the volume ratio J of every
