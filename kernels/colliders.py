@@ -109,6 +109,48 @@ def rigid_point_velocity(x: wp.vec3, motion: RigidMotion):
     return motion.linear_velocity + wp.cross(motion.angular_velocity, x - wp.transform_get_translation(motion.pose))
 
 
+@wp.func
+def push_point(
+    i: int,
+    x: wp.vec3,
+    sdf: float,
+    n: wp.vec3,
+    r: float,
+    motion: RigidMotion,
+    friction: float,
+    displacements: wp.array(dtype=wp.vec3),
+    velocities: wp.array(dtype=wp.vec3),
+):
+    """The response of point i at x [m] (rest + displacement), signed distance sdf [m] and outward normal n from the
+    surface of a rigid collider moving with ``motion`` (collider_response), written to its displacement and velocity."""
+    vs = rigid_point_velocity(x, motion)
+    x_new, v_new = collider_response(x, velocities[i], sdf, n, r, vs, friction)
+    displacements[i] = displacements[i] + (x_new - x)
+    velocities[i] = v_new
+
+
+@wp.func
+def mesh_contact_point(mesh: wp.uint64, p: wp.vec3, r: float, max_dist: float):
+    """The closest point of a closed triangle mesh to a sphere of radius r [m] centred at p, searched within
+    ``max_dist`` [m] of the surface: (touch, sdf, n, face, u, v). touch is 1 when the signed distance sdf [m] < r
+    (the sign from the angle-weighted pseudo-normal, negative inside), else 0 and the rest is not to be used; n is the
+    outward unit normal (along p - closest point, or the face normal when p lies within 1e-6 r of the surface);
+    face, u, v locate the closest point (barycentric weights u, v, 1 - u - v of the face's vertices)."""
+    hit = wp.mesh_query_point_sign_normal(mesh, p, max_dist)
+    if not hit.result:
+        return 0, float(0.0), wp.vec3(0.0), int(-1), float(0.0), float(0.0)
+    closest = wp.mesh_eval_position(mesh, hit.face, hit.u, hit.v)
+    d = p - closest
+    dist = wp.length(d)
+    sdf = hit.sign * dist
+    if sdf >= r:
+        return 0, sdf, wp.vec3(0.0), hit.face, hit.u, hit.v
+    n = wp.mesh_eval_face_normal(mesh, hit.face)
+    if dist > 1.0e-6 * r:
+        n = (hit.sign / dist) * d
+    return 1, sdf, n, hit.face, hit.u, hit.v
+
+
 @wp.kernel
 def collide_sphere(
     rest: wp.array(dtype=wp.vec3),
@@ -135,10 +177,7 @@ def collide_sphere(
         n = wp.vec3(0.0, 0.0, 1.0)
         if dist > 0.0:
             n = d / dist
-        vs = rigid_point_velocity(x, motion)
-        x_new, v_new = collider_response(x, velocities[i], sdf, n, r, vs, friction)
-        displacements[i] = displacements[i] + (x_new - x)
-        velocities[i] = v_new
+        push_point(i, x, sdf, n, r, motion, friction, displacements, velocities)
 
 
 @wp.kernel
@@ -188,10 +227,7 @@ def collide_box(
         else:
             n_local = wp.vec3(0.0, 0.0, wp.sign(p[2]))
     n = wp.transform_vector(pose, n_local)
-    vs = rigid_point_velocity(x, motion)
-    x_new, v_new = collider_response(x, velocities[i], sdf, n, r, vs, friction)
-    displacements[i] = displacements[i] + (x_new - x)
-    velocities[i] = v_new
+    push_point(i, x, sdf, n, r, motion, friction, displacements, velocities)
 
 
 @wp.kernel
@@ -216,20 +252,69 @@ def collide_mesh(
     x = rest[i] + displacements[i]
     r = radius[i]
     p = wp.transform_point(wp.transform_inverse(pose), x)
-    hit = wp.mesh_query_point_sign_normal(mesh, p, r + motion.band)
-    if not hit.result:
+    touch, sdf, n_local, face, u, v = mesh_contact_point(mesh, p, r, r + motion.band)
+    if touch == 0:
         return
-    closest = wp.mesh_eval_position(mesh, hit.face, hit.u, hit.v)
-    d = p - closest
-    dist = wp.length(d)
-    sdf = hit.sign * dist
-    if sdf >= r:
-        return
-    n_local = wp.mesh_eval_face_normal(mesh, hit.face)
-    if dist > 1.0e-6 * r:
-        n_local = (hit.sign / dist) * d
     n = wp.transform_vector(pose, n_local)
-    vs = rigid_point_velocity(x, motion)
-    x_new, v_new = collider_response(x, velocities[i], sdf, n, r, vs, friction)
-    displacements[i] = displacements[i] + (x_new - x)
-    velocities[i] = v_new
+    push_point(i, x, sdf, n, r, motion, friction, displacements, velocities)
+
+
+# -- launches (pdsim/colliders.py) ------------------------------------------------------------------------------------
+# One thread per point of the solver's arrays: rest positions, displacements, velocities (vec3 [n]), collision radii
+# and kinematic kinds (int32 [n]); ``motion`` is the collider's one-element RigidMotion array.
+
+
+def push_out_of_plane(rest, displacements, velocities, kind, radius, normal, offset, friction, mass, impulse, device):
+    """Ground plane n . x = ``offset`` [m] (local frame), ``normal`` 3 numbers (collide_ground_plane)."""
+    wp.launch(
+        collide_ground_plane,
+        dim=rest.shape[0],
+        inputs=[
+            rest,
+            displacements,
+            velocities,
+            kind,
+            radius,
+            wp.vec3(*normal),
+            float(offset),
+            float(friction),
+            mass,
+            impulse,
+        ],
+        device=device,
+    )
+
+
+def push_out_of_sphere(rest, displacements, velocities, kind, radius, motion, sphere_radius, friction, device):
+    """Kinematic sphere of ``sphere_radius`` [m] (collide_sphere)."""
+    wp.launch(
+        collide_sphere,
+        dim=rest.shape[0],
+        inputs=[rest, displacements, velocities, kind, radius, motion, sphere_radius, friction],
+        device=device,
+    )
+
+
+def push_out_of_box(rest, displacements, velocities, kind, radius, motion, half_extents, friction, device):
+    """Kinematic box of ``half_extents`` [m] (3 numbers) (collide_box)."""
+    wp.launch(
+        collide_box,
+        dim=rest.shape[0],
+        inputs=[rest, displacements, velocities, kind, radius, motion, wp.vec3(*half_extents), friction],
+        device=device,
+    )
+
+
+def push_out_of_mesh(rest, displacements, velocities, kind, radius, mesh, motion, friction, device):
+    """Closed triangle mesh ``mesh`` (a wp.Mesh id) in the frame of ``motion`` (collide_mesh)."""
+    wp.launch(
+        collide_mesh,
+        dim=rest.shape[0],
+        inputs=[rest, displacements, velocities, kind, radius, mesh, motion, friction],
+        device=device,
+    )
+
+
+def select_step_motion(table, slot: int, band: float, motion, device):
+    """motion[0] <- table[slot] with ``band`` [m] added to its band (select_motion)."""
+    wp.launch(select_motion, dim=1, inputs=[table, int(slot), float(band), motion], device=device)

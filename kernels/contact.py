@@ -13,8 +13,7 @@ c_b of its rest distance and a bonded pair at rest feels exactly nothing. The fo
     C_kj = 2 C_k C_j / (C_k + C_j)  (contact modulus [N/m^6]),  v_n = (v_k - v_j) . n,
 
 (float32 range: C reaches 4e22 N/m^6 for steel at h = 4 mm and 5e26 for glass at h = 0.5 mm, so C_kj is evaluated
-as 2 / (1 / C_k + 1 / C_j) and only products C_kj V_j [N/m^4] are formed; the product C_k C_j overflowed to inf and
-the first contact of any stiff body gave an infinite force),
+as 2 / (1 / C_k + 1 / C_j) and only products C_kj V_j [N/m^4] are formed: the product C_k C_j would overflow to inf),
 
 with the normal dashpot c^n_kj = 2 zeta sqrt(C_kj m_red / (V_k V_j)) (damping ratio zeta of the pair's relative
 oscillation, m_red the reduced mass) clamped so the normal force never pulls (no adhesion), and regularised Coulomb
@@ -29,8 +28,7 @@ Silling-Askari sum, hence to the stable step) is capped at its budget B_k = n_b 
 contacts (n_b = 12 by default, so B_k = S_k, one interior bond row sum): every pair term is scaled by
 s_kj = min(s_k, s_j), s_k = min(1, B_k / sum_j C_kj V_j), with s_k taken from the previous pass (one step of lag,
 double-buffered so no thread reads a value another writes). The scale is symmetric, so momentum stays exact; it is 1
-until a particle has more than the budget's worth of contacts (measured: at most 5 contacts per particle in a steel
-plate, h = 4 mm, hit by a 300 m/s sphere; at most 3 in the fracture runs of docs/stability.md), so ordinary contact is
+until a particle has more than the budget's worth of contacts, so ordinary contact (a few contacts per particle) is
 unchanged, and the contact's stable step sqrt(2 rho_k / B_k) is a bound on the contact springs rather than an
 assumption about how many there are.
 
@@ -41,15 +39,17 @@ the same pass as the force and applied by a second, per-particle kernel, so ever
 positions.
 
 The force kernel is a gather (one thread per particle, no atomics) over a ``wp.HashGrid`` built on current positions
-with cells twice the query radius (the largest contact distance): measured on the CPU (27^3 lattice, radius h), a
-query then visits at most 8 cells and about 56 candidates, 2.4x faster than cells equal to the query radius (up to
-27 cells); 1.5x and 2.5x were no better. Optionally only "exposed" particles (within two lattice shells of a surface
+with cells twice the query radius (the largest contact distance): a query then visits at most 8 cells instead of up
+to 27 with cells equal to the query radius. Optionally only "exposed" particles (within two lattice shells of a surface
 or crack) take part, through a grouped hash grid (see make_particle_contact_kernels).
 """
 
 import warp as wp
 
+from .colliders import mesh_contact_point
 from .integration import PARTICLE_FREE
+from .neighbors import same_body_count
+from .watchdog import WATCH_COLLIDERS
 
 
 @wp.func
@@ -73,8 +73,7 @@ def contact_pair_distance(
 def contact_pair_modulus(ck: float, cj: float):
     """Pair contact modulus C_kj = 2 C_k C_j / (C_k + C_j) [N/m^6], evaluated as 2 / (1 / C_k + 1 / C_j): exactly
     symmetric in k and j, and free of the float32 overflow of the product C_k C_j (C is 4e22 N/m^6 for steel at
-    h = 4 mm, 5e26 for glass at h = 0.5 mm: the product overflowed to inf, and the first contact gave an infinite
-    force)."""
+    h = 4 mm, 5e26 for glass at h = 0.5 mm: the product would be inf)."""
     return 2.0 / (1.0 / ck + 1.0 / cj)
 
 
@@ -94,16 +93,7 @@ def count_lattice_neighbors(
     """exposed[k] = 1 unless particle k has at least full_count particles of its own body within shield_factor
     2 r_k of its reference position (a simple-cubic lattice point with its two full shells: 32 within 2.05 h)."""
     k = wp.tid()
-    xk = rest_positions[k]
-    cut = shield_factor * 2.0 * radius[k]
-    bk = body_id[k]
-    count = int(0)
-    query = wp.hash_grid_query(grid, xk, cut)
-    j = int(0)
-    while wp.hash_grid_query_next(query, j):
-        if j != k and body_id[j] == bk:
-            if wp.length(rest_positions[j] - xk) <= cut:
-                count += 1
+    count = same_body_count(grid, rest_positions, body_id, k, shield_factor * 2.0 * radius[k])
     exposed[k] = wp.where(count >= full_count, 0, EXPOSED)
 
 
@@ -138,8 +128,8 @@ _contact_kernel_cache = {}
 def make_particle_contact_kernels(shielded: bool):
     """(force, energy_and_stiffness) kernels for particle contact, built once per variant. With ``shielded`` only
     exposed particles (group EXPOSED of a grouped hash grid, see count_lattice_neighbors) take part; interior
-    particles, which no foreign particle can reach through two exposed layers, are skipped (measured: 3.5x faster on
-    a 27^3 cube, 38 % exposed). The energy kernel follows the same rule, so it is the potential of the forces."""
+    particles, which no foreign particle can reach through two exposed layers, are skipped. The energy kernel follows
+    the same rule, so it is the potential of the forces."""
     key = bool(shielded)
     if key in _contact_kernel_cache:
         return _contact_kernel_cache[key]
@@ -251,6 +241,8 @@ def make_particle_contact_kernels(shielded: bool):
             position_delta[k] = s * dx
             velocity_delta[k] = s * dv
 
+    # Warp kernels cannot take a function argument, so this kernel repeats the pair loop of particle_contact_force
+    # (same candidates, same contact distance): its energy is the potential of exactly those forces.
     @wp.kernel(module="unique")
     def particle_contact_energy_and_stiffness(
         grid: wp.uint64,
@@ -371,24 +363,13 @@ def particle_mesh_contact(
     i = p_points[q]
     x = p_rest[i] + p_u[i]
     r = p_radius[q]
-    hit = wp.mesh_query_point_sign_normal(mesh, x, 3.0 * r)
-    if not hit.result:
+    touch, sdf, n, face, wa, wb = mesh_contact_point(mesh, x, r, 3.0 * r)
+    if touch == 0:
         return
-    closest = wp.mesh_eval_position(mesh, hit.face, hit.u, hit.v)
-    d = x - closest
-    dist = wp.length(d)
-    sdf = hit.sign * dist
-    if sdf >= r:
-        return
-    n = wp.mesh_eval_face_normal(mesh, hit.face)
-    if dist > 1.0e-6 * r:
-        n = (hit.sign / dist) * d
-    a = m_points[m_faces[3 * hit.face + 0]]
-    b = m_points[m_faces[3 * hit.face + 1]]
-    c = m_points[m_faces[3 * hit.face + 2]]
-    wa = hit.u
-    wb = hit.v
-    wc = 1.0 - hit.u - hit.v
+    a = m_points[m_faces[3 * face + 0]]
+    b = m_points[m_faces[3 * face + 1]]
+    c = m_points[m_faces[3 * face + 2]]
+    wc = 1.0 - wa - wb
     v_surface = wa * m_v[a] + wb * m_v[b] + wc * m_v[c]
     m_surface = wa * m_mass[a] + wb * m_mass[b] + wc * m_mass[c]
     mp = p_mass[i]
@@ -417,3 +398,217 @@ def gather_positions(
     q = wp.tid()
     i = points[q]
     out[q] = rest[i] + displacements[i]
+
+
+# -- launches (pdsim/contact.py) --------------------------------------------------------------------------------------
+# Particle contact: one thread per particle of the contact set (``rest_positions`` [n]).
+
+
+def mark_exposed_at_rest(grid, rest_positions, body_id, radius, shield_factor, full_count, exposed, device):
+    """Exposure of every particle at rest (count_lattice_neighbors), ``grid`` built on ``rest_positions``."""
+    wp.launch(
+        count_lattice_neighbors,
+        dim=rest_positions.shape[0],
+        inputs=[grid, rest_positions, body_id, radius, shield_factor, full_count, exposed],
+        device=device,
+    )
+
+
+def mark_exposed_by_cracks(
+    family_offsets, family_neighbors, bond_alive, rest_positions, radius, shield_factor, full_count, exposed, device
+):
+    """Exposes the particles near broken bonds (count_live_lattice_bonds)."""
+    wp.launch(
+        count_live_lattice_bonds,
+        dim=rest_positions.shape[0],
+        inputs=[
+            family_offsets,
+            family_neighbors,
+            bond_alive,
+            rest_positions,
+            radius,
+            shield_factor,
+            full_count,
+            exposed,
+        ],
+        device=device,
+    )
+
+
+def particle_contact_forces(
+    shielded: bool,
+    grid,
+    positions,
+    velocities,
+    rest_positions,
+    body_id,
+    radius,
+    volume,
+    mass,
+    modulus,
+    kind,
+    exposed,
+    query_radius,
+    distance_factor,
+    bonded_factor,
+    damping_ratio,
+    friction,
+    floor_factor,
+    budget_count,
+    scale_in,
+    force_density,
+    position_delta,
+    velocity_delta,
+    scale_out,
+    device,
+):
+    """Contact force density, hard-floor shares and the next stiffness-cap scale (particle_contact_force of
+    make_particle_contact_kernels(shielded))."""
+    force_kernel, _ = make_particle_contact_kernels(shielded)
+    wp.launch(
+        force_kernel,
+        dim=rest_positions.shape[0],
+        inputs=[
+            grid,
+            positions,
+            velocities,
+            rest_positions,
+            body_id,
+            radius,
+            volume,
+            mass,
+            modulus,
+            kind,
+            exposed,
+            query_radius,
+            distance_factor,
+            bonded_factor,
+            damping_ratio,
+            friction,
+            floor_factor,
+            budget_count,
+            scale_in,
+            force_density,
+            position_delta,
+            velocity_delta,
+            scale_out,
+        ],
+        device=device,
+    )
+
+
+def particle_contact_energies(
+    shielded: bool,
+    grid,
+    positions,
+    rest_positions,
+    body_id,
+    radius,
+    volume,
+    modulus,
+    exposed,
+    query_radius,
+    distance_factor,
+    bonded_factor,
+    scale,
+    energy,
+    row_sum,
+    contact_count,
+    device,
+):
+    """Per-particle contact energy, stiffness row sum and contact count (particle_contact_energy_and_stiffness of
+    make_particle_contact_kernels(shielded))."""
+    _, energy_kernel = make_particle_contact_kernels(shielded)
+    wp.launch(
+        energy_kernel,
+        dim=rest_positions.shape[0],
+        inputs=[
+            grid,
+            positions,
+            rest_positions,
+            body_id,
+            radius,
+            volume,
+            modulus,
+            exposed,
+            query_radius,
+            distance_factor,
+            bonded_factor,
+            scale,
+            energy,
+            row_sum,
+            contact_count,
+        ],
+        device=device,
+    )
+
+
+def hard_floor(displacements, velocities, position_delta, velocity_delta, device):
+    """u += position_delta, v += velocity_delta on every particle of the contact set (apply_contact_projection)."""
+    wp.launch(
+        apply_contact_projection,
+        dim=position_delta.shape[0],
+        inputs=[displacements, velocities, position_delta, velocity_delta],
+        device=device,
+    )
+
+
+# -- launches (pdsim/contact.py, MethodContact) -----------------------------------------------------------------------
+
+
+def surface_positions(points, rest, displacements, out):
+    """out[q] = rest + u of point points[q], on the points' device (gather_positions)."""
+    wp.launch(gather_positions, dim=points.shape[0], inputs=[points, rest, displacements, out], device=points.device)
+
+
+def particle_mesh_forces(
+    p_points,
+    p_rest,
+    p_u,
+    p_v,
+    p_mass,
+    p_to_force,
+    p_radius,
+    mesh,
+    m_points,
+    m_faces,
+    m_v,
+    m_mass,
+    stiffness_rate,
+    damping_ratio,
+    p_force,
+    m_force,
+    dt: float,
+    p_work,
+    m_work,
+    device,
+):
+    """Contact of the particles ``p_points`` with a surface mesh (particle_mesh_contact); the work goes to slot
+    WATCH_COLLIDERS of ``p_work`` and ``m_work``."""
+    wp.launch(
+        particle_mesh_contact,
+        dim=p_points.shape[0],
+        inputs=[
+            p_points,
+            p_rest,
+            p_u,
+            p_v,
+            p_mass,
+            p_to_force,
+            p_radius,
+            mesh,
+            m_points,
+            m_faces,
+            m_v,
+            m_mass,
+            stiffness_rate,
+            damping_ratio,
+            p_force,
+            m_force,
+            float(dt),
+            p_work,
+            m_work,
+            WATCH_COLLIDERS,
+        ],
+        device=device,
+    )

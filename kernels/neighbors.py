@@ -7,6 +7,28 @@ filled in hash-grid order, which is deterministic for a given grid and particle 
 import warp as wp
 
 
+@wp.func
+def same_body_count(
+    grid: wp.uint64,
+    rest: wp.array(dtype=wp.vec3),
+    body_id: wp.array(dtype=wp.int32),
+    k: int,
+    cut: float,
+):
+    """Number of particles j != k of particle k's body within ``cut`` [m] of it (positions ``rest``, hashed in
+    ``grid``)."""
+    xk = rest[k]
+    bk = body_id[k]
+    n = int(0)
+    query = wp.hash_grid_query(grid, xk, cut)
+    j = int(0)
+    while wp.hash_grid_query_next(query, j):
+        if j != k and body_id[j] == bk:
+            if wp.length(rest[j] - xk) <= cut:
+                n += 1
+    return n
+
+
 @wp.kernel
 def count_family(
     grid: wp.uint64,
@@ -17,17 +39,7 @@ def count_family(
 ):
     """counts[k] = number of particles j != k of the same body within radius[k] of particle k."""
     k = wp.tid()
-    xk = rest[k]
-    r = radius[k]
-    bk = body_id[k]
-    n = int(0)
-    query = wp.hash_grid_query(grid, xk, r)
-    j = int(0)
-    while wp.hash_grid_query_next(query, j):
-        if j != k and body_id[j] == bk:
-            if wp.length(rest[j] - xk) <= r:
-                n += 1
-    counts[k] = n
+    counts[k] = same_body_count(grid, rest, body_id, k, radius[k])
 
 
 @wp.kernel
@@ -39,7 +51,8 @@ def fill_family(
     offsets: wp.array(dtype=wp.int32),
     neighbors: wp.array(dtype=wp.int32),
 ):
-    """Writes the family of particle k into neighbors[offsets[k] : offsets[k + 1]] (same rule as count_family)."""
+    """Writes the family of particle k into neighbors[offsets[k] : offsets[k + 1]] (same rule as count_family; the
+    loop of same_body_count repeated, since it writes each neighbour where that one counts)."""
     k = wp.tid()
     xk = rest[k]
     r = radius[k]

@@ -9,8 +9,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
+import warp as wp
 
 from .errors import ParameterError
+from .kernels import colliders as kc
+from .output.views import RigidView
 from .validate import check_range
 
 
@@ -55,8 +59,6 @@ class GroundPlane(Collider):
         """The plane for the output: a square of the plane centred under the scene, 10 x the half-diagonal of
         ``bounds`` ((lo, hi) world corners [m]; default a 2 m square at the origin's foot), as the static RigidView
         ``ground`` directly under /World; its faces look along ``normal``."""
-        from .output.views import RigidView
-
         n = np.asarray(self.normal, dtype=np.float64)
         n = n / np.linalg.norm(n)
         if bounds is None:
@@ -83,10 +85,6 @@ class GroundPlane(Collider):
         return np.sum([a.numpy()[0] for a in arrays.values()], axis=0) if arrays else np.zeros(3)
 
     def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
-        import warp as wp
-
-        from .kernels import colliders as kc
-
         if not hasattr(self, "_impulse"):
             self._impulse = {}
         key = (str(rest.device), id(rest))
@@ -97,22 +95,18 @@ class GroundPlane(Collider):
                 self._no_mass = {**getattr(self, "_no_mass", {}), key: wp.zeros(0, dtype=float, device=rest.device)}
             mass = self._no_mass[key]
         n = np.asarray(self.normal, dtype=np.float64)
-        wp.launch(
-            kc.collide_ground_plane,
-            dim=rest.shape[0],
-            inputs=[
-                rest,
-                displacements,
-                velocities,
-                kind,
-                radius,
-                wp.vec3(*n),
-                float(self.offset - n @ self.origin),
-                float(self.friction),
-                mass,
-                self._impulse[key],
-            ],
-            device=rest.device,
+        kc.push_out_of_plane(
+            rest,
+            displacements,
+            velocities,
+            kind,
+            radius,
+            n,
+            self.offset - n @ self.origin,
+            self.friction,
+            mass,
+            self._impulse[key],
+            rest.device,
         )
 
 
@@ -199,10 +193,6 @@ class _MotionBuffer:
     frames in flight."""
 
     def __init__(self, device, rows: int = 1):
-        import warp as wp
-
-        from .kernels import colliders as kc
-
         self.device = device
         self.rows = int(rows)
         self.array = wp.zeros(self.rows, dtype=kc.RigidMotion, device=device)
@@ -221,8 +211,6 @@ class _MotionBuffer:
     def upload(self, row: int | None = None):
         """Copies the staging rows (all, or one) to the device; never during a graph capture (a captured copy would
         replay the staging buffer's contents of replay time)."""
-        import warp as wp
-
         if self._staging is self.array:
             return
         if self.device.is_capturing:
@@ -241,8 +229,6 @@ class _MeshData:
     """A wp.Mesh with its arrays kept alive, and the mesh's bounding radius about the local origin [m]."""
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, device):
-        import warp as wp
-
         self.points = wp.array(vertices.astype(np.float32), dtype=wp.vec3, device=device)
         self.indices = wp.array(faces.ravel(), dtype=wp.int32, device=device)
         self.mesh = wp.Mesh(points=self.points, indices=self.indices)
@@ -288,8 +274,6 @@ class MeshCollider(Collider):
     """
 
     def __init__(self, shape, *, friction: float = 0.5, band: float | None = None, device="cpu", name=None):
-        import warp as wp
-
         self.name = _check_name(name)
         self.friction = check_range("friction", friction, 0.0, None, lo_open=False)
         self.band = None if band is None else check_range("band", band, 0.0, None)
@@ -307,8 +291,6 @@ class MeshCollider(Collider):
 
     def view(self, time: float = 0.0, *, bounds=None):
         """The static mesh for the output: vertices relative to the centre of its bounding box, placed at it."""
-        from .output.views import RigidView
-
         return RigidView(
             self.name or type(self).__name__,
             self.vertices - self.center,
@@ -319,30 +301,14 @@ class MeshCollider(Collider):
         )
 
     def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
-        import warp as wp
-
-        from .kernels import colliders as kc
-
         band = _mesh_band(self.band, self._radius_bound, radius)
         motion = self._motions.get(band)
         if motion is None:  # static: the pose is written once per band (per solver's radii)
             motion = _MotionBuffer(self.device)
             motion.write(self.center - self.origin, IDENTITY_ROTATION, np.zeros(3), np.zeros(3), band)
             self._motions[band] = motion
-        wp.launch(
-            kc.collide_mesh,
-            dim=rest.shape[0],
-            inputs=[
-                rest,
-                displacements,
-                velocities,
-                kind,
-                radius,
-                self._mesh.mesh.id,
-                motion.array,
-                self.friction,
-            ],
-            device=self.device,
+        kc.push_out_of_mesh(
+            rest, displacements, velocities, kind, radius, self._mesh.mesh.id, motion.array, self.friction, self.device
         )
 
 
@@ -380,8 +346,6 @@ class RigidProjectile(Collider):
         device="cpu",
         name: str | None = None,
     ):
-        import warp as wp
-
         self.name = _check_name(name)
         if path is not None and not callable(path):
             raise ParameterError("path", path, "a callable t -> position or (position, quaternion)")
@@ -416,8 +380,6 @@ class RigidProjectile(Collider):
 
     def view(self, time: float, *, bounds=None):
         """The projectile for the output at ``time`` [s]: its body-frame mesh and ``pose(time)``."""
-        from .output.views import RigidView
-
         if not hasattr(self, "_body_mesh_cache"):
             self._body_mesh_cache = self.body_mesh()
         points, faces = self._body_mesh_cache
@@ -448,10 +410,6 @@ class RigidProjectile(Collider):
         """The step's motion into ``self._motion``: its row of the frame's table (:meth:`begin_frame`), or, for a
         step outside a frame program, the motion evaluated now into the scratch row; ``band`` [m] (meshes) is added
         to the distance the surface sweeps in the step."""
-        import warp as wp
-
-        from .kernels import colliders as kc
-
         slot = self._slots.get((float(time), float(dt)))
         if slot is None:
             if self.device.is_capturing:
@@ -462,12 +420,7 @@ class RigidProjectile(Collider):
             slot = self._table.rows - 1
             self._table.set_row(slot, *self._motion_over(time, dt))
             self._table.upload(slot)
-        wp.launch(
-            kc.select_motion,
-            dim=1,
-            inputs=[self._table.array, int(slot), float(band), self._motion.array],
-            device=self.device,
-        )
+        kc.select_step_motion(self._table.array, slot, band, self._motion.array, self.device)
 
     def _motion_over(self, time: float, dt: float) -> tuple:
         """(position, rotation, linear velocity, angular velocity, swept distance) in the local frame of the rigid
@@ -491,6 +444,18 @@ class RigidProjectile(Collider):
     def _bounding_radius(self) -> float:
         return 0.0
 
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
+        self._update_motion(time, dt, band=self._band(radius))
+        self._push(rest, displacements, velocities, radius, kind)
+
+    def _band(self, radius) -> float:
+        """Detection depth below the surface [m] (meshes; 0 for the analytic shapes), given the solver's radii."""
+        return 0.0
+
+    def _push(self, rest, displacements, velocities, radius, kind) -> None:
+        """Launches the shape's collision kernel with the step's motion (``self._motion``)."""
+        raise NotImplementedError
+
 
 class SphereProjectile(RigidProjectile):
     """A kinematic sphere of ``radius`` [m] centred at ``center`` [m] (see RigidProjectile for the motion)."""
@@ -504,31 +469,20 @@ class SphereProjectile(RigidProjectile):
 
     def body_mesh(self) -> tuple[np.ndarray, np.ndarray]:
         """An icosphere of 1280 triangles (3 subdivisions) of the sphere's radius."""
-        import trimesh
-
         m = trimesh.creation.icosphere(subdivisions=3, radius=self.sphere_radius)
         return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int32)
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
-        import warp as wp
-
-        from .kernels import colliders as kc
-
-        self._update_motion(time, dt)
-        wp.launch(
-            kc.collide_sphere,
-            dim=rest.shape[0],
-            inputs=[
-                rest,
-                displacements,
-                velocities,
-                kind,
-                radius,
-                self._motion.array,
-                self.sphere_radius,
-                self.friction,
-            ],
-            device=self.device,
+    def _push(self, rest, displacements, velocities, radius, kind) -> None:
+        kc.push_out_of_sphere(
+            rest,
+            displacements,
+            velocities,
+            kind,
+            radius,
+            self._motion.array,
+            self.sphere_radius,
+            self.friction,
+            self.device,
         )
 
 
@@ -548,31 +502,20 @@ class BoxProjectile(RigidProjectile):
 
     def body_mesh(self) -> tuple[np.ndarray, np.ndarray]:
         """The box's 8 corners and 12 triangles."""
-        import trimesh
-
         m = trimesh.creation.box(extents=2.0 * self.half_extents)
         return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int32)
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
-        import warp as wp
-
-        from .kernels import colliders as kc
-
-        self._update_motion(time, dt)
-        wp.launch(
-            kc.collide_box,
-            dim=rest.shape[0],
-            inputs=[
-                rest,
-                displacements,
-                velocities,
-                kind,
-                radius,
-                self._motion.array,
-                wp.vec3(*self.half_extents),
-                self.friction,
-            ],
-            device=self.device,
+    def _push(self, rest, displacements, velocities, radius, kind) -> None:
+        kc.push_out_of_box(
+            rest,
+            displacements,
+            velocities,
+            kind,
+            radius,
+            self._motion.array,
+            self.half_extents,
+            self.friction,
+            self.device,
         )
 
 
@@ -603,26 +546,20 @@ class MeshProjectile(RigidProjectile):
         """The mesh in its body frame (relative to ``center``, un-rotated by the initial rotation)."""
         return self._body
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
-        import warp as wp
+    def _band(self, radius) -> float:
+        return _mesh_band(self.band, self._radius_bound, radius)
 
-        from .kernels import colliders as kc
-
-        self._update_motion(time, dt, band=_mesh_band(self.band, self._radius_bound, radius))
-        wp.launch(
-            kc.collide_mesh,
-            dim=rest.shape[0],
-            inputs=[
-                rest,
-                displacements,
-                velocities,
-                kind,
-                radius,
-                self._mesh.mesh.id,
-                self._motion.array,
-                self.friction,
-            ],
-            device=self.device,
+    def _push(self, rest, displacements, velocities, radius, kind) -> None:
+        kc.push_out_of_mesh(
+            rest,
+            displacements,
+            velocities,
+            kind,
+            radius,
+            self._mesh.mesh.id,
+            self._motion.array,
+            self.friction,
+            self.device,
         )
 
 

@@ -17,9 +17,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
 
 from .errors import ParameterError
-from .kinematics import WATCH_COLLIDERS
+from .kernels import contact as kc
 from .validate import check_range
 
 CONTACT_NEIGHBOR_BUDGET = 12
@@ -30,7 +31,7 @@ is a bound whatever the number of contacts."""
 
 
 GRID_CELL_FACTOR = 2.0
-"""Hash grid cell size over the query radius (see kernels/contact.py for the measurement behind it)."""
+"""Hash grid cell size over the query radius: a query visits at most 8 cells (kernels/contact.py)."""
 
 SHIELD_FACTOR = 2.05
 SHIELD_COUNT = 32
@@ -53,8 +54,8 @@ def bond_stiffness_row_sum(bulk_modulus, shear_modulus, horizon):
     """Continuum Silling-Askari row sum of an interior particle's bonds [N/m^4] (the sum evaluated by
     kernels/peridynamics/bonds.compute_stiffness_row_sum with the supplement's constants, integrals over the full
     sphere):
-    S = (60 mu + 81/4 |kappa/2 - 5 mu/6|) / delta^2. Measured on a 0.3 m cube (h = 0.02 m, nu = 0 to 0.45): the
-    discrete sums lie between 0.65 S (surface particles) and 1.24 S (edges), interior particles at 0.90 S."""
+    S = (60 mu + 81/4 |kappa/2 - 5 mu/6|) / delta^2. The discrete sums of a lattice body scatter about it: below S
+    for surface particles, above it at edges."""
     kappa = np.asarray(bulk_modulus, dtype=np.float64)
     mu = np.asarray(shear_modulus, dtype=np.float64)
     delta = np.asarray(horizon, dtype=np.float64)
@@ -102,15 +103,14 @@ class ParticleContact:
             1.35 lattice constants): bodies at rest keep 1.35 h between particle centres (0.35 h between their cells),
             but the second particle layer then reaches the hollows between four surface particles (1.22 h away), so
             a surface no longer has holes. With 1.0 (cells touch) a lattice offset by half a spacing lets particles
-            sink into the hollows and slip through at 0.17 of the P-wave speed of approach (measured on two cubes:
-            1.35 holds to 0.40; head-on, both hold with the hard floor). 1.0 is 1.6x cheaper (fewer hash-grid
-            candidates).
+            sink into the hollows and slip through at a far lower speed of approach than with 1.35 (head-on, both
+            hold with the hard floor); 1.0 is cheaper (fewer hash-grid candidates).
         bonded_factor: fraction of the reference distance below which particles of the same body repel, in (0, 1];
             default 0.9 (LAMMPS, EMU).
         stiffness_scale: multiplies the contact modulus, > 0. The default (1) gives C_k (2 r_k)^3 = S_k / 12 with
             S_k the continuum bond row sum (bond_stiffness_row_sum): a facing surface particle (bond sum about
             0.94 S) with two contacts reaches about the body's largest bond sum (1.13 S), so the solver's stable step
-            is practically unchanged in ordinary impacts (see the tests for measured figures).
+            is practically unchanged in ordinary impacts.
         damping_ratio: normal damping as a fraction of the pair's critical damping, >= 0; default 0.02 (0.1 lost
             40 % of the energy in a collision of cubes with offset lattices, 0 gained up to 0.3 %).
         friction: Coulomb coefficient between particles, >= 0; default 0.
@@ -119,8 +119,8 @@ class ParticleContact:
             stay 0.6 R apart however fast they hit head-on.
         shield_interior: only particles within two lattice shells of a surface take part ("exposed": fewer than 32
             particles of their own body within 2.05 h, the two full shells of a simple-cubic lattice point); no
-            foreign particle reaches the interior through two exposed layers, and skipping it made the contact pass
-            2x faster on two 27 x 27 x 14 slabs (48 % exposed), 3.5x on a 27^3 cube (38 %). Exposure is fixed at
+            foreign particle reaches the interior through two exposed layers, and skipping it makes the contact pass
+            cheaper in proportion to the interior's share. Exposure is fixed at
             construction; after bonds break call ``update_exposure`` (crack faces become exposed), or leave this off
             for bodies that can break. Default True. Off, every particle takes part and, as in LAMMPS, interior
             particles of one body also repel when compressed below bonded_factor of their rest distance.
@@ -146,8 +146,6 @@ class ParticleContact:
         floor_factor: float = 0.6,
         shield_interior: bool = True,
     ):
-        import warp as wp
-
         rest = np.asarray(rest_positions, dtype=np.float64)
         if rest.ndim != 2 or rest.shape[1] != 3 or len(rest) == 0:
             raise ParameterError("rest_positions", f"array of shape {rest.shape}", "an array of shape (n, 3), n >= 1")
@@ -207,18 +205,18 @@ class ParticleContact:
         self._count = wp.zeros(n, dtype=wp.int32, device=d)
 
     def _mark_exposed_at_rest(self, dim: int):
-        import warp as wp
-
-        from .kernels import contact as kc
-
         grid = wp.HashGrid(dim, dim, dim, device=self.device)
         cell = float(SHIELD_FACTOR * 2.0 * self.radius.numpy().max())
         grid.build(self.rest_positions, cell)
-        wp.launch(
-            kc.count_lattice_neighbors,
-            dim=self.particle_count,
-            inputs=[grid.id, self.rest_positions, self.body_id, self.radius, SHIELD_FACTOR, SHIELD_COUNT, self.exposed],
-            device=self.device,
+        kc.mark_exposed_at_rest(
+            grid.id,
+            self.rest_positions,
+            self.body_id,
+            self.radius,
+            SHIELD_FACTOR,
+            SHIELD_COUNT,
+            self.exposed,
+            self.device,
         )
 
     def update_exposure(self, family_offsets, family_neighbors, bond_alive):
@@ -227,26 +225,18 @@ class ParticleContact:
         [n + 1] and int32 [bond_count]) and live flags (uint8 [bond_count]); rows must match this object's. A bond
         pass (cost about one force pass over the family); a family cut at a horizon below 2.05 h exposes everything,
         which is safe."""
-        import warp as wp
-
-        from .kernels import contact as kc
-
         if not self.shield_interior:
             return
-        wp.launch(
-            kc.count_live_lattice_bonds,
-            dim=self.particle_count,
-            inputs=[
-                family_offsets,
-                family_neighbors,
-                bond_alive,
-                self.rest_positions,
-                self.radius,
-                SHIELD_FACTOR,
-                SHIELD_COUNT,
-                self.exposed,
-            ],
-            device=self.device,
+        kc.mark_exposed_by_cracks(
+            family_offsets,
+            family_neighbors,
+            bond_alive,
+            self.rest_positions,
+            self.radius,
+            SHIELD_FACTOR,
+            SHIELD_COUNT,
+            self.exposed,
+            self.device,
         )
 
     def exposed_mask(self) -> np.ndarray:
@@ -286,53 +276,40 @@ class ParticleContact:
         the frame of this object's rest positions) and ``velocities`` [m/s] (vec3 [n]; the half-step velocities of
         velocity Verlet), then applies the hard-floor projection to ``displacements`` and ``velocities`` (free
         particles only: ``kind`` int32 [n], 0 = free; all free when None). Call it after the bond force density and
-        before the kick. Rebuilds the hash grid on ``positions`` (measured: the rebuild is about 5 % of the call; the
-        query dominates). Updates the stiffness cap's scale for the next call (one call of lag). No allocation."""
-        import warp as wp
-
-        from .kernels import contact as kc
-
-        force_kernel, _ = kc.make_particle_contact_kernels(self.shield_interior)
+        before the kick. Rebuilds the hash grid on ``positions`` (the query, not the rebuild, dominates the call's
+        cost). Updates the stiffness cap's scale for the next call (one call of lag). No allocation."""
         self._build_grid(positions)
-        wp.launch(
-            force_kernel,
-            dim=self.particle_count,
-            inputs=[
-                self.grid.id,
-                positions,
-                velocities,
-                self.rest_positions,
-                self.body_id,
-                self.radius,
-                self.volume,
-                self.mass,
-                self.modulus,
-                self._all_free if kind is None else kind,
-                self.exposed,
-                self.query_radius,
-                self.distance_factor,
-                self.bonded_factor,
-                self.damping_ratio,
-                self.friction,
-                self.floor_factor,
-                float(CONTACT_NEIGHBOR_BUDGET),
-                self._scale,
-                force_density,
-                self._position_delta,
-                self._velocity_delta,
-                self._scale_out,
-            ],
-            device=self.device,
+        kc.particle_contact_forces(
+            self.shield_interior,
+            self.grid.id,
+            positions,
+            velocities,
+            self.rest_positions,
+            self.body_id,
+            self.radius,
+            self.volume,
+            self.mass,
+            self.modulus,
+            self._all_free if kind is None else kind,
+            self.exposed,
+            self.query_radius,
+            self.distance_factor,
+            self.bonded_factor,
+            self.damping_ratio,
+            self.friction,
+            self.floor_factor,
+            float(CONTACT_NEIGHBOR_BUDGET),
+            self._scale,
+            force_density,
+            self._position_delta,
+            self._velocity_delta,
+            self._scale_out,
+            self.device,
         )
         wp.copy(self._scale_next, self._scale)
         wp.copy(self._scale, self._scale_out)
         if self.floor_factor > 0.0:
-            wp.launch(
-                kc.apply_contact_projection,
-                dim=self.particle_count,
-                inputs=[displacements, velocities, self._position_delta, self._velocity_delta],
-                device=self.device,
-            )
+            kc.hard_floor(displacements, velocities, self._position_delta, self._velocity_delta, self.device)
 
     def _build_grid(self, positions):
         cell = GRID_CELL_FACTOR * self.query_radius
@@ -344,33 +321,25 @@ class ParticleContact:
     # -- diagnostics ---------------------------------------------------------------------------------------------
     def diagnostics(self, positions) -> ContactDiagnostics:
         """Penalty energy, stiffness row sum and contact count per particle at ``positions`` (vec3 [n], [m])."""
-        import warp as wp
-
-        from .kernels import contact as kc
-
-        _, energy_kernel = kc.make_particle_contact_kernels(self.shield_interior)
         self._build_grid(positions)
-        wp.launch(
-            energy_kernel,
-            dim=self.particle_count,
-            inputs=[
-                self.grid.id,
-                positions,
-                self.rest_positions,
-                self.body_id,
-                self.radius,
-                self.volume,
-                self.modulus,
-                self.exposed,
-                self.query_radius,
-                self.distance_factor,
-                self.bonded_factor,
-                self._scale_next,  # after apply(): the scale its force pass applied (the forces' potential)
-                self._energy,
-                self._row_sum,
-                self._count,
-            ],
-            device=self.device,
+        kc.particle_contact_energies(
+            self.shield_interior,
+            self.grid.id,
+            positions,
+            self.rest_positions,
+            self.body_id,
+            self.radius,
+            self.volume,
+            self.modulus,
+            self.exposed,
+            self.query_radius,
+            self.distance_factor,
+            self.bonded_factor,
+            self._scale_next,  # after apply(): the scale its force pass applied (the forces' potential)
+            self._energy,
+            self._row_sum,
+            self._count,
+            self.device,
         )
         return ContactDiagnostics(
             energy=self._energy.numpy().astype(np.float64),
@@ -425,35 +394,19 @@ class MethodContact:
             ms.contact_mesh()
 
     def _mesh(self, solver):
-        import warp as wp
-
-        from .kernels import contact as kc
-
         points, faces, version = solver.contact_mesh()
         entry = self._meshes.get(id(solver))
         if entry is None or entry[0] != version:
             positions = wp.zeros(points.shape[0], dtype=wp.vec3, device=points.device)
-            wp.launch(
-                kc.gather_positions,
-                dim=points.shape[0],
-                inputs=[points, solver.kin.rest, solver.kin.u, positions],
-                device=points.device,
-            )
+            kc.surface_positions(points, solver.kin.rest, solver.kin.u, positions)
             entry = [version, points, faces, positions, wp.Mesh(points=positions, indices=faces)]
             self._meshes[id(solver)] = entry
         else:
-            wp.launch(
-                kc.gather_positions,
-                dim=points.shape[0],
-                inputs=[points, solver.kin.rest, solver.kin.u, entry[3]],
-                device=points.device,
-            )
+            kc.surface_positions(points, solver.kin.rest, solver.kin.u, entry[3])
             entry[4].refit()
         return entry
 
     def _force_scale(self, solver):
-        import warp as wp
-
         scale = self._to_force.get(id(solver))
         if scale is None:
             scale = wp.array(
@@ -464,49 +417,38 @@ class MethodContact:
 
     def apply(self, dt: float) -> None:
         """Adds the contact forces of the current state into the solvers' force arrays (step length ``dt`` [s])."""
-        import warp as wp
-
-        from .kernels import contact as kc
-
         rate = (0.25 / float(dt)) ** 2
         for ms in self.mesh_solvers:
             _, m_points, m_faces, _, mesh = self._mesh(ms)
             m_work = self._work_account(ms)
             for ps in self.particle_solvers:
                 p_points, p_radius = ps.contact_particles()
-                wp.launch(
-                    kc.particle_mesh_contact,
-                    dim=p_points.shape[0],
-                    inputs=[
-                        p_points,
-                        ps.kin.rest,
-                        ps.kin.u,
-                        ps.kin.v,
-                        ps.kin.mass,
-                        self._force_scale(ps),
-                        p_radius,
-                        mesh.id,
-                        m_points,
-                        m_faces,
-                        ms.kin.v,
-                        ms.kin.mass,
-                        rate,
-                        self.damping_ratio,
-                        ps.force,
-                        ms.force,
-                        float(dt),
-                        self._work_account(ps),
-                        m_work,
-                        WATCH_COLLIDERS,
-                    ],
-                    device=ps.kin.u.device,
+                kc.particle_mesh_forces(
+                    p_points,
+                    ps.kin.rest,
+                    ps.kin.u,
+                    ps.kin.v,
+                    ps.kin.mass,
+                    self._force_scale(ps),
+                    p_radius,
+                    mesh.id,
+                    m_points,
+                    m_faces,
+                    ms.kin.v,
+                    ms.kin.mass,
+                    rate,
+                    self.damping_ratio,
+                    ps.force,
+                    ms.force,
+                    dt,
+                    self._work_account(ps),
+                    m_work,
+                    ps.kin.u.device,
                 )
 
     def _work_account(self, solver):
         """The array the contact work done on ``solver``'s points goes to: its watchdog's work account (slot
         WATCH_COLLIDERS: work done by other bodies), or a scratch array when it has no watchdog."""
-        import warp as wp
-
         watchdog = getattr(solver, "watchdog", None)
         if watchdog is not None:
             return watchdog.acc

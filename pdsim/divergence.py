@@ -1,4 +1,4 @@
-"""Watching a run: the watchdogs (pdsim.kinematics.Watchdog) a run attaches to its solvers, with the scene's speeds,
+"""Watching a run: the watchdogs (pdsim.watchdog.Watchdog) a run attaches to its solvers, with the scene's speeds,
 energy tolerance and projectiles, and the likely cause of a divergence that the watchdog's message names."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import warp as wp
 
 from .colliders import _quat_mul, _rotation_vector
-from .kinematics import TOTAL_TOLERANCE, Watchdog
+from .watchdog import TOTAL_TOLERANCE, Watchdog
 from .solver import PointSolver
 
 
@@ -43,7 +43,7 @@ def scene_speeds(scene, bounds) -> dict:
 
 
 def attach_watchdogs(scene, solvers, *, dt, stable_dt, bounds) -> list:
-    """A pdsim.kinematics.Watchdog on every solver with mass (None for the others), with the scene's energy
+    """A pdsim.watchdog.Watchdog on every solver with mass (None for the others), with the scene's energy
     tolerance, projectile speeds and cause finder."""
     speeds = scene_speeds(scene, bounds)
     projectiles = [c for c in scene.colliders if hasattr(c, "pose") and callable(getattr(c, "pose", None))]

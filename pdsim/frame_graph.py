@@ -28,6 +28,8 @@ from __future__ import annotations
 
 import warnings
 
+import warp as wp
+
 __all__ = ["FrameGraphs"]
 
 
@@ -45,8 +47,6 @@ class FrameGraphs:
     """
 
     def __init__(self, device, enabled: bool | None = None):
-        import warp as wp
-
         self.device = wp.get_device(device)
         self.enabled = self.device.is_cuda if enabled is None else bool(enabled)
         self._graphs: dict = {}
@@ -81,8 +81,6 @@ class FrameGraphs:
         lattice solver; their tables already written by ``begin_frame``); ``run_steps()`` launches the steps
         directly. Returns what was done: "direct", "captured" or
         "replayed"."""
-        import warp as wp
-
         if not self.enabled:
             run_steps()
             return "direct"

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ParameterError
+from .regions import region_mask
 from .validate import check_range, check_vec3
 
 
@@ -231,8 +232,6 @@ def surface_forces_from_triangles(
 ):
     """Forces [N] on the triangles of a closed surface whose centroid lies in ``region``: traction times area, minus
     pressure times area times the outward unit normal. Returns (triangle indices, centroids [m], forces [N])."""
-    from .regions import region_mask
-
     tri = vertices[faces]
     centroids = tri.mean(axis=1)
     mask = region_mask(region, centroids, field=field_name)

@@ -41,20 +41,27 @@ and 0.5 mm.
 from __future__ import annotations
 
 import argparse
+import atexit
 import dataclasses
 import datetime
 import json
 import math
 import os
 import platform
+import shutil
 import subprocess
 import sys
+import tempfile
+import textwrap
 import time
+import types
 from dataclasses import dataclass, field
 
 import numpy as np
+import warp as wp
 
 import pdsim
+import pdsim.kernels
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BEFORE_REVISION = "e153a59"  # last commit with the pair modulus 2 C_k C_j / (C_k + C_j) evaluated as written
@@ -246,8 +253,6 @@ class Record:
 
 
 def _local_positions(solver):
-    import warp as wp
-
     x = solver.positions() - np.asarray(solver.origin, dtype=np.float64)
     return wp.array(x.astype(np.float32), dtype=wp.vec3, device=solver.device)
 
@@ -299,13 +304,6 @@ def run(case: Case, end_time: float, *, sample_every: int = 10) -> Record:
 def _install_revision(revision: str) -> None:
     """Replaces pdsim.contact and pdsim.kernels.contact by their text at git ``revision`` (before anything imports
     them: call first)."""
-    import atexit
-    import shutil
-    import tempfile
-    import types
-
-    import pdsim.kernels
-
     folder = tempfile.mkdtemp(prefix="pdsim_contact_")
     atexit.register(shutil.rmtree, folder, ignore_errors=True)
     for name, path in (("pdsim.kernels.contact", "kernels/contact.py"), ("pdsim.contact", "pdsim/contact.py")):
@@ -382,8 +380,6 @@ def _fmt_time(t) -> str:
 
 
 def _wrap(text: str) -> str:
-    import textwrap
-
     return textwrap.fill(text, width=118, break_long_words=False, break_on_hyphens=False)
 
 
@@ -485,8 +481,6 @@ def _section(records: dict, before: dict, revision: str | None, command: str, wa
 
 
 def _warp_version() -> str:
-    import warp as wp
-
     return wp.config.version
 
 
@@ -519,8 +513,6 @@ def main(argv=None) -> None:
     if args.child:
         _child(args.child, args.resolution)
         return
-
-    import warp as wp
 
     wp.config.quiet = True
     resolution = "quick" if args.quick else "full"

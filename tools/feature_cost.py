@@ -181,7 +181,7 @@ def build(n: int, feature: str, device: str, steps: int):
     v0 = lp.initial_velocities(state, solver.positions(), steps, dt)
     solver.set_velocities(v0)
     if feature == "watchdog":  # Scene.run's watchdog (energy accounted from this state), a check every 16 steps
-        from pdsim.kinematics import Watchdog
+        from pdsim.watchdog import Watchdog
 
         dog = Watchdog(solver, energy_floor=1.0e-12)
         dog.interval, dog.speed_limit = WATCHDOG_INTERVAL, 1.0e9

@@ -68,7 +68,7 @@ from pxr import Usd, UsdGeom
 
 import pdsim
 from pdsim.default_scene import build_scene
-from pdsim.kinematics import Watchdog
+from pdsim.watchdog import Watchdog
 from pdsim.lattice import Lattice, LatticeBody, LatticeFracture, LatticeRuleMixedCoordinate
 
 SPACING = 0.01  # [m] of the peridynamic blocks; FEM cells and lattice spacing alike
