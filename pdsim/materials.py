@@ -183,7 +183,7 @@ class Material:
     def critical_stretch_for(self, horizon: float) -> float:
         """Critical stretch s_c [-] for a horizon delta [m]: given directly, or from G0 as
         s_c = sqrt(G0 / ((3 mu + (3/4)^4 (kappa - 5 mu / 3)) delta)); inf for a material that never breaks by
-        stretch (tests/test_pd_fracture.py checks this calibration against the discrete energy of a cut)."""
+        stretch (tests/test_pd_plastic_fracture.py checks this calibration against the discrete energy of a cut)."""
         if self.critical_stretch is not None:
             return self.critical_stretch
         if self.fracture_energy is None:
