@@ -56,3 +56,15 @@ def add_debris_damping(
         if live > 0.0:
             v_bar = v_live / live
         force_density[k] = force_density[k] + (c / inv_density[k]) * (v_bar - velocities[k])
+
+
+def debris_damping(count, family_offsets, family_neighbors, bond_wv, bond_alive, velocities, inv_density, rate,
+                   damage_threshold, force_density, device):  # fmt: skip
+    """Adds the debris drag to force_density [N/m^3] of the ``count`` particles (add_debris_damping)."""
+    wp.launch(
+        add_debris_damping,
+        dim=count,
+        device=device,
+        inputs=[family_offsets, family_neighbors, bond_wv, bond_alive, velocities, inv_density, rate,
+                damage_threshold, force_density],
+    )  # fmt: skip
