@@ -362,3 +362,89 @@ def lattice_check_finite(u: wp.array(dtype=wp.vec3), result: wp.array(dtype=floa
         result[1] = 1.0
     else:
         wp.atomic_max(result, 0, s)
+
+
+# ---------------------------------------------------------------------------------------------------- launches
+def advance_step_clock(step_clock, device):
+    """step_clock[0] += 1 on the device (lattice_step_clock)."""
+    wp.launch(lattice_step_clock, dim=1, inputs=[step_clock], device=device)
+
+
+def set_kind(count, indices, new_kind, new_group, kind, group, device):
+    """The ``count`` particles ``indices`` become ``new_kind`` with leader path ``new_group`` (lattice_set_kind)."""
+    wp.launch(lattice_set_kind, dim=count, inputs=[indices, new_kind, new_group, kind, group], device=device)
+
+
+def move_leaders(count, step_clock, leader_ids, group, key_offsets, key_step, key_disp, group_velocity, u_cur, u_next,
+                 device):  # fmt: skip
+    """The ``count`` leaders ``leader_ids`` take their path's displacement [m] at this step (lattice_move_leaders)."""
+    wp.launch(
+        lattice_move_leaders,
+        dim=count,
+        inputs=[step_clock, leader_ids, group, key_offsets, key_step, key_disp, group_velocity, u_cur, u_next],
+        device=device,
+    )
+
+
+def follow(kernel, count, rest, kind, row_offsets, link_neighbor, link_offset, link_alive, offset_delta, offset_weight,
+           offset_shell, fictitious_scale, params, u_cur, u_next, device):  # fmt: skip
+    """The follower rule over ``count`` particles with a kernel from :func:`make_follow_kernel`: u_next [m] of every
+    follower from u_cur."""
+    wp.launch(
+        kernel,
+        dim=count,
+        inputs=[rest, kind, row_offsets, link_neighbor, link_offset, link_alive, offset_delta, offset_weight,
+                offset_shell, fictitious_scale, params, u_cur, u_next],
+        device=device,
+    )  # fmt: skip
+
+
+def copy_frame(first, count, frame_offsets, frame_sources, u_source, u_next, device):
+    """Frame points first .. first + count - 1 take the mean displacement [m] of their sources (lattice_copy_frame)."""
+    wp.launch(
+        lattice_copy_frame,
+        dim=count,
+        inputs=[first, frame_offsets, frame_sources, u_source, u_next],
+        device=device,
+    )
+
+
+def break_links(count, body_count, row_offsets, link_neighbor, link_offset, offset_delta, offset_threshold, u,
+                link_alive, broken_total, device):  # fmt: skip
+    """Breaks the over-stretched body links of the ``count`` particles and counts them (lattice_break_links)."""
+    wp.launch(
+        lattice_break_links,
+        dim=count,
+        inputs=[body_count, row_offsets, link_neighbor, link_offset, offset_delta, offset_threshold, u, link_alive,
+                broken_total],
+        device=device,
+    )  # fmt: skip
+
+
+def pseudo_energy(count, row_offsets, link_neighbor, link_offset, link_alive, use_alive, offset_delta, offset_length, u,
+                  pe1, pe1_intact, broken, device):  # fmt: skip
+    """PE1 [m^2] (all links and intact links) and lost links of the ``count`` particles (lattice_pseudo_energy)."""
+    wp.launch(
+        lattice_pseudo_energy,
+        dim=count,
+        inputs=[row_offsets, link_neighbor, link_offset, link_alive, use_alive, offset_delta, offset_length, u, pe1,
+                pe1_intact, broken],
+        device=device,
+    )  # fmt: skip
+
+
+def record_tracks(count, ids, row_offsets, link_neighbor, link_offset, offset_delta, offset_length, u, slot, track_u,
+                  track_pe1, device):  # fmt: skip
+    """Displacement [m] and PE1 [m^2] of the ``count`` tracked particles into row ``slot`` (lattice_record_tracks)."""
+    wp.launch(
+        lattice_record_tracks,
+        dim=count,
+        inputs=[ids, row_offsets, link_neighbor, link_offset, offset_delta, offset_length, u, slot, track_u,
+                track_pe1],
+        device=device,
+    )  # fmt: skip
+
+
+def check_finite(count, u, result, device):
+    """result[0] = max |u| [m] over ``count`` particles, result[1] = 1 if one is not finite (lattice_check_finite)."""
+    wp.launch(lattice_check_finite, dim=count, inputs=[u, result], device=device)
