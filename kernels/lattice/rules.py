@@ -256,6 +256,13 @@ def lattice_copy_frame(
 
 
 # ---------------------------------------------------------------------------------------------------- fracture
+@wp.func
+def lattice_link_length(u: wp.array(dtype=wp.vec3), uj: wp.vec3, k: int, rest_delta: wp.vec3) -> float:
+    """Current length |u_k - u_j + dX| [m] of the link from particle j (displacement uj [m]) to particle k, with dX
+    its rest offset [m] (the breaking test and PE1 read it)."""
+    return wp.length(u[k] - uj + rest_delta)
+
+
 @wp.kernel
 def lattice_break_links(
     body_count: int,
@@ -279,7 +286,7 @@ def lattice_break_links(
         k = link_neighbor[q]
         if link_alive[q] != wp.uint8(0) and (j < body_count or k < body_count):
             o = int(link_offset[q])
-            d = wp.length(u[k] - uj + offset_delta[o])
+            d = lattice_link_length(u, uj, k, offset_delta[o])
             if d > offset_threshold[o]:
                 link_alive[q] = wp.uint8(0)
                 n += 1
@@ -312,7 +319,7 @@ def lattice_pseudo_energy(
     nb = int(0)
     for q in range(row_offsets[j], row_offsets[j + 1]):
         o = int(link_offset[q])
-        e = wp.length(u[link_neighbor[q]] - uj + offset_delta[o]) - offset_length[o]
+        e = lattice_link_length(u, uj, link_neighbor[q], offset_delta[o]) - offset_length[o]
         e2 = e * e
         e_all += e2
         alive = True
@@ -347,7 +354,7 @@ def lattice_record_tracks(
     e_all = float(0.0)
     for q in range(row_offsets[j], row_offsets[j + 1]):
         o = int(link_offset[q])
-        e = wp.length(u[link_neighbor[q]] - uj + offset_delta[o]) - offset_length[o]
+        e = lattice_link_length(u, uj, link_neighbor[q], offset_delta[o]) - offset_length[o]
         e_all += e * e
     track_u[slot, t] = uj
     track_pe1[slot, t] = e_all

@@ -486,29 +486,28 @@ class SolverPeridynamics(PointSolver):
         pd_step.deformed_positions(self.model.particle_count, self.model.rest_positions, self.kin.u, out, self.device)
         return out
 
+    def _particle_vectors(self, name: str, values) -> np.ndarray:
+        """``values`` as float64 [particle_count, 3]; ParameterError naming ``name`` for another shape."""
+        a = np.asarray(values, dtype=np.float64)
+        if a.shape != (self.model.particle_count, 3):
+            raise ParameterError(name, a.shape, f"shape ({self.model.particle_count}, 3)")
+        return a
+
     def set_positions(self, positions: np.ndarray):
         """Sets world positions [m] (shape [particle_count, 3]; the displacements become positions - rest) and
         recomputes forces, dilatation and accelerations."""
-        p = np.asarray(positions, dtype=np.float64)
-        if p.shape != (self.model.particle_count, 3):
-            raise ParameterError("positions", p.shape, f"shape ({self.model.particle_count}, 3)")
+        p = self._particle_vectors("positions", positions)
         self.kin.set_displacements(p - self.model.rest_host)
         self._refresh_accelerations()
 
     def set_displacements(self, displacements: np.ndarray):
         """Sets displacements [m] (shape [particle_count, 3]) and recomputes forces and accelerations."""
-        u = np.asarray(displacements, dtype=np.float64)
-        if u.shape != (self.model.particle_count, 3):
-            raise ParameterError("displacements", u.shape, f"shape ({self.model.particle_count}, 3)")
-        self.kin.set_displacements(u)
+        self.kin.set_displacements(self._particle_vectors("displacements", displacements))
         self._refresh_accelerations()
 
     def set_velocities(self, velocities: np.ndarray):
         """Overwrites velocities [m/s], shape [particle_count, 3]."""
-        v = np.asarray(velocities, dtype=np.float64)
-        if v.shape != (self.model.particle_count, 3):
-            raise ParameterError("velocities", v.shape, f"shape ({self.model.particle_count}, 3)")
-        self.kin.set_velocities(v)
+        self.kin.set_velocities(self._particle_vectors("velocities", velocities))
 
     def dilatation(self) -> np.ndarray:
         """theta per particle at the current positions [-]."""
