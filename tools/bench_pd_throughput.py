@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import hashlib
 import importlib.util
 import json
 import os
@@ -66,6 +67,13 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import warp as wp
+
+import pdsim
+from pdsim.kernels import integration
+from pdsim.kernels.peridynamics import bonds as pd_bonds
+from pdsim.kernels.peridynamics import step as pd_step
 
 SPACING = 1.0e-3
 """Lattice spacing h [m]."""
@@ -114,12 +122,6 @@ def cpu_model() -> str:
 
 def kernel_source_digest() -> str:
     """Short SHA-1 of the step's kernel sources (peridynamics/bonds.py, peridynamics/step.py, integration.py)."""
-    import hashlib
-
-    from pdsim.kernels import integration
-    from pdsim.kernels.peridynamics import bonds as pd_bonds
-    from pdsim.kernels.peridynamics import step as pd_step
-
     digest = hashlib.sha1()
     for module in (pd_bonds, pd_step, integration):
         digest.update(Path(module.__file__).read_bytes())
@@ -128,8 +130,6 @@ def kernel_source_digest() -> str:
 
 def machine_info(device) -> dict:
     """CPU model, core count, load average, Warp version, device name, Python version and the date (UTC)."""
-    import warp as wp
-
     try:
         load = [round(x, 2) for x in os.getloadavg()]
     except OSError:
@@ -157,8 +157,6 @@ def critical_stretch_for(state: str, fracture: bool) -> float | None:
 def build_solver(n: int, *, horizon_factor: float, device: str, plastic=False, critical_stretch=None, threads=1):
     """The benchmark block: n^3 particles, families cut at delta (no partial volumes), at rest; its bond passes on
     ``threads`` CPU threads (None on a CUDA device)."""
-    import pdsim
-
     material = pdsim.Material(
         density=DENSITY,
         youngs_modulus=YOUNGS_MODULUS,
@@ -188,8 +186,6 @@ def time_steps(solver, dt: float, steps: int) -> tuple[float, float]:
     """Wall time and process CPU time [s] of ``steps`` solver steps, synchronising the device before reading the
     clocks at both ends. On the CPU device Warp runs the kernels in the calling thread, so the CPU time is the time the
     step had a core: on a machine shared with other jobs it is the steadier measure of a core's throughput."""
-    import warp as wp
-
     wp.synchronize_device(solver.device)
     start, cpu = time.perf_counter(), time.process_time()
     for _ in range(steps):
@@ -202,8 +198,6 @@ def time_kernels(solver, dt: float, steps: int) -> tuple[dict[str, float], dict[
     """Wall and CPU seconds spent in each kernel over ``steps`` steps: wraps ``warp.launch`` so that every launch made
     by the solver is synchronised and timed on its own (the solver's own launch arguments are used unchanged; the
     CPU time is the calling thread's, so run it on a solver with one thread)."""
-    import warp as wp
-
     totals: dict[str, float] = {}
     cpu_totals: dict[str, float] = {}
     original = wp.launch
@@ -229,8 +223,6 @@ def time_kernels(solver, dt: float, steps: int) -> tuple[dict[str, float], dict[
 
 
 def _init_warp(device: str):
-    import warp as wp
-
     if hasattr(wp, "LOG_WARNING"):
         wp.config.log_level = wp.LOG_WARNING  # Warp >= 1.12: no banner or module-load lines
     else:
@@ -256,8 +248,6 @@ def run_pdsim(
 ) -> dict:
     """Times pdsim on the block in ``state`` with its bond passes on ``threads`` CPU threads; returns its figures, the
     rest positions and initial velocities (for LAMMPS) and the time step."""
-    import warp as wp
-
     lp = _load_lammps_runner()
     dev = _init_warp(device)
     sc = critical_stretch_for(state, fracture)

@@ -1,4 +1,4 @@
-"""Kernels of the position-based particle lattice (shared/seeds/pbd_lattice.txt, dell'Erba 2018).
+"""Kernels of the position-based particle lattice (dell'Erba 2018).
 
 The state is the displacement u = x - X of every particle (rest position X), double-buffered: a step reads
 ``u_cur`` (the configuration C_{t-1}, with the leaders already moved to step t: the paper's "intermediate lattice") and

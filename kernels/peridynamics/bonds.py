@@ -1,6 +1,7 @@
-"""Bond kernels of the ordinary state-based peridynamic solid (shared/seeds/pd_supplement.txt).
+"""Bond kernels of the ordinary state-based peridynamic solid (the peridynamics supplement of the project
+specification).
 
-Notation (DESIGN.md section 2): reference bond xi = X_j - X_k, L = |xi|, deformed eta = y_j - y_k, l = |eta|,
+Notation: reference bond xi = X_j - X_k, L = |xi|, deformed eta = y_j - y_k, l = |eta|,
 n = eta / l, extension e = l - L, weight w = delta / L, V_j the neighbour's volume and beta its
 partial-volume factor. Per bond we store ``bond_geom = (xi / L, L)`` and ``bond_wv = w V_j beta``.
 

@@ -1,4 +1,4 @@
-"""Bodies of the position-based particle lattice (shared/seeds/pbd_lattice.txt, dell'Erba 2018): particle kinds, the
+"""Bodies of the position-based particle lattice (dell'Erba 2018): particle kinds, the
 body's points, frame, neighbour links, leaders and category changes. The lattices and neighbourhoods are in
 pdsim/lattice/geometry.py, the rules and fracture in pdsim/lattice/rules.py, the solver in pdsim/lattice/solver.py,
 the kernels in kernels/lattice/rules.py, the choices made where the paper is open in docs/lattice.md.

@@ -1,4 +1,4 @@
-"""Geometry of the position-based particle lattice (shared/seeds/pbd_lattice.txt, dell'Erba 2018): the Bravais
+"""Geometry of the position-based particle lattice (dell'Erba 2018): the Bravais
 lattices (``LatticeType``, ``Lattice``) and the Lagrangian neighbourhoods of their points (``LatticeNeighbourhood``).
 Lengths are in metres; integer lattice coordinates c give the points origin + sum_i c_i a_i."""
 

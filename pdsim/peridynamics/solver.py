@@ -1,9 +1,9 @@
 """State-based peridynamic solid: bodies, the model built from them, and the explicit solver.
 
-The elastic model is the one derived in shared/seeds/pd_supplement.txt (kernels/peridynamics/bonds.py lists the
-formulas). Its three parameters come from matching two reference deformations, an isotropic expansion (theta = 3 zeta,
-W = 9/2 kappa zeta^2) and a shear (W = 1/2 mu zeta^2). The supplement evaluates the family sums as integrals over a
-full sphere, which gives the constants
+The elastic model is the one derived in the peridynamics supplement of the project specification
+(kernels/peridynamics/bonds.py lists the formulas). Its three parameters come from matching two reference deformations,
+an isotropic expansion (theta = 3 zeta, W = 9/2 kappa zeta^2) and a shear (W = 1/2 mu zeta^2). The supplement evaluates
+the family sums as integrals over a full sphere, which gives the constants
 
     d = 9 / (4 pi delta^4),   b = 15 mu / (2 pi delta^5),   a = kappa d / 2,   g = (5 mu / 6) d / b = delta / 4.
 
@@ -657,9 +657,8 @@ class ParticleRanges:
     when all are done. A particle's arithmetic does not depend on its range, so results are bit-identical for any
     thread count. On a CUDA device there is one range: one launch over all particles.
 
-    Warp (1.19) passes each launch's thread index as an argument of the generated CPU function (early versions kept
-    it in a static variable, which made concurrent CPU launches unsafe) and builds each launch's argument block
-    afresh; what is not safe is loading a module from several threads at once, so the kernels' modules are loaded
+    Warp (1.19) passes each launch's thread index as an argument of the generated CPU function and builds each
+    launch's argument block afresh, so concurrent CPU launches are safe; what is not safe is loading a module from several threads at once, so the kernels' modules are loaded
     from the calling thread before the first threaded launch (``_load``). While the device records a graph
     (``wp.ScopedCapture``, pdsim/frame_graph.py) the ranges are launched one after another from the calling thread,
     which is the only thread a capture records; a CPU replay then runs them on one thread."""
