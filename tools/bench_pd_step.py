@@ -21,11 +21,12 @@ os.environ.setdefault("PDSIM_THREADS", "1")  # set before pdsim is imported, whe
 
 import warp as wp
 
-import pdsim
+wp.config.quiet = True  # before pdsim is imported (importing it initialises Warp)
+
+import pdsim  # noqa: E402
 
 
 def main() -> None:
-    wp.config.quiet = True
 
     n, h = 25, 1.0e-3
     mat = pdsim.Material(density=1000.0, youngs_modulus=1.0e9, poisson_ratio=0.25)

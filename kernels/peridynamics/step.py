@@ -31,7 +31,7 @@ Formulas (kernels/peridynamics/bonds.py gives the notation and the elastic model
   every pass after the flag (their cached (n, e) is left as it was).
 
 A step is two passes over the particles, dilatation (with the plastic update) then force, each launched over
-contiguous particle ranges (pdsim/peridynamics/solver.py, ParticleRanges): a kernel writes only its particles' rows
+contiguous particle ranges (pdsim/peridynamics/ranges.py, ParticleRanges): a kernel writes only its particles' rows
 and their own bonds' rows (and, for the mirror of the plastic extensions, the one slot each of its bonds owns at the
 reverse bond, read only by the next pass), and reads other particles' rows only from what an earlier pass wrote.
 """
