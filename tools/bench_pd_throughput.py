@@ -182,6 +182,15 @@ def mean_damage(solver) -> float:
     return float(frac.mean())
 
 
+def _least_favourable(states: dict, key: str):
+    """(state, value) of the smallest ``key`` over the state entries that hold it, or None when none does."""
+    values = {s: e[key] for s, e in states.items() if key in e}
+    if not values:
+        return None
+    worst = min(values, key=values.get)
+    return worst, values[worst]
+
+
 def time_steps(solver, dt: float, steps: int) -> tuple[float, float]:
     """Wall time and process CPU time [s] of ``steps`` solver steps, synchronising the device before reading the
     clocks at both ends. On the CPU device Warp runs the kernels in the calling thread, so the CPU time is the time the
@@ -432,23 +441,19 @@ def run_benchmark(
                     entry["ratio_all_cores_cpu"] = alln["ratio_cpu"]
                 entry["lammps_all_cores_bond_visits_per_s"] = alln["bond_visits_per_s"]
         result["states"][state] = entry
-    ratios = {s: e["ratio"] for s, e in result["states"].items() if "ratio" in e}
-    if ratios:
-        worst = min(ratios, key=ratios.get)
-        result["least_favourable_state"] = worst
-        result["least_favourable_ratio"] = ratios[worst]
-        cpu = {s: e["ratio_cpu"] for s, e in result["states"].items() if "ratio_cpu" in e}
+    least = _least_favourable(result["states"], "ratio")
+    if least:
+        result["least_favourable_state"], result["least_favourable_ratio"] = least
+        cpu = _least_favourable(result["states"], "ratio_cpu")
         if cpu:
-            result["least_favourable_ratio_cpu"] = min(cpu.values())
-            result["least_favourable_state_cpu"] = min(cpu, key=cpu.get)
-        allc = {s: e["ratio_all_cores"] for s, e in result["states"].items() if "ratio_all_cores" in e}
+            result["least_favourable_ratio_cpu"] = cpu[1]
+            result["least_favourable_state_cpu"] = cpu[0]
+        allc = _least_favourable(result["states"], "ratio_all_cores")
         if allc:
-            w = min(allc, key=allc.get)
-            result["least_favourable_all_cores_state"] = w
-            result["least_favourable_all_cores_ratio"] = allc[w]
-            allc_cpu = {s: e["ratio_all_cores_cpu"] for s, e in result["states"].items() if "ratio_all_cores_cpu" in e}
+            result["least_favourable_all_cores_state"], result["least_favourable_all_cores_ratio"] = allc
+            allc_cpu = _least_favourable(result["states"], "ratio_all_cores_cpu")
             if allc_cpu:
-                result["least_favourable_all_cores_ratio_cpu"] = min(allc_cpu.values())
+                result["least_favourable_all_cores_ratio_cpu"] = allc_cpu[1]
     if len(states) == 1:  # the flat keys of a single-state run (what earlier versions of this tool printed)
         only = result["states"][states[0]]
         pd = only["pdsim"]

@@ -19,6 +19,9 @@ effect). Stability of the explicit step needs c dt < 1.
 import warp as wp
 
 
+# add_debris_damping repeats compute_damage's sums of live and total bond weight (kernels/peridynamics/step.py) on
+# purpose: it gathers the neighbours' velocities in the same loop, where sharing compute_damage's would take a second
+# pass over the family.
 @wp.kernel
 def add_debris_damping(
     family_offsets: wp.array(dtype=wp.int32),

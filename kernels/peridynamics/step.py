@@ -53,6 +53,8 @@ def make_step_kernels(fracture: bool, plastic: bool):
     FRACTURE = key[0]
     PLASTIC = key[1]
 
+    # tools/feature_cost.py holds a deliberate stripped copy of the elastic dilatation and force below (it measures
+    # what the feature branches cost an elastic scene): keep it in step (tests/test_bench_tools.py checks the bits).
     @wp.kernel(module="unique")
     def dilatation(
         first: int,
