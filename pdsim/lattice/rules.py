@@ -5,12 +5,16 @@ position-based particle lattice."""
 from __future__ import annotations
 
 from dataclasses import KW_ONLY, dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import ParameterError
 from ..kernels.lattice import rules as kl
 from ..validate import check_range
+
+if TYPE_CHECKING:  # annotations only: body.py imports this module
+    from .body import LatticeBody
 
 
 # ------------------------------------------------------------------------------------------------------------- rules
