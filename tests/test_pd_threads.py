@@ -7,7 +7,7 @@ import pytest
 
 import pdsim
 from pdsim.errors import ParameterError
-from pdsim.peridynamics.solver import MIN_BONDS_PER_THREAD, ParticleRanges, available_cores
+from pdsim.peridynamics.ranges import MIN_BONDS_PER_THREAD, ParticleRanges, available_cores
 
 CENTER = (150.0, -40.0, 20.0)  # far from the origin: the local frame must not depend on the thread count either
 

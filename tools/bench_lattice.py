@@ -17,10 +17,12 @@ import os
 import platform
 import time
 
+import warp as wp
+
+from pdsim.lattice import Lattice, LatticeBody, LatticeFracture, LatticeNeighbourhood, SolverLattice
+
 
 def build(dim: int, n: int, gradient: int, fracture: bool):
-    from pdsim.lattice import Lattice, LatticeBody, LatticeFracture, LatticeNeighbourhood
-
     side = round(n ** (1.0 / dim))
     lattice = Lattice.square(1.0) if dim == 2 else Lattice.simple_cubic(1.0)
     body = LatticeBody.block(
@@ -36,10 +38,6 @@ def build(dim: int, n: int, gradient: int, fracture: bool):
 
 
 def measure(dim: int, n: int, gradient: int, *, steps: int, repeat: int, device: str, fracture: bool) -> dict:
-    import warp as wp
-
-    from pdsim.lattice import SolverLattice
-
     t0 = time.perf_counter()
     body = build(dim, n, gradient, fracture)
     solver = SolverLattice([body], device=device)
@@ -78,8 +76,6 @@ def main(argv=None) -> int:
     p.add_argument("--device", default="cpu")
     p.add_argument("--fracture", action="store_true", help="links can break (adds the link-loss kernel)")
     args = p.parse_args(argv)
-
-    import warp as wp
 
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING

@@ -17,13 +17,16 @@ import time
 
 import numpy as np
 
+os.environ.setdefault("PDSIM_THREADS", "1")  # set before pdsim is imported, whenever a checkout reads it
+
+import warp as wp
+
+wp.config.quiet = True  # before pdsim is imported (importing it initialises Warp)
+
+import pdsim  # noqa: E402
+
 
 def main() -> None:
-    import warp as wp
-
-    os.environ.setdefault("PDSIM_THREADS", "1")
-    wp.config.quiet = True
-    import pdsim
 
     n, h = 25, 1.0e-3
     mat = pdsim.Material(density=1000.0, youngs_modulus=1.0e9, poisson_ratio=0.25)

@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import hashlib
 import importlib.util
 import json
 import os
@@ -66,6 +67,13 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import warp as wp
+
+import pdsim
+from pdsim.kernels import integration
+from pdsim.kernels.peridynamics import bonds as pd_bonds
+from pdsim.kernels.peridynamics import step as pd_step
 
 SPACING = 1.0e-3
 """Lattice spacing h [m]."""
@@ -114,12 +122,6 @@ def cpu_model() -> str:
 
 def kernel_source_digest() -> str:
     """Short SHA-1 of the step's kernel sources (peridynamics/bonds.py, peridynamics/step.py, integration.py)."""
-    import hashlib
-
-    from pdsim.kernels import integration
-    from pdsim.kernels.peridynamics import bonds as pd_bonds
-    from pdsim.kernels.peridynamics import step as pd_step
-
     digest = hashlib.sha1()
     for module in (pd_bonds, pd_step, integration):
         digest.update(Path(module.__file__).read_bytes())
@@ -128,8 +130,6 @@ def kernel_source_digest() -> str:
 
 def machine_info(device) -> dict:
     """CPU model, core count, load average, Warp version, device name, Python version and the date (UTC)."""
-    import warp as wp
-
     try:
         load = [round(x, 2) for x in os.getloadavg()]
     except OSError:
@@ -157,8 +157,6 @@ def critical_stretch_for(state: str, fracture: bool) -> float | None:
 def build_solver(n: int, *, horizon_factor: float, device: str, plastic=False, critical_stretch=None, threads=1):
     """The benchmark block: n^3 particles, families cut at delta (no partial volumes), at rest; its bond passes on
     ``threads`` CPU threads (None on a CUDA device)."""
-    import pdsim
-
     material = pdsim.Material(
         density=DENSITY,
         youngs_modulus=YOUNGS_MODULUS,
@@ -184,12 +182,19 @@ def mean_damage(solver) -> float:
     return float(frac.mean())
 
 
+def _least_favourable(states: dict, key: str):
+    """(state, value) of the smallest ``key`` over the state entries that hold it, or None when none does."""
+    values = {s: e[key] for s, e in states.items() if key in e}
+    if not values:
+        return None
+    worst = min(values, key=values.get)
+    return worst, values[worst]
+
+
 def time_steps(solver, dt: float, steps: int) -> tuple[float, float]:
     """Wall time and process CPU time [s] of ``steps`` solver steps, synchronising the device before reading the
     clocks at both ends. On the CPU device Warp runs the kernels in the calling thread, so the CPU time is the time the
     step had a core: on a machine shared with other jobs it is the steadier measure of a core's throughput."""
-    import warp as wp
-
     wp.synchronize_device(solver.device)
     start, cpu = time.perf_counter(), time.process_time()
     for _ in range(steps):
@@ -202,8 +207,6 @@ def time_kernels(solver, dt: float, steps: int) -> tuple[dict[str, float], dict[
     """Wall and CPU seconds spent in each kernel over ``steps`` steps: wraps ``warp.launch`` so that every launch made
     by the solver is synchronised and timed on its own (the solver's own launch arguments are used unchanged; the
     CPU time is the calling thread's, so run it on a solver with one thread)."""
-    import warp as wp
-
     totals: dict[str, float] = {}
     cpu_totals: dict[str, float] = {}
     original = wp.launch
@@ -229,8 +232,6 @@ def time_kernels(solver, dt: float, steps: int) -> tuple[dict[str, float], dict[
 
 
 def _init_warp(device: str):
-    import warp as wp
-
     if hasattr(wp, "LOG_WARNING"):
         wp.config.log_level = wp.LOG_WARNING  # Warp >= 1.12: no banner or module-load lines
     else:
@@ -256,8 +257,6 @@ def run_pdsim(
 ) -> dict:
     """Times pdsim on the block in ``state`` with its bond passes on ``threads`` CPU threads; returns its figures, the
     rest positions and initial velocities (for LAMMPS) and the time step."""
-    import warp as wp
-
     lp = _load_lammps_runner()
     dev = _init_warp(device)
     sc = critical_stretch_for(state, fracture)
@@ -442,23 +441,19 @@ def run_benchmark(
                     entry["ratio_all_cores_cpu"] = alln["ratio_cpu"]
                 entry["lammps_all_cores_bond_visits_per_s"] = alln["bond_visits_per_s"]
         result["states"][state] = entry
-    ratios = {s: e["ratio"] for s, e in result["states"].items() if "ratio" in e}
-    if ratios:
-        worst = min(ratios, key=ratios.get)
-        result["least_favourable_state"] = worst
-        result["least_favourable_ratio"] = ratios[worst]
-        cpu = {s: e["ratio_cpu"] for s, e in result["states"].items() if "ratio_cpu" in e}
+    least = _least_favourable(result["states"], "ratio")
+    if least:
+        result["least_favourable_state"], result["least_favourable_ratio"] = least
+        cpu = _least_favourable(result["states"], "ratio_cpu")
         if cpu:
-            result["least_favourable_ratio_cpu"] = min(cpu.values())
-            result["least_favourable_state_cpu"] = min(cpu, key=cpu.get)
-        allc = {s: e["ratio_all_cores"] for s, e in result["states"].items() if "ratio_all_cores" in e}
+            result["least_favourable_ratio_cpu"] = cpu[1]
+            result["least_favourable_state_cpu"] = cpu[0]
+        allc = _least_favourable(result["states"], "ratio_all_cores")
         if allc:
-            w = min(allc, key=allc.get)
-            result["least_favourable_all_cores_state"] = w
-            result["least_favourable_all_cores_ratio"] = allc[w]
-            allc_cpu = {s: e["ratio_all_cores_cpu"] for s, e in result["states"].items() if "ratio_all_cores_cpu" in e}
+            result["least_favourable_all_cores_state"], result["least_favourable_all_cores_ratio"] = allc
+            allc_cpu = _least_favourable(result["states"], "ratio_all_cores_cpu")
             if allc_cpu:
-                result["least_favourable_all_cores_ratio_cpu"] = min(allc_cpu.values())
+                result["least_favourable_all_cores_ratio_cpu"] = allc_cpu[1]
     if len(states) == 1:  # the flat keys of a single-state run (what earlier versions of this tool printed)
         only = result["states"][states[0]]
         pd = only["pdsim"]

@@ -55,6 +55,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import warp as wp
 
+import bench_pd_throughput as bench
+import pdsim
+from pdsim.kernels.peridynamics import step as pd_step
+from pdsim.watchdog import Watchdog
+
 SPACING = 1.0e-3
 YOUNGS_MODULUS = 1.0e9
 POISSON_RATIO = 0.25
@@ -65,6 +70,9 @@ DOC_END = "<!-- feature_cost:end -->"
 
 
 # -- the stripped elastic kernels -----------------------------------------------------------------------------------
+# Deliberate copies of kernels/peridynamics/step.py's elastic dilatation and force, with the fracture and plasticity
+# code cut out by hand: they measure what that code costs an elastic scene, so they must repeat the kernels' arithmetic
+# (stripped_check fails when they no longer give bit-identical results).
 @wp.kernel
 def dilatation_stripped(
     displacements: wp.array(dtype=wp.vec3),
@@ -126,21 +134,13 @@ def force_stripped(
 
 
 # -- the block and its variants --------------------------------------------------------------------------------------
-def _bench():
-    import bench_pd_throughput as bench
-
-    return bench
-
-
 def _lammps_runner():
-    return _bench()._load_lammps_runner()
+    return bench._load_lammps_runner()
 
 
 def build(n: int, feature: str, device: str, steps: int):
     """(solver, dt, initial velocities) of the block with ``feature`` added ("elastic": none; "all": every feature but
     breaking)."""
-    import pdsim
-
     lp = _lammps_runner()
     every = feature == "all"
     kw = {"density": DENSITY, "youngs_modulus": YOUNGS_MODULUS, "poisson_ratio": POISSON_RATIO}
@@ -181,8 +181,6 @@ def build(n: int, feature: str, device: str, steps: int):
     v0 = lp.initial_velocities(state, solver.positions(), steps, dt)
     solver.set_velocities(v0)
     if feature == "watchdog":  # Scene.run's watchdog (energy accounted from this state), a check every 16 steps
-        from pdsim.watchdog import Watchdog
-
         dog = Watchdog(solver, energy_floor=1.0e-12)
         dog.interval, dog.speed_limit = WATCHDOG_INTERVAL, 1.0e9
     return solver, dt
@@ -240,7 +238,7 @@ def feature_costs(n: int, steps: int, pairs: int, device: str, features=FEATURES
             "feature_runs": f,
         }
         if feature == "fracture_breaking":
-            row["mean_damage_end"] = _bench().mean_damage(solver)
+            row["mean_damage_end"] = bench.mean_damage(solver)
         rows.append(row)
         if log:
             log(f"{feature:<22s} {row['feature_ms_per_step']:8.2f} ms/step vs {row['baseline_ms_per_step']:8.2f}: "
@@ -281,15 +279,14 @@ def surface_costs(n: int, device: str, frames: int = 5, steps_between: int = 20,
 
 def stripped_check(n: int, device: str, launches: int = 20, rounds: int = 8) -> dict:
     """The elastic kernel variant against the stripped copy: bit-identical results, then median times."""
-    from pdsim.kernels.peridynamics import step as pd_step
-
     solver, dt = build(n, "elastic", device, 100)
     solver.simulate(dt, 20)  # a deformed state
     m, s = solver.model, solver.state
     ks = pd_step.make_step_kernels(False, False)
-    u8, f1, _ = solver._dummy_u8, solver._dummy_f, solver._dummy_i
+    u8, f1, i1 = solver._dummy_u8, solver._dummy_f, solver._dummy_i
     d = solver.device
     u = solver.kin.u
+    launch = pd_step.single_launch(m.particle_count, d)
 
     def arrays():
         return (
@@ -300,12 +297,15 @@ def stripped_check(n: int, device: str, launches: int = 20, rounds: int = 8) -> 
 
     def variant(o):
         theta, bp, ne, force = o
-        wp.launch(ks.dilatation, dim=m.particle_count, device=d, inputs=[
-            0, u, m.family_offsets, m.family_neighbors, m.bond_geom, m.bond_wv_dil, m.dil_d, m.dil_coef, m.dev_b, u8,
-            theta, bp, ne, f1, 0, *([f1] * 9), solver._dummy_i, f1])  # fmt: skip
-        wp.launch(ks.force, dim=m.particle_count, device=d, inputs=[
-            0, m.family_offsets, m.family_neighbors, m.bond_geom, ne, m.bond_wv_dil, m.bond_wv_dev, bp, u8, f1, f1,
-            f1, f1, f1, f1, 0, f1, f1, force])  # fmt: skip
+        pd_step.dilatation(
+            launch, ks, displacements=u, family_offsets=m.family_offsets, family_neighbors=m.family_neighbors,
+            bond_geom=m.bond_geom, bond_wv_dil=m.bond_wv_dil, dil_d=m.dil_d, dil_coef=m.dil_coef, dev_b=m.dev_b,
+            bond_alive=u8, theta=theta, bp=bp, bond_ne=ne, stretch_min=f1, **pd_step.plastic_placeholders(f1, i1))  # fmt: skip
+        pd_step.bond_forces(
+            launch, ks, family_offsets=m.family_offsets, family_neighbors=m.family_neighbors, bond_geom=m.bond_geom,
+            bond_ne=ne, bond_wv_dil=m.bond_wv_dil, bond_wv_dev=m.bond_wv_dev, bp=bp, bond_alive=u8,
+            bond_critical_stretch=f1, compressive_bonus=f1, compressive_stretch_floor=f1, stretch_min=f1, eqps=f1,
+            failure_eqps=f1, plastic_bond_count=0, bond_plastic=f1, bond_plastic_reverse=f1, force_density=force)  # fmt: skip
 
     def stripped(o):
         theta, bp, ne, force = o
@@ -431,7 +431,6 @@ def main(argv=None) -> int:
         wp.config.log_level = wp.LOG_WARNING
     wp.init()
     log = None if args.json else (lambda s: print(s, flush=True))
-    bench = _bench()
     start = time.perf_counter()
     probe, _ = build(args.n, "elastic", args.device, 1)
     result = {

@@ -1,4 +1,4 @@
-"""Kernels of the position-based particle lattice (shared/seeds/pbd_lattice.txt, dell'Erba 2018).
+"""Kernels of the position-based particle lattice (dell'Erba 2018).
 
 The state is the displacement u = x - X of every particle (rest position X), double-buffered: a step reads
 ``u_cur`` (the configuration C_{t-1}, with the leaders already moved to step t: the paper's "intermediate lattice") and
@@ -256,6 +256,13 @@ def lattice_copy_frame(
 
 
 # ---------------------------------------------------------------------------------------------------- fracture
+@wp.func
+def lattice_link_length(u: wp.array(dtype=wp.vec3), uj: wp.vec3, k: int, rest_delta: wp.vec3) -> float:
+    """Current length |u_k - u_j + dX| [m] of the link from particle j (displacement uj [m]) to particle k, with dX
+    its rest offset [m] (the breaking test and PE1 read it)."""
+    return wp.length(u[k] - uj + rest_delta)
+
+
 @wp.kernel
 def lattice_break_links(
     body_count: int,
@@ -279,7 +286,7 @@ def lattice_break_links(
         k = link_neighbor[q]
         if link_alive[q] != wp.uint8(0) and (j < body_count or k < body_count):
             o = int(link_offset[q])
-            d = wp.length(u[k] - uj + offset_delta[o])
+            d = lattice_link_length(u, uj, k, offset_delta[o])
             if d > offset_threshold[o]:
                 link_alive[q] = wp.uint8(0)
                 n += 1
@@ -312,7 +319,7 @@ def lattice_pseudo_energy(
     nb = int(0)
     for q in range(row_offsets[j], row_offsets[j + 1]):
         o = int(link_offset[q])
-        e = wp.length(u[link_neighbor[q]] - uj + offset_delta[o]) - offset_length[o]
+        e = lattice_link_length(u, uj, link_neighbor[q], offset_delta[o]) - offset_length[o]
         e2 = e * e
         e_all += e2
         alive = True
@@ -347,7 +354,7 @@ def lattice_record_tracks(
     e_all = float(0.0)
     for q in range(row_offsets[j], row_offsets[j + 1]):
         o = int(link_offset[q])
-        e = wp.length(u[link_neighbor[q]] - uj + offset_delta[o]) - offset_length[o]
+        e = lattice_link_length(u, uj, link_neighbor[q], offset_delta[o]) - offset_length[o]
         e_all += e * e
     track_u[slot, t] = uj
     track_pe1[slot, t] = e_all
@@ -362,3 +369,89 @@ def lattice_check_finite(u: wp.array(dtype=wp.vec3), result: wp.array(dtype=floa
         result[1] = 1.0
     else:
         wp.atomic_max(result, 0, s)
+
+
+# ---------------------------------------------------------------------------------------------------- launches
+def advance_step_clock(step_clock, device):
+    """step_clock[0] += 1 on the device (lattice_step_clock)."""
+    wp.launch(lattice_step_clock, dim=1, inputs=[step_clock], device=device)
+
+
+def set_kind(count, indices, new_kind, new_group, kind, group, device):
+    """The ``count`` particles ``indices`` become ``new_kind`` with leader path ``new_group`` (lattice_set_kind)."""
+    wp.launch(lattice_set_kind, dim=count, inputs=[indices, new_kind, new_group, kind, group], device=device)
+
+
+def move_leaders(count, step_clock, leader_ids, group, key_offsets, key_step, key_disp, group_velocity, u_cur, u_next,
+                 device):  # fmt: skip
+    """The ``count`` leaders ``leader_ids`` take their path's displacement [m] at this step (lattice_move_leaders)."""
+    wp.launch(
+        lattice_move_leaders,
+        dim=count,
+        inputs=[step_clock, leader_ids, group, key_offsets, key_step, key_disp, group_velocity, u_cur, u_next],
+        device=device,
+    )
+
+
+def follow(kernel, count, rest, kind, row_offsets, link_neighbor, link_offset, link_alive, offset_delta, offset_weight,
+           offset_shell, fictitious_scale, params, u_cur, u_next, device):  # fmt: skip
+    """The follower rule over ``count`` particles with a kernel from :func:`make_follow_kernel`: u_next [m] of every
+    follower from u_cur."""
+    wp.launch(
+        kernel,
+        dim=count,
+        inputs=[rest, kind, row_offsets, link_neighbor, link_offset, link_alive, offset_delta, offset_weight,
+                offset_shell, fictitious_scale, params, u_cur, u_next],
+        device=device,
+    )  # fmt: skip
+
+
+def copy_frame(first, count, frame_offsets, frame_sources, u_source, u_next, device):
+    """Frame points first .. first + count - 1 take the mean displacement [m] of their sources (lattice_copy_frame)."""
+    wp.launch(
+        lattice_copy_frame,
+        dim=count,
+        inputs=[first, frame_offsets, frame_sources, u_source, u_next],
+        device=device,
+    )
+
+
+def break_links(count, body_count, row_offsets, link_neighbor, link_offset, offset_delta, offset_threshold, u,
+                link_alive, broken_total, device):  # fmt: skip
+    """Breaks the over-stretched body links of the ``count`` particles and counts them (lattice_break_links)."""
+    wp.launch(
+        lattice_break_links,
+        dim=count,
+        inputs=[body_count, row_offsets, link_neighbor, link_offset, offset_delta, offset_threshold, u, link_alive,
+                broken_total],
+        device=device,
+    )  # fmt: skip
+
+
+def pseudo_energy(count, row_offsets, link_neighbor, link_offset, link_alive, use_alive, offset_delta, offset_length, u,
+                  pe1, pe1_intact, broken, device):  # fmt: skip
+    """PE1 [m^2] (all links and intact links) and lost links of the ``count`` particles (lattice_pseudo_energy)."""
+    wp.launch(
+        lattice_pseudo_energy,
+        dim=count,
+        inputs=[row_offsets, link_neighbor, link_offset, link_alive, use_alive, offset_delta, offset_length, u, pe1,
+                pe1_intact, broken],
+        device=device,
+    )  # fmt: skip
+
+
+def record_tracks(count, ids, row_offsets, link_neighbor, link_offset, offset_delta, offset_length, u, slot, track_u,
+                  track_pe1, device):  # fmt: skip
+    """Displacement [m] and PE1 [m^2] of the ``count`` tracked particles into row ``slot`` (lattice_record_tracks)."""
+    wp.launch(
+        lattice_record_tracks,
+        dim=count,
+        inputs=[ids, row_offsets, link_neighbor, link_offset, offset_delta, offset_length, u, slot, track_u,
+                track_pe1],
+        device=device,
+    )  # fmt: skip
+
+
+def check_finite(count, u, result, device):
+    """result[0] = max |u| [m] over ``count`` particles, result[1] = 1 if one is not finite (lattice_check_finite)."""
+    wp.launch(lattice_check_finite, dim=count, inputs=[u, result], device=device)

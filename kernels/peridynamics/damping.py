@@ -19,6 +19,9 @@ effect). Stability of the explicit step needs c dt < 1.
 import warp as wp
 
 
+# add_debris_damping repeats compute_damage's sums of live and total bond weight (kernels/peridynamics/step.py) on
+# purpose: it gathers the neighbours' velocities in the same loop, where sharing compute_damage's would take a second
+# pass over the family.
 @wp.kernel
 def add_debris_damping(
     family_offsets: wp.array(dtype=wp.int32),
@@ -56,3 +59,15 @@ def add_debris_damping(
         if live > 0.0:
             v_bar = v_live / live
         force_density[k] = force_density[k] + (c / inv_density[k]) * (v_bar - velocities[k])
+
+
+def debris_damping(count, family_offsets, family_neighbors, bond_wv, bond_alive, velocities, inv_density, rate,
+                   damage_threshold, force_density, device):  # fmt: skip
+    """Adds the debris drag to force_density [N/m^3] of the ``count`` particles (add_debris_damping)."""
+    wp.launch(
+        add_debris_damping,
+        dim=count,
+        device=device,
+        inputs=[family_offsets, family_neighbors, bond_wv, bond_alive, velocities, inv_density, rate,
+                damage_threshold, force_density],
+    )  # fmt: skip

@@ -22,15 +22,16 @@ Formulas (kernels/peridynamics/bonds.py gives the notation and the elastic model
   (n, e) are then still in cache, and the volumetric sums of theta_p come with the dilatation's loop).
 - Fracture: a live bond breaks for good when its stretch (its elastic stretch, s - (e^p_kj + e^p_jk) / (2 L), for
   a yielding material) exceeds s_c,kj - alpha min(s_min,k, s_min,j) (Silling-Askari compressive bonus, s_min the
-  particle's most compressive live stretch, <= 0, from this step's dilatation pass; with Material.compressive_bonus_cap
-  k the min is floored at -(k / alpha) s_c,kj, so the bonus is at most k s_c,kj), or, for a ductile material,
+  particle's most compressive live stretch, <= 0, from this step's dilatation pass; alpha is
+  Material.compressive_bonus; with Material.compressive_bonus_cap k the min is floored at -(k / alpha) s_c,kj, the
+  model's compressive_stretch_floor k / alpha, so the bonus is at most k s_c,kj), or, for a ductile material,
   when the larger equivalent plastic strain of its two particles exceeds the failure plastic strain. The test runs
   at the end of the force pass, which already holds both directions' plastic extensions; both directed copies of a
   bond see the same quantities, so they break in the same step without communication. Broken bonds are skipped by
   every pass after the flag (their cached (n, e) is left as it was).
 
 A step is two passes over the particles, dilatation (with the plastic update) then force, each launched over
-contiguous particle ranges (pdsim/peridynamics/solver.py, ParticleRanges): a kernel writes only its particles' rows
+contiguous particle ranges (pdsim/peridynamics/ranges.py, ParticleRanges): a kernel writes only its particles' rows
 and their own bonds' rows (and, for the mirror of the plastic extensions, the one slot each of its bonds owns at the
 reverse bond, read only by the next pass), and reads other particles' rows only from what an earlier pass wrote.
 """
@@ -52,6 +53,8 @@ def make_step_kernels(fracture: bool, plastic: bool):
     FRACTURE = key[0]
     PLASTIC = key[1]
 
+    # tools/feature_cost.py holds a deliberate stripped copy of the elastic dilatation and force below (it measures
+    # what the feature branches cost an elastic scene): keep it in step (tests/test_bench_tools.py checks the bits).
     @wp.kernel(module="unique")
     def dilatation(
         first: int,
@@ -187,8 +190,8 @@ def make_step_kernels(fracture: bool, plastic: bool):
         bp: wp.array(dtype=wp.vec2),
         bond_alive: wp.array(dtype=wp.uint8),
         bond_critical_stretch: wp.array(dtype=float),
-        bonus_alpha: wp.array(dtype=float),
-        bonus_floor: wp.array(dtype=float),
+        compressive_bonus: wp.array(dtype=float),
+        compressive_stretch_floor: wp.array(dtype=float),
         stretch_min: wp.array(dtype=float),
         eqps: wp.array(dtype=float),
         failure_eqps: wp.array(dtype=float),
@@ -205,14 +208,14 @@ def make_step_kernels(fracture: bool, plastic: bool):
         bpk = bp[k]
         f = wp.vec3(0.0)
         smin_k = float(0.0)
-        alpha_k = float(0.0)
+        bonus_k = float(0.0)
         floor_k = float(0.0)
         eqps_k = float(0.0)
         fail_k = float(0.0)
         if wp.static(FRACTURE):
             smin_k = stretch_min[k]
-            alpha_k = bonus_alpha[k]
-            floor_k = bonus_floor[k]
+            bonus_k = compressive_bonus[k]
+            floor_k = compressive_stretch_floor[k]
             if wp.static(PLASTIC):
                 eqps_k = eqps[k]
                 fail_k = failure_eqps[k]
@@ -240,7 +243,7 @@ def make_step_kernels(fracture: bool, plastic: bool):
                         if c[3] > 0.0 and wp.max(eqps_k, eqps[j]) > fail_k:
                             broke = 1
                 sc0 = bond_critical_stretch[q]
-                sc = sc0 - alpha_k * wp.max(wp.min(smin_k, stretch_min[j]), -floor_k * sc0)
+                sc = sc0 - bonus_k * wp.max(wp.min(smin_k, stretch_min[j]), -floor_k * sc0)
                 if c[3] - 0.5 * ep_sum > sc * bond_geom[q][3]:
                     broke = 1
                 if broke != 0:
@@ -402,3 +405,136 @@ def break_bonds_crossing_mesh(
         hit = wp.mesh_query_ray(mesh, a, d / L, L)
         if hit.result:
             bond_alive[q] = wp.uint8(0)
+
+
+# ---------------------------------------------------------------------------------------------------- launches
+def launch_range(kernel, first: int, count: int, inputs: list, device, record_cmd: bool = False):
+    """One launch of a range kernel (its first argument is the first particle of the launch) over the particles
+    first .. first + count - 1 with the remaining arguments ``inputs``; returns what ``wp.launch`` returns (with
+    ``record_cmd``, the recorded launch, to be run later)."""
+    return wp.launch(kernel, dim=count, inputs=[first, *inputs], device=device, record_cmd=record_cmd)
+
+
+def single_launch(count: int, device):
+    """A ``launch(kernel, inputs)`` for the pass functions below that runs a range kernel as one launch over the
+    particles 0 .. count - 1 (the solver passes its ParticleRanges' launch instead, which splits a pass into thread
+    ranges)."""
+
+    def launch(kernel, inputs: list) -> None:
+        launch_range(kernel, 0, count, inputs, device)
+
+    return launch
+
+
+def placeholders(device):
+    """Length-1 arrays (uint8, float, int32) passed for the arguments of features a kernel variant compiles out."""
+    return (
+        wp.zeros(1, dtype=wp.uint8, device=device),
+        wp.zeros(1, dtype=float, device=device),
+        wp.zeros(1, dtype=wp.int32, device=device),
+    )
+
+
+def plastic_placeholders(f1, i1) -> dict:
+    """The dilatation pass's plasticity arguments for a variant without plasticity: length-1 placeholders ``f1``
+    (float) and ``i1`` (int32), and no yielding particle."""
+    return dict(
+        plastic_particle_count=0,
+        bond_wv=f1,
+        bond_wv_dev=f1,
+        horizon=f1,
+        weighted_volume=f1,
+        yield_stress=f1,
+        hardening=f1,
+        psi_scale=f1,
+        bond_plastic=f1,
+        eqps=f1,
+        bond_reverse=i1,
+        bond_plastic_reverse=f1,
+    )
+
+
+def dilatation(
+    launch, ks, *, displacements, family_offsets, family_neighbors, bond_geom, bond_wv_dil, dil_d, dil_coef, dev_b,
+    bond_alive, theta, bp, bond_ne, stretch_min, plastic_particle_count, bond_wv, bond_wv_dev, horizon,
+    weighted_volume, yield_stress, hardening, psi_scale, bond_plastic, eqps, bond_reverse, bond_plastic_reverse,
+):  # fmt: skip
+    """The dilatation pass of the kernels ``ks`` (make_step_kernels) through ``launch(kernel, inputs)``: theta [-],
+    (b_k, P_k), the bonds' (n, e) cache and, where compiled in, the most compressive stretch and the plastic update."""
+    launch(
+        ks.dilatation,
+        [displacements, family_offsets, family_neighbors, bond_geom, bond_wv_dil, dil_d, dil_coef, dev_b, bond_alive,
+         theta, bp, bond_ne, stretch_min, plastic_particle_count, bond_wv, bond_wv_dev, horizon, weighted_volume,
+         yield_stress, hardening, psi_scale, bond_plastic, eqps, bond_reverse, bond_plastic_reverse],
+    )  # fmt: skip
+
+
+def bond_forces(
+    launch, ks, *, family_offsets, family_neighbors, bond_geom, bond_ne, bond_wv_dil, bond_wv_dev, bp, bond_alive,
+    bond_critical_stretch, compressive_bonus, compressive_stretch_floor, stretch_min, eqps, failure_eqps,
+    plastic_bond_count, bond_plastic, bond_plastic_reverse, force_density,
+):  # fmt: skip
+    """The force pass of the kernels ``ks`` through ``launch(kernel, inputs)``: force density [N/m^3] and, where
+    compiled in, the breaking test of every live bond."""
+    launch(
+        ks.force,
+        [family_offsets, family_neighbors, bond_geom, bond_ne, bond_wv_dil, bond_wv_dev, bp, bond_alive,
+         bond_critical_stretch, compressive_bonus, compressive_stretch_floor, stretch_min, eqps, failure_eqps,
+         plastic_bond_count, bond_plastic, bond_plastic_reverse, force_density],
+    )  # fmt: skip
+
+
+def strain_energy_density(
+    launch, ks, *, family_offsets, bond_ne, bond_wv_dev, bond_alive, plastic_bond_count, bond_plastic, theta, dev_b,
+    dil_c0, energy_density,
+):  # fmt: skip
+    """The energy pass of the kernels ``ks`` through ``launch(kernel, inputs)``: elastic energy density [J/m^3]."""
+    launch(
+        ks.energy,
+        [family_offsets, bond_ne, bond_wv_dev, bond_alive, plastic_bond_count, bond_plastic, theta, dev_b, dil_c0,
+         energy_density],
+    )  # fmt: skip
+
+
+def particle_damage(launch, family_offsets, bond_wv, bond_alive, damage):
+    """Damage phi_k [-] of every particle through ``launch(kernel, inputs)`` (compute_damage)."""
+    launch(compute_damage, [family_offsets, bond_wv, bond_alive, damage])
+
+
+def deformed_positions(count, rest_positions, displacements, positions, device):
+    """positions = rest + u [m] of the ``count`` particles (compose_positions)."""
+    wp.launch(compose_positions, dim=count, inputs=[rest_positions, displacements, positions], device=device)
+
+
+def mirror_plastic(count, bond_reverse, bond_plastic, bond_plastic_reverse, device):
+    """bond_plastic_reverse from bond_plastic for the ``count`` plastic bonds (mirror_plastic_extensions)."""
+    wp.launch(
+        mirror_plastic_extensions, dim=count, inputs=[bond_reverse, bond_plastic, bond_plastic_reverse], device=device
+    )
+
+
+def reverse_bonds(count, family_offsets, family_neighbors, bond_reverse, device):
+    """bond_reverse of the bonds of the first ``count`` particles (find_reverse_bonds)."""
+    wp.launch(find_reverse_bonds, dim=count, inputs=[family_offsets, family_neighbors, bond_reverse], device=device)
+
+
+def cut_bonds_by_box(first, count, rest_positions, family_offsets, family_neighbors, lo, hi, bond_alive, device):
+    """Breaks the bonds of particles first .. first + count - 1 that cross the box [lo, hi] (break_bonds_crossing_box;
+    lo, hi: wp.vec3 [m] in the frame of ``rest_positions``)."""
+    wp.launch(
+        break_bonds_crossing_box,
+        dim=count,
+        inputs=[first, rest_positions, family_offsets, family_neighbors, lo, hi, bond_alive],
+        device=device,
+    )
+
+
+def cut_bonds_by_mesh(first, count, mesh, rest_positions, family_offsets, family_neighbors, bond_alive, device):
+    """Breaks the bonds of particles first .. first + count - 1 that cross the triangle surface ``mesh`` (a wp.Mesh id;
+    break_bonds_crossing_mesh)."""
+    wp.launch(
+        break_bonds_crossing_mesh,
+        dim=count,
+        inputs=[first, mesh, rest_positions, family_offsets, family_neighbors, bond_alive],
+        device=device,
+    )

@@ -1,17 +1,15 @@
-"""Position-based particle lattice (shared/seeds/pbd_lattice.txt): lattices, neighbourhoods, rules, bodies and the
-solver. The paper's cases live in scenes/lattice_paper.py and its figures in tools/lattice_plots.py."""
+"""Position-based particle lattice (dell'Erba 2018): lattices and neighbourhoods (geometry.py), rules and fracture
+(rules.py), bodies (body.py) and the solver (solver.py). The paper's cases live in scenes/lattice_paper.py and its
+figures in tools/lattice_plots.py."""
 
-from .body import (
-    Lattice,
-    LatticeBody,
+from .body import LatticeBody, LatticeKind
+from .geometry import Lattice, LatticeNeighbourhood, LatticeType
+from .rules import (
     LatticeFracture,
-    LatticeKind,
-    LatticeNeighbourhood,
     LatticeRule,
     LatticeRuleCentroid,
     LatticeRuleDistanceWeighted,
     LatticeRuleMixedCoordinate,
-    LatticeType,
 )
 from .solver import SolverLattice
 

@@ -1,6 +1,7 @@
-"""Position-based particle lattice (shared/seeds/pbd_lattice.txt, dell'Erba 2018): lattices, neighbourhoods, rules,
-fracture and bodies. The solver is in pdsim/lattice/solver.py, the kernels in kernels/lattice/rules.py, the choices
-made where the paper is open in docs/lattice.md.
+"""Bodies of the position-based particle lattice (dell'Erba 2018): particle kinds, the
+body's points, frame, neighbour links, leaders and category changes. The lattices and neighbourhoods are in
+pdsim/lattice/geometry.py, the rules and fracture in pdsim/lattice/rules.py, the solver in pdsim/lattice/solver.py,
+the kernels in kernels/lattice/rules.py, the choices made where the paper is open in docs/lattice.md.
 
 A body is a set of lattice points filling a shape (the leaders and followers) surrounded by a frame (a shell of lattice
 points one or two layers deep that copies the displacement of its assigned body points). Its motion is step-based: at
@@ -14,44 +15,20 @@ front in 3D), then the frame points in the same order. Particle index j is the p
 
 from __future__ import annotations
 
-import math
-from dataclasses import KW_ONLY, dataclass
-from enum import Enum, IntEnum
+from dataclasses import dataclass
+from enum import IntEnum
 
 import numpy as np
 
 from ..errors import GeometryError, ParameterError
+from ..geometry import SolidShape
+from ..regions import BoxRegion, SphereRegion, region_mask
+from ..sampling import points_inside
 from ..validate import check_range
-
-__all__ = [
-    "Lattice",
-    "LatticeBody",
-    "LatticeFracture",
-    "LatticeKind",
-    "LatticeNeighbourhood",
-    "LatticeRule",
-    "LatticeRuleCentroid",
-    "LatticeRuleDistanceWeighted",
-    "LatticeRuleMixedCoordinate",
-    "LatticeType",
-]
+from .geometry import Lattice, LatticeNeighbourhood, LatticeType
+from .rules import LatticeFracture, LatticeRule, LatticeRuleCentroid
 
 MAX_LATTICE_POINTS = 20_000_000
-MAX_OFFSETS = 255  # per-link offset ids are uint8
-_TOL = 1.0e-6  # relative tolerance for lattice-vector comparisons
-
-
-class LatticeType(str, Enum):
-    """The five plane Bravais lattices and three cubic lattices."""
-
-    SQUARE = "square"
-    HEXAGONAL = "hexagonal"
-    RECTANGULAR = "rectangular"
-    CENTRED_RECTANGULAR = "centred_rectangular"
-    OBLIQUE = "oblique"
-    SIMPLE_CUBIC = "simple_cubic"
-    BODY_CENTRED_CUBIC = "body_centred_cubic"
-    FACE_CENTRED_CUBIC = "face_centred_cubic"
 
 
 class LatticeKind(IntEnum):
@@ -61,366 +38,6 @@ class LatticeKind(IntEnum):
     LEADER = 1
     FRAME = 2
     FICTITIOUS = 3
-
-
-# ------------------------------------------------------------------------------------------------------------ lattices
-@dataclass(frozen=True, eq=False)
-class Lattice:
-    """A Bravais lattice: points origin + sum_i c_i a_i for integer c.
-
-    Attributes:
-        type: which lattice.
-        basis: primitive vectors a_i [m], shape [dim, 3] (2D lattices lie in the z = 0 plane).
-        spacing: nearest-neighbour distance h [m].
-    """
-
-    type: LatticeType
-    basis: np.ndarray
-    spacing: float
-
-    @property
-    def dim(self) -> int:
-        """2 for the plane lattices, 3 for the cubic ones."""
-        return int(self.basis.shape[0])
-
-    @property
-    def basis_matrix(self) -> np.ndarray:
-        """The basis restricted to its dimension, shape [dim, dim] [m] (rows are the vectors)."""
-        return self.basis[:, : self.dim]
-
-    # -- constructors -----------------------------------------------------------------------------------------------
-    @classmethod
-    def square(cls, spacing: float) -> Lattice:
-        """Square lattice of side ``spacing`` [m] (coordination number 4)."""
-        h = check_range("spacing", spacing, 0.0, None)
-        return cls(LatticeType.SQUARE, np.array([[h, 0.0, 0.0], [0.0, h, 0.0]]), h)
-
-    @classmethod
-    def hexagonal(cls, spacing: float) -> Lattice:
-        """Hexagonal (triangular) lattice, nearest-neighbour distance ``spacing`` [m], rows along x (coordination 6)."""
-        h = check_range("spacing", spacing, 0.0, None)
-        return cls(LatticeType.HEXAGONAL, np.array([[h, 0.0, 0.0], [0.5 * h, 0.5 * math.sqrt(3.0) * h, 0.0]]), h)
-
-    @classmethod
-    def rectangular(cls, spacing: float, *, aspect: float = 1.5) -> Lattice:
-        """Rectangular lattice: ``spacing`` [m] along x, ``aspect`` x ``spacing`` along y; aspect in [0.25, 4]."""
-        h = check_range("spacing", spacing, 0.0, None)
-        r = check_range("aspect", aspect, 0.25, 4.0, lo_open=False, hi_open=False)
-        return cls(LatticeType.RECTANGULAR, np.array([[h, 0.0, 0.0], [0.0, r * h, 0.0]]), h * min(1.0, r))
-
-    @classmethod
-    def centred_rectangular(cls, spacing: float, *, aspect: float = 1.5) -> Lattice:
-        """Centred rectangular lattice: a rectangular cell ``spacing`` x ``aspect`` ``spacing`` [m] with a point at its
-        centre (primitive vectors (a, 0) and (a/2, b/2)); aspect in [0.25, 4], != sqrt(3) (that is hexagonal)."""
-        h = check_range("spacing", spacing, 0.0, None)
-        r = check_range("aspect", aspect, 0.25, 4.0, lo_open=False, hi_open=False)
-        if abs(r - math.sqrt(3.0)) < 1.0e-9:
-            raise ParameterError("aspect", aspect, "[0.25, 4] except sqrt(3) (use Lattice.hexagonal)")
-        basis = np.array([[h, 0.0, 0.0], [0.5 * h, 0.5 * r * h, 0.0]])
-        return cls(LatticeType.CENTRED_RECTANGULAR, basis, float(min(h, np.linalg.norm(basis[1]))))
-
-    @classmethod
-    def oblique(cls, spacing: float, *, ratio: float = 1.2, angle: float = 75.0) -> Lattice:
-        """Oblique lattice: a1 = (spacing, 0), a2 of length ``ratio`` x ``spacing`` at ``angle`` degrees from a1;
-        ratio in [0.5, 2], angle in [30, 150]."""
-        h = check_range("spacing", spacing, 0.0, None)
-        r = check_range("ratio", ratio, 0.5, 2.0, lo_open=False, hi_open=False)
-        g = math.radians(check_range("angle", angle, 30.0, 150.0, lo_open=False, hi_open=False))
-        basis = np.array([[h, 0.0, 0.0], [r * h * math.cos(g), r * h * math.sin(g), 0.0]])
-        return cls(LatticeType.OBLIQUE, basis, h * min(1.0, r))
-
-    @classmethod
-    def simple_cubic(cls, spacing: float) -> Lattice:
-        """Simple cubic lattice of side ``spacing`` [m] (coordination number 6)."""
-        h = check_range("spacing", spacing, 0.0, None)
-        return cls(LatticeType.SIMPLE_CUBIC, np.eye(3) * h, h)
-
-    @classmethod
-    def body_centred_cubic(cls, spacing: float) -> Lattice:
-        """Body-centred cubic lattice of cube side ``spacing`` [m] (nearest neighbours at sqrt(3)/2 spacing)."""
-        h = check_range("spacing", spacing, 0.0, None)
-        basis = np.array([[h, 0.0, 0.0], [0.0, h, 0.0], [0.5 * h, 0.5 * h, 0.5 * h]])
-        return cls(LatticeType.BODY_CENTRED_CUBIC, basis, 0.5 * math.sqrt(3.0) * h)
-
-    @classmethod
-    def face_centred_cubic(cls, spacing: float) -> Lattice:
-        """Face-centred cubic lattice of cube side ``spacing`` [m] (nearest neighbours at spacing / sqrt(2))."""
-        h = check_range("spacing", spacing, 0.0, None)
-        basis = 0.5 * h * np.array([[0.0, 1.0, 1.0], [1.0, 0.0, 1.0], [1.0, 1.0, 0.0]])
-        return cls(LatticeType.FACE_CENTRED_CUBIC, basis, h / math.sqrt(2.0))
-
-    # -- geometry ---------------------------------------------------------------------------------------------------
-    def vectors(self, coords: np.ndarray) -> np.ndarray:
-        """Cartesian vectors [m], shape [n, 3], of integer lattice coordinates ``coords`` [n, dim]."""
-        return np.asarray(coords, dtype=np.float64) @ self.basis
-
-    def candidate_offsets(self, length: float) -> np.ndarray:
-        """Every nonzero integer offset whose lattice vector is at most ``length`` [m] long, shape [m, dim]."""
-        inv = np.linalg.inv(self.basis_matrix)
-        r = math.ceil(length * np.abs(inv).sum(axis=0).max()) + 1
-        axes = [np.arange(-r, r + 1)] * self.dim
-        c = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)
-        c = c[np.any(c != 0, axis=1)]
-        v = self.vectors(c)
-        return c[np.linalg.norm(v, axis=1) <= length * (1.0 + _TOL)]
-
-    def coordination_offsets(self) -> np.ndarray:
-        """Integer offsets to the lattice's Voronoi-relevant neighbours (the faces of the Wigner-Seitz cell): square 4,
-        rectangular 4, hexagonal 6, centred rectangular 6, oblique 6, simple cubic 6, BCC 14, FCC 12. A vector v is
-        relevant when v/2 is strictly closer to 0 and v than to any other lattice point."""
-        longest = float(np.linalg.norm(self.basis, axis=1).max())
-        c = self.candidate_offsets(2.0 * longest * math.sqrt(self.dim))
-        v = self.vectors(c)
-        n2 = np.einsum("ij,ij->i", v, v)
-        # relevant iff |w|^2 - v.w > 0 for every w != v (w = 0 excluded already)
-        gap = n2[None, :] - v @ v.T
-        np.fill_diagonal(gap, np.inf)
-        relevant = np.all(gap > _TOL * self.spacing**2, axis=1)
-        return c[relevant]
-
-
-# ------------------------------------------------------------------------------------------------------ neighbourhoods
-NEIGHBOURHOOD_METRICS = ("coordination", "chebyshev", "euclidean")
-
-
-@dataclass(frozen=True, kw_only=True)
-class LatticeNeighbourhood:
-    """Which lattice points are a particle's Lagrangian neighbours (fixed at t0).
-
-    Args:
-        metric: "coordination" (shell 1 = the lattice's coordination neighbours, the faces of its Wigner-Seitz cell;
-            shell 2 = their neighbours, i.e. graph distance 2), "chebyshev" (shell n = points at Chebyshev distance
-            max_a |dx_a| / s_a in ((n - 1) c, n c], c the largest Chebyshev norm of a coordination neighbour: the
-            paper's Figure 3 for the square lattice) or "euclidean" (shell n = points at weighted Euclidean distance
-            |dx / s| in ((n - 1) r, n r]).
-        gradient: 1 (first gradient: one shell) or 2 (second gradient: two shells).
-        radius: r [m] of the "euclidean" metric; default the coordination shell's longest vector.
-        metric_scale: per-axis scales s (x, y, z) of the chebyshev and euclidean metrics, each > 0: an anisotropic
-            metric reaching s_a times farther along axis a. Default isotropic.
-        shell_weights: static weight of the neighbours of each shell in the rules (w1, w2), each > 0.
-    """
-
-    metric: str = "coordination"
-    gradient: int = 1
-    radius: float | None = None
-    metric_scale: tuple = (1.0, 1.0, 1.0)
-    shell_weights: tuple = (1.0, 1.0)
-
-    def __post_init__(self):
-        if self.metric not in NEIGHBOURHOOD_METRICS:
-            raise ParameterError("metric", self.metric, " or ".join(map(repr, NEIGHBOURHOOD_METRICS)))
-        if isinstance(self.gradient, bool) or self.gradient not in (1, 2):
-            raise ParameterError("gradient", self.gradient, "1 (first gradient) or 2 (second gradient)")
-        if self.radius is not None:
-            check_range("radius", self.radius, 0.0, None)
-        s = np.asarray(self.metric_scale, dtype=np.float64)
-        if s.shape != (3,) or not np.all(np.isfinite(s)) or np.any(s <= 0):
-            raise ParameterError("metric_scale", self.metric_scale, "3 finite numbers > 0")
-        w = np.asarray(self.shell_weights, dtype=np.float64)
-        if w.shape != (2,) or not np.all(np.isfinite(w)) or np.any(w <= 0):
-            raise ParameterError("shell_weights", self.shell_weights, "2 finite numbers > 0 (shell 1, shell 2)")
-
-    def offsets(self, lattice: Lattice) -> tuple[np.ndarray, np.ndarray]:
-        """Neighbour offsets of ``lattice``: integer offsets [m, dim] and their shell (0 or 1) [m], sorted by shell
-        and length, each offset o directly followed by -o."""
-        coord = lattice.coordination_offsets()
-        dim = lattice.dim
-        if self.metric == "coordination":
-            shells = [coord]
-            if self.gradient == 2:
-                s2 = (coord[:, None, :] + coord[None, :, :]).reshape(-1, dim)
-                s2 = np.unique(s2, axis=0)
-                known = {tuple(c) for c in coord}
-                keep = np.array([np.any(c != 0) and tuple(c) not in known for c in s2], dtype=bool)
-                shells.append(s2[keep])
-        else:
-            scale = np.asarray(self.metric_scale, dtype=np.float64)[:dim]
-            if self.metric == "chebyshev":
-                unit = float(np.abs(lattice.vectors(coord)[:, :dim] / scale).max(axis=1).max())
-
-                def norm(v):
-                    return np.abs(v / scale).max(axis=1)
-
-            else:
-                unit = (
-                    float(self.radius)
-                    if self.radius is not None
-                    else float(np.linalg.norm(lattice.vectors(coord), axis=1).max())
-                )
-
-                def norm(v):
-                    return np.linalg.norm(v / scale, axis=1)
-
-            reach = self.gradient * unit * float(scale.max()) * math.sqrt(dim)
-            cand = lattice.candidate_offsets(reach)
-            rho = norm(lattice.vectors(cand)[:, :dim]) / unit
-            shells = [cand[rho <= 1.0 + _TOL]]
-            if self.gradient == 2:
-                shells.append(cand[(rho > 1.0 + _TOL) & (rho <= 2.0 + _TOL)])
-        offs, shell = [], []
-        for s, c in enumerate(shells):
-            if len(c) == 0:
-                raise ParameterError("radius", self.radius, "a radius that gives every shell at least one neighbour")
-            pairs = _paired(lattice, c)
-            offs.append(pairs)
-            shell.append(np.full(len(pairs), s, dtype=np.int32))
-        offs = np.concatenate(offs)
-        if len(offs) > MAX_OFFSETS:
-            raise ParameterError("neighbourhood", self, f"at most {MAX_OFFSETS} neighbours (this gives {len(offs)})")
-        return offs.astype(np.int64), np.concatenate(shell)
-
-
-def _paired(lattice: Lattice, c: np.ndarray) -> np.ndarray:
-    """The offsets ``c`` (a set closed under negation) sorted by length then lexicographically, as pairs (o, -o)."""
-    first = c[np.arange(len(c)), np.argmax(c != 0, axis=1)]
-    rep = c[first > 0]
-    length = np.round(np.linalg.norm(lattice.vectors(rep), axis=1) / lattice.spacing, 9)
-    order = np.lexsort((*(rep[:, a] for a in reversed(range(rep.shape[1]))), length))
-    rep = rep[order]
-    out = np.empty((2 * len(rep), c.shape[1]), dtype=np.int64)
-    out[0::2] = rep
-    out[1::2] = -rep
-    return out
-
-
-# ------------------------------------------------------------------------------------------------------------- rules
-@dataclass(frozen=True, kw_only=True)
-class LatticeRule:
-    """A follower rule: u_j <- update(c, u_j, X_j) with c the weighted centroid of j's neighbours (relative to X_j).
-
-    Subclasses name two Warp functions (``warp_functions``) with the signatures of ``lattice_weight_uniform``
-    (delta, rest_delta, shell, params) -> weight and ``lattice_update_centroid`` (centroid, u_old, rest, params) ->
-    new displacement in kernels/lattice/rules.py, and fill the parameter block (``parameters``); a custom rule is a
-    subclass with its own ``@wp.func`` pair. The solver compiles one follower kernel per pair.
-
-    Args:
-        relaxation: omega in (0, 2): u_new = u_old + omega (target - u_old). 1 (default) places the follower on its
-            target as in the paper; > 1 overshoots (the paper's suggested route to oscillation), < 1 lags.
-    """
-
-    relaxation: float = 1.0
-
-    def __post_init__(self):
-        check_range("relaxation", self.relaxation, 0.0, 2.0)
-
-    def warp_functions(self):
-        """(weight function, update function) as Warp ``@wp.func`` objects."""
-        from ..kernels.lattice import rules as kl
-
-        return kl.lattice_weight_uniform, kl.lattice_update_centroid
-
-    def parameters(self, body: LatticeBody) -> tuple:
-        """(scalars[4], axis[3], origin[3]) of the parameter block for ``body``."""
-        return (self.relaxation, 0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-
-
-@dataclass(frozen=True, kw_only=True)
-class LatticeRuleCentroid(LatticeRule):
-    """x_j(t) = sum_k w_k x_k(t - 1) / sum_k w_k: the centre of gravity of the neighbours (w_k = shell weight)."""
-
-
-@dataclass(frozen=True, kw_only=True)
-class LatticeRuleDistanceWeighted(LatticeRule):
-    """x_j(t) = sum_k w_k dis(k, j)^p x_k / sum_k w_k dis(k, j)^p with dis the current distance [m]: farther
-    neighbours pull harder (the paper's Hooke-like rule has p = 1).
-
-    Args:
-        exponent: p in [0, 4], one value for every shell or (p1, p2) per shell (p = 0: no distance weighting in
-            that shell).
-    """
-
-    exponent: float | tuple = 1.0
-
-    def __post_init__(self):
-        super().__post_init__()
-        p = np.atleast_1d(np.asarray(self.exponent, dtype=np.float64))
-        if p.ndim != 1 or len(p) not in (1, 2) or not np.all(np.isfinite(p)) or np.any((p < 0) | (p > 4)):
-            raise ParameterError("exponent", self.exponent, "1 or 2 numbers in [0, 4] (per shell)")
-
-    def warp_functions(self):
-        from ..kernels.lattice import rules as kl
-
-        return kl.lattice_weight_distance, kl.lattice_update_centroid
-
-    def parameters(self, body):
-        p = np.atleast_1d(np.asarray(self.exponent, dtype=np.float64))
-        return (self.relaxation, 0.0, float(p[0]), float(p[-1])), (1.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-
-
-@dataclass(frozen=True, kw_only=True)
-class LatticeRuleMixedCoordinate(LatticeRule):
-    """The mixed-coordinate (Poisson) rule: the axial coordinate is the centroid's; each lateral coordinate is the
-    centroid's minus k (u_j . a) d_j, with u_j . a the follower's new axial displacement [m] and d_j its rest offset
-    from the axis, perpendicular to it [m] (the paper's y_j = K (x_j(t) - x_j(t0)) da + mean y; k > 0 contracts a body
-    stretched along the axis).
-
-    Args:
-        k: K [1/m], a finite number; 0 is the centroid rule.
-        axis: direction of the axis (normalised), default x.
-        origin: a point of the axis [m]; default the centre of the body's rest bounding box.
-    """
-
-    k: float = 0.01
-    axis: tuple = (1.0, 0.0, 0.0)
-    origin: tuple | None = None
-
-    def __post_init__(self):
-        super().__post_init__()
-        check_range("k", self.k, None, None)
-        a = np.asarray(self.axis, dtype=np.float64)
-        if a.shape != (3,) or not np.all(np.isfinite(a)) or np.linalg.norm(a) == 0:
-            raise ParameterError("axis", self.axis, "3 finite numbers, not all zero")
-        if self.origin is not None:
-            o = np.asarray(self.origin, dtype=np.float64)
-            if o.shape != (3,) or not np.all(np.isfinite(o)):
-                raise ParameterError("origin", self.origin, "3 finite numbers [m] or None")
-
-    def warp_functions(self):
-        from ..kernels.lattice import rules as kl
-
-        return kl.lattice_weight_uniform, kl.lattice_update_mixed_coordinate
-
-    def parameters(self, body):
-        a = np.asarray(self.axis, dtype=np.float64)
-        a = a / np.linalg.norm(a)
-        if self.origin is None:
-            x = body.rest_positions[: body.body_count]
-            o = 0.5 * (x.min(axis=0) + x.max(axis=0))
-        else:
-            o = np.asarray(self.origin, dtype=np.float64)
-        return (self.relaxation, self.k, 1.0, 0.0), tuple(a), tuple(o)
-
-
-# ------------------------------------------------------------------------------------------------------------ fracture
-@dataclass(frozen=True)
-class LatticeFracture:
-    """Links are lost when their current length exceeds a threshold; fictitious points then balance the rule.
-
-    Args:
-        distances: threshold length [m] per shell, (d1,) or (d1, d2); a single number applies to every shell. Each
-            must exceed the longest rest link of its shell.
-        fictitious_distance: s > 0: a broken link k of particle j is replaced in j's rule by a fictitious point at
-            x_j + s (X_k - X_j), the original lattice offset scaled by s (it moves with j). s = 1 (default) gives
-            elastic-like fracture edges (a detached piece recovers its shape), s != 1 plastic-like ones (the edge
-            layer stays contracted, s < 1, or loosened, s > 1). None: no fictitious points, the link simply drops
-            out of the rule (edges then collapse inwards, as the paper's frame is meant to prevent).
-    """
-
-    distances: tuple | float
-    _: KW_ONLY
-    fictitious_distance: float | None = 1.0
-
-    def __post_init__(self):
-        d = np.atleast_1d(np.asarray(self.distances, dtype=np.float64))
-        if d.ndim != 1 or len(d) not in (1, 2) or not np.all(np.isfinite(d)) or np.any(d <= 0):
-            raise ParameterError("distances", self.distances, "1 or 2 finite lengths > 0 [m] (per shell)")
-        if self.fictitious_distance is not None:
-            check_range("fictitious_distance", self.fictitious_distance, 0.0, 4.0)
-
-    def thresholds(self) -> tuple[float, float]:
-        """(d1, d2) [m]."""
-        d = np.atleast_1d(np.asarray(self.distances, dtype=np.float64))
-        return float(d[0]), float(d[-1])
 
 
 # -------------------------------------------------------------------------------------------------------------- bodies
@@ -714,8 +331,6 @@ class LatticeBody:
     def select(self, region, field_name: str = "region") -> np.ndarray:
         """Indices of the body points selected by ``region``: a region object or callable evaluated on rest
         positions (frame points excluded), an index or a sequence of indices, or a bool mask over body points."""
-        from ..regions import region_mask
-
         nb = self.body_count
         if isinstance(region, (int, np.integer)) and not isinstance(region, bool):
             idx = np.array([int(region)])
@@ -860,9 +475,6 @@ def _block_coords(lattice: Lattice, counts, origin):
 
 
 def _shape_coords(lattice: Lattice, shape, origin):
-    from ..geometry import SolidShape
-    from ..regions import BoxRegion, SphereRegion
-
     dim = lattice.dim
     if isinstance(shape, SolidShape):
         lo, hi = shape.bounds
@@ -918,8 +530,6 @@ def _shape_coords(lattice: Lattice, shape, origin):
 
 def _inside_mesh(shape, points: np.ndarray) -> np.ndarray:
     """Winding-number inside test of points [n, 3] [m] against a closed SolidShape (pdsim.sampling.points_inside)."""
-    from ..sampling import points_inside
-
     return points_inside(shape, points, device="cpu")
 
 

@@ -14,11 +14,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import warp as wp
 
 from ..errors import InstabilityError, ParameterError
 from ..graph import fragment_labels
+from ..kernels.lattice import rules as kl
 from ..output.views import PointsView
-from ..solver import Solver, SolverContext, register_solver
+from ..solver import Solver, SolverContext, array_state, assign_state, register_solver
 from .body import LatticeBody, LatticeKind
 
 __all__ = ["SolverLattice"]
@@ -33,10 +35,6 @@ class _LatticeRuntime:
     to it (float32), so their rounding does not grow with the body's distance from the world origin."""
 
     def __init__(self, body: LatticeBody, device, origin: np.ndarray):
-        import warp as wp
-
-        from ..kernels.lattice import rules as kl
-
         self.body = body
         self.device = device
         n = body.particle_count
@@ -138,92 +136,75 @@ class _LatticeRuntime:
 
     # -- stepping --------------------------------------------------------------------------------------------------
     def step(self):
-        import warp as wp
-
-        from ..kernels.lattice import rules as kl
-
         t = self.step_count + 1
         d = self.device
         if self._clock_host != self.step_count:  # a restore or a state set from the host
             if d.is_capturing:
                 raise RuntimeError("the lattice step clock was set from the host during a graph capture")
             self.step_clock.assign(np.array([self.step_count], dtype=np.int32))
-        wp.launch(kl.lattice_step_clock, dim=1, inputs=[self.step_clock], device=d)
+        kl.advance_step_clock(self.step_clock, d)
         self._clock_host = t
         events = self.events.get(t, ())
         for ids, kind, group, host_ids in events:
-            wp.launch(
-                kl.lattice_set_kind, dim=len(host_ids), inputs=[ids, kind, group, self.kind, self.group], device=d
-            )
+            kl.set_kind(len(host_ids), ids, kind, group, self.kind, self.group, d)
             self.kind_host[host_ids] = kind
         if events:
             self._update_leader_ids()
         if self.leader_count:
-            wp.launch(
-                kl.lattice_move_leaders,
-                dim=self.leader_count,
-                inputs=[
-                    self.step_clock,
-                    self.leader_ids,
-                    self.group,
-                    self.key_offsets,
-                    self.key_step,
-                    self.key_disp,
-                    self.group_velocity,
-                    self.u_cur,
-                    self.u_next,
-                ],
-                device=d,
+            kl.move_leaders(
+                self.leader_count,
+                self.step_clock,
+                self.leader_ids,
+                self.group,
+                self.key_offsets,
+                self.key_step,
+                self.key_disp,
+                self.group_velocity,
+                self.u_cur,
+                self.u_next,
+                d,
             )
-        wp.launch(
+        kl.follow(
             self.follow_kernel,
-            dim=self.n,
-            inputs=[
-                self.rest,
-                self.kind,
+            self.n,
+            self.rest,
+            self.kind,
+            self.row_offsets,
+            self.link_neighbor,
+            self.link_offset,
+            self.link_alive,
+            self.offset_delta,
+            self.offset_weight,
+            self.offset_shell,
+            self.fictitious_scale,
+            self.params,
+            self.u_cur,
+            self.u_next,
+            d,
+        )
+        if self.has_frame:
+            kl.copy_frame(
+                self.body.body_count,
+                self.body.frame_count,
+                self.frame_offsets,
+                self.frame_sources,
+                self.u_cur if self.frame_lag else self.u_next,
+                self.u_next,
+                d,
+            )
+        if self.fracture:
+            kl.break_links(
+                self.n,
+                self.body.body_count,
                 self.row_offsets,
                 self.link_neighbor,
                 self.link_offset,
-                self.link_alive,
                 self.offset_delta,
-                self.offset_weight,
-                self.offset_shell,
-                self.fictitious_scale,
-                self.params,
-                self.u_cur,
+                self.offset_threshold,
                 self.u_next,
-            ],
-            device=d,
-        )
-        if self.has_frame:
-            wp.launch(
-                kl.lattice_copy_frame,
-                dim=self.body.frame_count,
-                inputs=[
-                    self.body.body_count,
-                    self.frame_offsets,
-                    self.frame_sources,
-                    self.u_cur if self.frame_lag else self.u_next,
-                    self.u_next,
-                ],
-                device=d,
-            )
-        if self.fracture:
-            wp.launch(
-                kl.lattice_break_links,
-                dim=self.n,
-                inputs=[
-                    self.body.body_count,
-                    self.row_offsets,
-                    self.link_neighbor,
-                    self.link_offset,
-                    self.offset_delta,
-                    self.offset_threshold,
-                    self.u_next,
-                    self.link_alive,
-                    self.broken_total,
-                ],
-                device=d,
+                self.link_alive,
+                self.broken_total,
+                d,
             )
         self.u_cur, self.u_next = self.u_next, self.u_cur
         self.step_count = t
@@ -253,45 +234,34 @@ class _LatticeRuntime:
             self.u_cur, self.u_next = self.u_next, self.u_cur
 
     def _update_leader_ids(self):
-        import warp as wp
-
         ids = np.nonzero(self.kind_host == int(LatticeKind.LEADER))[0].astype(np.int32)
         self.leader_count = len(ids)
         self.leader_ids = wp.array(ids if len(ids) else np.zeros(1, np.int32), dtype=wp.int32, device=self.device)
 
     def run(self, steps: int):
-        import warp as wp
-
         for i in range(steps):
             if i == steps - 1:
                 wp.copy(self.u_prev, self.u_cur)
             self.step()
 
     def _record_tracks(self):
-        import warp as wp
-
-        from ..kernels.lattice import rules as kl
-
         if len(self.tracked) == 0:
             return
         if self.track_slot == _TRACK_CHUNK:
             self._flush_tracks()
-        wp.launch(
-            kl.lattice_record_tracks,
-            dim=len(self.tracked),
-            inputs=[
-                self.track_ids,
-                self.row_offsets,
-                self.link_neighbor,
-                self.link_offset,
-                self.offset_delta,
-                self.offset_length,
-                self.u_cur,
-                self.track_slot,
-                self.track_u,
-                self.track_pe1,
-            ],
-            device=self.device,
+        kl.record_tracks(
+            len(self.tracked),
+            self.track_ids,
+            self.row_offsets,
+            self.link_neighbor,
+            self.link_offset,
+            self.offset_delta,
+            self.offset_length,
+            self.u_cur,
+            self.track_slot,
+            self.track_u,
+            self.track_pe1,
+            self.device,
         )
         self.track_slot += 1
 
@@ -307,27 +277,20 @@ class _LatticeRuntime:
         return self.u_cur.numpy().astype(np.float64)
 
     def pseudo_energy(self):
-        import warp as wp
-
-        from ..kernels.lattice import rules as kl
-
-        wp.launch(
-            kl.lattice_pseudo_energy,
-            dim=self.n,
-            inputs=[
-                self.row_offsets,
-                self.link_neighbor,
-                self.link_offset,
-                self.link_alive,
-                int(self.fracture),
-                self.offset_delta,
-                self.offset_length,
-                self.u_cur,
-                self.pe1,
-                self.pe1_intact,
-                self.broken,
-            ],
-            device=self.device,
+        kl.pseudo_energy(
+            self.n,
+            self.row_offsets,
+            self.link_neighbor,
+            self.link_offset,
+            self.link_alive,
+            int(self.fracture),
+            self.offset_delta,
+            self.offset_length,
+            self.u_cur,
+            self.pe1,
+            self.pe1_intact,
+            self.broken,
+            self.device,
         )
         return (
             self.pe1.numpy().astype(np.float64),
@@ -358,12 +321,8 @@ class _LatticeRuntime:
         return out.copy()
 
     def check(self) -> tuple[float, bool]:
-        import warp as wp
-
-        from ..kernels.lattice import rules as kl
-
         self._check.zero_()
-        wp.launch(kl.lattice_check_finite, dim=self.n, inputs=[self.u_cur, self._check], device=self.device)
+        kl.check_finite(self.n, self.u_cur, self._check, self.device)
         umax, bad = self._check.numpy()
         return float(umax), bool(bad > 0)
 
@@ -396,8 +355,6 @@ class SolverLattice(Solver):
     supported_features = frozenset({"fracture", "frame"})
 
     def __init__(self, bodies: list[LatticeBody], context: SolverContext | None = None, *, device=None):
-        import warp as wp
-
         if not bodies or not all(isinstance(b, LatticeBody) for b in bodies):
             raise ParameterError("bodies", bodies, "at least one LatticeBody")
         spf = {b.steps_per_frame for b in bodies}
@@ -522,8 +479,6 @@ class SolverLattice(Solver):
         """The state to continue this run exactly (pdsim.solver.Solver.checkpoint), per body: the current, next and
         previous configurations, categories and leader groups, live links and the broken-link count, the step count
         and the tracked particles' history; and the solver's time."""
-        from ..solver import array_state
-
         bodies = {}
         for i, r in enumerate(self._runtimes):
             r._flush_tracks()
@@ -545,8 +500,6 @@ class SolverLattice(Solver):
 
     def restore(self, state: dict) -> None:
         """Puts a :meth:`checkpoint` of a solver built from the same bodies back."""
-        from ..solver import assign_state
-
         bodies = state["bodies"]
         if len(bodies) != len(self._runtimes):
             raise ParameterError(
@@ -644,8 +597,6 @@ class SolverLattice(Solver):
         """Overwrites the current displacements u [m] of a body (shape [particle_count, 3]); the previous
         configuration (PE2) becomes the old current one. For diagnostics and tests: the rules apply from the next
         step."""
-        import warp as wp
-
         r = self._rt(body)
         u = np.asarray(displacements, dtype=np.float64)
         if u.shape != (r.n, 3) or not np.all(np.isfinite(u)):

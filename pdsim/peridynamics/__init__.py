@@ -1,5 +1,5 @@
-"""State-based peridynamics (shared/seeds/pd_supplement.txt): bodies, the model built from them, the explicit solver
-and the renderable fragment surfaces."""
+"""State-based peridynamics (the peridynamics supplement of the project specification): bodies, the model built from
+them, the explicit solver and the renderable fragment surfaces."""
 
 from .body import SURFACE_CORRECTIONS, PeridynamicBody
 from .model import PeridynamicModel, PeridynamicState, build_model

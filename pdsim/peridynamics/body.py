@@ -4,12 +4,14 @@ conditions (the scene-facing part of the peridynamic method)."""
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..bodies import PointBody
 from ..errors import ParameterError
 from ..geometry import SolidShape
+from ..loads import surface_forces_from_triangles
 from ..materials import Material
-from ..regions import region_mask
+from ..regions import BoxRegion, region_mask
 from ..sampling import fill_solid, jitter_points, morton_order
 from ..validate import check_range
 
@@ -123,16 +125,13 @@ class PeridynamicBody(PointBody):
         """Pre-cut: every bond whose reference segment crosses ``cut`` (a BoxRegion, e.g. a thin slab; a SolidShape's
         surface; or an open triangle surface given as (vertices, faces)) starts broken. Needs a material that breaks
         or a scene that tracks damage; any body with a notch is simulated with fracture on."""
-        from ..geometry import SolidShape as _Shape
-        from ..regions import BoxRegion
-
         if isinstance(cut, tuple) and len(cut) == 2:  # an open surface: (vertices [n, 3], triangles [m, 3])
             v = np.asarray(cut[0], dtype=np.float64)
             f = np.asarray(cut[1], dtype=np.int64)
             if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or f.size == 0:
                 raise ParameterError("cut", "(vertices, faces)", "arrays of shape [n, 3] and [m, 3], m >= 1")
-            cut = _Shape(vertices=v, faces=f.astype(np.int32), name="notch")
-        if not isinstance(cut, BoxRegion | _Shape):
+            cut = SolidShape(vertices=v, faces=f.astype(np.int32), name="notch")
+        if not isinstance(cut, BoxRegion | SolidShape):
             raise ParameterError("cut", cut, "a BoxRegion, a SolidShape or a (vertices, faces) surface")
         self.notches.append(cut)
 
@@ -160,10 +159,6 @@ class PeridynamicBody(PointBody):
         traction x area (minus pressure x area x outward normal) and gives it to the particle nearest to its
         centroid, so a uniform traction on a flat face reaches each face particle in proportion to the area it is
         nearest to (within about 10 %). Returns (particle indices int64 [k], forces float64 [k, 3])."""
-        from scipy.spatial import cKDTree
-
-        from ..loads import surface_forces_from_triangles
-
         def every(p):  # all triangles: their pieces are selected below
             return np.ones(len(p), dtype=bool)
 

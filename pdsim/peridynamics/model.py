@@ -7,7 +7,12 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+import warp as wp
 
+from ..kernels import neighbors as kn
+from ..kernels.peridynamics import bonds as kb
+from ..kernels.peridynamics import step as pd_step
+from ..regions import BoxRegion
 from .body import PeridynamicBody
 
 
@@ -44,8 +49,8 @@ class PeridynamicModel:
     plastic_bond_count: int = 0
     bond_critical_stretch: object = None  # s_c per bond (anisotropy and unbreakable regions applied) [-]
     bond_alive_initial: object = None  # uint8 per bond: 0 for bonds cut by notches
-    bonus_alpha: object = None  # compressive bonus alpha per particle [-]
-    bonus_floor: object = None  # compressive_bonus_cap / alpha per particle (1e30: no cap) [-]
+    compressive_bonus: object = None  # Material.compressive_bonus alpha per particle [-]
+    compressive_stretch_floor: object = None  # Material.compressive_bonus_cap / alpha per particle (1e30: no cap) [-]
     failure_eqps: object = None  # ductile failure plastic strain per particle [-]
     yield_stress: object = None  # sigma_Y0 per plastic particle [Pa]
     hardening: object = None  # H per plastic particle [Pa]
@@ -78,10 +83,6 @@ class PeridynamicState:
 
 def _build_families(rest, body_id, radius, device):
     """CSR families via a hash grid: returns (offsets, neighbors) Warp arrays."""
-    import warp as wp
-
-    from ..kernels import neighbors as kn
-
     n = rest.shape[0]
     cell = float(radius.numpy().max())
     dim = int(max(8, min(128, round(n ** (1.0 / 3.0)))))
@@ -101,23 +102,6 @@ DIRECTIONAL_STRETCH = 1.0e-3
 DIRECTIONAL_CALIBRATION = "uniaxial_stress"  # or "uniaxial_stretch" (Madenci-Oterkus); docs/accuracy.md compares
 
 
-def placeholders(device):
-    """Length-1 arrays passed for the arguments of features a kernel variant compiles out."""
-    import warp as wp
-
-    return (
-        wp.zeros(1, dtype=wp.uint8, device=device),
-        wp.zeros(1, dtype=float, device=device),
-        wp.zeros(1, dtype=wp.int32, device=device),
-    )
-
-
-def make_step_kernels(*, fracture: bool, plastic: bool):
-    from ..kernels.peridynamics import step as pd_step
-
-    return pd_step.make_step_kernels(fracture, plastic)
-
-
 def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, bond_wv, device):
     """Correction factors per particle and axis (Madenci-Oterkus): the continuum value over the discrete family value
     of the dilatation under a uniaxial stretch zeta along the axis (theta = zeta), and of the deviatoric sum
@@ -127,11 +111,10 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
     parts feel in tension and bending (about halves the bar-stiffness error, docs/accuracy.md), while the dilatation
     keeps the well-conditioned stretch target (theta under uniaxial stress, (1 - 2 nu) zeta, vanishes as nu -> 1/2).
     Returns two arrays of shape [n, 3]; 1 where a family is empty."""
-    import warp as wp
-
     n = len(rest_h)
     zeta = DIRECTIONAL_STRETCH
-    ks = make_step_kernels(fracture=False, plastic=False)
+    ks = pd_step.make_step_kernels(False, False)
+    launch = pd_step.single_launch(n, device)
     ones = wp.array(np.ones(n, dtype=np.float32), dtype=float, device=device)
     zeros = wp.zeros(n, dtype=float, device=device)
     sum_dil = wp.zeros(n, dtype=float, device=device)
@@ -140,7 +123,7 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
     bp = wp.zeros(n, dtype=wp.vec2, device=device)
     nb = bond_wv.shape[0]
     bond_ne = wp.zeros(nb, dtype=wp.vec4, device=device)
-    u8, f1, i1 = placeholders(device)
+    u8, f1, i1 = pd_step.placeholders(device)
     f_dil = np.ones((n, 3))
     f_dev = np.ones((n, 3))
     d_cont = 9.0 / (4.0 * math.pi * delta_h**4)
@@ -152,13 +135,23 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
         rest * (scale - 1) of a homogeneous deformation
         (the elastic kernels with d = 1, c0 = 0, b = 1)."""
         pos = wp.array((rest_h * (scale - 1.0)).astype(np.float32), dtype=wp.vec3, device=device)
-        inputs = [0, pos, offsets, neighbors, bond_geom, bond_wv, ones, zeros, zeros, u8]
-        no_plasticity = [0, *([f1] * 9), i1, f1]
-        wp.launch(
-            ks.dilatation,
-            dim=n,
-            device=device,
-            inputs=[*inputs, theta_out, bp, bond_ne, f1, *no_plasticity],
+        pd_step.dilatation(
+            launch,
+            ks,
+            displacements=pos,
+            family_offsets=offsets,
+            family_neighbors=neighbors,
+            bond_geom=bond_geom,
+            bond_wv_dil=bond_wv,
+            dil_d=ones,
+            dil_coef=zeros,
+            dev_b=zeros,
+            bond_alive=u8,
+            theta=theta_out,
+            bp=bp,
+            bond_ne=bond_ne,
+            stretch_min=f1,
+            **pd_step.plastic_placeholders(f1, i1),
         )
 
     for axis in range(3):
@@ -168,8 +161,20 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
         stress[:, axis] = 1.0 + zeta
         elastic_sums(stretch, sum_dil)  # dilatation factor: uniaxial stretch
         elastic_sums(stress, zeros_out)  # deviatoric factor: uniaxial stress (only the bond cache is used)
-        energy_inputs = [0, offsets, bond_ne, bond_wv, u8, 0, f1, zeros, ones, zeros, sum_dev]
-        wp.launch(ks.energy, dim=n, device=device, inputs=energy_inputs)
+        pd_step.strain_energy_density(
+            launch,
+            ks,
+            family_offsets=offsets,
+            bond_ne=bond_ne,
+            bond_wv_dev=bond_wv,
+            bond_alive=u8,
+            plastic_bond_count=0,
+            bond_plastic=f1,
+            theta=zeros,
+            dev_b=ones,
+            dil_c0=zeros,
+            energy_density=sum_dev,
+        )
         sd = sum_dil.numpy().astype(np.float64)
         sv = sum_dev.numpy().astype(np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -180,10 +185,6 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
 
 def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -> PeridynamicModel:
     """Concatenates the bodies, builds their families and per-bond / per-particle constants (all in kernels)."""
-    import warp as wp
-
-    from ..kernels.peridynamics import bonds as kb
-
     counts = [b.particle_count for b in bodies]
     body_offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     n = int(body_offsets[-1])
@@ -220,21 +221,11 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
     partial = wp.array(
         per_particle([b.partial_volumes for b in bodies]).astype(np.int32), dtype=wp.int32, device=device
     )
-    wp.launch(
-        kb.compute_bond_geometry,
-        dim=n,
-        inputs=[rest, volumes, horizon, spacing, partial, offsets, neighbors, bond_geom, bond_wv],
-        device=device,
-    )
+    kb.bond_geometry(n, rest, volumes, horizon, spacing, partial, offsets, neighbors, bond_geom, bond_wv, device)
 
     volume_sum = wp.zeros(n, dtype=float, device=device)
     weighted_volume = wp.zeros(n, dtype=float, device=device)
-    wp.launch(
-        kb.compute_family_moments,
-        dim=n,
-        inputs=[offsets, bond_geom, bond_wv, horizon, volume_sum, weighted_volume],
-        device=device,
-    )
+    kb.family_moments(n, offsets, bond_geom, bond_wv, horizon, volume_sum, weighted_volume, device)
     vs = volume_sum.numpy().astype(np.float64)
     m = weighted_volume.numpy().astype(np.float64)
     correction = np.concatenate([np.full(c, b.surface_correction) for c, b in zip(counts, bodies, strict=False)])
@@ -256,20 +247,17 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
         f_dev[~directional] = 1.0
         bond_wv_dil = wp.zeros_like(bond_wv)
         bond_wv_dev = wp.zeros_like(bond_wv)
-        wp.launch(
-            kb.compute_directional_bond_factors,
-            dim=n,
-            inputs=[
-                offsets,
-                neighbors,
-                bond_geom,
-                bond_wv,
-                wp.array(f_dil.astype(f32), dtype=wp.vec3, device=device),
-                wp.array(f_dev.astype(f32), dtype=wp.vec3, device=device),
-                bond_wv_dil,
-                bond_wv_dev,
-            ],
-            device=device,
+        kb.directional_bond_weights(
+            n,
+            offsets,
+            neighbors,
+            bond_geom,
+            bond_wv,
+            wp.array(f_dil.astype(f32), dtype=wp.vec3, device=device),
+            wp.array(f_dev.astype(f32), dtype=wp.vec3, device=device),
+            bond_wv_dil,
+            bond_wv_dev,
+            device,
         )
     else:
         bond_wv_dil = bond_wv_dev = bond_wv
@@ -288,39 +276,29 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
     if np.any(anisotropic & (stiff_h != 1.0)):
         if bond_wv_dil is bond_wv:
             bond_wv_dil, bond_wv_dev = wp.clone(bond_wv), wp.clone(bond_wv)
-        wp.launch(
-            kb.scale_anisotropic_stiffness,
-            dim=n,
-            inputs=[offsets, bond_geom, axis, arr(stiff_h), bond_wv_dil, bond_wv_dev],
-            device=device,
-        )
+        kb.anisotropic_stiffness(n, offsets, bond_geom, axis, arr(stiff_h), bond_wv_dil, bond_wv_dev, device)
 
     extra = {}
     fracture = any(b.fractures for b in bodies)
     if fracture:
-        from ..kernels.peridynamics import step as ks
-
         sc_h = np.concatenate([np.full(c, b.material.critical_stretch_for(b.horizon)) for c, b in zip(counts, bodies)])
         sc_h = np.minimum(sc_h, 1.0e30)
         unbreak = np.concatenate([b.unbreakable for b in bodies]).astype(np.int32)
         bond_sc = wp.zeros(max(bond_count, 1), dtype=float, device=device)
-        wp.launch(
-            kb.init_bond_fracture,
-            dim=n,
-            inputs=[
-                offsets,
-                neighbors,
-                bond_geom,
-                arr(sc_h),
-                wp.array(unbreak, dtype=wp.int32, device=device),
-                axis,
-                arr(strength_h),
-                wp.array((np.arange(n) - np.repeat(body_offsets[:-1], counts)).astype(np.int32), device=device),
-                arr(per_particle([b.material.strength_weibull_modulus or 0.0 for b in bodies])),
-                wp.array(per_particle([b.material.strength_seed for b in bodies]).astype(np.int32), device=device),
-                bond_sc,
-            ],
-            device=device,
+        kb.bond_strengths(
+            n,
+            offsets,
+            neighbors,
+            bond_geom,
+            arr(sc_h),
+            wp.array(unbreak, dtype=wp.int32, device=device),
+            axis,
+            arr(strength_h),
+            wp.array((np.arange(n) - np.repeat(body_offsets[:-1], counts)).astype(np.int32), device=device),
+            arr(per_particle([b.material.strength_weibull_modulus or 0.0 for b in bodies])),
+            wp.array(per_particle([b.material.strength_seed for b in bodies]).astype(np.int32), device=device),
+            bond_sc,
+            device,
         )
         alive = wp.array(np.ones(max(bond_count, 1), dtype=np.uint8), dtype=wp.uint8, device=device)
         for c, b, lo in zip(counts, bodies, body_offsets[:-1]):
@@ -333,8 +311,8 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
             fracture=True,
             bond_critical_stretch=bond_sc,
             bond_alive_initial=alive,
-            bonus_alpha=arr(per_particle([b.material.compressive_bonus for b in bodies])),
-            bonus_floor=arr(per_particle([_bonus_floor(b.material) for b in bodies])),
+            compressive_bonus=arr(per_particle([b.material.compressive_bonus for b in bodies])),
+            compressive_stretch_floor=arr(per_particle([compressive_stretch_floor(b.material) for b in bodies])),
             failure_eqps=arr(fail_h),
         )
         if any(b.material.debris_damping > 0.0 for b in bodies):  # kernels/peridynamics/damping.py
@@ -344,19 +322,12 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
             )
     plastic_bodies = [b for b in bodies if b.material.yields]
     if plastic_bodies:
-        from ..kernels.peridynamics import step as ks
-
         n_p = int(sum(b.particle_count for b in plastic_bodies))  # yielding bodies come first (see SolverPeridynamics)
         nb_p = int(offsets.numpy()[n_p])
         reverse = wp.zeros(max(nb_p, 1), dtype=wp.int32, device=device)
-        wp.launch(ks.find_reverse_bonds, dim=n_p, inputs=[offsets, neighbors, reverse], device=device)
+        pd_step.reverse_bonds(n_p, offsets, neighbors, reverse, device)
         psi = wp.zeros(n, dtype=float, device=device)
-        wp.launch(
-            kb.compute_plastic_norm_scale,
-            dim=n,
-            inputs=[offsets, bond_geom, bond_wv, bond_wv_dev, horizon, arr(b_k / b_cont), psi],
-            device=device,
-        )
+        kb.plastic_norm_scale(n, offsets, bond_geom, bond_wv, bond_wv_dev, horizon, arr(b_k / b_cont), psi, device)
         extra.update(
             plastic=True,
             plastic_particle_count=n_p,
@@ -399,42 +370,22 @@ def _cut_bonds(cut, first: int, count: int, rest, offsets, neighbors, alive, dev
     """Breaks the bonds of particles [first, first + count) whose reference segment crosses ``cut`` (world
     coordinates; ``rest`` is in the local frame, world - ``origin``)."""
     o = np.asarray(origin, dtype=np.float64)
-    import warp as wp
-
-    from ..kernels.peridynamics import step as ks
-    from ..regions import BoxRegion
-
     if isinstance(cut, BoxRegion):
-        wp.launch(
-            ks.break_bonds_crossing_box,
-            dim=count,
-            inputs=[
-                first,
-                rest,
-                offsets,
-                neighbors,
-                wp.vec3(*(np.asarray(cut.lo) - o)),
-                wp.vec3(*(np.asarray(cut.hi) - o)),
-                alive,
-            ],
-            device=device,
-        )
+        lo = wp.vec3(*(np.asarray(cut.lo) - o))
+        hi = wp.vec3(*(np.asarray(cut.hi) - o))
+        pd_step.cut_bonds_by_box(first, count, rest, offsets, neighbors, lo, hi, alive, device)
     else:
         mesh = wp.Mesh(
             points=wp.array((cut.vertices - o).astype(np.float32), dtype=wp.vec3, device=device),
             indices=wp.array(cut.faces.astype(np.int32).ravel(), dtype=wp.int32, device=device),
         )
-        wp.launch(
-            ks.break_bonds_crossing_mesh,
-            dim=count,
-            inputs=[first, mesh.id, rest, offsets, neighbors, alive],
-            device=device,
-        )
+        pd_step.cut_bonds_by_mesh(first, count, mesh.id, rest, offsets, neighbors, alive, device)
 
 
-def _bonus_floor(material) -> float:
-    """Material.compressive_bonus_cap k as a floor on the compressive stretch the bonus reads: the force kernel
-    takes s0 = s_c - alpha max(s_min, -(k / alpha) s_c), which is s_c + min(-alpha s_min, k s_c); 1e30 (no floor)
-    without a cap or a bonus, which leaves the plain rule's arithmetic unchanged."""
+def compressive_stretch_floor(material) -> float:
+    """The one place where Material.compressive_bonus_cap k becomes the kernel's floor on the compressive stretch the
+    bonus reads, k / alpha with alpha = Material.compressive_bonus [-]: the force kernel takes
+    s0 = s_c - alpha max(s_min, -(k / alpha) s_c), which is s_c + min(-alpha s_min, k s_c); 1e30 (no floor) without a
+    cap or a bonus, which leaves the plain rule's arithmetic unchanged."""
     cap, alpha = material.compressive_bonus_cap, material.compressive_bonus
     return 1.0e30 if cap is None or alpha <= 0.0 else min(cap / alpha, 1.0e30)

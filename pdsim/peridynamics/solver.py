@@ -1,9 +1,9 @@
 """State-based peridynamic solid: bodies, the model built from them, and the explicit solver.
 
-The elastic model is the one derived in shared/seeds/pd_supplement.txt (kernels/peridynamics/bonds.py lists the
-formulas). Its three parameters come from matching two reference deformations, an isotropic expansion (theta = 3 zeta,
-W = 9/2 kappa zeta^2) and a shear (W = 1/2 mu zeta^2). The supplement evaluates the family sums as integrals over a
-full sphere, which gives the constants
+The elastic model is the one derived in the peridynamics supplement of the project specification
+(kernels/peridynamics/bonds.py lists the formulas). Its three parameters come from matching two reference deformations,
+an isotropic expansion (theta = 3 zeta, W = 9/2 kappa zeta^2) and a shear (W = 1/2 mu zeta^2). The supplement evaluates
+the family sums as integrals over a full sphere, which gives the constants
 
     d = 9 / (4 pi delta^4),   b = 15 mu / (2 pi delta^5),   a = kappa d / 2,   g = (5 mu / 6) d / b = delta / 4.
 
@@ -31,20 +31,24 @@ peridynamic solid's dilatation with the supplement's constants: the same to firs
 
 from __future__ import annotations
 
-import itertools
 import math
-import os
-import threading
-from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
+import warp as wp
 
+from ..contact import ParticleContact
 from ..errors import ParameterError
+from ..fragment_surfaces import FragmentSurfaces
+from ..graph import FragmentTracker
+from ..kernels.peridynamics import bonds as kb
+from ..kernels.peridynamics import damping as pd_damping
+from ..kernels.peridynamics import step as pd_step
 from ..kinematics import PointKinematics
 from ..output.views import PointsView
-from ..solver import PointSolver, SolverContext, register_solver
+from ..solver import PointSolver, SolverContext, array_state, assign_state, register_solver
 from .body import PeridynamicBody
-from .model import PeridynamicState, build_model, make_step_kernels, placeholders
+from .model import PeridynamicState, build_model
+from .ranges import ParticleRanges, resolve_threads
 
 
 @register_solver
@@ -90,8 +94,6 @@ class SolverPeridynamics(PointSolver):
         surfaces: bool = True,
         threads: int | None = None,
     ):
-        import warp as wp
-
         if not bodies or not all(isinstance(b, PeridynamicBody) for b in bodies):
             raise ParameterError("bodies", bodies, "at least one PeridynamicBody")
         ctx = context or SolverContext()
@@ -141,7 +143,7 @@ class SolverPeridynamics(PointSolver):
             self.state.bond_plastic = wp.zeros(max(m.plastic_bond_count, 1), dtype=float, device=d)
             self.state.bond_plastic_reverse = wp.zeros(max(m.plastic_bond_count, 1), dtype=float, device=d)
             self.state.eqps = wp.zeros(n, dtype=float, device=d)
-        self._kernels = make_step_kernels(fracture=m.fracture, plastic=m.plastic)
+        self._kernels = pd_step.make_step_kernels(m.fracture, m.plastic)
         self._offsets_host = m.family_offsets.numpy()[: n + 1].astype(np.int64)
         self._ranges = None
         self.threads = threads
@@ -153,12 +155,10 @@ class SolverPeridynamics(PointSolver):
         self._colliders_all = ([ground] if ground is not None else []) + colliders
         self.contact = None
         if contact is not None and contact is not False:
-            from ..contact import ParticleContact
-
             options = {} if contact is True else dict(contact)
             self.contact = ParticleContact.from_bodies(self.bodies, device=self.device, origin=self.origin, **options)
             self._positions = wp.zeros(n, dtype=wp.vec3, device=d)  # rest + u, the contact pass's positions
-        self._dummy_u8, self._dummy_f, self._dummy_i = placeholders(d)
+        self._dummy_u8, self._dummy_f, self._dummy_i = pd_step.placeholders(d)
         self._energy_density = wp.zeros(n, dtype=float, device=d)
         self.write_surfaces = bool(surfaces)
         self._surfaces = None  # FragmentSurfaces per body, built on the first views() call
@@ -196,26 +196,19 @@ class SolverPeridynamics(PointSolver):
     # -- time step -----------------------------------------------------------------------------------------------
     def stable_time_step(self) -> float:
         """Silling-Askari critical time step min_k sqrt(2 rho_k / sum_j V_j C_kj) [s] (no safety factor)."""
-        import warp as wp
-
-        from ..kernels.peridynamics import bonds as kb
-
         m = self.model
         row = wp.zeros(m.particle_count, dtype=float, device=self.device)
-        wp.launch(
-            kb.compute_stiffness_row_sum,
-            dim=m.particle_count,
-            inputs=[
-                m.family_offsets,
-                m.family_neighbors,
-                m.bond_wv_dil,
-                m.bond_wv_dev,
-                m.dev_b,
-                m.dil_d,
-                m.dil_c0,
-                row,
-            ],
-            device=self.device,
+        kb.stiffness_row_sum(
+            m.particle_count,
+            m.family_offsets,
+            m.family_neighbors,
+            m.bond_wv_dil,
+            m.bond_wv_dev,
+            m.dev_b,
+            m.dil_d,
+            m.dil_c0,
+            row,
+            self.device,
         )
         s = row.numpy().astype(np.float64)
         ok = s > 0
@@ -236,117 +229,94 @@ class SolverPeridynamics(PointSolver):
 
     def _mirror_plastic(self):
         """bond_plastic_reverse from bond_plastic (after a restore; the step keeps the mirror itself)."""
-        import warp as wp
-
-        from ..kernels.peridynamics import step as pd_step
-
         m, s = self.model, self.state
         if m.plastic and m.plastic_bond_count > 0:
-            wp.launch(
-                pd_step.mirror_plastic_extensions,
-                dim=m.plastic_bond_count,
-                inputs=[m.bond_reverse, s.bond_plastic, s.bond_plastic_reverse],
-                device=self.device,
+            pd_step.mirror_plastic(
+                m.plastic_bond_count, m.bond_reverse, s.bond_plastic, s.bond_plastic_reverse, self.device
             )
 
     def compute_forces(self):
         """Force density [N/m^3] at the current displacements: bonds (with plasticity and the breaking test where
         live), contact, then the loads at the end of the step being taken."""
-        import warp as wp
-
         m, s, ks = self.model, self.state, self._kernels
         f1 = self._dummy_f
         alive, plastic, reverse = self._feature_arrays()
         frac = m.fracture
         plastic_args = (
-            [
-                m.plastic_particle_count,
-                m.bond_wv,
-                m.bond_wv_dev,
-                m.horizon,
-                m.weighted_volume,
-                m.yield_stress,
-                m.hardening,
-                m.psi_scale,
-                plastic,
-                s.eqps,
-                reverse,
-                s.bond_plastic_reverse,
-            ]
+            dict(
+                plastic_particle_count=m.plastic_particle_count,
+                bond_wv=m.bond_wv,
+                bond_wv_dev=m.bond_wv_dev,
+                horizon=m.horizon,
+                weighted_volume=m.weighted_volume,
+                yield_stress=m.yield_stress,
+                hardening=m.hardening,
+                psi_scale=m.psi_scale,
+                bond_plastic=plastic,
+                eqps=s.eqps,
+                bond_reverse=reverse,
+                bond_plastic_reverse=s.bond_plastic_reverse,
+            )
             if m.plastic
-            else [0, *([f1] * 9), reverse, f1]
+            else pd_step.plastic_placeholders(f1, reverse)
         )
-        ranges = self._ranges
-        ranges.launch(
-            ks.dilatation,
-            [
-                self.kin.u,
-                m.family_offsets,
-                m.family_neighbors,
-                m.bond_geom,
-                m.bond_wv_dil,
-                m.dil_d,
-                m.dil_coef,
-                m.dev_b,
-                alive,
-                s.theta,
-                s.bp,
-                s.bond_ne,
-                s.stretch_min if frac else f1,
-                *plastic_args,
-            ],
+        launch = self._ranges.launch
+        pd_step.dilatation(
+            launch,
+            ks,
+            displacements=self.kin.u,
+            family_offsets=m.family_offsets,
+            family_neighbors=m.family_neighbors,
+            bond_geom=m.bond_geom,
+            bond_wv_dil=m.bond_wv_dil,
+            dil_d=m.dil_d,
+            dil_coef=m.dil_coef,
+            dev_b=m.dev_b,
+            bond_alive=alive,
+            theta=s.theta,
+            bp=s.bp,
+            bond_ne=s.bond_ne,
+            stretch_min=s.stretch_min if frac else f1,
+            **plastic_args,
         )
-        ranges.launch(
-            ks.force,
-            [
-                m.family_offsets,
-                m.family_neighbors,
-                m.bond_geom,
-                s.bond_ne,
-                m.bond_wv_dil,
-                m.bond_wv_dev,
-                s.bp,
-                alive,
-                m.bond_critical_stretch if frac else f1,
-                m.bonus_alpha if frac else f1,
-                m.bonus_floor if frac else f1,
-                s.stretch_min if frac else f1,
-                s.eqps if m.plastic else f1,
-                m.failure_eqps if frac else f1,
-                m.plastic_bond_count,
-                plastic,
-                s.bond_plastic_reverse if m.plastic else f1,
-                s.force_density,
-            ],
+        pd_step.bond_forces(
+            launch,
+            ks,
+            family_offsets=m.family_offsets,
+            family_neighbors=m.family_neighbors,
+            bond_geom=m.bond_geom,
+            bond_ne=s.bond_ne,
+            bond_wv_dil=m.bond_wv_dil,
+            bond_wv_dev=m.bond_wv_dev,
+            bp=s.bp,
+            bond_alive=alive,
+            bond_critical_stretch=m.bond_critical_stretch if frac else f1,
+            compressive_bonus=m.compressive_bonus if frac else f1,
+            compressive_stretch_floor=m.compressive_stretch_floor if frac else f1,
+            stretch_min=s.stretch_min if frac else f1,
+            eqps=s.eqps if m.plastic else f1,
+            failure_eqps=m.failure_eqps if frac else f1,
+            plastic_bond_count=m.plastic_bond_count,
+            bond_plastic=plastic,
+            bond_plastic_reverse=s.bond_plastic_reverse if m.plastic else f1,
+            force_density=s.force_density,
         )
         if m.debris_rate is not None:  # Material.debris_damping (kernels/peridynamics/damping.py)
-            from ..kernels.peridynamics.damping import add_debris_damping
-
-            wp.launch(
-                add_debris_damping,
-                dim=m.particle_count,
-                device=self.device,
-                inputs=[
-                    m.family_offsets,
-                    m.family_neighbors,
-                    m.bond_wv,
-                    alive,
-                    self.kin.v,
-                    m.inv_density,
-                    m.debris_rate,
-                    m.debris_damage,
-                    s.force_density,
-                ],
+            pd_damping.debris_damping(
+                m.particle_count,
+                m.family_offsets,
+                m.family_neighbors,
+                m.bond_wv,
+                alive,
+                self.kin.v,
+                m.inv_density,
+                m.debris_rate,
+                m.debris_damage,
+                s.force_density,
+                self.device,
             )
         if self.contact is not None:
-            from ..kernels.peridynamics import step as pd_step
-
-            wp.launch(
-                pd_step.compose_positions,
-                dim=m.particle_count,
-                inputs=[m.rest_positions, self.kin.u, self._positions],
-                device=self.device,
-            )
+            pd_step.deformed_positions(m.particle_count, m.rest_positions, self.kin.u, self._positions, self.device)
             self.contact.apply(self._positions, self.kin.u, self.kin.v, s.force_density, self.kin.point_kind)
         self.kin.add_loads(s.force_density, self._force_time)
 
@@ -384,8 +354,6 @@ class SolverPeridynamics(PointSolver):
         """The state to continue this run exactly (pdsim.solver.Solver.checkpoint): the shared kinematics, the bond
         state (live flags, plastic extensions, equivalent plastic strain, the step's dilatation and bond cache) and
         particle contact's stiffness-cap scales and exposure."""
-        from ..solver import array_state
-
         s = self.state
         out = {"kinematics": self.kinematics_checkpoint(), "bonds": {}}
         for name in ("theta", "bp", "force_density", "bond_ne", "bond_alive", "stretch_min"):
@@ -404,9 +372,6 @@ class SolverPeridynamics(PointSolver):
     def restore(self, state: dict) -> None:
         """Puts a :meth:`checkpoint` of a solver built from the same bodies back; fragment labels and surfaces are
         recomputed from the restored bonds at the next output."""
-        from ..errors import ParameterError
-        from ..solver import assign_state
-
         if int(state["kinematics"]["point_count"]) != self.particle_count:
             raise ParameterError(
                 "checkpoint", f"{state['kinematics']['point_count']} particles", f"{self.particle_count} particles"
@@ -453,8 +418,6 @@ class SolverPeridynamics(PointSolver):
     def contact_particles(self):
         """The particles that take part in contact with bodies of other methods (all of them) and their contact
         radii h/2 [m]: (int32 [n], float32 [n]) Warp arrays (pdsim.contact.MethodContact)."""
-        import warp as wp
-
         if getattr(self, "_contact_points", None) is None:
             n = self.model.particle_count
             self._contact_points = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=self.device)
@@ -464,8 +427,6 @@ class SolverPeridynamics(PointSolver):
         """Fragment id per particle (connected components of live bonds, numbered per body by the body-local index
         of the fragment's first particle, so ids stay stable over an animation); recomputed only when bonds broke
         since the last call. Zeros when no body can break."""
-        from ..graph import FragmentTracker
-
         m = self.model
         if not m.fracture:
             return np.zeros(m.particle_count, dtype=np.int32)
@@ -490,8 +451,6 @@ class SolverPeridynamics(PointSolver):
         if self.model.plastic:
             values["plastic_strain"] = self.plastic_strain()
         if self.write_surfaces and self._surfaces is None:
-            from ..fragment_surfaces import FragmentSurfaces
-
             self._surfaces = [
                 FragmentSurfaces(b.shape, b.rest_positions, b.spacing, b.name, device=str(self.device))
                 for b in self.bodies
@@ -520,42 +479,32 @@ class SolverPeridynamics(PointSolver):
     # -- host-side views and diagnostics (vectorised numpy) ---------------------------------------------------------
     def _local_positions_wp(self):
         """rest + u in the local frame, as a Warp array (the contact pass's positions)."""
-        import warp as wp
-
-        from ..kernels.peridynamics import step as pd_step
-
         out = wp.zeros(self.model.particle_count, dtype=wp.vec3, device=self.device)
-        wp.launch(
-            pd_step.compose_positions,
-            dim=self.model.particle_count,
-            inputs=[self.model.rest_positions, self.kin.u, out],
-            device=self.device,
-        )
+        pd_step.deformed_positions(self.model.particle_count, self.model.rest_positions, self.kin.u, out, self.device)
         return out
+
+    def _particle_vectors(self, name: str, values) -> np.ndarray:
+        """``values`` as float64 [particle_count, 3]; ParameterError naming ``name`` for another shape."""
+        a = np.asarray(values, dtype=np.float64)
+        if a.shape != (self.model.particle_count, 3):
+            raise ParameterError(name, a.shape, f"shape ({self.model.particle_count}, 3)")
+        return a
 
     def set_positions(self, positions: np.ndarray):
         """Sets world positions [m] (shape [particle_count, 3]; the displacements become positions - rest) and
         recomputes forces, dilatation and accelerations."""
-        p = np.asarray(positions, dtype=np.float64)
-        if p.shape != (self.model.particle_count, 3):
-            raise ParameterError("positions", p.shape, f"shape ({self.model.particle_count}, 3)")
+        p = self._particle_vectors("positions", positions)
         self.kin.set_displacements(p - self.model.rest_host)
         self._refresh_accelerations()
 
     def set_displacements(self, displacements: np.ndarray):
         """Sets displacements [m] (shape [particle_count, 3]) and recomputes forces and accelerations."""
-        u = np.asarray(displacements, dtype=np.float64)
-        if u.shape != (self.model.particle_count, 3):
-            raise ParameterError("displacements", u.shape, f"shape ({self.model.particle_count}, 3)")
-        self.kin.set_displacements(u)
+        self.kin.set_displacements(self._particle_vectors("displacements", displacements))
         self._refresh_accelerations()
 
     def set_velocities(self, velocities: np.ndarray):
         """Overwrites velocities [m/s], shape [particle_count, 3]."""
-        v = np.asarray(velocities, dtype=np.float64)
-        if v.shape != (self.model.particle_count, 3):
-            raise ParameterError("velocities", v.shape, f"shape ({self.model.particle_count}, 3)")
-        self.kin.set_velocities(v)
+        self.kin.set_velocities(self._particle_vectors("velocities", velocities))
 
     def dilatation(self) -> np.ndarray:
         """theta per particle at the current positions [-]."""
@@ -570,31 +519,28 @@ class SolverPeridynamics(PointSolver):
         is always that of the current positions)."""
         m, s = self.model, self.state
         alive, plastic, _ = self._feature_arrays()
-        self._ranges.launch(
-            self._kernels.energy,
-            [
-                m.family_offsets,
-                s.bond_ne,
-                m.bond_wv_dev,
-                alive,
-                m.plastic_bond_count,
-                plastic,
-                s.theta,
-                m.dev_b,
-                m.dil_c0,
-                self._energy_density,
-            ],
+        pd_step.strain_energy_density(
+            self._ranges.launch,
+            self._kernels,
+            family_offsets=m.family_offsets,
+            bond_ne=s.bond_ne,
+            bond_wv_dev=m.bond_wv_dev,
+            bond_alive=alive,
+            plastic_bond_count=m.plastic_bond_count,
+            bond_plastic=plastic,
+            theta=s.theta,
+            dev_b=m.dev_b,
+            dil_c0=m.dil_c0,
+            energy_density=self._energy_density,
         )
         return self._energy_density.numpy().astype(np.float64)
 
     def damage(self) -> np.ndarray:
         """Damage phi_k = 1 - live / all bond weight per particle [-] (zeros when no body can break)."""
-        from ..kernels.peridynamics import step as pd_step
-
         m = self.model
         if not m.fracture:
             return np.zeros(m.particle_count)
-        self._ranges.launch(pd_step.compute_damage, [m.family_offsets, m.bond_wv, self.state.bond_alive, self._damage])
+        pd_step.particle_damage(self._ranges.launch, m.family_offsets, m.bond_wv, self.state.bond_alive, self._damage)
         return self._damage.numpy().astype(np.float64)
 
     def plastic_strain(self) -> np.ndarray:
@@ -626,161 +572,3 @@ def _bounds_centre(bodies) -> np.ndarray:
     """Centre of the bodies' rest bounding box [m] (the local frame's origin of a solver built without a scene)."""
     rest = np.concatenate([b.rest_positions for b in bodies])
     return 0.5 * (rest.min(axis=0) + rest.max(axis=0))
-
-
-THREADS_ENV = "PDSIM_THREADS"
-"""Environment variable: CPU threads of the peridynamic bond passes when a solver is built without ``threads``."""
-
-MIN_BONDS_PER_THREAD = 50_000
-"""The default thread count gives each thread at least this many bonds: starting and joining a pass on a pool thread
-costs some 50 us, about what one thread spends on 5,000 bonds in one pass."""
-
-RANGE_PARTICLE_COST = 4
-"""Cost of a particle's own work (reads, the per-particle arithmetic, its writes) in bond visits, added to its bond
-count when the particles are split into ranges of equal cost."""
-
-
-def available_cores() -> int:
-    """CPU cores this process may run on (its affinity mask where the platform has one)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return max(1, os.cpu_count() or 1)
-
-
-def resolve_threads(threads, device, bond_count: int = 0) -> int:
-    """The thread count of the bond passes: ``threads`` (an integer >= 1), else the environment variable
-    PDSIM_THREADS, else every core in the process's affinity but no more than one per MIN_BONDS_PER_THREAD bonds;
-    1 on a CUDA device (where ``threads`` must be None or 1: the GPU runs each pass as one launch)."""
-    if threads is not None:
-        if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
-            raise ParameterError("threads", threads, "None or an integer >= 1 (CPU threads of the bond passes)")
-        threads = int(threads)
-        if device.is_cuda and threads != 1:
-            raise ParameterError(
-                "threads", threads, f"None or 1 on the CUDA device {device} (each bond pass is one GPU launch)"
-            )
-        return threads
-    if device.is_cuda:
-        return 1
-    env = os.environ.get(THREADS_ENV, "").strip()
-    if env:
-        try:
-            value = int(env)
-        except ValueError:
-            value = 0
-        if value < 1:
-            raise ParameterError(THREADS_ENV, env, "an integer >= 1 (CPU threads of the peridynamic bond passes)")
-        return value
-    return max(1, min(available_cores(), int(bond_count) // MIN_BONDS_PER_THREAD))
-
-
-def _launch_wrapped(wp) -> bool:
-    """Whether ``wp.launch`` is a tool's wrapper (one that records or times launches) rather than Warp's own."""
-    return not getattr(wp.launch, "__module__", "").startswith("warp.")
-
-
-_executors: dict[tuple[int, int], ThreadPoolExecutor] = {}
-_executors_lock = threading.Lock()
-
-
-def _executor(workers: int) -> ThreadPoolExecutor:
-    """The process's pool of ``workers`` threads for range launches (shared by solvers, created on first use; a
-    process forked from one that had a pool gets its own, as the parent's threads do not exist in it)."""
-    key = (os.getpid(), workers)
-    with _executors_lock:
-        pool = _executors.get(key)
-        if pool is None:
-            pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="pdsim-pd")
-            _executors[key] = pool
-        return pool
-
-
-class ParticleRanges:
-    """Contiguous particle ranges of about equal cost (bond count plus RANGE_PARTICLE_COST per particle), one per
-    thread, and the launch of one pass over them.
-
-    Each step kernel takes the first particle of its launch and writes only its own particles' rows and their bonds'
-    rows (the families are stored per particle; the mirror of the plastic extensions writes one slot per bond, at its
-    reverse bond, that only the next pass reads: kernels/peridynamics/step.py), and a pass reads only what earlier
-    passes wrote, so the ranges of one pass are independent: ``launch`` starts one Warp launch per range, the calling
-    thread running the first while pool threads run the others (a CPU kernel runs with the GIL released), and returns
-    when all are done. A particle's arithmetic does not depend on its range, so results are bit-identical for any
-    thread count. On a CUDA device there is one range: one launch over all particles.
-
-    Warp (1.19) passes each launch's thread index as an argument of the generated CPU function (early versions kept
-    it in a static variable, which made concurrent CPU launches unsafe) and builds each launch's argument block
-    afresh; what is not safe is loading a module from several threads at once, so the kernels' modules are loaded
-    from the calling thread before the first threaded launch (``_load``). While the device records a graph
-    (``wp.ScopedCapture``, pdsim/frame_graph.py) the ranges are launched one after another from the calling thread,
-    which is the only thread a capture records; a CPU replay then runs them on one thread."""
-
-    def __init__(self, offsets_host: np.ndarray, threads: int, device):
-        n = len(offsets_host) - 1
-        self.device = device
-        self.particle_count = n
-        count = max(1, min(int(threads), n))
-        cost = offsets_host.astype(np.int64) + RANGE_PARTICLE_COST * np.arange(n + 1, dtype=np.int64)
-        targets = cost[-1] * np.arange(1, count) / count
-        above = np.clip(np.searchsorted(cost, targets), 1, n)  # the first cut at or past each target, or the one
-        cuts = np.where(targets - cost[above - 1] < cost[above] - targets, above - 1, above).tolist()  # nearer
-        for i in range(len(cuts)):  # one per thread (a handful): each range keeps at least one particle
-            cuts[i] = min(max(cuts[i], cuts[i - 1] + 1 if i else 1), n - (count - 1 - i))
-        bounds = [0, *cuts, n]
-        self.ranges = [(int(a), int(b - a)) for a, b in itertools.pairwise(bounds)]
-        self._loaded = set()
-        self._commands = {}  # kernel key -> (inputs key, recorded launches, inputs)
-
-    def _load(self, kernel) -> None:
-        import warp as wp
-
-        module = kernel.module
-        if id(module) not in self._loaded:
-            wp.load_module(module, device=self.device)
-            self._loaded.add(id(module))
-
-    def launch(self, kernel, inputs: list) -> None:
-        """``kernel`` over every particle: one launch per range with inputs ``[first, *inputs]``, joined."""
-        import warp as wp
-
-        device = self.device
-        if device.is_cuda or device.is_capturing or _launch_wrapped(wp):
-            # one launch on a GPU; in order from this thread while a graph is recorded; through wp.launch while a
-            # tool records or times launches by wrapping it (pdsim/explain.py, tools/bench_pd_throughput.py)
-            for first, count in self.ranges:
-                if count:
-                    wp.launch(kernel, dim=count, inputs=[first, *inputs], device=device)
-            return
-        launches = self._recorded(kernel, inputs)
-        if len(launches) <= 1:
-            for cmd in launches:
-                cmd.launch()
-            return
-        pool = _executor(len(launches) - 1)
-        futures = [pool.submit(cmd.launch) for cmd in launches[1:]]
-        try:
-            launches[0].launch()
-        finally:  # every range has finished before this returns or raises (they write the same arrays)
-            wait(futures)
-        for fut in futures:
-            fut.result()
-
-    def _recorded(self, kernel, inputs: list) -> list:
-        """The recorded launches (``wp.launch(..., record_cmd=True)``) of ``kernel`` over the ranges with ``inputs``,
-        kept while the inputs are the same arrays and values: replaying one costs a few microseconds of Python,
-        where ``wp.launch`` checks and packs every argument again, and the pool threads take turns on the GIL for
-        that Python part. The entry keeps the inputs alive, so an array's id cannot be reused while it is cached."""
-        import warp as wp
-
-        key = tuple(id(x) if isinstance(x, wp.array) else x for x in inputs)
-        entry = self._commands.get(kernel.key)
-        if entry is None or entry[0] != key:
-            self._load(kernel)
-            cmds = [
-                wp.launch(kernel, dim=count, inputs=[first, *inputs], device=self.device, record_cmd=True)
-                for first, count in self.ranges
-                if count
-            ]
-            entry = (key, cmds, list(inputs))
-            self._commands[kernel.key] = entry
-        return entry[1]
