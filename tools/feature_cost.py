@@ -13,7 +13,7 @@ built once elastic only (the baseline) and once per feature with that one featur
 - colliders: a sphere projectile pressing on the top face; ground plane: a plane under the block;
 - loads: a traction on the +x face; boundary conditions: the -x face held; gravity; damping;
 - everything above together (fracture without breaking);
-- watchdog: not a material feature: the divergence watchdog Scene.run attaches (pdsim.kinematics.Watchdog, a check
+- watchdog: not a material feature: the divergence watchdog Scene.run attaches (pdsim.watchdog.Watchdog, a check
   every 16 steps: Scene.run's default ``check_interval``), on the elastic block.
 
 Baseline and feature solvers step in alternating chunks (baseline, feature, baseline, ...), ``--pairs`` times, so
@@ -300,12 +300,14 @@ def stripped_check(n: int, device: str, launches: int = 20, rounds: int = 8) -> 
         pd_step.dilatation(
             launch, ks, displacements=u, family_offsets=m.family_offsets, family_neighbors=m.family_neighbors,
             bond_geom=m.bond_geom, bond_wv_dil=m.bond_wv_dil, dil_d=m.dil_d, dil_coef=m.dil_coef, dev_b=m.dev_b,
-            bond_alive=u8, theta=theta, bp=bp, bond_ne=ne, stretch_min=f1, **pd_step.plastic_placeholders(f1, i1))  # fmt: skip
+            bond_alive=u8, theta=theta, bp=bp, bond_ne=ne, stretch_min=f1,
+            **pd_step.plastic_placeholders(f1, i1))  # fmt: skip
         pd_step.bond_forces(
             launch, ks, family_offsets=m.family_offsets, family_neighbors=m.family_neighbors, bond_geom=m.bond_geom,
             bond_ne=ne, bond_wv_dil=m.bond_wv_dil, bond_wv_dev=m.bond_wv_dev, bp=bp, bond_alive=u8,
             bond_critical_stretch=f1, compressive_bonus=f1, compressive_stretch_floor=f1, stretch_min=f1, eqps=f1,
-            failure_eqps=f1, plastic_bond_count=0, bond_plastic=f1, bond_plastic_reverse=f1, force_density=force)  # fmt: skip
+            failure_eqps=f1, plastic_bond_count=0, bond_plastic=f1, bond_plastic_reverse=f1,
+            force_density=force)  # fmt: skip
 
     def stripped(o):
         theta, bp, ne, force = o
