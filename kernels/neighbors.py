@@ -65,3 +65,21 @@ def fill_family(
             if wp.length(rest[j] - xk) <= r:
                 neighbors[q] = j
                 q += 1
+
+
+def build_families(rest, body_id, radius, device):
+    """CSR families via a hash grid (:func:`count_family`, a scan, :func:`fill_family`): the points within ``radius``
+    of each point of ``rest`` in the same body. Returns (offsets, neighbors) Warp arrays and the bond count."""
+    n = rest.shape[0]
+    cell = float(radius.numpy().max())
+    dim = int(max(8, min(128, round(n ** (1.0 / 3.0)))))
+    grid = wp.HashGrid(dim, dim, dim, device=device)
+    grid.build(rest, cell)
+    counts = wp.zeros(n, dtype=wp.int32, device=device)
+    wp.launch(count_family, dim=n, inputs=[grid.id, rest, body_id, radius, counts], device=device)
+    offsets = wp.zeros(n + 1, dtype=wp.int32, device=device)
+    wp.utils.array_scan(counts, offsets[1:], inclusive=True)
+    bond_count = int(offsets.numpy()[-1])
+    neighbors = wp.zeros(max(bond_count, 1), dtype=wp.int32, device=device)
+    wp.launch(fill_family, dim=n, inputs=[grid.id, rest, body_id, radius, offsets, neighbors], device=device)
+    return offsets, neighbors, bond_count

@@ -1,4 +1,4 @@
-"""The peridynamic bond passes on several CPU threads (pdsim/peridynamics/solver.py, ParticleRanges): the particle
+"""The peridynamic bond passes on several CPU threads (pdsim/peridynamics/ranges.py, ParticleRanges): the particle
 ranges cover every particle once with about equal bond counts, results are bit-identical for any thread count, and
 the thread setting is checked."""
 

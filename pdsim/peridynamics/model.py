@@ -81,23 +81,6 @@ class PeridynamicState:
     eqps: object = None  # equivalent plastic strain per particle [-]
 
 
-def _build_families(rest, body_id, radius, device):
-    """CSR families via a hash grid: returns (offsets, neighbors) Warp arrays."""
-    n = rest.shape[0]
-    cell = float(radius.numpy().max())
-    dim = int(max(8, min(128, round(n ** (1.0 / 3.0)))))
-    grid = wp.HashGrid(dim, dim, dim, device=device)
-    grid.build(rest, cell)
-    counts = wp.zeros(n, dtype=wp.int32, device=device)
-    wp.launch(kn.count_family, dim=n, inputs=[grid.id, rest, body_id, radius, counts], device=device)
-    offsets = wp.zeros(n + 1, dtype=wp.int32, device=device)
-    wp.utils.array_scan(counts, offsets[1:], inclusive=True)
-    bond_count = int(offsets.numpy()[-1])
-    neighbors = wp.zeros(max(bond_count, 1), dtype=wp.int32, device=device)
-    wp.launch(kn.fill_family, dim=n, inputs=[grid.id, rest, body_id, radius, offsets, neighbors], device=device)
-    return offsets, neighbors, bond_count
-
-
 DIRECTIONAL_STRETCH = 1.0e-3
 DIRECTIONAL_CALIBRATION = "uniaxial_stress"  # or "uniaxial_stretch" (Madenci-Oterkus); docs/accuracy.md compares
 
@@ -214,7 +197,7 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
     horizon = arr(delta_h)
     spacing = arr(h_h)
     body_id = wp.array(body_id_h, dtype=wp.int32, device=device)
-    offsets, neighbors, bond_count = _build_families(rest, body_id, arr(search_h), device)
+    offsets, neighbors, bond_count = kn.build_families(rest, body_id, arr(search_h), device)
 
     bond_geom = wp.zeros(max(bond_count, 1), dtype=wp.vec4, device=device)
     bond_wv = wp.zeros(max(bond_count, 1), dtype=float, device=device)
