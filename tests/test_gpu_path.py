@@ -16,6 +16,7 @@ from pdsim.colliders import SphereProjectile
 from pdsim.frame_graph import FrameGraphs
 from pdsim.graph import DeviceLabeller, FragmentTracker, connected_components, fragment_labels, labels_from_roots
 from pdsim.lattice import Lattice, LatticeBody, LatticeFracture, LatticeKind
+from pdsim.run import advance_frame, method_contact
 
 HAS_CUDA = wp.get_cuda_device_count() > 0
 needs_cuda = pytest.mark.skipif(not HAS_CUDA, reason="needs a CUDA device")
@@ -123,7 +124,7 @@ def test_load_curve_and_kick_follow_the_device_clock():
     modes = []
     for _ in range(4):
         graphs_state = (graphs.captures, graphs.replays)
-        scene.advance_frame([solver], dt, substeps, graphs=graphs)
+        advance_frame([solver], dt, substeps, graphs=graphs)
         modes.append((graphs.captures - graphs_state[0], graphs.replays - graphs_state[1]))
         for _ in range(substeps):
             times.append(times[-1] + dt)
@@ -155,7 +156,7 @@ def test_prescribed_velocity_ramp_is_integrated_at_mid_step_times():
     dt = scene.frame_time / substeps
     starts = [0.0]
     for frame in range(1, 5):
-        scene.advance_frame([solver], dt, substeps, graphs=graphs)
+        advance_frame([solver], dt, substeps, graphs=graphs)
         for _ in range(substeps):
             starts.append(starts[-1] + dt)
         mid = np.array(starts[:-1]) + 0.5 * dt
@@ -226,7 +227,7 @@ def test_loads_kick_conditions_and_projectile_give_the_results_of_before():
     scene.add_collider(SphereProjectile(0.01, (0.0, 0.0, 0.025), velocity=(0.0, 0.0, -10.0), name="ball"))
     (solver,) = scene.build_solvers(device="cpu")
     for _ in range(4):
-        scene.advance_frame([solver], scene.frame_time / 7, 7)
+        advance_frame([solver], scene.frame_time / 7, 7)
     u = solver.kin.u.numpy().astype(np.float64)
     v = solver.kin.v.numpy().astype(np.float64)
     reactions = np.array(list(solver.reaction_forces().values()))
@@ -286,9 +287,9 @@ def _states(solvers):
 def _run_frames(scene, frames, substeps, graphs):
     solvers = scene.build_solvers(device="cpu")
     dt = scene.frame_time / substeps
-    coupling = scene.method_contact(solvers)
+    coupling = method_contact(scene, solvers)
     for _ in range(frames):
-        scene.advance_frame(solvers, dt, substeps, coupling, graphs=graphs)
+        advance_frame(solvers, dt, substeps, coupling, graphs=graphs)
     return solvers
 
 
@@ -332,7 +333,7 @@ def _lattice_frames(capture, steps_per_frame):
     (solver,) = scene.build_solvers(device="cpu")
     graphs = FrameGraphs("cpu", capture)
     for _ in range(7):
-        scene.advance_frame([solver], scene.frame_time, 1, graphs=graphs)
+        advance_frame([solver], scene.frame_time, 1, graphs=graphs)
     return solver, graphs
 
 
@@ -381,7 +382,7 @@ def test_fem_fracture_falls_back_visibly():
     with pytest.warns(UserWarning, match="FEM fracture"):
         solvers = scene.build_solvers(device="cpu")
         for _ in range(3):
-            scene.advance_frame(solvers, scene.frame_time / 4, 4, graphs=graphs)
+            advance_frame(solvers, scene.frame_time / 4, 4, graphs=graphs)
     assert graphs.captures == 0 and graphs.direct_frames == 3 and "FEM fracture" in graphs.fallback
 
 
@@ -415,7 +416,7 @@ def test_a_frame_reads_nothing_from_the_device(method, monkeypatch):
     scene = {"peridynamics": _pd_impact_scene, "fem": _fem_scene}.get(method, lambda _: _lattice_scene())(None)
     solvers = scene.build_solvers(device="cpu")
     dt = scene.frame_time / 5
-    scene.advance_frame(solvers, dt, 5)
+    advance_frame(solvers, dt, 5)
     calls = []
     original = wp.array.numpy
 
@@ -424,7 +425,7 @@ def test_a_frame_reads_nothing_from_the_device(method, monkeypatch):
         return original(self)
 
     monkeypatch.setattr(wp.array, "numpy", counting)
-    scene.advance_frame(solvers, dt, 5)
+    advance_frame(solvers, dt, 5)
     monkeypatch.setattr(wp.array, "numpy", original)
     assert calls == []
     assert np.isfinite(solvers[0].displacements()).all()
@@ -453,9 +454,9 @@ def test_cpu_and_cuda_agree(method):
         scene = _agreement_scene(method)
         solvers = scene.build_solvers(device=device)
         dt = scene.frame_time / 6
-        coupling = scene.method_contact(solvers)
+        coupling = method_contact(scene, solvers)
         for _ in range(3):
-            scene.advance_frame(solvers, dt, 6, coupling)
+            advance_frame(solvers, dt, 6, coupling)
         out[device] = solvers[0].displacements()
     scale = np.abs(out["cpu"]).max()
     assert scale > 0.0
@@ -472,9 +473,9 @@ def test_cuda_graph_replay_agrees_with_step_by_step(build):
         scene = build(capture)
         solvers = scene.build_solvers(device="cuda")
         graphs = FrameGraphs("cuda", capture)
-        coupling = scene.method_contact(solvers)
+        coupling = method_contact(scene, solvers)
         for _ in range(4):
-            scene.advance_frame(solvers, scene.frame_time / 7, 7, coupling, graphs=graphs)
+            advance_frame(solvers, scene.frame_time / 7, 7, coupling, graphs=graphs)
         scenes[capture] = (solvers[0].displacements(), graphs)
     ref, (got, graphs) = scenes[False][0], scenes[True]
     assert graphs.replays == 2

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import pdsim
+from pdsim.run import advance_frame, method_contact
 
 SOFT = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)
 H = 0.01  # particle spacing [m]
@@ -57,7 +58,7 @@ def _penetration(pd_solver, fem_solver) -> float:
 
 def _run(scene, cube_name, slab_name, duration, *, check_every=20):
     solvers = scene.build_solvers(device="cpu")
-    coupling = scene.method_contact(solvers)
+    coupling = method_contact(scene, solvers)
     assert coupling is not None
     dt = scene.time_step_safety * min(s.stable_time_step() for s in solvers)
     steps = int(duration / dt)
@@ -67,7 +68,7 @@ def _run(scene, cube_name, slab_name, duration, *, check_every=20):
     p0 = sum(s.linear_momentum() for s in solvers)
     depth = 0.0
     for k in range(0, steps, check_every):
-        scene.advance_frame(solvers, dt, min(check_every, steps - k), coupling)
+        advance_frame(solvers, dt, min(check_every, steps - k), coupling)
         depth = max(depth, _penetration(pd, fem))
     return solvers, cube, slab, p0, depth, steps * dt
 
@@ -115,7 +116,7 @@ def test_implicit_fem_cannot_take_part_in_contact_between_methods():
     )
     solvers = scene.build_solvers(device="cpu")
     with pytest.raises(pdsim.FeatureNotAvailableError) as ei:
-        scene.method_contact(solvers)
+        method_contact(scene, solvers)
     assert "'slab'" in str(ei.value) and "implicit" in str(ei.value)
 
 

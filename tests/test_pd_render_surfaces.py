@@ -12,6 +12,7 @@ import pytest
 
 import pdsim
 from pdsim.fragment_surfaces import FragmentSurfaces, shells_closed, triangle_angles
+from pdsim.run import advance_frame
 
 
 def _frame_loop(scene, solver, frames):
@@ -20,7 +21,7 @@ def _frame_loop(scene, solver, frames):
     substeps = max(1, math.ceil(frame_dt / min(scene.time_step_safety * solver.stable_time_step(), frame_dt)))
     for frame in range(frames + 1):
         if frame:
-            scene.advance_frame([solver], frame_dt / substeps, substeps)
+            advance_frame([solver], frame_dt / substeps, substeps)
         yield frame, solver.views()
 
 

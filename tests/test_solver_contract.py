@@ -3,7 +3,7 @@ the watchdog, independence of world position, the shared output attributes and t
 
 Tests run on the CPU always and on CUDA where present (the ``device`` fixture of tests/conftest.py). Every scene is
 built through pdsim.Scene, as a user builds it, with the defaults on (automatic step; contact where the
-method has it), and runs through the scene's own frame stepping (Scene.advance_frame), so the origin of the local
+method has it), and runs through the scene's own frame stepping (pdsim.run.advance_frame), so the origin of the local
 frame and the time-step policy are those of a real run.
 """
 
@@ -13,6 +13,7 @@ import pytest
 import pdsim
 from pdsim.lattice import Lattice, LatticeBody, LatticeFracture
 from pdsim.output.views import ATTRIBUTES, MeshView, PointsView
+from pdsim.run import advance_frame
 
 METHODS = ["peridynamics", "fem", "lattice"]
 SHIFT = np.array([1000.0, -500.0, 250.0])
@@ -82,7 +83,7 @@ def _run(scene, steps, device="cpu"):
     dt = scene.time_step_safety * min(s.stable_time_step() for s in solvers)
     if not np.isfinite(dt):
         dt = 1.0 / scene.fps
-    scene.advance_frame(solvers, dt, steps)
+    advance_frame(solvers, dt, steps)
     return solvers
 
 
@@ -144,8 +145,7 @@ def test_linear_momentum_is_conserved_without_external_loads(method, device):
     p0 = solver.linear_momentum()
     scale = float(solver.masses() @ np.linalg.norm(solver.velocities(), axis=1))
     dt = 0.7 * solver.stable_time_step()
-    Scene = pdsim.Scene
-    Scene.advance_frame([solver], dt, 100)
+    advance_frame([solver], dt, 100)
     assert np.abs(solver.linear_momentum() - p0).max() < 1.0e-5 * scale
 
 

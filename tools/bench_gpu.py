@@ -2,9 +2,9 @@
 
 ``pd``: the peridynamic step throughput of an elastic n^3 block (spacing 1 mm, E = 1 GPa, nu = 0.25, rho = 1000
 kg/m^3, horizon 3 h, families cut at the horizon without partial volumes), given uniform random velocities of +-0.1 m/s
-(numpy default_rng(0)), stepped by the scene's frame loop (``Scene.advance_frame``) in frames of ``--substeps`` steps
-of 0.7 x the stable step: first with every step launched from the host, then with each frame replayed as a captured
-graph (pdsim/frame_graph.py; the first frame of each mode is a warm-up and is not timed). Reported per mode:
+(numpy default_rng(0)), stepped by the run's frame loop (``pdsim.run.advance_frame``) in frames of ``--substeps``
+steps of 0.7 x the stable step: first with every step launched from the host, then with each frame replayed as a
+captured graph (pdsim/frame_graph.py; the first frame of each mode is a warm-up and is not timed). Reported per mode:
 
     bond_visits_per_s = bond_count * steps / seconds      (seconds between device synchronisations)
 
@@ -35,9 +35,10 @@ import warp as wp
 
 import pdsim
 from pdsim.frame_graph import FrameGraphs
+from pdsim.run import advance_frame
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes"))
-import four_walls  # noqa: E402 (scenes/four_walls.py, on the path above)
+import four_walls
 
 SPACING = 1.0e-3
 
@@ -81,11 +82,11 @@ def bench_pd(n: int, frames: int, substeps: int, device: str, json_out: str | No
         graphs = FrameGraphs(dev, enabled)
         warm = 2 if enabled else 1  # the graph mode's first frame is direct, its second captures
         for _ in range(warm):
-            scene.advance_frame([solver], dt, substeps, graphs=graphs)
+            advance_frame([solver], dt, substeps, graphs=graphs)
         wp.synchronize_device(dev)
         start = time.perf_counter()
         for _ in range(frames):
-            scene.advance_frame([solver], dt, substeps, graphs=graphs)
+            advance_frame([solver], dt, substeps, graphs=graphs)
         wp.synchronize_device(dev)
         seconds = time.perf_counter() - start
         steps = frames * substeps

@@ -58,10 +58,11 @@ import types
 from dataclasses import dataclass, field
 
 import numpy as np
+import pdsim.kernels
 import warp as wp
 
 import pdsim
-import pdsim.kernels
+from pdsim.run import advance_frame
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BEFORE_REVISION = "e153a59"  # last commit with the pair modulus 2 C_k C_j / (C_k + C_j) evaluated as written
@@ -258,7 +259,7 @@ def _local_positions(solver):
 
 
 def run(case: Case, end_time: float, *, sample_every: int = 10) -> Record:
-    """Steps ``case`` to ``end_time`` [s] at the automatic step with Scene.advance_frame, ``sample_every`` steps per
+    """Steps ``case`` to ``end_time`` [s] at the automatic step with pdsim.run.advance_frame, ``sample_every`` steps per
     call (one step per call for per-step work trackers), sampling after each; stops at the first check_state
     failure."""
     solvers, s = case.solvers, case.solver
@@ -285,10 +286,10 @@ def run(case: Case, end_time: float, *, sample_every: int = 10) -> Record:
         n = min(sample_every, rec.steps - done)
         if case.work.per_step:
             for _ in range(n):
-                pdsim.Scene.advance_frame(solvers, dt, 1)
+                advance_frame(solvers, dt, 1)
                 case.work.step(dt)
         else:
-            pdsim.Scene.advance_frame(solvers, dt, n)
+            advance_frame(solvers, dt, n)
         done += n
         try:
             for x in solvers:

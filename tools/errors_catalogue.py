@@ -7,8 +7,7 @@ writes docs/errors.md from the same list, so the page and the tests cannot drift
     python tools/errors_catalogue.py --check    # exit 1 when docs/errors.md is out of date
 
 Run cases call :func:`pdsim.preflight.preflight` with the output path, time step and frame count before
-``Scene.run``, as ``Scene.run`` does once it calls the pre-flight itself; command-line cases marked ``run_preflight``
-need that (they are skipped by the tests until ``Scene.run`` calls it).
+``Scene.run``, as the run (pdsim.run.run_scene) does itself.
 """
 
 from __future__ import annotations
@@ -17,7 +16,6 @@ import argparse
 import contextlib
 import hashlib
 import importlib.util
-import inspect
 import os
 import subprocess
 import sys
@@ -38,11 +36,6 @@ import pdsim.preflight
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "errors.md"
 MAT = {"density": 1000.0, "youngs_modulus": 1.0e5, "poisson_ratio": 0.3}
-
-
-def run_calls_preflight() -> bool:
-    """True once Scene.run calls pdsim.preflight.preflight (then command-line run cases check it too)."""
-    return "preflight(" in inspect.getsource(pdsim.Scene.run)
 
 
 class NoError(AssertionError):
@@ -116,7 +109,6 @@ class Case:
     fragments: tuple
     act: Callable
     cli: bool = False
-    run_preflight: bool = False  # command-line case that needs Scene.run to call the pre-flight
     needs_ftetwild: bool = False
     skip_with_cuda: bool = False
     notes: list = field(default_factory=list)
@@ -782,14 +774,14 @@ def _(ws):
 
 
 @case("cli_dt_tiny", A_CLI, "pdsim run --dt 1e-12 (4e10 substeps a frame)", "at most 1e7 substeps per frame",
-      pdsim.ParameterError, "dt=1e-12", "substeps per frame", cli=True, run_preflight=True)  # fmt: skip
+      pdsim.ParameterError, "dt=1e-12", "substeps per frame", cli=True)  # fmt: skip
 def _(ws):
     ws.earlier_cache()
     return _cli_run(ws, _script(ws, fps=24.0), "--out", ws.out, "--dt", "1e-12")
 
 
 @case("cli_out_read_only", A_CLI, "pdsim run --out /proc/out.usdc (a folder nobody can write to)",
-      "a writable folder", pdsim.ParameterError, "can write to", cli=True, run_preflight=True)  # fmt: skip
+      "a writable folder", pdsim.ParameterError, "can write to", cli=True)  # fmt: skip
 def _(ws):
     return _cli_run(ws, _script(ws), "--out", "/proc/out.usdc")
 
@@ -833,14 +825,10 @@ def capture(c: Case, root: Path) -> str:
 
 def skip_reason(c: Case) -> str | None:
     """Why a case cannot run here, or None."""
-    if c.run_preflight and not run_calls_preflight():
-        return "Scene.run does not call pdsim.preflight.preflight yet"
-    if c.needs_ftetwild:
-        if importlib.util.find_spec("pytetwild") is None:
-            return "pytetwild is not installed"
-    if c.skip_with_cuda:
-        if wp.get_cuda_device_count() > 0:
-            return "this machine has a CUDA device"
+    if c.needs_ftetwild and importlib.util.find_spec("pytetwild") is None:
+        return "pytetwild is not installed"
+    if c.skip_with_cuda and wp.get_cuda_device_count() > 0:
+        return "this machine has a CUDA device"
     return None
 
 

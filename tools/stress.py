@@ -67,9 +67,11 @@ import warp as wp
 from pxr import Usd, UsdGeom
 
 import pdsim
+import pdsim.run
 from pdsim.default_scene import build_scene
-from pdsim.watchdog import Watchdog
 from pdsim.lattice import Lattice, LatticeBody, LatticeFracture, LatticeRuleMixedCoordinate
+from pdsim.run import advance_frame
+from pdsim.watchdog import Watchdog
 
 SPACING = 0.01  # [m] of the peridynamic blocks; FEM cells and lattice spacing alike
 BLOCK = (0.08, 0.08, 0.04)  # [m]
@@ -713,16 +715,16 @@ def overhead(frames: int = 12, repeats: int = 5, *, log=print) -> dict:
     Returns the times [s] and the overhead."""
     folder = tempfile.mkdtemp(prefix="pdsim_overhead_")
     times = {"watchdog": [], "none": []}
-    real = pdsim.Scene._attach_watchdogs
+    real = pdsim.run.attach_watchdogs
 
-    def without(self, solvers, **kwargs):
+    def without(scene, solvers, **kwargs):
         return [None for _ in solvers]
 
     try:
         build_scene().run(os.path.join(folder, "warm.usdc"), frames=1, device="cpu", progress=False)
         for _ in range(repeats):
             for mode in ("watchdog", "none"):
-                pdsim.Scene._attach_watchdogs = real if mode == "watchdog" else without
+                pdsim.run.attach_watchdogs = real if mode == "watchdog" else without
                 scene = build_scene()
                 t0 = time.process_time()
                 report = scene.run(
@@ -736,7 +738,7 @@ def overhead(frames: int = 12, repeats: int = 5, *, log=print) -> dict:
                 steps = report.substeps_per_frame
                 log(f"{mode}: {times[mode][-1]:.2f} s ({steps} steps a frame, {report.checks} checks)")
     finally:
-        pdsim.Scene._attach_watchdogs = real
+        pdsim.run.attach_watchdogs = real
         shutil.rmtree(folder, ignore_errors=True)
     median = {k: float(np.median(v)) for k, v in times.items()}
     parts = _check_costs(build_scene(), report.substeps_per_frame)
@@ -756,7 +758,7 @@ def _check_costs(scene, steps_per_frame: int) -> dict:
     solver = scene.build_solvers(device="cpu", **_no_preflight(scene))[0]
     dt = scene.frame_time / steps_per_frame
     watchdog = Watchdog(solver, energy_floor=1.0e-9)
-    pdsim.Scene.advance_frame([solver], dt, 20)
+    advance_frame([solver], dt, 20)
 
     def cost(fn, n):
         t0 = time.process_time()
@@ -771,7 +773,7 @@ def _check_costs(scene, steps_per_frame: int) -> dict:
     fast = cost(lambda: watchdog.check(1.0e30, ""), 40)
     frame_end = cost(full, 20)
     solver.watchdog = solver.kin.watchdog = None
-    step = cost(lambda: pdsim.Scene.advance_frame([solver], dt, 16), 4) / 16
+    step = cost(lambda: advance_frame([solver], dt, 16), 4) / 16
     share = ((steps_per_frame // 16) * fast + frame_end) / (steps_per_frame * step)
     return {"fast_check_ms": fast * 1e3, "frame_end_check_ms": frame_end * 1e3, "step_ms": step * 1e3, "share": share}
 
