@@ -133,7 +133,7 @@ def _number(field: str, text: str | None, kind, allowed: str):
 def _preview(args) -> int:
     import warp as wp
 
-    from .output.preview import write_preview
+    from .preview import write_preview
 
     if args.out is None:
         raise ParameterError("out", None, "a path ending in .png (still), .gif or .mp4 (animation)")
