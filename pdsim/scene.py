@@ -309,7 +309,7 @@ class Scene:
         from .checkpoint import CHECKPOINT_FORMAT, RunInterrupted, checkpoint_path, load_checkpoint, save_checkpoint
         from .colliders import collider_names
         from .errors import InstabilityError
-        from .output import UsdCache
+        from .output.usd import UsdCache
         from .output.writer import ViewWriter
 
         out = os.fspath(out)
