@@ -152,72 +152,7 @@ def render_preview(
     image[i, j] = color
 
 
-def render_image(
-    mesh,
-    has_mesh,
-    surface_tris,
-    tris_per_sphere,
-    corner_colors,
-    corner_normals,
-    sphere_centers,
-    sphere_colors,
-    eye,
-    forward,
-    right,
-    up,
-    tan_x,
-    tan_y,
-    light,
-    fill,
-    world_up,
-    ambient,
-    shadows,
-    ground,
-    ground_offset,
-    ground_center,
-    ground_fade,
-    ground_color,
-    background,
-    eps,
-    max_t,
-    image,
-    coverage,
-    device,
-):
-    """Launch ``render_preview`` over every pixel of ``image`` (dim = image.shape = (height, width)) on ``device``;
-    the arguments are the kernel's (see there), ``image`` and ``coverage`` its outputs."""
-    wp.launch(
-        render_preview,
-        dim=image.shape,
-        inputs=[
-            mesh,
-            has_mesh,
-            surface_tris,
-            tris_per_sphere,
-            corner_colors,
-            corner_normals,
-            sphere_centers,
-            sphere_colors,
-            eye,
-            forward,
-            right,
-            up,
-            tan_x,
-            tan_y,
-            light,
-            fill,
-            world_up,
-            ambient,
-            shadows,
-            ground,
-            ground_offset,
-            ground_center,
-            ground_fade,
-            ground_color,
-            background,
-            eps,
-            max_t,
-        ],
-        outputs=[image, coverage],
-        device=device,
-    )
+def render_image(inputs: list, image, coverage, device) -> None:
+    """Launch ``render_preview`` over every pixel of ``image`` (dim = image.shape = (height, width)) on ``device``.
+    ``inputs``: the kernel's inputs in its order, ``mesh`` to ``max_t``; ``image`` and ``coverage`` its outputs."""
+    wp.launch(render_preview, dim=image.shape, inputs=inputs, outputs=[image, coverage], device=device)
