@@ -12,7 +12,7 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, Vt
 
 from .usd_values import PRIMVAR_KINDS
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # annotations only: usd imports this module
     from .usd import UsdCache
     from .usd_stream import FrameStream
 
