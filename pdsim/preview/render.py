@@ -182,7 +182,8 @@ class _Renderer:
 
 
 def _ground_albedo(light: np.ndarray, fill: np.ndarray, up: np.ndarray) -> float:
-    """The shading factor of a lit, upward-facing surface (kernels/preview.py ``shade`` with n = up, lit = 1)."""
+    """The shading factor of a lit, upward-facing surface (kernels/preview.py ``shade`` with n = up, lit = 1). It
+    repeats ``shade``'s arithmetic on the host, once per frame, since a ``wp.func`` cannot be called from Python."""
     return AMBIENT + (1.0 - AMBIENT) * (max(float(light @ up), 0.0) + 0.25 * max(float(fill @ up), 0.0))
 
 
