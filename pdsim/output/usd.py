@@ -58,6 +58,7 @@ from .usd_layout import (
     MeshHandle,
     PointsHandle,
     XformHandle,
+    default_topology_set,
     define_face_subset,
     define_material,
     define_mesh,
@@ -389,7 +390,7 @@ class UsdCache:
             mesh.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble)
             mesh.AddOrientOp(UsdGeom.XformOp.PrecisionFloat)
         if topology_set is None:
-            topology_set = "topology_" + path[len("/World/") :].replace("/", "_")
+            topology_set = default_topology_set(path)
         elif not (isinstance(topology_set, str) and topology_set.startswith("topology_")):
             raise ValueError(f"topology_set={topology_set!r} must be a string starting with 'topology_'")
         self._stream.manifests.setdefault(topology_set, {})

@@ -68,6 +68,12 @@ class MeshHandle:
     _transform: bool = field(default=False, repr=False)  # xformOps declared (animated transform)
 
 
+def default_topology_set(path: str) -> str:
+    """The value-clip set of its own that holds the topology of the mesh at ``path``: ``topology_<path under /World>``
+    with ``/`` as ``_``."""
+    return "topology_" + path[len("/World/") :].replace("/", "_")
+
+
 def define_world(stage: Usd.Stage, fps: float, start_frame: int, up_axis: str, meters_per_unit: float) -> None:
     """Stage metadata (time codes per second and frames per second ``fps``, start and end at ``start_frame``, up axis,
     metres per unit) and the default prim ``/World`` (an Xform) with its ``pdsim:time`` attribute."""
@@ -201,7 +207,7 @@ def reopened_handles(cache: UsdCache, stream: FrameStream, frame: int) -> dict:
                 handle.vertex_count = sample_length(samples, frame, path, "points")
                 handle._face_count = sample_length(*topologies.get(clip_set, (None, 0)), path, "faceVertexCounts")
             else:
-                handle.topology_set = "topology_" + path[len("/World/") :].replace("/", "_")
+                handle.topology_set = default_topology_set(path)
                 counts = mesh.GetFaceVertexCountsAttr().Get()
                 if counts is not None:  # a static mesh (set_mesh)
                     handle._has_topology = True
