@@ -1,4 +1,4 @@
-"""Preview renderer kernels (pdsim/output/preview.py): one primary ray per pixel against a triangle BVH, Lambert +
+"""Preview renderer kernels (pdsim/preview/render.py): one primary ray per pixel against a triangle BVH, Lambert +
 ambient shading from one key light, shadow rays, and an infinite ground plane that fades into the background.
 
 Coordinates are the renderer's frame: world positions [m] minus a fixed origin near the scene (so float32 keeps
@@ -22,7 +22,7 @@ def shade(
     """Lambert shading with a hemispherical ambient, a key light and an unshadowed fill light of a quarter of the key's
     strength: albedo * (ambient (0.65 + 0.35 n.up) + (1 - ambient) (max(n.L, 0) lit + 0.25 max(n.F, 0))).
     All vectors unit length; lit in [0, 1] (0 in the key light's shadow). (Mirrored by ``_ground_albedo`` in
-    pdsim/output/preview.py.)"""
+    pdsim/preview/render.py.)"""
     sky = ambient * (0.65 + 0.35 * wp.dot(n, world_up))
     key = (1.0 - ambient) * (wp.max(wp.dot(n, light), 0.0) * lit + 0.25 * wp.max(wp.dot(n, fill), 0.0))
     return albedo * (sky + key)
@@ -150,3 +150,9 @@ def render_preview(
         f = wp.exp(-r * r)
         color = f * g + (1.0 - f) * background
     image[i, j] = color
+
+
+def render_image(inputs: list, image, coverage, device) -> None:
+    """Launch ``render_preview`` over every pixel of ``image`` (dim = image.shape = (height, width)) on ``device``.
+    ``inputs``: the kernel's inputs in its order, ``mesh`` to ``max_t``; ``image`` and ``coverage`` its outputs."""
+    wp.launch(render_preview, dim=image.shape, inputs=inputs, outputs=[image, coverage], device=device)

@@ -28,7 +28,7 @@ from .default_scene import build_scene as build_default_scene
 from .device import resolve_device
 from .errors import InstabilityError, ParameterError, PdsimError
 from .explain import explain_scene
-from .output.preview import write_preview
+from .preview import write_preview
 from .scene import Scene
 from .scene_script import load_scene_script
 

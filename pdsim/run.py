@@ -3,7 +3,7 @@ USD cache, with the watchdog, checkpoints and resume.
 
 :func:`run_scene` is what ``Scene.run`` and ``pdsim run`` call. It checks the run's settings and the scene
 (pdsim.preflight), builds the solvers, takes the time step from pdsim.timestep, attaches the watchdogs
-(pdsim.divergence), opens the cache (pdsim.output.UsdCache) and its writer, then loops over the frames
+(pdsim.divergence), opens the cache (pdsim.output.usd.UsdCache) and its writer, then loops over the frames
 (:func:`_frame_loop`). :func:`advance_frame` is one frame of steps of a set of solvers; :func:`method_contact` the
 contact between methods.
 """
@@ -26,7 +26,7 @@ from .contact import MethodContact
 from .divergence import attach_watchdogs, schedule_watchdogs
 from .errors import InstabilityError, ParameterError
 from .frame_graph import FrameGraphs
-from .output import UsdCache
+from .output.usd import UsdCache
 from .output.writer import ViewWriter
 from .preflight import preflight
 from .solver import PointSolver

@@ -11,7 +11,7 @@ import pytest
 
 import pdsim
 from pdsim.lattice import Lattice, LatticeBody, LatticeFracture
-from pdsim.output import validate_usd
+from pdsim.output.usd_files import usd_problems
 from pdsim.output.views import ATTRIBUTES
 
 FRAMES = 2
@@ -106,7 +106,7 @@ def test_one_schema_for_every_method(caches):
     bodies = {"peridynamics": "block", "fem": "bar", "lattice": "block"}
     mesh_attribute_sets = []
     for method, path in caches.items():
-        assert validate_usd(path) == [], method
+        assert usd_problems(path) == [], method
         stage = _stage(path)
         assert stage.GetTimeCodesPerSecond() == stage.GetFramesPerSecond() == 24.0
         assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (0.0, float(FRAMES))
@@ -211,7 +211,7 @@ def test_colliders_projectiles_and_ground_in_the_cache(tmp_path):
     scene = _collider_scene()
     out = tmp_path / "hit.usdc"
     scene.run(out, device="cpu", progress=False)
-    assert validate_usd(out) == []
+    assert usd_problems(out) == []
     stage = _stage(out)
     ground = UsdGeom.Mesh(stage.GetPrimAtPath("/World/ground"))
     g = np.asarray(ground.GetPointsAttr().Get(), dtype=np.float64) + np.asarray(

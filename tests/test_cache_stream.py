@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import pdsim
-from pdsim.output import validate_usd
+from pdsim.output.usd_files import usd_problems
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -119,7 +119,7 @@ def test_kill_9_leaves_every_finished_frame(tmp_path, kill_after):
         )
     assert stage.GetPrimAtPath("/World").GetAttribute("pdsim:time").Get(end) == pytest.approx(end / 24.0)
     del stage
-    assert validate_usd(out) == []
+    assert usd_problems(out) == []
 
 
 def _scene(speed: float):
@@ -169,7 +169,7 @@ def test_failing_rerun_keeps_the_earlier_cache(tmp_path, monkeypatch):
     partial, partial_end = _frames_of(tmp_path / "rerun.partial.usdc")
     assert partial_end == 2 and sorted(partial) == [0, 1, 2]
     assert not np.allclose(partial[2], first[2])  # the failed run's own data
-    assert validate_usd(out) == []
+    assert usd_problems(out) == []
 
     monkeypatch.setattr(pdsim.SolverPeridynamics, "simulate", real)
     _scene(0.5).run(out, device="cpu", progress=False)
@@ -178,7 +178,7 @@ def test_failing_rerun_keeps_the_earlier_cache(tmp_path, monkeypatch):
     np.testing.assert_allclose(third[2], partial[2], atol=1e-6)
     assert not (tmp_path / "rerun.partial.usdc").exists()
     assert len(list((tmp_path / "rerun.frames").iterdir())) == 1
-    assert validate_usd(out) == []
+    assert usd_problems(out) == []
 
 
 def test_save_interval_throttles_only_the_top_level_layer(tmp_path):

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import pdsim
-from pdsim.output import validate_usd
+from pdsim.output.usd_files import usd_problems
 
 FPS = 100.0
 
@@ -166,7 +166,7 @@ def test_run_writes_cache(tmp_path, scene_script):
     assert np.all(np.isfinite([reaction[0].Get(f) for f in range(frames + 1)]))
     assert reaction[0].Get(frames)[2] > 0.0
 
-    assert validate_usd(out) == []
+    assert usd_problems(out) == []
 
 
 def test_default_scene_builds_and_runs_two_frames(tmp_path):
@@ -192,7 +192,7 @@ def test_default_scene_builds_and_runs_two_frames(tmp_path):
     assert points.GetPointsAttr().GetTimeSamples() == [0.0, 1.0, 2.0]
     for x in _all_positions(points).values():
         assert x.shape == (body.particle_count, 3) and np.isfinite(x).all()
-    assert validate_usd(out) == []
+    assert usd_problems(out) == []
 
 
 def test_scene_not_py(tmp_path):
@@ -321,7 +321,7 @@ def test_divergence_raises_and_leaves_finite_cache(tmp_path, monkeypatch, device
     assert points.GetPointsAttr().GetTimeSamples() == [float(f) for f in range(last + 1)]
     xs = _all_positions(points)
     assert all(np.isfinite(x).all() for x in xs.values())
-    assert validate_usd(out) == []
+    assert usd_problems(out) == []
 
 
 def _interrupt_on_third_call(monkeypatch):
@@ -346,7 +346,7 @@ def _assert_two_finished_frames(out, name="beam"):
     points = _points(stage, name)
     assert points.GetPointsAttr().GetTimeSamples() == [0.0, 1.0, 2.0]
     assert all(np.isfinite(x).all() for x in _all_positions(points).values())
-    assert validate_usd(out) == []
+    assert usd_problems(out) == []
 
 
 def test_keyboard_interrupt_in_scene_run(tmp_path, monkeypatch, scene_script, device):

@@ -222,7 +222,7 @@ def test_cache_keeps_its_layout(tmp_path):
     smooth surface's crack faces are bound to the crack subset. (tests/test_cache_schema.py checks the schema.)"""
     from pxr import Usd, UsdGeom
 
-    from pdsim.output import validate_usd
+    from pdsim.output.usd_files import usd_problems
 
     def read(path):
         stage = Usd.Stage.Open(str(path))
@@ -238,7 +238,7 @@ def test_cache_keeps_its_layout(tmp_path):
     for mode in ("smooth", "elements"):
         out = tmp_path / f"{mode}.usdc"
         _bar_scene(mode).run(out, device="cpu", progress=False)
-        assert validate_usd(out) == [], mode
+        assert usd_problems(out) == [], mode
         caches[mode] = read(out)
     assert caches["smooth"][0] == caches["elements"][0]
     assert caches["smooth"][1] == caches["elements"][1]

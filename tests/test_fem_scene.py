@@ -88,7 +88,7 @@ def test_scene_run_writes_the_fem_views(tmp_path):
     passes pxr.UsdValidation."""
     from pxr import Usd, UsdGeom
 
-    from pdsim.output import validate_usd
+    from pdsim.output.usd_files import usd_problems
 
     scene = pdsim.Scene(fps=10, frames=6, gravity=(0.0, 0.0, 0.0), name="pull")
     body = FemBody(_notched_bar(), MAT, tensile_strength=2.0e4, integrator="implicit", damping=5.0)
@@ -108,7 +108,7 @@ def test_scene_run_writes_the_fem_views(tmp_path):
     for t in topo:
         faces = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(t)).reshape(-1, 3)
         assert closed_surface_defects(faces) == 0 and faces.max() < len(mesh.GetPointsAttr().Get(t))
-    assert validate_usd(out) == []
+    assert usd_problems(out) == []
 
 
 def test_render_mesh_follows_the_tetrahedra():

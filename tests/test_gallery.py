@@ -67,7 +67,7 @@ def test_scene_runs_at_preview_resolution(name, tmp_path):
     the scene's docstring says what it shows and how to run it."""
     from pxr import Usd, UsdGeom
 
-    from pdsim.output.usd import validate_usd
+    from pdsim.output.usd_files import usd_problems
 
     module = _load(name)
     assert isinstance(getattr(module, "PREVIEW", None), dict), f"scenes/{name}.py defines no PREVIEW dict"
@@ -78,7 +78,7 @@ def test_scene_runs_at_preview_resolution(name, tmp_path):
     report = scene.run(out, frames=FRAMES, device="cpu", progress=False, checkpoint_interval_s=None)
     assert report.frames_written == FRAMES + 1
 
-    assert validate_usd(out) == []
+    assert usd_problems(out) == []
     stage = Usd.Stage.Open(str(out))
     assert stage.GetStartTimeCode() == 0 and stage.GetEndTimeCode() == FRAMES
     geometry = [p for p in stage.Traverse() if p.IsA(UsdGeom.Points) or p.IsA(UsdGeom.Mesh)]

@@ -225,7 +225,7 @@ def test_scene_runs_lattice_into_a_valid_usd_cache(tmp_path):
     paper-style figures (PE1, PE2 contours, trajectory) are drawn from it when matplotlib is installed."""
     from lattice_plots import read_lattice_cache, write_case_plots
 
-    from pdsim.output import validate_usd
+    from pdsim.output.usd_files import usd_problems
 
     scene = pdsim.Scene(fps=24, frames=4, name="lattice")
     body = LatticeBody.block(Lattice.hexagonal(1.0), (8, 6), steps_per_frame=3, fracture=LatticeFracture((1.6,)))
@@ -239,7 +239,7 @@ def test_scene_runs_lattice_into_a_valid_usd_cache(tmp_path):
     out = tmp_path / "lattice.usdc"
     report = scene.run(out, device="cpu", progress=False)
     assert report.frames_written == 5 and report.particle_count == body.particle_count
-    assert validate_usd(out) == []
+    assert usd_problems(out) == []
     (cached,) = read_lattice_cache(out)
     assert set(cached.primvars) >= {"kind", "pe1", "pe1_intact", "pe2", "displacement", "broken_links", "fragment"}
     assert np.allclose(cached.positions[0], body.rest_positions, atol=1e-6)
@@ -279,14 +279,14 @@ def test_reference_scenes_run(case, tmp_path):
     body."""
     import lattice_paper as lattice_cases
 
-    from pdsim.output import validate_usd
+    from pdsim.output.usd_files import usd_problems
 
     build = lattice_cases.tear_3d_scene if case == "3d" else getattr(lattice_cases, f"case_{case}_scene")
     scene = build()
     out = tmp_path / f"{case}.usdc"
     report = scene.run(out, frames=2, device="cpu", progress=False)
     assert report.frames_written == 3
-    assert validate_usd(out) == []
+    assert usd_problems(out) == []
     from pxr import Usd
 
     stage = Usd.Stage.Open(str(out))

@@ -196,7 +196,8 @@ def test_usd_cache_topology_only_where_fragments_change(tmp_path):
     import trimesh
     from pxr import Usd, UsdGeom
 
-    from pdsim.output import UsdCache, validate_usd
+    from pdsim.output.usd import UsdCache
+    from pdsim.output.usd_files import usd_problems
     from pdsim.output.views import PointsView
     from pdsim.output.writer import ViewWriter
 
@@ -214,7 +215,7 @@ def test_usd_cache_topology_only_where_fragments_change(tmp_path):
             x = x0 + [0.0, 0.0, -0.02 * frame] + (x0[:, :1] > 0) * [0.03 * frame, 0.0, 0.0]
             writer.write(frame, [PointsView("bar", x, np.zeros_like(x), np.full(len(x0), h)), surf.view(x)])
             cache.end_frame(frame)
-    assert validate_usd(path) == []
+    assert usd_problems(path) == []
     stage = Usd.Stage.Open(str(path))
     mesh = UsdGeom.Mesh.Get(stage, "/World/bar_surface")
     assert mesh.GetFaceVertexIndicesAttr().GetTimeSamples() == [0.0, 3.0]
@@ -298,7 +299,7 @@ def test_scene_cache_surfaces_closed_and_topology_only_when_fragments_change(tmp
     import trimesh
     from pxr import Usd, UsdGeom
 
-    from pdsim.output import validate_usd
+    from pdsim.output.usd_files import usd_problems
 
     h = 0.01
     scene = pdsim.Scene(fps=60, frames=8, gravity=(0.0, 0.0, 0.0), name="split")
@@ -311,7 +312,7 @@ def test_scene_cache_surfaces_closed_and_topology_only_when_fragments_change(tmp
         bar.set_unbreakable(grip)
     out = tmp_path / "split.usdc"
     scene.run(out, progress=False, device="cpu")
-    assert validate_usd(out) == []
+    assert usd_problems(out) == []
     stage = Usd.Stage.Open(str(out))
     points = UsdGeom.Points(stage.GetPrimAtPath("/World/bar"))
     mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/World/bar_surface"))

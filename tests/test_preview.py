@@ -1,4 +1,4 @@
-"""The preview renderer (pdsim/output/preview.py, ``pdsim preview``): images of caches of every method, silhouettes
+"""The preview renderer (pdsim/preview/, ``pdsim preview``): images of caches of every method, silhouettes
 where the geometry projects through the camera, animations with one image per frame, colouring by an attribute, and
 one-line errors with exit status 1.
 
@@ -146,7 +146,7 @@ def test_silhouette_lies_where_the_geometry_projects(caches, method):
     of the PD plate and the FEM bar (boxes) the object pixels' centroid is within 0.5 px of the centroid of the convex
     hull of the 8 projected corners and their area within 1 % of the hull's (a box's silhouette is that hull). The
     lattice's object pixels span the rectangle of its projected spheres to 2 px."""
-    from pdsim.output.preview import render_cache
+    from pdsim.preview import render_cache
 
     path = caches(method)
     result = render_cache(path, "0:4:3", ground=False, size=(320, 240))
@@ -213,7 +213,7 @@ def test_png_still_is_the_last_frame_by_default(caches, tmp_path):
     """`pdsim preview CACHE --out x.png` renders the last frame: the PNG equals the library's render of frame 3."""
     import imageio.v3 as iio
 
-    from pdsim.output.preview import render_cache
+    from pdsim.preview import render_cache
 
     path = caches("peridynamics")
     code, out, err = _cli(path, "--out", tmp_path / "x.png", "--size", "200x150")
@@ -228,7 +228,7 @@ def test_color_by_damage_and_crack_faces(caches):
     """The PD plate at frame 3 (cracked): by default crack faces show in the orange interior colour (none at the
     rest pose); `color="damage"` (a primvar of the particles, carried onto the surface) changes the object's colours
     and spans a non-empty range."""
-    from pdsim.output.preview import render_cache
+    from pdsim.preview import render_cache
 
     path = caches("peridynamics")
     plain = render_cache(path, "0:4:3", ground=False, size=(320, 240))
@@ -276,7 +276,7 @@ def test_quads_transforms_y_up_subsets_and_face_colours(tmp_path):
     """A hand-written Y-up stage (quads, a scaled and translated parent, a ``crack`` GeomSubset, a uniform float
     primvar): the cube's silhouette is the hull of its projected world-space corners (0.5 px, 1 %), the crack subset
     (the top face) shows orange, and `color="heat"` gives the three visible faces three different colours."""
-    from pdsim.output.preview import render_cache
+    from pdsim.preview import render_cache
 
     path = tmp_path / "cube.usda"
     lo, hi = _authored_cube(path)
@@ -302,7 +302,7 @@ def test_camera_specs():
     """--camera: 'AZ,EL,DIST' puts the eye DIST from the box centre at that azimuth/elevation about the up axis;
     'AZ,EL' fits the distance so that every box corner projects inside the image; 'eye=...:target=...' is taken
     as given."""
-    from pdsim.output.preview import camera_from_spec
+    from pdsim.preview import camera_from_spec
 
     lo, hi, up = np.array([-1.0, -0.5, 0.0]), np.array([1.0, 0.5, 0.4]), np.array([0.0, 0.0, 1.0])
     cam = camera_from_spec("30,20,5", lo, hi, up, (640, 480))
@@ -335,7 +335,7 @@ def test_camera_image_up_is_continuous_towards_the_pole():
     up vector points the same way (within 1 degree) at elevations 85 to 89.9, for any azimuth (it used to jump to an
     arbitrary horizontal direction beyond 87.4 degrees); it always points towards the stage's up as seen from the
     eye."""
-    from pdsim.output.preview import camera_from_spec
+    from pdsim.preview import camera_from_spec
 
     lo, hi, up = np.array([-1.0, -0.5, 0.0]), np.array([1.0, 0.5, 0.4]), np.array([0.0, 0.0, 1.0])
     for azimuth in (-90.0, 0.0, 37.0, 180.0):
@@ -351,7 +351,7 @@ def test_camera_image_up_is_continuous_towards_the_pole():
 def test_frames_spec():
     """--frames: N, A:B (B exclusive), steps, open ends and negative values like Python slices; out of range or
     empty raises ParameterError naming frames."""
-    from pdsim.output.preview import parse_frames
+    from pdsim.preview import parse_frames
 
     frames = list(range(11))
     assert parse_frames("3", frames) == [3]
@@ -405,7 +405,7 @@ def test_fit_and_points_options_and_the_tool_wrapper(caches, tmp_path):
     runs `pdsim preview`."""
     import preview_cache
 
-    from pdsim.output.preview import render_cache
+    from pdsim.preview import render_cache
 
     path = caches("fem")
     first = render_cache(path, [3], fit="first", ground=False, size=(160, 120))

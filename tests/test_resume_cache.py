@@ -21,7 +21,8 @@ import pytest
 
 import pdsim
 from pdsim.checkpoint import RunInterrupted, checkpoint_path
-from pdsim.output.usd import UsdCache, validate_usd
+from pdsim.output.usd import UsdCache
+from pdsim.output.usd_files import usd_problems
 from test_watchdog_resume import _StopAfter  # a deterministic SIGTERM at the n-th poll
 
 
@@ -144,7 +145,7 @@ def _assert_same_cache(reference, resumed, frames: int):
             else:
                 assert a == b, f"{key} at frame {t}: {b!r} != {a!r}"
     assert checked > 0
-    assert validate_usd(resumed) == []
+    assert usd_problems(resumed) == []
 
 
 def _first_frame(prim) -> float:
@@ -295,7 +296,7 @@ def test_a_resumed_run_stopped_again_keeps_its_frames_and_resumes_again(tmp_path
     for key in ("/World/bar.points", "/World/bar.velocities", "/World/bar_surface.normals"):
         for t in range(second.last_frame + 1):
             assert np.array_equal(partial[key][1][t], full[key][1][t]), (key, t)
-    assert validate_usd(out) == []
+    assert usd_problems(out) == []
     _pd_bar().run(out, device="cpu", progress=False, resume=True)
     _assert_same_cache(reference, out, 8)
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pdsim.output import UsdCache, validate_usd
+from pdsim.output.usd import UsdCache
+from pdsim.output.usd_files import usd_problems
 
 N = 50
 
@@ -153,23 +154,23 @@ def test_mesh_topology_samples_only_where_given(tmp_path):
     assert list(m.GetFaceVertexCountsAttr().Get(4)) == [3] * 8
     np.testing.assert_array_equal(np.asarray(m.GetFaceVertexIndicesAttr().Get(1)), faces.reshape(-1))
     np.testing.assert_allclose(np.asarray(m.GetExtentAttr().Get(2)), [[2, 2, 2], [3, 3, 3]])
-    assert validate_usd(path) == []
+    assert usd_problems(path) == []
 
 
 def test_validate_written_cache_is_clean(tmp_path):
     """A cache written by UsdCache passes every registered UsdValidation validator."""
     path = tmp_path / "cache.usdc"
     _write_cache(path, frames=3)
-    assert validate_usd(path) == []
+    assert usd_problems(path) == []
 
 
 def test_validate_reports_broken_stage(tmp_path):
-    """validate_usd reports errors: missing stage metadata and an attribute whose type contradicts its schema."""
+    """usd_problems reports errors: missing stage metadata and an attribute whose type contradicts its schema."""
     path = tmp_path / "broken.usda"
     path.write_text(
         '#usda 1.0\ndef Xform "World"\n{\n    def Points "p"\n    {\n        int[] points = [1, 2, 3]\n    }\n}\n'
     )
-    errors = validate_usd(path)
+    errors = usd_problems(path)
     text = "\n".join(errors)
     assert "AttributeTypeMismatch" in text
     assert "MissingDefaultPrim" in text
@@ -196,7 +197,7 @@ def test_exception_inside_with_keeps_finished_frames(tmp_path):
     assert prim.GetAttribute("points").GetTimeSamples() == [0.0, 1.0, 2.0]
     assert prim.GetAttribute("primvars:damage").GetTimeSamples() == [0.0, 1.0, 2.0]
     cache.close()  # idempotent
-    assert validate_usd(path) == []
+    assert usd_problems(path) == []
 
 
 def test_keyboard_interrupt_saves(tmp_path):
@@ -328,16 +329,6 @@ def test_constructor_rejects_bad_parameters(tmp_path):
         UsdCache(tmp_path / "a.abc", fps=24.0)
 
 
-def test_import_is_light():
-    """Importing pdsim.output does not import pxr (checked in a fresh interpreter)."""
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    code = "import sys, pdsim.output; assert 'pxr' not in sys.modules, 'pxr imported'"
-    subprocess.run([sys.executable, "-c", code], check=True, cwd=Path(__file__).resolve().parents[1])
-
-
 # ------------------------------------------------------------------------------------------- streamed layout on disk
 
 
@@ -349,7 +340,7 @@ def test_layout_on_disk_and_clip_metadata(tmp_path):
     the same samples."""
     from pxr import Sdf, Usd
 
-    from pdsim.output.usd import cache_files, flatten_cache
+    from pdsim.output.usd_files import cache_files, flatten_cache
 
     path = tmp_path / "layout.usdc"
     points, faces = _tetra()
@@ -398,7 +389,7 @@ def test_layout_on_disk_and_clip_metadata(tmp_path):
     flat_layer = Sdf.Layer.OpenAsAnonymous(str(flat))
     assert flat_layer.ListTimeSamplesForPath("/World/shell.points") == [0.0, 1.0, 2.0, 3.0]
     np.testing.assert_array_equal(np.asarray(flat_layer.QueryTimeSample("/World/shell.points", 3.0)), points + 3)
-    assert validate_usd(path) == [] and validate_usd(flat) == []
+    assert usd_problems(path) == [] and usd_problems(flat) == []
 
 
 def test_memory_of_the_writer_does_not_hold_frames(tmp_path):
@@ -504,7 +495,7 @@ def test_writer_mesh_normals_velocities_subsets_and_colors(tmp_path):
             points = PointsView("bar", x, np.ones((3, 3)), np.full(3, 0.1), {"damage": np.array([0.0, 0.5, 1.0])})
             writer.write(frame, [points, mesh])
             cache.end_frame(frame)
-    assert validate_usd(path) == []
+    assert usd_problems(path) == []
     stage = _open(path)
     m = UsdGeom.Mesh(stage.GetPrimAtPath("/World/bar_surface"))
     assert m.GetNormalsInterpolation() == UsdGeom.Tokens.faceVarying
@@ -555,7 +546,7 @@ def test_fragments_as_prims_have_stable_names_and_visibility(tmp_path):
             crack = (frag > 0).astype(int)
             writer.write(frame, [MeshView("s", pts + frame, None, version, faces, {"fragment": frag, "crack": crack})])
             cache.end_frame(frame)
-    assert validate_usd(path) == []
+    assert usd_problems(path) == []
     stage = _open(path)
     assert stage.GetPrimAtPath("/World/s").IsA(UsdGeom.Xform)
     f0 = UsdGeom.Mesh(stage.GetPrimAtPath("/World/s/fragment_0"))
@@ -593,7 +584,7 @@ def test_rigid_views_static_and_animated(tmp_path):
             box = RigidView("box", v, f, np.array([frame, 0.0, 1.0]), q90 if frame == 2 else np.array([0, 0, 0, 1.0]))
             writer.write(frame, [ground, box])
             cache.end_frame(frame)
-    assert validate_usd(path) == []
+    assert usd_problems(path) == []
     stage = _open(path)
     g = UsdGeom.Mesh(stage.GetPrimAtPath("/World/ground"))
     assert g.GetPointsAttr().GetNumTimeSamples() == 0 and len(g.GetPointsAttr().Get()) == 4
@@ -642,4 +633,4 @@ def test_failed_run_keeps_earlier_cache_unit(tmp_path):
     assert not (tmp_path / "keep.partial.usdc").exists()
     assert len(list((tmp_path / "keep.frames").iterdir())) == 1
     assert _fresh_stage(path).GetEndTimeCode() == 1
-    assert validate_usd(path) == []
+    assert usd_problems(path) == []

@@ -95,12 +95,12 @@ def _assert_identical(reference: dict, resumed: dict):
 
 def _assert_cache_until(path, name: str, last: int):
     """The cache opens, holds frames 0..last with finite positions, and passes the USD validators."""
-    from pdsim.output import validate_usd
+    from pdsim.output.usd_files import usd_problems
 
     frames = _positions(path, name)
     assert sorted(frames) == list(range(last + 1))
     assert all(np.isfinite(x).all() for x in frames.values())
-    assert validate_usd(path) == []
+    assert usd_problems(path) == []
 
 
 # ------------------------------------------------------------------------------------------------------ the watchdog

@@ -1,5 +1,5 @@
 """Builds the gallery: runs every scene of scenes/ at preview resolution, renders a still and an animation of each with
-``pdsim preview`` (pdsim.output.preview.write_preview), a Blender (Cycles) still of the teaser, and writes
+``pdsim preview`` (pdsim.preview.write_preview), a Blender (Cycles) still of the teaser, and writes
 docs/gallery.md with the images under docs/gallery/.
 
 A gallery scene is a script in scenes/ that defines ``build_scene()``; its module-level ``PREVIEW`` dict holds the
@@ -47,7 +47,7 @@ GIF_SIZE = "320x240"
 GIF_FRAMES = 48  # at most, evenly spaced
 STILL_SIZE = "480x360"
 
-# How each scene is best looked at (options of pdsim.output.preview.write_preview); "still": the frame of the still
+# How each scene is best looked at (options of pdsim.preview.write_preview); "still": the frame of the still
 # (default: the last). Scenes not listed get the preview's defaults.
 VIEWS: dict[str, dict] = {
     "four_walls": {"fit": "first", "still": 24},
@@ -173,7 +173,7 @@ def _child(name: str, out: str) -> dict:
 
 def render(name: str, cache: str, images: str, result: dict) -> dict:
     """Still (PNG) and animation (GIF) of a cache; returns their file names and render times."""
-    from pdsim.output.preview import write_preview
+    from pdsim.preview import write_preview
 
     view = dict(VIEWS.get(name, {}))
     still_frame = view.pop("still", None)

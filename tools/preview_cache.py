@@ -1,4 +1,4 @@
-"""Preview of a pdsim USD cache: a thin wrapper of ``pdsim preview`` (pdsim/output/preview.py, docs/preview.md).
+"""Preview of a pdsim USD cache: a thin wrapper of ``pdsim preview`` (pdsim/preview/, docs/preview.md).
 
     python tools/preview_cache.py CACHE.usdc --out preview.png [--frames A:B] [--color ATTR] [--camera AZ,EL]
 
@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import sys
 
+from pdsim.cli import main as pdsim_main
+
 
 def main(argv: list[str] | None = None) -> int:
-    from pdsim.cli import main as pdsim_main
-
     return pdsim_main(["preview", *(sys.argv[1:] if argv is None else argv)])
 
 

@@ -490,7 +490,7 @@ def load_tet_mesh(
     if not os.path.isfile(path):
         raise GeometryError(f"{path}: no such file")
     if suffix in (".usd", ".usda", ".usdc"):
-        from ..output.usd import read_tet_mesh
+        from ..output.usd_files import read_tet_mesh
 
         v, t = read_tet_mesh(path, prim_path)
     else:

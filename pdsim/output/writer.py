@@ -17,6 +17,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from .views import MeshView, PointsView, RigidView, attribute_kind
 
@@ -65,9 +67,6 @@ def smoothing_groups(points: np.ndarray, faces: np.ndarray, sharp_angle: float =
         (labels, count): the group of each corner (int [3 f], in the order of ``faces.ravel()``) and the number of
         groups.
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     faces = np.asarray(faces, dtype=np.int64)
     nf = len(faces)
     if nf == 0:
