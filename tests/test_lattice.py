@@ -1,4 +1,4 @@
-"""The position-based particle lattice reproduces the behaviour reported in shared/seeds/pbd_lattice.txt (cases a-g,
+"""The position-based particle lattice reproduces the behaviour reported in dell'Erba 2018 (cases a-g,
 propagation, pseudo-energy), CPU backend. Lengths are in lattice units (spacing 1, the paper's "units"); leader speeds
 in units per step.
 

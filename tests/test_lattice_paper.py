@@ -1,4 +1,4 @@
-"""The shipped case scenes of scenes/lattice_paper.py show what shared/seeds/pbd_lattice.txt reports, under the
+"""The shipped case scenes of scenes/lattice_paper.py show what dell'Erba 2018 reports (docs/lattice.md), under the
 readings the builders take by default (docs/lattice.md, "Readings of the paper"): the square lattice's neighbours
 are the Chebyshev shells of Figure 3, cases a-d pull at the 1.2 units/step of case a's text, case d loses links
 beyond 4.0 / 6.0 units. The paper numbers points from 1: its point j is index j - 1. CPU backend.

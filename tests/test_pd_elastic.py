@@ -1,4 +1,5 @@
-"""Physics checks of the elastic state-based peridynamic solid (shared/seeds/pd_supplement.txt), CPU backend."""
+"""Physics checks of the elastic state-based peridynamic solid (the supplement of Peridynamics-Based Fracture
+Animation for Elastoplastic Solids, 2016), CPU backend."""
 
 import math
 
