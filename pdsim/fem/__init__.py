@@ -1,5 +1,4 @@
-"""Tetrahedral FEM (shared/seeds/fem_slides.txt): bodies, meshing, the explicit/implicit/static solver and fracture by
-vertex splitting."""
+"""Tetrahedral FEM: bodies, meshing, the explicit/implicit/static solver and fracture by vertex splitting."""
 
 from .body import FemBody, FemPlasticity
 from .mesh import TetMesh, box_tet_mesh, load_tet_mesh, tet_mesh_from_arrays, tetrahedralize, write_tet_mesh

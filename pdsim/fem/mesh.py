@@ -20,14 +20,21 @@ Orientation and quality on load (:func:`tet_mesh_from_arrays`):
 
 from __future__ import annotations
 
+import hashlib
+import importlib.util
 import math
 import os
+import signal
+import subprocess
+import sys
+import tempfile
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import GeometryError, ParameterError
 from ..geometry import SolidShape
+from ..output.usd import read_tet_mesh
 from ..validate import check_range, unit_hint
 
 TET_MESH_SUFFIXES = (".msh", ".vtk", ".vtu", ".mesh", ".inp", ".xdmf", ".med", ".usd", ".usda", ".usdc")
@@ -299,7 +306,7 @@ def tetrahedralize(
 ) -> TetMesh:
     """Fills a closed surface with a quality tetrahedral mesh using fTetWild (pytetwild, MPL-2.0).
 
-    fTetWild's output differs from run to run (measured on one input: 2,078 to 3,463 vertices, also with one thread).
+    fTetWild's output differs from run to run (in its vertex count too, also with one thread).
     For reproducible simulations pass ``cache_dir``: the first mesh made for a given surface and parameters is saved
     there (.vtu, keyed by a SHA-1 of the inputs) and loaded by later calls.
 
@@ -332,8 +339,6 @@ def tetrahedralize(
     label = name or shape.name
     cached = None
     if cache_dir is not None:
-        import hashlib
-
         h = hashlib.sha1()
         h.update(np.ascontiguousarray(shape.vertices, dtype=np.float64).tobytes())
         h.update(np.ascontiguousarray(shape.faces, dtype=np.int64).tobytes())
@@ -360,8 +365,8 @@ def tetrahedralize(
 
 def check_mesh_size(shape: SolidShape, edge_length: float) -> float:
     """The number of elements fTetWild makes for ``shape`` at ``edge_length`` [m], estimated as the volume over a
-    regular tetrahedron's (edge^3 / (6 sqrt 2); measured: 0.98x on a box, 2.5x on a sphere, whose curved surface is
-    refined); ParameterError with a unit hint above MAX_MESH_ELEMENTS."""
+    regular tetrahedron's (edge^3 / (6 sqrt 2); fTetWild makes more on curved surfaces, which it refines);
+    ParameterError with a unit hint above MAX_MESH_ELEMENTS."""
     estimate = abs(shape.volume) / (edge_length**3 / (6.0 * math.sqrt(2.0)))
     if estimate > MAX_MESH_ELEMENTS:
         raise ParameterError(
@@ -401,11 +406,6 @@ _CHILD_TEST_HOOK = ""  # Python run in the child before meshing (tests: "import 
 def _mesh_in_child(shape: SolidShape, label: str, edge_length, epsilon, optimize, threads):
     """Runs fTetWild on ``shape`` in a child Python process; returns (vertices [n, 3], tets [m, 4]). A crash of the
     mesher (a signal, or an exception) becomes a GeometryError naming the mesh, how it ended and what to change."""
-    import signal
-    import subprocess
-    import sys
-    import tempfile
-
     wrapper = _ftetwild_path()
     with tempfile.TemporaryDirectory(prefix="pdsim-ftetwild-") as tmp:
         inp, outp = os.path.join(tmp, "surface.npz"), os.path.join(tmp, "tets.npz")
@@ -445,8 +445,6 @@ def _mesh_in_child(shape: SolidShape, label: str, edge_length, epsilon, optimize
 def _ftetwild_path() -> str:
     """Path of pytetwild's compiled fTetWild wrapper, found without importing the package (whose ``__init__`` imports
     pyvista, an undeclared heavy dependency)."""
-    import importlib.util
-
     try:
         spec = importlib.util.find_spec("pytetwild")
     except (ImportError, ValueError):
@@ -490,8 +488,6 @@ def load_tet_mesh(
     if not os.path.isfile(path):
         raise GeometryError(f"{path}: no such file")
     if suffix in (".usd", ".usda", ".usdc"):
-        from ..output.usd import read_tet_mesh
-
         v, t = read_tet_mesh(path, prim_path)
     else:
         try:

@@ -16,7 +16,10 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+import warp as wp
+from scipy.spatial import cKDTree
 
+from ..kernels.fem import elements as ke
 from .body import FemBody
 from .mesh import TET_EDGES, boundary_faces, element_heights
 
@@ -41,8 +44,6 @@ def _embed(rest: np.ndarray, tets: np.ndarray, points: np.ndarray, *, candidates
     """Barycentric embedding of ``points`` [p, 3] in a tet mesh: (element [p], weights [p, 4]); each point takes, among
     the ``candidates`` elements with the nearest centroids, the one it is deepest inside (largest smallest weight);
     points slightly outside the mesh (fTetWild's envelope) get slightly negative weights (linear extrapolation)."""
-    from scipy.spatial import cKDTree
-
     cent = rest[tets].mean(axis=1)
     k = min(candidates, len(tets))
     _, idx = cKDTree(cent).query(points, k=k)
@@ -90,10 +91,6 @@ class FemModel:
     """
 
     def __init__(self, bodies: list[FemBody], origin: np.ndarray, dtype, np_dtype, device):
-        import warp as wp
-
-        from ..kernels.fem import elements as ke
-
         self.dtype, self.np_dtype, self.device = dtype, np_dtype, device
         vec3, mat33, vec4 = ke.fem_types(dtype)
         vec2 = wp.types.vector(2, dtype)
