@@ -388,6 +388,8 @@ def element_stiffness_product_kernel(dtype, rotated: bool):
     sym = fn["sym"]
     store_corners = fn["store_corners"]
 
+    # the same element prologue as element_energy (corners, displacement gradient) on another field: the kernels
+    # differ in what they form from G, and Warp kernels cannot take a function argument
     @wp.kernel(module="unique")
     def element_stiffness_product(
         u: wp.array(dtype=vec3),

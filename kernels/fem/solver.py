@@ -267,24 +267,24 @@ def implicit_rhs_kernel(dtype):
 # wp.float64), one thread per vertex.
 
 
-def gather_forces(vertex_offsets, vertex_slots, corner_forces, forces, *, dtype, device):
-    """forces[i] = sum of the corner vectors of vertex i [N] (overwrites)."""
+def _gather(kernel: str, vertex_offsets, vertex_slots, corner_forces, forces, dtype, device):
+    """The launch of the gather ``kernel`` ("gather_forces" or "gather_add"), which share their arguments."""
     wp.launch(
-        vertex_kernels(dtype)["gather_forces"],
+        vertex_kernels(dtype)[kernel],
         dim=forces.shape[0],
         inputs=[vertex_offsets, vertex_slots, corner_forces, forces],
         device=device,
     )
+
+
+def gather_forces(vertex_offsets, vertex_slots, corner_forces, forces, *, dtype, device):
+    """forces[i] = sum of the corner vectors of vertex i [N] (overwrites)."""
+    _gather("gather_forces", vertex_offsets, vertex_slots, corner_forces, forces, dtype, device)
 
 
 def gather_add(vertex_offsets, vertex_slots, corner_forces, forces, *, dtype, device):
     """forces[i] += sum of the corner vectors of vertex i [N] (onto the loads already in ``forces``)."""
-    wp.launch(
-        vertex_kernels(dtype)["gather_add"],
-        dim=forces.shape[0],
-        inputs=[vertex_offsets, vertex_slots, corner_forces, forces],
-        device=device,
-    )
+    _gather("gather_add", vertex_offsets, vertex_slots, corner_forces, forces, dtype, device)
 
 
 def gather_kick(

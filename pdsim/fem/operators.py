@@ -21,7 +21,7 @@ class FemOperators(Protocol):
     ``lumped_mass`` (Warp, lumped mass per vertex [kg]), ``lumped_mass_host`` (the same, float64 numpy [kg]),
     ``vertex_damping_host`` (mass-proportional damping c per vertex [1/s], float64 numpy), ``gravity`` (Warp vec3
     [m/s^2]) and ``gravity_host`` (float64 numpy [m/s^2]), ``dtype`` / ``np_dtype`` (the scalar type, Warp and numpy),
-    ``device``, ``time`` [s], ``point_count``, ``measure``, ``integrator``, ``fracture``, ``cg_reports``.
+    ``device``, ``time`` [s], ``point_count``, ``measure``, ``integrator``, ``cg_reports`` (of the last solve).
     """
 
     kin: object
@@ -39,7 +39,6 @@ class FemOperators(Protocol):
     point_count: int
     measure: str
     integrator: str
-    fracture: bool
     cg_reports: list
 
     def element_forces(self, dt: float, displacements=None) -> None:
@@ -54,6 +53,10 @@ class FemOperators(Protocol):
 
     def update_accelerations(self) -> None:
         """a = f / m + g - c v [m/s^2] at the current state (explicit integrator), no kick, no plastic update."""
+
+    def apply_colliders(self, time: float, dt: float) -> None:
+        """The ground plane, then the scene's colliders, on the free vertices at ``time`` [s] for a step of ``dt``
+        [s]."""
 
     def reset_over_count(self) -> None:
         """Zeroes fracture's over-strength count (no-op without fracture): forces evaluated outside a step split
