@@ -73,6 +73,11 @@ class FemModel:
         dtype, np_dtype: the solver's Warp and numpy scalar types.
         device: the Warp device of the arrays.
 
+    The body and material settings take their kernel names here, and only here: ``FemBody.tensile_strength`` ->
+    ``strength``, ``Material.lame_lambda`` and ``Material.shear_modulus`` -> ``lame`` = (lambda, mu),
+    ``FemPlasticity`` (yield_strain, creep, max_strain) -> ``plastic_params``, ``FemBody.fracture_energy`` ->
+    ``fracture_energy_h``.
+
     ``dtype``, ``np_dtype`` and ``device`` are those given. Host arrays (float64 unless noted):
     ``element_offsets`` [bodies + 1] and ``element_body`` [m] (int64), ``volume_h`` [m^3], ``density_h`` [kg/m^3],
     ``centroids_h`` (local frame, fracture's crack planes), ``strength_h`` (tensile strength per element [Pa], inf on
