@@ -27,6 +27,7 @@ import sys
 import time
 
 import numpy as np
+import warp as wp
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
@@ -56,8 +57,6 @@ def _time_pdsim(mesh, *, integrator, measure, device, steps, warmup, stiffness="
     solver = SolverFem([body], context, stiffness=stiffness)
     dt = solver.explicit_time_step() * (10.0 if integrator == "implicit" else 1.0)
     solver.simulate(dt, warmup)
-    import warp as wp
-
     wp.synchronize_device(solver.device)
     iterations = 0
     t0 = time.perf_counter()
@@ -84,7 +83,6 @@ def _time_newton(mesh, *, solver_name, device, steps, warmup, dt):
     """Newton's tetrahedral solver on the same mesh; None when newton is not installed."""
     try:
         import newton
-        import warp as wp
     except ImportError:
         return None
     builder = newton.ModelBuilder()
@@ -141,6 +139,7 @@ def _time_newton(mesh, *, solver_name, device, steps, warmup, dt):
 def cantilever_table(cells=(2, 4, 8)):
     """Tip deflection of the test cantilever (tests/test_fem_cantilever.py) against beam theory, float64."""
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
+    # tests/ goes on the path only for this table (the test module imports pytest)
     from test_fem_cantilever import BEAM, tip_deflection
 
     rows = []
@@ -161,8 +160,6 @@ def cantilever_table(cells=(2, 4, 8)):
 
 
 def machine_info(device: str) -> dict:
-    import warp as wp
-
     cpu = platform.processor() or "?"
     try:
         with open("/proc/cpuinfo") as f:
@@ -190,8 +187,6 @@ def main(argv=None) -> int:
     p.add_argument("--cantilever", action="store_true", help="also print the cantilever convergence table")
     p.add_argument("--json", action="store_true", help="one JSON line per size")
     args = p.parse_args(argv)
-
-    import warp as wp
 
     wp.config.quiet = True
     wp.init()

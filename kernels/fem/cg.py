@@ -32,27 +32,29 @@ CG_SCALAR_COUNT = 8
 
 
 @functools.cache
-def cg_kernels(dtype, rotated: bool):
-    """Kernels of the preconditioned CG for A = c_mass M + c_stiff K_R (K_R = sum_e R K_e R^T, R frozen; identity when
-    not ``rotated``) on the free components (``constrained`` bit masks), as a dict:
+def cg_funcs(dtype):
+    """Warp functions shared by the CG kernels (a dict): operator_value."""
+    vec3, _, _ = fem_types(dtype)
+    free_components = constraint_funcs(dtype)["free_components"]
 
-    - block_jacobi (vertices): P_i = inverse of the 3x3 diagonal block c_mass m_i I + c_stiff sum R K_aa R^T
-      restricted to the free components (zero rows and columns on constrained ones).
-    - operator_gather (chunks): q_i = c_mass m_i p_i + c_stiff sum of corner products, constrained components zeroed;
-      partial[c] = sum p . q over the chunk.
-    - residual_init (chunks): r = b - A x (filtered), z = P r, p = z; partials of r . z, r . r and b . b.
-    - update_xr (chunks): x += alpha p, r -= alpha q, z = P r; partials of r . z and r . r.
-    - update_p (chunks): p = z + beta p.
-    - reduce_alpha / reduce_init / reduce_beta (one thread): sum the partials and set the scalars.
-    """
-    vec3, mat33, _ = fem_types(dtype)
-    vec2 = wp.types.vector(2, dtype)
+    @wp.func
+    def operator_value(m: dtype, p: vec3, k: vec3, c_mass: dtype, c_stiff: dtype, bits: int):
+        """(A p)_i = c_mass m_i p_i + c_stiff (K p)_i with its constrained components zeroed (m [kg], k = (K p)_i)."""
+        return free_components((c_mass * m) * p + c_stiff * k, bits)
+
+    return {"operator_value": operator_value}
+
+
+@functools.cache
+def block_jacobi_kernel(dtype, rotated: bool):
+    """Kernel over vertices (matrix-free variant): P_i = inverse of the 3x3 diagonal block
+    c_mass m_i I + c_stiff sum R K_aa R^T (R frozen; identity when not ``rotated``) restricted to the free components
+    (zero rows and columns on constrained ones)."""
+    _, mat33, _ = fem_types(dtype)
     fn = fem_funcs(dtype)
     shape_gradient = fn["shape_gradient"]
     stiffness_block = fn["stiffness_block"]
-    cf = constraint_funcs(dtype)
-    free_components = cf["free_components"]
-    filter_block = cf["filter_block"]
+    filter_block = constraint_funcs(dtype)["filter_block"]
 
     @wp.kernel(module="unique")
     def block_jacobi(
@@ -81,6 +83,26 @@ def cg_kernels(dtype, rotated: bool):
             d += c_stiff * k
         precond[i] = filter_block(d, constrained[i])
 
+    return block_jacobi
+
+
+@functools.cache
+def cg_kernels(dtype):
+    """Kernels of the preconditioned CG for A = c_mass M + c_stiff K_R (K_R = sum_e R K_e R^T, R frozen) on the free
+    components (``constrained`` bit masks), as a dict (the matrix-free preconditioner is block_jacobi_kernel):
+
+    - operator_gather (chunks): q_i = c_mass m_i p_i + c_stiff sum of corner products, constrained components zeroed;
+      partial[c] = sum p . q over the chunk.
+    - residual_init (chunks): r = b - A x (filtered), z = P r, p = z; partials of r . z, r . r and b . b.
+    - update_xr (chunks): x += alpha p, r -= alpha q, z = P r; partials of r . z and r . r.
+    - update_p (chunks): p = z + beta p.
+    - reduce_alpha / reduce_init / reduce_beta (one thread): sum the partials and set the scalars.
+    """
+    vec3, mat33, _ = fem_types(dtype)
+    vec2 = wp.types.vector(2, dtype)
+    free_components = constraint_funcs(dtype)["free_components"]
+    operator_value = cg_funcs(dtype)["operator_value"]
+
     @wp.kernel(module="unique")
     def operator_gather(
         vertex_offsets: wp.array(dtype=wp.int32),
@@ -102,7 +124,7 @@ def cg_kernels(dtype, rotated: bool):
             k = vec3(dtype(0.0))
             for s in range(vertex_offsets[i], vertex_offsets[i + 1]):
                 k += corner_products[vertex_slots[s]]
-            q = free_components((c_mass * mass[i]) * p[i] + c_stiff * k, constrained[i])
+            q = operator_value(mass[i], p[i], k, c_mass, c_stiff, constrained[i])
             q_out[i] = q
             acc += wp.dot(p[i], q)
         partial[c] = acc
@@ -212,7 +234,6 @@ def cg_kernels(dtype, rotated: bool):
             p[i] = z[i] + beta * p[i]
 
     return {
-        "block_jacobi": block_jacobi,
         "operator_gather": operator_gather,
         "residual_init": residual_init,
         "reduce_init": reduce_init,
@@ -235,10 +256,10 @@ def assembled_kernels(dtype):
       restricted to the free components.
     """
     vec3, mat33, _ = fem_types(dtype)
-    cf = constraint_funcs(dtype)
-    free_components = cf["free_components"]
-    filter_block = cf["filter_block"]
+    filter_block = constraint_funcs(dtype)["filter_block"]
+    operator_value = cg_funcs(dtype)["operator_value"]
 
+    # the CSR gather of kernels/fem/solver.py's gather_corners, on 3x3 blocks (a wp.func there is typed for vectors)
     @wp.kernel(module="unique")
     def assemble_blocks(
         contrib_offsets: wp.array(dtype=wp.int32),
@@ -252,6 +273,8 @@ def assembled_kernels(dtype):
             acc += element_blocks[contrib_ids[c]]
         values[k] = acc
 
+    # Warp kernels cannot take a function argument, so bsr_operator_gather repeats the chunk loop of cg_kernels'
+    # operator_gather with the block-row product in place of the corner gather.
     @wp.kernel(module="unique")
     def bsr_operator_gather(
         row_offsets: wp.array(dtype=wp.int32),
@@ -273,7 +296,7 @@ def assembled_kernels(dtype):
             k = vec3(dtype(0.0))
             for s in range(row_offsets[i], row_offsets[i + 1]):
                 k += values[s] * p[columns[s]]
-            q = free_components((c_mass * mass[i]) * p[i] + c_stiff * k, constrained[i])
+            q = operator_value(mass[i], p[i], k, c_mass, c_stiff, constrained[i])
             q_out[i] = q
             acc += wp.dot(p[i], q)
         partial[c] = acc
@@ -297,3 +320,170 @@ def assembled_kernels(dtype):
         "bsr_operator_gather": bsr_operator_gather,
         "bsr_block_jacobi": bsr_block_jacobi,
     }
+
+
+
+# -- launches ----------------------------------------------------------------------------------------------------------
+# One function per kernel, the kernel's arguments in its order; ``dtype`` is the solver's scalar type (wp.float32 or
+# wp.float64). The chunked kernels run one thread per chunk of ``chunk`` vertices (``chunks`` threads: the length of
+# their partial-sum array), the reductions one thread.
+
+
+def block_jacobi(
+    vertex_offsets,
+    vertex_slots,
+    dm_inv,
+    volume,
+    lame,
+    rotation,
+    mass,
+    c_mass,
+    c_stiff,
+    constrained,
+    precond,
+    *,
+    dtype,
+    rotated: bool,
+    device,
+):
+    """The matrix-free block-Jacobi preconditioner P_i of every vertex into ``precond`` (block_jacobi_kernel)."""
+    wp.launch(
+        block_jacobi_kernel(dtype, rotated),
+        dim=precond.shape[0],
+        inputs=[
+            vertex_offsets,
+            vertex_slots,
+            dm_inv,
+            volume,
+            lame,
+            rotation,
+            mass,
+            c_mass,
+            c_stiff,
+            constrained,
+            precond,
+        ],
+        device=device,
+    )
+
+
+def operator_gather(
+    vertex_offsets,
+    vertex_slots,
+    corner_products,
+    mass,
+    c_mass,
+    c_stiff,
+    constrained,
+    p,
+    chunk,
+    q_out,
+    partial,
+    *,
+    dtype,
+    device,
+):
+    """q = A p [N] from the matrix-free corner products (constrained components zeroed) and the chunks' p . q."""
+    wp.launch(
+        cg_kernels(dtype)["operator_gather"],
+        dim=partial.shape[0],
+        inputs=[
+            vertex_offsets,
+            vertex_slots,
+            corner_products,
+            mass,
+            c_mass,
+            c_stiff,
+            constrained,
+            p,
+            chunk,
+            q_out,
+            partial,
+        ],
+        device=device,
+    )
+
+
+def residual_init(b, ax, constrained, precond, chunk, r, z, p, partial3, *, dtype, device):
+    """r = b - A x, z = P r, p = z (free components) and the chunks' r . z, r . r and b . b."""
+    wp.launch(
+        cg_kernels(dtype)["residual_init"],
+        dim=partial3.shape[0],
+        inputs=[b, ax, constrained, precond, chunk, r, z, p, partial3],
+        device=device,
+    )
+
+
+def reduce_init(partial3, scalars, *, dtype, device):
+    """Sums the chunks' r . z, r . r and b . b into ``scalars`` (CG_RZ, CG_RR, CG_BB)."""
+    wp.launch(cg_kernels(dtype)["reduce_init"], dim=1, inputs=[partial3, scalars], device=device)
+
+
+def reduce_alpha(partial, scalars, *, dtype, device):
+    """Sums the chunks' p . q into ``scalars[CG_PQ]`` and sets alpha = r . z / p . q."""
+    wp.launch(cg_kernels(dtype)["reduce_alpha"], dim=1, inputs=[partial, scalars], device=device)
+
+
+def update_xr(p, q, precond, scalars, chunk, x, r, z, partial2, *, dtype, device):
+    """x += alpha p, r -= alpha q, z = P r and the chunks' r . z and r . r."""
+    wp.launch(
+        cg_kernels(dtype)["update_xr"],
+        dim=partial2.shape[0],
+        inputs=[p, q, precond, scalars, chunk, x, r, z, partial2],
+        device=device,
+    )
+
+
+def reduce_beta(partial2, scalars, *, dtype, device):
+    """Sums the chunks' r . z and r . r and sets beta = new r . z / old r . z."""
+    wp.launch(cg_kernels(dtype)["reduce_beta"], dim=1, inputs=[partial2, scalars], device=device)
+
+
+def update_p(z, scalars, chunk, p, *, chunks: int, dtype, device):
+    """p = z + beta p over ``chunks`` chunks of ``chunk`` vertices."""
+    wp.launch(cg_kernels(dtype)["update_p"], dim=chunks, inputs=[z, scalars, chunk, p], device=device)
+
+
+def assemble_blocks(contrib_offsets, contrib_ids, element_blocks, values, *, dtype, device):
+    """The assembled stiffness blocks [N/m] into ``values`` (a gather of the element blocks)."""
+    wp.launch(
+        assembled_kernels(dtype)["assemble_blocks"],
+        dim=values.shape[0],
+        inputs=[contrib_offsets, contrib_ids, element_blocks, values],
+        device=device,
+    )
+
+
+def bsr_operator_gather(
+    row_offsets,
+    columns,
+    values,
+    mass,
+    c_mass,
+    c_stiff,
+    constrained,
+    p,
+    chunk,
+    q_out,
+    partial,
+    *,
+    dtype,
+    device,
+):
+    """q = A p [N] with the assembled stiffness (constrained components zeroed) and the chunks' p . q."""
+    wp.launch(
+        assembled_kernels(dtype)["bsr_operator_gather"],
+        dim=partial.shape[0],
+        inputs=[row_offsets, columns, values, mass, c_mass, c_stiff, constrained, p, chunk, q_out, partial],
+        device=device,
+    )
+
+
+def bsr_block_jacobi(diagonal, values, mass, c_mass, c_stiff, constrained, precond, *, dtype, device):
+    """The block-Jacobi preconditioner P_i of every vertex from the assembled diagonal blocks into ``precond``."""
+    wp.launch(
+        assembled_kernels(dtype)["bsr_block_jacobi"],
+        dim=precond.shape[0],
+        inputs=[diagonal, values, mass, c_mass, c_stiff, constrained, precond],
+        device=device,
+    )

@@ -1,4 +1,4 @@
-"""Element kernels of the linear tetrahedral finite element solid (shared/seeds/fem_slides.txt, DESIGN.md section 3).
+"""Element kernels of the linear tetrahedral finite element solid.
 
 Notation: a tetrahedron has corners 0..3 with rest positions X_a and displacements u_a (current positions
 x_a = X_a + u_a); Dm = [X1-X0, X2-X0, X3-X0] (positive determinant after loading; Dm^-1 is computed on the host in
@@ -28,7 +28,7 @@ Element stiffness (slides: K_e = V B^T E B), as 3x3 blocks between corners a and
 
     K_ab = V (lambda g_a g_b^T + mu (g_a . g_b) I + mu g_b g_a^T),   f = -K u;  corotated: R K_ab R^T (R frozen).
 
-Plasticity (slides "Plastic Update Rules", DESIGN.md section 3), on the element's strain tensor in its material frame,
+Plasticity (slides "Plastic Update Rules"), on the element's strain tensor in its material frame,
 with |.| the Frobenius norm of the symmetric 3x3 tensor:
 
     eps_elastic = eps_total - eps_plastic
@@ -208,6 +208,19 @@ def fem_funcs(dtype):
             k = 2
         return d[k], vec3(q[0, k], q[1, k], q[2, k])
 
+    @wp.func
+    def store_corners(h: mat33, e: int, corners: wp.array(dtype=vec3)):
+        """Writes the corner vectors of element e from the columns (f_1, f_2, f_3) of h: corners[4 e + a] = f_a for
+        a = 1..3 and corners[4 e] = -(f_1 + f_2 + f_3) (the four sum to zero)."""
+        f1 = vec3(h[0, 0], h[1, 0], h[2, 0])
+        f2 = vec3(h[0, 1], h[1, 1], h[2, 1])
+        f3 = vec3(h[0, 2], h[1, 2], h[2, 2])
+        base = 4 * e
+        corners[base] = -(f1 + f2 + f3)
+        corners[base + 1] = f1
+        corners[base + 2] = f2
+        corners[base + 3] = f3
+
     return {
         "displacement_gradient": displacement_gradient,
         "corotated_strain": corotated_strain,
@@ -221,6 +234,7 @@ def fem_funcs(dtype):
         "shape_gradient": shape_gradient,
         "stiffness_block": stiffness_block,
         "largest_eigen": largest_eigen,
+        "store_corners": store_corners,
     }
 
 
@@ -250,6 +264,7 @@ def element_force_kernel(dtype, measure: int, plastic: bool, fracture: bool, sto
     frobenius = fn["frobenius"]
     plastic_update = fn["plastic_update"]
     largest_eigen = fn["largest_eigen"]
+    store_corners = fn["store_corners"]
     sqrt_two_thirds = dtype(0.816496580927726)
 
     @wp.kernel(module="unique")
@@ -313,14 +328,7 @@ def element_force_kernel(dtype, measure: int, plastic: bool, fracture: bool, sto
         else:
             p = sigma
         h = (-volume[e]) * (p * wp.transpose(dmi))  # columns are f_1, f_2, f_3
-        f1 = vec3(h[0, 0], h[1, 0], h[2, 0])
-        f2 = vec3(h[0, 1], h[1, 1], h[2, 1])
-        f3 = vec3(h[0, 2], h[1, 2], h[2, 2])
-        base = 4 * e
-        corner_forces[base] = -(f1 + f2 + f3)
-        corner_forces[base + 1] = f1
-        corner_forces[base + 2] = f2
-        corner_forces[base + 3] = f3
+        store_corners(h, e, corner_forces)
 
     return element_forces
 
@@ -378,7 +386,10 @@ def element_stiffness_product_kernel(dtype, rotated: bool):
     displacement_gradient = fn["displacement_gradient"]
     hooke = fn["hooke"]
     sym = fn["sym"]
+    store_corners = fn["store_corners"]
 
+    # the same element prologue as element_energy (corners, displacement gradient) on another field: the kernels
+    # differ in what they form from G, and Warp kernels cannot take a function argument
     @wp.kernel(module="unique")
     def element_stiffness_product(
         u: wp.array(dtype=vec3),
@@ -400,14 +411,7 @@ def element_stiffness_product_kernel(dtype, rotated: bool):
         else:
             sigma = hooke(sym(g), lame[e][0], lame[e][1])
             h = volume[e] * (sigma * wp.transpose(dmi))
-        f1 = vec3(h[0, 0], h[1, 0], h[2, 0])
-        f2 = vec3(h[0, 1], h[1, 1], h[2, 1])
-        f3 = vec3(h[0, 2], h[1, 2], h[2, 2])
-        base = 4 * e
-        corner_out[base] = -(f1 + f2 + f3)
-        corner_out[base + 1] = f1
-        corner_out[base + 2] = f2
-        corner_out[base + 3] = f3
+        store_corners(h, e, corner_out)
 
     return element_stiffness_product
 
@@ -495,3 +499,99 @@ def embed_points_kernel(dtype):
         out_velocity[p] = v
 
     return embed_points
+
+
+# -- launches ----------------------------------------------------------------------------------------------------------
+# One function per kernel, the kernel's arguments in its order; ``dtype`` is the solver's scalar type (wp.float32 or
+# wp.float64), one thread per element (per embedded point for embed_points).
+
+
+def element_forces(
+    displacements,
+    tets,
+    dm_inv,
+    volume,
+    lame,
+    plastic_params,
+    plastic_strain,
+    dt,
+    strength,
+    principal,
+    over_count,
+    rotation_q,
+    rotation,
+    corner_forces,
+    *,
+    dtype,
+    measure: int,
+    plastic: bool,
+    fracture: bool,
+    device,
+):
+    """Corner forces [N] of every element into ``corner_forces`` at ``displacements`` [m], with the plastic update of
+    step ``dt`` [s], the principal stresses and the over-strength count (fracture) and the rotations (corotated) as
+    element_force_kernel documents (the rotation matrix stored)."""
+    wp.launch(
+        element_force_kernel(dtype, measure, plastic, fracture, True),
+        dim=tets.shape[0],
+        inputs=[
+            displacements,
+            tets,
+            dm_inv,
+            volume,
+            lame,
+            plastic_params,
+            plastic_strain,
+            dt,
+            strength,
+            principal,
+            over_count,
+            rotation_q,
+            rotation,
+            corner_forces,
+        ],
+        device=device,
+    )
+
+
+def element_energy(
+    displacements, tets, dm_inv, volume, lame, plastic_strain, energy, *, dtype, measure: int, plastic: bool, device
+):
+    """Elastic energy [J] of every element into ``energy`` at ``displacements`` [m] (element_energy_kernel)."""
+    wp.launch(
+        element_energy_kernel(dtype, measure, plastic),
+        dim=tets.shape[0],
+        inputs=[displacements, tets, dm_inv, volume, lame, plastic_strain, energy],
+        device=device,
+    )
+
+
+def element_stiffness_product(u, tets, dm_inv, volume, lame, rotation, corner_out, *, dtype, rotated: bool, device):
+    """Corner products (K_e u)_a [N] of every element into ``corner_out`` for a vector field ``u`` [m]
+    (element_stiffness_product_kernel: the matrix-free stiffness)."""
+    wp.launch(
+        element_stiffness_product_kernel(dtype, rotated),
+        dim=tets.shape[0],
+        inputs=[u, tets, dm_inv, volume, lame, rotation, corner_out],
+        device=device,
+    )
+
+
+def element_stiffness_blocks(dm_inv, volume, lame, rotation, blocks, *, dtype, rotated: bool, device):
+    """The 16 stiffness blocks R K_ab R^T [N/m] of every element into ``blocks[16 e + 4 a + b]``."""
+    wp.launch(
+        element_stiffness_blocks_kernel(dtype, rotated),
+        dim=volume.shape[0],
+        inputs=[dm_inv, volume, lame, rotation, blocks],
+        device=device,
+    )
+
+
+def embed_points(displacements, velocities, tets, element, weights, out_displacement, out_velocity, *, dtype, device):
+    """Displacements [m] and velocities [m/s] of the barycentrically embedded points (embed_points_kernel)."""
+    wp.launch(
+        embed_points_kernel(dtype),
+        dim=weights.shape[0],
+        inputs=[displacements, velocities, tets, element, weights, out_displacement, out_velocity],
+        device=device,
+    )

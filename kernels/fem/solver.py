@@ -97,6 +97,20 @@ def vertex_kernels(dtype):
     axis_bits = cf["axis_bits"]
     free_components = cf["free_components"]
 
+    @wp.func
+    def gather_corners(
+        f: vec3,
+        i: int,
+        vertex_offsets: wp.array(dtype=wp.int32),
+        vertex_slots: wp.array(dtype=wp.int32),
+        corner_forces: wp.array(dtype=vec3),
+    ):
+        """f plus the corner vectors of vertex i [N], added in the order of its CSR incidence list."""
+        acc = f
+        for q in range(vertex_offsets[i], vertex_offsets[i + 1]):
+            acc += corner_forces[vertex_slots[q]]
+        return acc
+
     @wp.kernel(module="unique")
     def gather_forces(
         vertex_offsets: wp.array(dtype=wp.int32),
@@ -105,10 +119,7 @@ def vertex_kernels(dtype):
         forces: wp.array(dtype=vec3),
     ):
         i = wp.tid()
-        f = vec3(dtype(0.0))
-        for q in range(vertex_offsets[i], vertex_offsets[i + 1]):
-            f += corner_forces[vertex_slots[q]]
-        forces[i] = f
+        forces[i] = gather_corners(vec3(dtype(0.0)), i, vertex_offsets, vertex_slots, corner_forces)
 
     @wp.kernel(module="unique")
     def gather_add(
@@ -118,10 +129,7 @@ def vertex_kernels(dtype):
         forces: wp.array(dtype=vec3),
     ):
         i = wp.tid()
-        f = forces[i]
-        for q in range(vertex_offsets[i], vertex_offsets[i + 1]):
-            f += corner_forces[vertex_slots[q]]
-        forces[i] = f
+        forces[i] = gather_corners(forces[i], i, vertex_offsets, vertex_slots, corner_forces)
 
     @wp.kernel(module="unique")
     def gather_kick(
@@ -139,11 +147,10 @@ def vertex_kernels(dtype):
         velocities: wp.array(dtype=vec3),
         accelerations: wp.array(dtype=vec3),
     ):
-        """f_i = loads + sum of corner forces [N]; then kick_point (kernels/integration.py)."""
+        """f_i = loads + sum of corner forces [N]; then kick_point (kernels/integration.py). The gather and the kick are
+        fused into one launch, so this repeats the kick_point call of kernels/integration.py's ``kick``."""
         i = wp.tid()
-        f = forces[i]
-        for q in range(vertex_offsets[i], vertex_offsets[i + 1]):
-            f += corner_forces[vertex_slots[q]]
+        f = gather_corners(forces[i], i, vertex_offsets, vertex_slots, corner_forces)
         forces[i] = f
         kick_point(
             i,
@@ -253,3 +260,150 @@ def implicit_rhs_kernel(dtype):
         point_kind[i] = kind
 
     return implicit_rhs
+
+
+# -- launches ----------------------------------------------------------------------------------------------------------
+# One function per kernel, the kernel's arguments in its order; ``dtype`` is the solver's scalar type (wp.float32 or
+# wp.float64), one thread per vertex.
+
+
+def _gather(kernel: str, vertex_offsets, vertex_slots, corner_forces, forces, dtype, device):
+    """The launch of the gather ``kernel`` ("gather_forces" or "gather_add"), which share their arguments."""
+    wp.launch(
+        vertex_kernels(dtype)[kernel],
+        dim=forces.shape[0],
+        inputs=[vertex_offsets, vertex_slots, corner_forces, forces],
+        device=device,
+    )
+
+
+def gather_forces(vertex_offsets, vertex_slots, corner_forces, forces, *, dtype, device):
+    """forces[i] = sum of the corner vectors of vertex i [N] (overwrites)."""
+    _gather("gather_forces", vertex_offsets, vertex_slots, corner_forces, forces, dtype, device)
+
+
+def gather_add(vertex_offsets, vertex_slots, corner_forces, forces, *, dtype, device):
+    """forces[i] += sum of the corner vectors of vertex i [N] (onto the loads already in ``forces``)."""
+    _gather("gather_add", vertex_offsets, vertex_slots, corner_forces, forces, dtype, device)
+
+
+def gather_kick(
+    vertex_offsets,
+    vertex_slots,
+    corner_forces,
+    inv_mass,
+    gravity,
+    damping,
+    dt,
+    point_condition,
+    point_kind,
+    cond_axes,
+    forces,
+    velocities,
+    accelerations,
+    *,
+    dtype,
+    device,
+):
+    """gather_add, then the second half kick: a = f / m + g - c v [m/s^2], v += dt/2 a on the free axes (dt [s]; 0:
+    the accelerations only)."""
+    wp.launch(
+        vertex_kernels(dtype)["gather_kick"],
+        dim=forces.shape[0],
+        inputs=[
+            vertex_offsets,
+            vertex_slots,
+            corner_forces,
+            inv_mass,
+            gravity,
+            damping,
+            dt,
+            point_condition,
+            point_kind,
+            cond_axes,
+            forces,
+            velocities,
+            accelerations,
+        ],
+        device=device,
+    )
+
+
+def advance_displacements(displacements, velocities, dt, *, dtype, device):
+    """u += dt v [m] (dt [s])."""
+    wp.launch(
+        vertex_kernels(dtype)["advance_displacements"],
+        dim=displacements.shape[0],
+        inputs=[displacements, velocities, dt],
+        device=device,
+    )
+
+
+def constraint_bits(point_condition, active_kind, cond_axes, point_kind, constrained, *, dtype, device):
+    """The bit mask of each vertex's active condition into ``constrained`` (0 when free) and its kind into
+    ``point_kind``."""
+    wp.launch(
+        vertex_kernels(dtype)["constraint_bits"],
+        dim=constrained.shape[0],
+        inputs=[point_condition, active_kind, cond_axes, point_kind, constrained],
+        device=device,
+    )
+
+
+def residual_forces(forces, mass, gravity, constrained, residual, *, dtype, device):
+    """residual_i = f_i + m_i g [N] on the free components (the static equilibrium residual)."""
+    wp.launch(
+        vertex_kernels(dtype)["residual_forces"],
+        dim=residual.shape[0],
+        inputs=[forces, mass, gravity, constrained, residual],
+        device=device,
+    )
+
+
+def apply_increment(displacements, du, *, dtype, device):
+    """u += du [m]."""
+    wp.launch(
+        vertex_kernels(dtype)["apply_increment"], dim=displacements.shape[0], inputs=[displacements, du], device=device
+    )
+
+
+def implicit_rhs(
+    forces,
+    mass,
+    velocities,
+    point_condition,
+    active_kind,
+    cond_axes,
+    active_velocity,
+    gravity,
+    dt,
+    rhs,
+    guess,
+    constrained,
+    point_kind,
+    *,
+    dtype,
+    device,
+):
+    """The backward-Euler right-hand side b = m v + dt (f + m g) [N s] into ``rhs``, the initial guess of the new
+    velocity [m/s] into ``guess``, the constraint bit masks and the vertex kinds (implicit_rhs_kernel)."""
+    wp.launch(
+        implicit_rhs_kernel(dtype),
+        dim=rhs.shape[0],
+        inputs=[
+            forces,
+            mass,
+            velocities,
+            point_condition,
+            active_kind,
+            cond_axes,
+            active_velocity,
+            gravity,
+            dt,
+            rhs,
+            guess,
+            constrained,
+            point_kind,
+        ],
+        device=device,
+    )

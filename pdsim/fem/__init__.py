@@ -1,9 +1,9 @@
-"""Tetrahedral FEM (shared/seeds/fem_slides.txt): bodies, meshing, the explicit/implicit/static solver and fracture by
-vertex splitting."""
+"""Tetrahedral FEM: bodies, meshing, the explicit/implicit/static solver and fracture by vertex splitting."""
 
 from .body import FemBody, FemPlasticity
-from .mesh import TetMesh, box_tet_mesh, load_tet_mesh, tet_mesh_from_arrays, tetrahedralize, write_tet_mesh
 from .cg import CgReport
+from .mesh import TetMesh, box_tet_mesh, tet_mesh_from_arrays, tetrahedralize, write_tet_mesh
+from .mesh_files import load_tet_mesh
 from .solver import SolverFem
 from .static import StaticSolveReport
 

@@ -15,6 +15,7 @@ from ..loads import surface_forces_from_triangles
 from ..materials import Material
 from ..regions import region_mask
 from ..validate import check_range
+from .fracture import closed_surface_defects
 from .mesh import DEFAULT_MIN_QUALITY, TetMesh, signed_volumes, tetrahedralize
 
 MEASURES = ("linear", "corotated", "green")
@@ -205,8 +206,6 @@ def mesh_surface(mesh: TetMesh, name: str) -> SolidShape:
     """The boundary of a tet mesh as a closed surface (its boundary faces on the vertices they use), for drawing
     smooth crack surfaces. ParameterError (crack_surfaces) when it is not a closed 2-manifold: an edge of the boundary
     not shared by exactly two faces of opposite directions, as where two parts of the mesh touch along an edge."""
-    from .fracture import closed_surface_defects
-
     faces = np.asarray(mesh.boundary_faces(), dtype=np.int64)
     if closed_surface_defects(faces):
         raise ParameterError(

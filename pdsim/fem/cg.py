@@ -16,7 +16,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
 
+from ..kernels.fem import cg as kc
+from ..kernels.fem import elements as ke
 from .model import FemModel
 
 CG_CHUNK = 256  # vertices per partial sum of the CG reductions
@@ -59,10 +62,6 @@ class FemCg:
         vertex_slots,
         vertex_count: int,
     ):
-        import warp as wp
-
-        from ..kernels.fem import elements as ke
-
         self.model = model
         self.device = dev = model.device
         self.dtype = dtype = model.dtype
@@ -94,15 +93,17 @@ class FemCg:
 
     def apply_stiffness(self, u, out_corner):
         """Corner products (K_R u) per element corner into ``out_corner`` (the matrix-free operator)."""
-        import warp as wp
-
-        from ..kernels.fem import elements as ke
-
         m = self.model
-        wp.launch(
-            ke.element_stiffness_product_kernel(self.dtype, self.rotated),
-            dim=m.element_count,
-            inputs=[u, self.tets, m.dm_inv, m.volume, m.lame, self.rotation, out_corner],
+        ke.element_stiffness_product(
+            u,
+            self.tets,
+            m.dm_inv,
+            m.volume,
+            m.lame,
+            self.rotation,
+            out_corner,
+            dtype=self.dtype,
+            rotated=self.rotated,
             device=self.device,
         )
 
@@ -113,64 +114,97 @@ class FemCg:
         block-Jacobi preconditioned CG to the relative residual ``tolerance`` or ``max_iterations``, the stiffness
         ``assembled`` or matrix-free; ``x`` holds the initial guess (kept on the constrained components) and the
         result."""
-        import warp as wp
-
-        from ..kernels.fem import cg as kc
-
         mdl = self.model
-        k = kc.cg_kernels(self.dtype, self.rotated)
-        d, n, ch, chunks = self.device, self.vertex_count, self.chunk, self.chunks
+        dtype = self.dtype
+        d, ch, chunks = self.device, self.chunk, self.chunks
         tol = tolerance
         max_it = int(max_iterations)
-        c_mass, c_stiff = self.dtype(c_mass), self.dtype(c_stiff)
+        c_mass, c_stiff = dtype(c_mass), dtype(c_stiff)
         if assembled:
-            ka = kc.assembled_kernels(self.dtype)
             bsr = self.assemble_stiffness()
-            wp.launch(
-                ka["bsr_block_jacobi"],
-                dim=n,
-                inputs=[bsr["diagonal"], bsr["values"], op_mass, c_mass, c_stiff, self.constrained, self.precond],
+            kc.bsr_block_jacobi(
+                bsr["diagonal"],
+                bsr["values"],
+                op_mass,
+                c_mass,
+                c_stiff,
+                self.constrained,
+                self.precond,
+                dtype=dtype,
                 device=d,
             )
-            op_kernel = ka["bsr_operator_gather"]
-            op_inputs = [bsr["row_offsets"], bsr["columns"], bsr["values"], op_mass, c_mass, c_stiff]
-        else:
-            wp.launch(
-                k["block_jacobi"],
-                dim=n,
-                inputs=[
-                    self.vertex_offsets,
-                    self.vertex_slots,
-                    mdl.dm_inv,
-                    mdl.volume,
-                    mdl.lame,
-                    self.rotation,
+
+            def apply_operator(p):
+                """q = A p into ``q`` and the chunks' p . q into ``partial``."""
+                kc.bsr_operator_gather(
+                    bsr["row_offsets"],
+                    bsr["columns"],
+                    bsr["values"],
                     op_mass,
                     c_mass,
                     c_stiff,
                     self.constrained,
-                    self.precond,
-                ],
+                    p,
+                    ch,
+                    self.q,
+                    self.partial,
+                    dtype=dtype,
+                    device=d,
+                )
+
+        else:
+            kc.block_jacobi(
+                self.vertex_offsets,
+                self.vertex_slots,
+                mdl.dm_inv,
+                mdl.volume,
+                mdl.lame,
+                self.rotation,
+                op_mass,
+                c_mass,
+                c_stiff,
+                self.constrained,
+                self.precond,
+                dtype=dtype,
+                rotated=self.rotated,
                 device=d,
             )
-            op_kernel = k["operator_gather"]
-            op_inputs = [self.vertex_offsets, self.vertex_slots, self.corner_product, op_mass, c_mass, c_stiff]
+
+            def apply_operator(p):
+                """q = A p into ``q`` (the corner products first) and the chunks' p . q into ``partial``."""
+                self.apply_stiffness(p, self.corner_product)
+                kc.operator_gather(
+                    self.vertex_offsets,
+                    self.vertex_slots,
+                    self.corner_product,
+                    op_mass,
+                    c_mass,
+                    c_stiff,
+                    self.constrained,
+                    p,
+                    ch,
+                    self.q,
+                    self.partial,
+                    dtype=dtype,
+                    device=d,
+                )
+
         # q = A x0 (constrained components zeroed), r = b - q, z = P r, p = z
-        if not assembled:
-            self.apply_stiffness(self.x, self.corner_product)
-        wp.launch(
-            op_kernel,
-            dim=chunks,
-            inputs=[*op_inputs, self.constrained, self.x, ch, self.q, self.partial],
+        apply_operator(self.x)
+        kc.residual_init(
+            self.rhs,
+            self.q,
+            self.constrained,
+            self.precond,
+            ch,
+            self.r,
+            self.z,
+            self.p,
+            self.partial3,
+            dtype=dtype,
             device=d,
         )
-        wp.launch(
-            k["residual_init"],
-            dim=chunks,
-            inputs=[self.rhs, self.q, self.constrained, self.precond, ch, self.r, self.z, self.p, self.partial3],
-            device=d,
-        )
-        wp.launch(k["reduce_init"], dim=1, inputs=[self.partial3, self.scalars], device=d)
+        kc.reduce_init(self.partial3, self.scalars, dtype=dtype, device=d)
         s = self.scalars.numpy()
         bb = float(s[kc.CG_BB])
         if bb == 0.0:
@@ -179,23 +213,23 @@ class FemCg:
         it = 0
         rr = float(s[kc.CG_RR])
         while rr > target and it < max_it:
-            if not assembled:
-                self.apply_stiffness(self.p, self.corner_product)
-            wp.launch(
-                op_kernel,
-                dim=chunks,
-                inputs=[*op_inputs, self.constrained, self.p, ch, self.q, self.partial],
+            apply_operator(self.p)
+            kc.reduce_alpha(self.partial, self.scalars, dtype=dtype, device=d)
+            kc.update_xr(
+                self.p,
+                self.q,
+                self.precond,
+                self.scalars,
+                ch,
+                self.x,
+                self.r,
+                self.z,
+                self.partial2,
+                dtype=dtype,
                 device=d,
             )
-            wp.launch(k["reduce_alpha"], dim=1, inputs=[self.partial, self.scalars], device=d)
-            wp.launch(
-                k["update_xr"],
-                dim=chunks,
-                inputs=[self.p, self.q, self.precond, self.scalars, ch, self.x, self.r, self.z, self.partial2],
-                device=d,
-            )
-            wp.launch(k["reduce_beta"], dim=1, inputs=[self.partial2, self.scalars], device=d)
-            wp.launch(k["update_p"], dim=chunks, inputs=[self.z, self.scalars, ch, self.p], device=d)
+            kc.reduce_beta(self.partial2, self.scalars, dtype=dtype, device=d)
+            kc.update_p(self.z, self.scalars, ch, self.p, chunks=chunks, dtype=dtype, device=d)
             it += 1
             rr = float(self.scalars.numpy()[kc.CG_RR])
         rel = math.sqrt(max(rr, 0.0) / bb)
@@ -204,11 +238,6 @@ class FemCg:
     def assemble_stiffness(self) -> dict:
         """The assembled K_R as 3x3 blocks in CSR order (pattern cached per topology; values filled per call from the
         element blocks by a gather over the precomputed contribution lists)."""
-        import warp as wp
-
-        from ..kernels.fem import cg as kc
-        from ..kernels.fem import elements as ke
-
         d, mdl = self.device, self.model
         if self._bsr is None:
             n, m = self.vertex_count, mdl.element_count
@@ -239,17 +268,18 @@ class FemCg:
                 "element_blocks": wp.zeros(16 * m, dtype=self.mat33, device=d),
             }
         bsr = self._bsr
-        wp.launch(
-            ke.element_stiffness_blocks_kernel(self.dtype, self.rotated),
-            dim=mdl.element_count,
-            inputs=[mdl.dm_inv, mdl.volume, mdl.lame, self.rotation, bsr["element_blocks"]],
+        ke.element_stiffness_blocks(
+            mdl.dm_inv,
+            mdl.volume,
+            mdl.lame,
+            self.rotation,
+            bsr["element_blocks"],
+            dtype=self.dtype,
+            rotated=self.rotated,
             device=d,
         )
-        wp.launch(
-            kc.assembled_kernels(self.dtype)["assemble_blocks"],
-            dim=bsr["values"].shape[0],
-            inputs=[bsr["contrib_offsets"], bsr["contrib_ids"], bsr["element_blocks"], bsr["values"]],
-            device=d,
+        kc.assemble_blocks(
+            bsr["contrib_offsets"], bsr["contrib_ids"], bsr["element_blocks"], bsr["values"], dtype=self.dtype, device=d
         )
         return bsr
 

@@ -1,10 +1,10 @@
 """Topology changes of the fracturing FEM solid: crack-plane vertex splits, separation of pieces, boundary surfaces,
 fracture energy.
 
-The slides' crack computation (shared/seeds/fem_slides.txt, DESIGN.md section 3) splits vertices, never elements:
-every element keeps its corners' rest positions, so no element is created, inverted or degenerate, element arrays keep
-their meaning and the stable step does not change. A crack surface is therefore made of element faces; what keeps it
-on the fracture plane (instead of a path along faces that drifts away from it) is that each crack carries its plane.
+The crack computation splits vertices, never elements: every element keeps its corners' rest positions, so no element
+is created, inverted or degenerate, element arrays keep their meaning and the stable step does not change. A crack
+surface is therefore made of element faces; what keeps it on the fracture plane (instead of a path along faces that
+drifts away from it) is that each crack carries its plane.
 For the elements whose largest principal stress exceeds their tensile strength, in one step:
 
 1. the normal n: the direction of the largest principal stress of the volume-weighted mean stress over two vertex
@@ -64,8 +64,10 @@ within NEAR_CRACK element sizes).
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
-from .mesh import TET_FACES, boundary_faces, interior_face_pairs
+from ..graph import connected_components
+from .mesh import TET_EDGES, TET_FACES, boundary_faces, interior_face_pairs
 
 MIN_SIDE = 2  # elements each side of a crack plane must keep around the split vertex
 NEAR_CRACK = 2.0  # an over-stressed element continues a crack whose vertex is within this many element sizes
@@ -177,8 +179,6 @@ def choose_splits(
     lone = np.flatnonzero(count == 0)
     near_plane = np.full(k, -1, dtype=np.int64)
     if known.size and lone.size:
-        from scipy.spatial import cKDTree
-
         size = np.linalg.norm(rest[cand[lone]] - centroids[elements[lone]][:, None, :], axis=2).max(axis=1)
         dist_near, near = cKDTree(rest[known]).query(centroids[elements[lone]], k=1)
         close = dist_near <= NEAR_CRACK * size
@@ -280,8 +280,6 @@ def best_offsets(tets, rest, centroids, vertices, normals, anchors, search):
     points [s, 3] (:func:`split_vertices`' ``anchors``) and whether each split has a valid plane (bool [s]: each
     side keeps at least MIN_SIDE elements). A plane that leaves a side in several groups (connected through faces
     containing the vertex) loses 1 of its score per extra group: the extra groups become chips or side cracks."""
-    from ..graph import connected_components
-
     vertices = np.asarray(vertices, dtype=np.int64)
     k = len(vertices)
     normals = np.asarray(normals, dtype=np.float64)
@@ -419,8 +417,6 @@ def griffith_filter(tets, rest, vertices, tets_split, parent, element_energy, fr
     area = triangle_areas(rest, original)
     lone = owner == s  # opened by the separation of pieces, away from the split vertices: the nearest split's
     if lone.any():
-        from scipy.spatial import cKDTree
-
         owner[lone] = cKDTree(rest[vertices]).query(rest[original[lone]].mean(axis=1), k=1)[1]
     a_s = np.bincount(owner, weights=0.5 * area, minlength=s)
     offsets, slots = vertex_incidence(tets, len(rest))
@@ -453,8 +449,6 @@ def pay_fracture_energy(tets, mass, velocity, debt, free):
     Returns:
         (new velocities [n, 3], new debts [n], energy paid [J]).
     """
-    from ..graph import connected_components
-
     owe = debt > 0.0
     if not owe.any():
         return velocity, debt, 0.0
@@ -498,8 +492,6 @@ def separate_pieces(tets: np.ndarray, vertex_count: int, relabel: np.ndarray | N
 
     Returns (new tets, parent) with parent[i] the original vertex of vertex i; vertex ids below ``vertex_count`` keep
     the group holding their lowest slot, new copies are numbered from ``vertex_count`` in (vertex, slot) order."""
-    from ..graph import connected_components
-
     tets = np.asarray(tets, dtype=np.int64)
     m = tets.shape[0]
     flat = tets.ravel()
@@ -537,9 +529,6 @@ def separate_pieces(tets: np.ndarray, vertex_count: int, relabel: np.ndarray | N
 def _edge_fans(tets: np.ndarray):
     """Edge slots (6 e + k, edge k of TET_EDGES in element e) grouped into fans: two slots of one edge are joined when
     their elements share a face containing the edge. Returns (edge key per slot [6m], fan label per slot [6m])."""
-    from ..graph import connected_components
-    from .mesh import TET_EDGES
-
     m = tets.shape[0]
     ev = np.sort(tets[:, TET_EDGES], axis=2)  # [m, 6, 2]
     n = int(tets.max()) + 1
@@ -564,8 +553,6 @@ def _edge_fans(tets: np.ndarray):
 
 
 def _local_edge(a: int, b: int) -> int:
-    from .mesh import TET_EDGES
-
     lo, hi = min(a, b), max(a, b)
     return int(np.flatnonzero((TET_EDGES[:, 0] == lo) & (TET_EDGES[:, 1] == hi))[0])
 
@@ -579,8 +566,6 @@ def separate_edge_fans(tets: np.ndarray, vertex_count: int, dirty: np.ndarray | 
     a dirty endpoint are examined (their fans are complete in the subset).
 
     Returns (new tets, parent, changed)."""
-    from .mesh import TET_EDGES
-
     tets = np.asarray(tets, dtype=np.int64)
     m = tets.shape[0]
     key, labels = _edge_fans(tets)
@@ -650,8 +635,6 @@ def make_manifold(tets: np.ndarray, vertex_count: int, dirty_vertices=None, *, m
 def element_pieces(tets: np.ndarray):
     """Face-connected pieces: (piece count, piece label per element int64 [element_count]); pieces are numbered 0,
     1, ... in the order of their smallest element (pdsim.graph.connected_components)."""
-    from ..graph import connected_components
-
     m = len(tets)
     pairs = interior_face_pairs(tets) // 4
     labels = connected_components(m, pairs[:, 0], pairs[:, 1])

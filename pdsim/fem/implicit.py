@@ -10,28 +10,27 @@ velocity; the CG works on the free components.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+import warp as wp
 
-if TYPE_CHECKING:
-    from .solver import SolverFem
+from ..kernels.fem import solver as ks
+from .operators import FemOperators
 
 
 class BackwardEuler:
-    """The backward-Euler step of a :class:`SolverFem` for one topology of its mesh (the solver builds a new one with
-    its vertex data), with the operator mass cached per step size."""
+    """The backward-Euler step of a solver (the :class:`FemOperators` of a :class:`SolverFem`) for one topology of its
+    mesh (the solver builds a new one with its vertex data), with the operator mass cached per step size."""
 
-    def __init__(self, solver: SolverFem):
+    def __init__(self, solver: FemOperators):
         self.solver = solver
         self._op_mass = None
         self._op_mass_dt = None
 
     def operator_mass(self, dt: float):
-        """(1 + dt c) m per vertex (the mass term of the backward-Euler operator), cached per dt and topology."""
-        import warp as wp
-
+        """(1 + dt c) m per vertex [kg] (the mass term of the backward-Euler operator; dt [s], c [1/s]), cached per
+        dt and topology."""
         s = self.solver
         if self._op_mass is None or self._op_mass_dt != dt:
-            om = s._mass_h * (1.0 + dt * s._vertex_damping_h)
+            om = s.lumped_mass_host * (1.0 + dt * s.vertex_damping_host)
             self._op_mass = wp.array(om.astype(s.np_dtype), dtype=s.dtype, device=s.device)
             self._op_mass_dt = dt
         return self._op_mass
@@ -39,47 +38,35 @@ class BackwardEuler:
     def step(self, dt: float):
         """Backward Euler: kicks, conditions at the mid-step, forces at u_n with the loads at t + dt, the CG solve
         for v_{n+1} (constrained components at the condition's velocity), u += dt v, colliders at t + dt."""
-        import warp as wp
-
-        from ..kernels.fem import solver as ks
-
         s = self.solver
         d, kin, t, cg = s.device, s.kin, s.time, s.cg
         kin.apply_kicks(t, dt)
         if kin.condition_count:
             kin.evaluate_conditions(t + 0.5 * dt)
-        s._compute_element_forces(dt)
-        s._loads_into_force(t + dt)
-        s._gather("gather_add")
-        wp.launch(
-            ks.implicit_rhs_kernel(s.dtype),
-            dim=s.point_count,
-            inputs=[
-                s.force,
-                s._mass,
-                kin.v,
-                kin.point_condition,
-                kin.active_kind,
-                kin.cond_axes,
-                kin.active_velocity,
-                s.gravity,
-                s.dtype(dt),
-                cg.rhs,
-                cg.x,
-                cg.constrained,
-                kin.point_kind,
-            ],
+        s.element_forces(dt)
+        s.loads_into_force(t + dt)
+        s.add_element_forces()
+        ks.implicit_rhs(
+            s.force,
+            s.lumped_mass,
+            kin.v,
+            kin.point_condition,
+            kin.active_kind,
+            kin.cond_axes,
+            kin.active_velocity,
+            s.gravity,
+            s.dtype(dt),
+            cg.rhs,
+            cg.x,
+            cg.constrained,
+            kin.point_kind,
+            dtype=s.dtype,
             device=d,
         )
-        report = s._cg_solve(self.operator_mass(dt), 1.0, dt * dt)
+        report = s.cg_solve(self.operator_mass(dt), 1.0, dt * dt)
         s.cg_reports = [report]
         wp.copy(kin.v, cg.x)
-        wp.launch(
-            ks.vertex_kernels(s.dtype)["advance_displacements"],
-            dim=s.point_count,
-            inputs=[kin.u, kin.v, s.dtype(dt)],
-            device=d,
-        )
+        ks.advance_displacements(kin.u, kin.v, s.dtype(dt), dtype=s.dtype, device=d)
         s.apply_colliders(t + dt, dt)
 
 

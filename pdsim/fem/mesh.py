@@ -20,10 +20,17 @@ Orientation and quality on load (:func:`tet_mesh_from_arrays`):
 
 from __future__ import annotations
 
+import hashlib
+import importlib.util
 import math
 import os
+import signal
+import subprocess
+import sys
+import tempfile
 from dataclasses import dataclass, field
 
+import meshio
 import numpy as np
 
 from ..errors import GeometryError, ParameterError
@@ -31,6 +38,7 @@ from ..geometry import SolidShape
 from ..validate import check_range, unit_hint
 
 TET_MESH_SUFFIXES = (".msh", ".vtk", ".vtu", ".mesh", ".inp", ".xdmf", ".med", ".usd", ".usda", ".usdc")
+
 DEFAULT_MIN_QUALITY = 0.02
 # fTetWild's meshes measure 0.26 to 0.36 at worst (box, sphere, cylinder); a sliver of quality 3e-3 cut the stable step
 # 400x below the median element's and cracked falsely. 0.02 keeps the worst element's step within about 40x.
@@ -299,7 +307,7 @@ def tetrahedralize(
 ) -> TetMesh:
     """Fills a closed surface with a quality tetrahedral mesh using fTetWild (pytetwild, MPL-2.0).
 
-    fTetWild's output differs from run to run (measured on one input: 2,078 to 3,463 vertices, also with one thread).
+    fTetWild's output differs from run to run (in its vertex count too, also with one thread).
     For reproducible simulations pass ``cache_dir``: the first mesh made for a given surface and parameters is saved
     there (.vtu, keyed by a SHA-1 of the inputs) and loaded by later calls.
 
@@ -332,8 +340,6 @@ def tetrahedralize(
     label = name or shape.name
     cached = None
     if cache_dir is not None:
-        import hashlib
-
         h = hashlib.sha1()
         h.update(np.ascontiguousarray(shape.vertices, dtype=np.float64).tobytes())
         h.update(np.ascontiguousarray(shape.faces, dtype=np.int64).tobytes())
@@ -341,7 +347,7 @@ def tetrahedralize(
         os.makedirs(cache_dir, exist_ok=True)
         cached = os.path.join(os.fspath(cache_dir), f"{label}-{h.hexdigest()[:20]}.vtu")
         if os.path.isfile(cached):
-            return load_tet_mesh(cached, name=label, min_quality=min_quality)
+            return tet_mesh_from_arrays(*read_meshio_tets(cached), name=label, min_quality=min_quality)
     check_mesh_size(shape, edge_length)
     v, t = _mesh_in_child(shape, label, edge_length, epsilon, optimize, threads)
     if len(t) == 0:
@@ -360,8 +366,8 @@ def tetrahedralize(
 
 def check_mesh_size(shape: SolidShape, edge_length: float) -> float:
     """The number of elements fTetWild makes for ``shape`` at ``edge_length`` [m], estimated as the volume over a
-    regular tetrahedron's (edge^3 / (6 sqrt 2); measured: 0.98x on a box, 2.5x on a sphere, whose curved surface is
-    refined); ParameterError with a unit hint above MAX_MESH_ELEMENTS."""
+    regular tetrahedron's (edge^3 / (6 sqrt 2); fTetWild makes more on curved surfaces, which it refines);
+    ParameterError with a unit hint above MAX_MESH_ELEMENTS."""
     estimate = abs(shape.volume) / (edge_length**3 / (6.0 * math.sqrt(2.0)))
     if estimate > MAX_MESH_ELEMENTS:
         raise ParameterError(
@@ -401,11 +407,6 @@ _CHILD_TEST_HOOK = ""  # Python run in the child before meshing (tests: "import 
 def _mesh_in_child(shape: SolidShape, label: str, edge_length, epsilon, optimize, threads):
     """Runs fTetWild on ``shape`` in a child Python process; returns (vertices [n, 3], tets [m, 4]). A crash of the
     mesher (a signal, or an exception) becomes a GeometryError naming the mesh, how it ended and what to change."""
-    import signal
-    import subprocess
-    import sys
-    import tempfile
-
     wrapper = _ftetwild_path()
     with tempfile.TemporaryDirectory(prefix="pdsim-ftetwild-") as tmp:
         inp, outp = os.path.join(tmp, "surface.npz"), os.path.join(tmp, "tets.npz")
@@ -445,8 +446,6 @@ def _mesh_in_child(shape: SolidShape, label: str, edge_length, epsilon, optimize
 def _ftetwild_path() -> str:
     """Path of pytetwild's compiled fTetWild wrapper, found without importing the package (whose ``__init__`` imports
     pyvista, an undeclared heavy dependency)."""
-    import importlib.util
-
     try:
         spec = importlib.util.find_spec("pytetwild")
     except (ImportError, ValueError):
@@ -460,57 +459,21 @@ def _ftetwild_path() -> str:
     return os.path.join(folder, files[0])
 
 
-def load_tet_mesh(
-    path: str | os.PathLike,
-    *,
-    scale: float = 1.0,
-    translate=(0.0, 0.0, 0.0),
-    name: str | None = None,
-    prim_path: str | None = None,
-    min_quality: float = DEFAULT_MIN_QUALITY,
-) -> TetMesh:
-    """Loads a ready tetrahedral mesh: Gmsh .msh, VTK .vtk/.vtu, Medit .mesh, Abaqus .inp, ... through meshio, or a
-    ``UsdGeom.TetMesh`` from .usd/.usda/.usdc (the first one, or the prim at ``prim_path``; its points are taken in
-    world space). Only the tetrahedra of the file are used. Checked as :func:`tet_mesh_from_arrays`.
-
-    Args:
-        path: mesh file.
-        scale: uniform scale [-], > 0, applied before ``translate`` [m].
-        name: label; defaults to the file's stem.
-        prim_path: USD only: the TetMesh prim to load.
-        min_quality: smallest allowed element quality.
-    """
-    path = os.fspath(path)
-    label = name or os.path.splitext(os.path.basename(path))[0]
-    suffix = os.path.splitext(path)[1].lower()
-    if suffix not in TET_MESH_SUFFIXES:
-        raise GeometryError(
-            f"{path}: unknown tetrahedral mesh type '{suffix}'; supported: {', '.join(TET_MESH_SUFFIXES)}"
-        )
-    if not os.path.isfile(path):
-        raise GeometryError(f"{path}: no such file")
-    if suffix in (".usd", ".usda", ".usdc"):
-        from ..output.usd_files import read_tet_mesh
-
-        v, t = read_tet_mesh(path, prim_path)
-    else:
-        try:
-            import meshio
-        except ModuleNotFoundError:
-            raise GeometryError(f"{path}: reading {suffix} files needs meshio (pip install meshio)") from None
-        try:
-            m = meshio.read(path)
-        except Exception as exc:  # noqa: BLE001 (meshio raises many exception types for unreadable files)
-            raise GeometryError(f"{path}: cannot read mesh ({exc})") from None
-        blocks = [c.data for c in m.cells if c.type == "tetra"]
-        if not blocks:
-            kinds = sorted({c.type for c in m.cells})
-            raise GeometryError(f"{path}: the file holds no tetrahedra (cell types: {', '.join(kinds) or 'none'})")
-        v, t = np.asarray(m.points, dtype=np.float64), np.concatenate(blocks)
-        if v.shape[1] == 2:
-            raise GeometryError(f"{path}: the file holds 2D points; a tetrahedral mesh needs 3D points")
-    mesh = tet_mesh_from_arrays(v, t, name=label, min_quality=min_quality)
-    return mesh.transformed(scale=scale, translate=translate)
+def read_meshio_tets(path: str) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices [m], tetrahedra) of a mesh file meshio reads (.msh, .vtk, .vtu, .mesh, .inp, ...): its tetrahedral
+    cells only; GeometryError for an unreadable file, one without tetrahedra, or 2D points."""
+    try:
+        m = meshio.read(path)
+    except Exception as exc:  # noqa: BLE001 (meshio raises many exception types for unreadable files)
+        raise GeometryError(f"{path}: cannot read mesh ({exc})") from None
+    blocks = [c.data for c in m.cells if c.type == "tetra"]
+    if not blocks:
+        kinds = sorted({c.type for c in m.cells})
+        raise GeometryError(f"{path}: the file holds no tetrahedra (cell types: {', '.join(kinds) or 'none'})")
+    v, t = np.asarray(m.points, dtype=np.float64), np.concatenate(blocks)
+    if v.shape[1] == 2:
+        raise GeometryError(f"{path}: the file holds 2D points; a tetrahedral mesh needs 3D points")
+    return v, t
 
 
 def box_tet_mesh(size, cells, *, center=(0.0, 0.0, 0.0), name: str = "box", jitter: float = 0.0, seed: int = 0):
@@ -557,8 +520,6 @@ def box_tet_mesh(size, cells, *, center=(0.0, 0.0, 0.0), name: str = "box", jitt
 
 def write_tet_mesh(mesh: TetMesh, path: str | os.PathLike) -> None:
     """Writes a tetrahedral mesh with meshio (format from the suffix: .msh, .vtk, .vtu, ...)."""
-    import meshio
-
     meshio.write(os.fspath(path), meshio.Mesh(mesh.vertices, [("tetra", mesh.tets)]))
 
 
@@ -568,9 +529,7 @@ __all__ = [
     "box_tet_mesh",
     "element_heights",
     "element_quality",
-    "load_tet_mesh",
     "signed_volumes",
     "tet_mesh_from_arrays",
     "tetrahedralize",
-    "write_tet_mesh",
 ]

@@ -16,7 +16,10 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+import warp as wp
+from scipy.spatial import cKDTree
 
+from ..kernels.fem import elements as ke
 from .body import FemBody
 from .mesh import TET_EDGES, boundary_faces, element_heights
 
@@ -41,8 +44,6 @@ def _embed(rest: np.ndarray, tets: np.ndarray, points: np.ndarray, *, candidates
     """Barycentric embedding of ``points`` [p, 3] in a tet mesh: (element [p], weights [p, 4]); each point takes, among
     the ``candidates`` elements with the nearest centroids, the one it is deepest inside (largest smallest weight);
     points slightly outside the mesh (fTetWild's envelope) get slightly negative weights (linear extrapolation)."""
-    from scipy.spatial import cKDTree
-
     cent = rest[tets].mean(axis=1)
     k = min(candidates, len(tets))
     _, idx = cKDTree(cent).query(points, k=k)
@@ -72,6 +73,11 @@ class FemModel:
         dtype, np_dtype: the solver's Warp and numpy scalar types.
         device: the Warp device of the arrays.
 
+    The body and material settings take their kernel names here, and only here: ``FemBody.tensile_strength`` ->
+    ``strength``, ``Material.lame_lambda`` and ``Material.shear_modulus`` -> ``lame`` = (lambda, mu),
+    ``FemPlasticity`` (yield_strain, creep, max_strain) -> ``plastic_params``, ``FemBody.fracture_energy`` ->
+    ``fracture_energy_h``.
+
     ``dtype``, ``np_dtype`` and ``device`` are those given. Host arrays (float64 unless noted):
     ``element_offsets`` [bodies + 1] and ``element_body`` [m] (int64), ``volume_h`` [m^3], ``density_h`` [kg/m^3],
     ``centroids_h`` (local frame, fracture's crack planes), ``strength_h`` (tensile strength per element [Pa], inf on
@@ -90,10 +96,6 @@ class FemModel:
     """
 
     def __init__(self, bodies: list[FemBody], origin: np.ndarray, dtype, np_dtype, device):
-        import warp as wp
-
-        from ..kernels.fem import elements as ke
-
         self.dtype, self.np_dtype, self.device = dtype, np_dtype, device
         vec3, mat33, vec4 = ke.fem_types(dtype)
         vec2 = wp.types.vector(2, dtype)

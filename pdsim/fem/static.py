@@ -10,15 +10,14 @@ update is below max(tolerance, 1000 eps) times the displacement change so far.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
+import warp as wp
 
 from ..errors import ParameterError
+from ..kernels.fem import solver as ks
 from ..validate import check_range
-
-if TYPE_CHECKING:
-    from .solver import SolverFem
+from .operators import FemOperators
 
 
 @dataclass
@@ -33,7 +32,7 @@ class StaticSolveReport:
 
 
 def solve_static(
-    solver: SolverFem,
+    solver: FemOperators,
     *,
     constrained=None,
     time: float | None = None,
@@ -42,26 +41,19 @@ def solve_static(
     cg_tolerance: float | None = None,
     cg_max_iterations: int = 20000,
 ) -> StaticSolveReport:
-    """:meth:`SolverFem.solve_static` of ``solver`` (the arguments are documented there)."""
-    import warp as wp
-
-    from ..kernels.fem import solver as ks
-
+    """:meth:`SolverFem.solve_static` of ``solver`` (its :class:`FemOperators`; the arguments are documented
+    there)."""
     s = solver
     n = s.point_count
     kin, cg = s.kin, s.cg
     t = s.time if time is None else float(time)
     tolerance = check_range("tolerance", tolerance, 0.0, None)
-    vk = ks.vertex_kernels(s.dtype)
-    d = s.device
+    d, dtype = s.device, s.dtype
     if constrained is None:
         if kin.condition_count:
             kin.evaluate_conditions(t)
-        wp.launch(
-            vk["constraint_bits"],
-            dim=n,
-            inputs=[kin.point_condition, kin.active_kind, kin.cond_axes, kin.point_kind, cg.constrained],
-            device=d,
+        ks.constraint_bits(
+            kin.point_condition, kin.active_kind, kin.cond_axes, kin.point_kind, cg.constrained, dtype=dtype, device=d
         )
         bits = cg.constrained.numpy()
     else:
@@ -71,8 +63,8 @@ def solve_static(
         bits = np.where(mask, 7, 0).astype(np.int32)
         wp.copy(cg.constrained, wp.array(bits, dtype=wp.int32, device=d))
     free = ((bits[:, None] >> np.arange(3)) & 1) == 0  # [n, 3]
-    s._loads_into_force(t)
-    external = s.force.numpy().astype(np.float64) + s._mass_h[:, None] * s.gravity_host
+    s.loads_into_force(t)
+    external = s.force.numpy().astype(np.float64) + s.lumped_mass_host[:, None] * s.gravity_host
     load = float(np.linalg.norm(external[free]))
     zero_mass = wp.zeros(n, dtype=s.dtype, device=d)
     reports = []
@@ -80,15 +72,10 @@ def solve_static(
     step_tol = max(tolerance, 1000.0 * float(np.finfo(s.np_dtype).eps))
 
     def residual_norm() -> float:
-        s._compute_element_forces(0.0)
-        s._loads_into_force(t)
-        s._gather("gather_add")
-        wp.launch(
-            vk["residual_forces"],
-            dim=n,
-            inputs=[s.force, s._mass, s.gravity, cg.constrained, cg.rhs],
-            device=d,
-        )
+        s.element_forces(0.0)
+        s.loads_into_force(t)
+        s.add_element_forces()
+        ks.residual_forces(s.force, s.lumped_mass, s.gravity, cg.constrained, cg.rhs, dtype=dtype, device=d)
         return float(np.linalg.norm(cg.rhs.numpy().astype(np.float64)))
 
     try:
@@ -98,8 +85,8 @@ def solve_static(
             if res <= tolerance * ref:
                 break
             cg.x.zero_()
-            reports.append(s._cg_solve(zero_mass, 0.0, 1.0, tolerance=cg_tolerance, max_iterations=cg_max_iterations))
-            wp.launch(vk["apply_increment"], dim=n, inputs=[kin.u, cg.x], device=d)
+            reports.append(s.cg_solve(zero_mass, 0.0, 1.0, tolerance=cg_tolerance, max_iterations=cg_max_iterations))
+            ks.apply_increment(kin.u, cg.x, dtype=dtype, device=d)
             du = float(np.linalg.norm(cg.x.numpy().astype(np.float64)))
             u = float(np.linalg.norm(kin.displacements() - u_start))
             res = residual_norm()
@@ -108,11 +95,10 @@ def solve_static(
             if newton > 0 and du <= step_tol * u:
                 break  # converged in the increment (float32 round-off bounds the residual)
     finally:
-        if s.fracture:
-            s._over_count.zero_()
+        s.reset_over_count()
     s.cg_reports = reports
     if s.integrator == "explicit":
-        s._update_accelerations()
+        s.update_accelerations()
     return StaticSolveReport(
         newton_iterations=len(reports),
         cg_iterations=sum(r.iterations for r in reports),
