@@ -7,6 +7,7 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
+from . import presets as presets  # named materials: pdsim.presets.glass(), concrete, wood, clay, steel, aluminium
 from .bodies import BoundaryCondition, PointKind
 from .colliders import BoxProjectile, GroundPlane, MeshCollider, MeshProjectile, SphereProjectile
 from .errors import FeatureNotAvailableError, GeometryError, InstabilityError, ParameterError, PdsimError
@@ -38,7 +39,6 @@ from .lattice import (
 from .loads import TimeCurve
 from .materials import Anisotropy, Material
 from .peridynamics import PeridynamicBody, SolverPeridynamics
-from . import presets as presets  # named materials: pdsim.presets.glass(), concrete, wood, clay, steel, aluminium
 from .regions import BoxRegion, HalfSpace, SphereRegion
 from .scene import RunReport, Scene
 from .solver import Solver, SolverContext

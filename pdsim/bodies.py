@@ -16,10 +16,9 @@ from enum import IntEnum
 
 import numpy as np
 
+from .checks import check_axes, check_range, check_vec3
 from .errors import ParameterError
 from .loads import PointLoads, TimeCurve, as_curve
-from .validate import check_axes, check_range, check_vec3
-
 
 SURFACE_REGION = "a region that contains part of the body's surface"  # what pdsim.loads allows a surface load
 

@@ -12,10 +12,10 @@ import numpy as np
 import trimesh
 import warp as wp
 
+from .checks import check_range
 from .errors import ParameterError
 from .kernels import colliders as kc
 from .output.views import RigidView
-from .validate import check_range
 
 
 class Collider:

@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from .checks import check_range
 from .errors import ParameterError
 from .kernels import contact as kc
-from .validate import check_range
 
 CONTACT_NEIGHBOR_BUDGET = 12
 """Contact modulus calibration: C_k (2 r_k)^3 = S_k / 12, so 12 simultaneous contacts (the kissing number of equal

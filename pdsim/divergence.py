@@ -9,8 +9,8 @@ import numpy as np
 import warp as wp
 
 from .colliders import _quat_mul, _rotation_vector
-from .watchdog import TOTAL_TOLERANCE, Watchdog
 from .solver import PointSolver
+from .watchdog import TOTAL_TOLERANCE, Watchdog
 
 
 def scene_speeds(scene, bounds) -> dict:

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
+from .checks import check_range
 from .errors import GeometryError, ParameterError
-from .validate import check_range
 
 MESH_SUFFIXES = (".obj", ".stl", ".ply", ".glb", ".gltf", ".off")
 

@@ -393,6 +393,7 @@ class PointKinematics:
         x = self.positions() - np.asarray(origin, dtype=np.float64)
         return self.mass_host @ np.cross(x, self.velocities())
 
+
 def _curve_tables(curves):
     """Concatenated (spans int32 [c, 2], times float32, values float32) of TimeCurves; one dummy entry when empty."""
     if not curves:

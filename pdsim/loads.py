@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .checks import check_range, check_vec3
 from .errors import ParameterError
 from .regions import region_mask
-from .validate import check_range, check_vec3
 
 
 class TimeCurve:

@@ -7,8 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .checks import check_range
 from .errors import ParameterError
-from .validate import check_range
 
 
 @dataclass(frozen=True)

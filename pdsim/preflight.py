@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import memory
+from .checks import check_frames, check_range, check_time_step, format_bytes, unit_hint
 from .colliders import BoxProjectile, MeshCollider, MeshProjectile, SphereProjectile, _rotate, collider_names
 from .device import default_device
 from .errors import GeometryError, ParameterError
@@ -45,7 +46,6 @@ from .fem.mesh import quality_problem
 from .geometry import SolidShape
 from .sampling import points_inside
 from .timestep import MAX_SUBSTEPS_PER_FRAME, chosen_step, estimated_stable_step
-from .validate import check_frames, check_range, check_time_step, format_bytes, unit_hint
 
 MAX_INDEX = 2**31 - 1  # particles, vertices, bonds and elements are indexed with int32 on the device
 

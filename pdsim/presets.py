@@ -27,9 +27,9 @@ from __future__ import annotations
 
 import math
 
+from .checks import check_range, check_vec3
 from .errors import ParameterError
 from .materials import Anisotropy, Material
-from .validate import check_range, check_vec3
 
 STIFFNESS_SCALE = 1.0e-4  # Young's modulus (and stresses) of the animation presets over the real ones
 # Silling-Askari compressive bonus alpha of the brittle presets (s0 = s_c - alpha s_min). It makes them unbreakable

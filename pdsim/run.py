@@ -20,18 +20,18 @@ from dataclasses import dataclass
 import numpy as np
 from tqdm import tqdm
 
+from .capture import FrameGraphs
 from .checkpoint import CHECKPOINT_FORMAT, RunInterrupted, checkpoint_path, load_checkpoint, save_checkpoint
+from .checks import check_frames, check_range, check_time_step
 from .colliders import collider_names
 from .contact import MethodContact
 from .divergence import attach_watchdogs, schedule_watchdogs
 from .errors import InstabilityError, ParameterError
-from .frame_graph import FrameGraphs
 from .output.usd import UsdCache
 from .output.writer import ViewWriter
 from .preflight import preflight
 from .solver import PointSolver
 from .timestep import frame_steps
-from .validate import check_frames, check_range, check_time_step
 
 
 @dataclass
@@ -333,7 +333,7 @@ def method_contact(scene, solvers):
 
 
 def frame_graphs(solvers, graph_capture):
-    """The FrameGraphs (pdsim/frame_graph.py) of a run's solvers, following the scene's ``graph_capture``: kept on the
+    """The FrameGraphs (pdsim/capture.py) of a run's solvers, following the scene's ``graph_capture``: kept on the
     first solver (it lives as long as the solvers do) for the same set of solvers."""
     first = solvers[0]
     cached = getattr(first, "_frame_graphs", None)
@@ -357,7 +357,7 @@ def advance_frame(solvers, dt: float, substeps: int, coupling=None, graphs=None)
     """One frame of ``substeps`` steps of ``dt`` [s]: the solvers of methods with mass step together, phase by phase,
     so that ``coupling`` (contact between methods) acts within each step; the others (the lattice) advance by a frame.
     The frame's tables (projectile poses, the watchdog's collider speeds) are written to the device first; no step
-    reads the device. ``graphs`` (a pdsim.frame_graph.FrameGraphs) replays the steps as a captured graph where it
+    reads the device. ``graphs`` (a pdsim.capture.FrameGraphs) replays the steps as a captured graph where it
     can; None launches them from the host."""
     coupled = [s for s in solvers if isinstance(s, PointSolver)]
     for s in solvers:

@@ -6,10 +6,10 @@ import numpy as np
 import warp as wp
 
 from . import memory
+from .checks import check_range, format_bytes, unit_hint
 from .errors import GeometryError, ParameterError
 from .geometry import SolidShape
 from .kernels import sampling as ks
-from .validate import check_range, format_bytes, unit_hint
 
 MAX_LATTICE_POINTS = 200_000_000
 

@@ -9,6 +9,7 @@ import os
 
 import numpy as np
 
+from .checks import check_frames, check_range
 from .colliders import Collider, GroundPlane
 from .device import default_device
 from .errors import ParameterError
@@ -20,7 +21,6 @@ from .peridynamics import PeridynamicBody
 from .preflight import check_prim_names, preflight
 from .run import RunReport, run_scene
 from .solver import SolverContext, solver_for
-from .validate import check_frames, check_range
 
 UP_AXES = {"Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
 
@@ -42,7 +42,7 @@ class Scene:
         up_axis: "Z" (default) or "Y"; written to the stage and used for the default gravity and ground plane.
         time_step_safety: automatic dt = safety * Silling-Askari estimate, in (0, 1]; default 0.7.
         name: scene label.
-        graph_capture: replay each frame's steps as one captured graph (pdsim/frame_graph.py): None (default) on CUDA
+        graph_capture: replay each frame's steps as one captured graph (pdsim/capture.py): None (default) on CUDA
             devices, False never (every step launched from the host), True on any device (the CPU replays Warp's
             recorded operations). Scenes whose steps do host work (FEM fracture, the implicit FEM integrator) run
             uncaptured with a warning naming the reason.

@@ -204,7 +204,7 @@ class PointSolver(Solver):
         for _ in range(int(steps)):
             self.step(dt)
 
-    # -- frames replayed as graphs (pdsim/frame_graph.py) ----------------------------------------------------------
+    # -- frames replayed as graphs (pdsim/capture.py) ----------------------------------------------------------
     def graph_capture_blocker(self, dt: float) -> str | None:
         """Why this solver's steps of ``dt`` [s] cannot be captured once and replayed every frame (work a step does
         on the host), or None (default: the shared kinematics, colliders and contact are capturable). A solver that
@@ -234,7 +234,7 @@ class PointSolver(Solver):
         return False
 
     def graph_key(self) -> tuple:
-        """What the captured launches depend on (pdsim/frame_graph.py keys its graphs by the identity of each object
+        """What the captured launches depend on (pdsim/capture.py keys its graphs by the identity of each object
         and keeps the objects alive with the graph): the kinematics and force arrays (FEM fracture rebuilds them), the
         watchdog's table and the projectiles' tables (reallocated when the substeps change)."""
         parts = [self.kin, getattr(self, "force", None), getattr(self, "topology_version", 0)]

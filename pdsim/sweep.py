@@ -2,8 +2,8 @@
 
 Two entry points, each running one task per point on ``dask.distributed``:
 
-- :func:`run_sweep` runs a validation problem (:mod:`pdsim.validation`) over a grid of knobs and returns one record
-  per point (error, run time, peak memory, knobs).
+- :func:`run_sweep` runs a validation problem (:mod:`pdsim.reference_problems`) over a grid of knobs and returns one
+record per point (error, run time, peak memory, knobs).
 - :func:`run_wedge` runs a scene script once per variant of its settings and writes one USD cache per variant,
   plus ``wedge.json`` listing them.
 
@@ -60,14 +60,14 @@ from contextlib import contextmanager
 import numpy as np
 import warp as wp
 
-from . import validation
+from . import reference_problems
+from .checks import check_frames, check_range
 from .errors import ParameterError
 from .fem.body import INTEGRATORS, MEASURES
 from .materials import Material
 from .peridynamics.body import SURFACE_CORRECTIONS
 from .scene import Scene
 from .scene_script import load_scene_script
-from .validate import check_frames, check_range
 
 __all__ = [
     "apply_settings",
@@ -148,9 +148,9 @@ def _warm_worker() -> str:
     the first imports of its process (Warp's kernel cache on disk makes the loads quick)."""
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING
-    validation.cantilever(1, method="fem")
-    validation.pd_energy_density(1.6, surface_correction="none")
-    validation.lattice_laplace(5)
+    reference_problems.cantilever(1, method="fem")
+    reference_problems.pd_energy_density(1.6, surface_correction="none")
+    reference_problems.lattice_laplace(5)
     return _worker_id()
 
 
@@ -175,12 +175,12 @@ def grid_points(grid) -> list[dict]:
 
 def _problem_function(problem):
     if isinstance(problem, str):
-        if problem not in validation.PROBLEMS:
-            raise ParameterError("problem", problem, "one of " + ", ".join(sorted(validation.PROBLEMS)))
-        return validation.PROBLEMS[problem].function
+        if problem not in reference_problems.PROBLEMS:
+            raise ParameterError("problem", problem, "one of " + ", ".join(sorted(reference_problems.PROBLEMS)))
+        return reference_problems.PROBLEMS[problem].function
     if callable(problem):
         return problem
-    raise ParameterError("problem", problem, "a problem name of pdsim.validation.PROBLEMS or a function")
+    raise ParameterError("problem", problem, "a problem name of pdsim.reference_problems.PROBLEMS or a function")
 
 
 def _check_knobs(function, points: list[dict]) -> None:
@@ -197,7 +197,7 @@ def _check_knobs(function, points: list[dict]) -> None:
 def _run_point(problem, knobs: dict) -> dict:
     """One sweep point, in a worker: runs the problem and returns its record (or a failure record)."""
     try:
-        rec = validation.run_problem(problem, **knobs)
+        rec = reference_problems.run_problem(problem, **knobs)
     except Exception as exc:  # noqa: BLE001 - a failing point is reported, the sweep goes on
         name = problem if isinstance(problem, str) else getattr(problem, "__name__", "problem")
         rec = {"problem": name, "knobs": dict(knobs), "error": math.nan, "failed": f"{type(exc).__name__}: {exc}"}
@@ -210,7 +210,7 @@ def run_sweep(problem, grid, *, scheduler=None, workers: int | None = None, warm
     order of the points (:func:`grid_points`).
 
     Args:
-        problem: a name of ``pdsim.validation.PROBLEMS`` (e.g. "cantilever") or a function returning a record (a
+        problem: a name of ``pdsim.reference_problems.PROBLEMS`` (e.g. "cantilever") or a function returning a record (a
             module-level function the workers can import, or one cloudpickle sends by value).
         grid: {knob: [values]} (every combination) or [{knob: value}, ...]. Knobs are the problem function's
             keyword arguments, the refinement included: ``{"n": [2, 3, 4], "method": ["fem"]}``.
@@ -220,7 +220,7 @@ def run_sweep(problem, grid, *, scheduler=None, workers: int | None = None, warm
         warm: first load pdsim and its kernels in every worker (see :func:`run_sweeps`).
 
     Each record: ``problem``, ``method``, ``knobs``, ``error`` [-], ``seconds``, ``peak_rss_mb``, ``memory_mb``,
-    ``points`` ... (pdsim.validation), plus ``worker`` (host:pid); a failed point has ``failed`` and NaN error.
+    ``points`` ... (pdsim.reference_problems), plus ``worker`` (host:pid); a failed point has ``failed`` and NaN error.
 
     Example, on a farm: ``run_sweep("cantilever", {"n": [2, 4, 8], "method": ["fem", "pd"]},
     scheduler="tcp://host:8786")``.

@@ -136,7 +136,7 @@ class Watchdog:
         self.stride = 1
         self.frame_start_step = 0
         self._done = 0  # steps completed since the last check
-        # a frame replayed as a graph (pdsim/frame_graph.py) checks and polls ``stop`` at its end only
+        # a frame replayed as a graph (pdsim/capture.py) checks and polls ``stop`` at its end only
         self.frame_checks_only = False
         # the largest collider surface speed of each step of the frame, on the device (``begin_frame`` writes it;
         # the last entry is a scratch slot for steps outside a frame program)
@@ -230,7 +230,7 @@ class Watchdog:
         # kinematics and force array of this step (a fracture may rebuild both at the end of the step)
         self._pending = (dt, kin, getattr(self.solver, "force", None))
 
-    # -- frames (pdsim/frame_graph.py) ---------------------------------------------------------------------------
+    # -- frames (pdsim/capture.py) ---------------------------------------------------------------------------
     def begin_frame(self, dt: float, steps: int) -> None:
         """Writes the collider surface speed of each of the next ``steps`` steps of ``dt`` [s] to the device (one
         copy), so that the steps read it from a table instead of a launch argument."""
@@ -488,7 +488,6 @@ class Watchdog:
         self._time = float(state["time"])
         self._pending = None
         self._step_dt = None
-
 
 
 __all__ = ["ENERGY_FACTOR", "STRAIN_LIMITS", "TOTAL_TOLERANCE", "Watchdog"]

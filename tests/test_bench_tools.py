@@ -105,9 +105,8 @@ Neighbor list builds = 1
 
 
 def test_feature_cost_stripped_kernels_match_the_solver_kernels():
-    import warp as wp
-
     import feature_cost
+    import warp as wp
 
     wp.init()
     r = feature_cost.stripped_check(6, "cpu", launches=1, rounds=1)

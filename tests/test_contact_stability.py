@@ -22,9 +22,9 @@ import contact_stability as cs  # tools/ (on the path through conftest.py)
 import numpy as np
 import pytest
 import warp as wp
+from pdsim.kernels import contact as kc
 
 from pdsim.contact import ParticleContact, bond_stiffness_row_sum
-from pdsim.kernels import contact as kc
 
 ENERGY_TOLERANCE = 0.02
 

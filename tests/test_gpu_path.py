@@ -1,6 +1,6 @@
 """The GPU path (docs/architecture.md, GPU path): a frame's steps read nothing from the device, take their time from
 the kinematics' device clock and their projectile poses from a table written before the frame, so that a frame can be
-captured once and replayed (pdsim/frame_graph.py); fragments are labelled on the device (pdsim/graph.py).
+captured once and replayed (pdsim/capture.py); fragments are labelled on the device (pdsim/fragment_labels.py).
 
 Warp records and replays graphs on the CPU too, so the capture path runs here: a replayed frame must give the same
 state, bit for bit, as the frame launched step by step. The CPU/CUDA agreement tests and the CUDA capture test run
@@ -12,9 +12,15 @@ import pytest
 import warp as wp
 
 import pdsim
+from pdsim.capture import FrameGraphs
 from pdsim.colliders import SphereProjectile
-from pdsim.frame_graph import FrameGraphs
-from pdsim.graph import DeviceLabeller, FragmentTracker, connected_components, fragment_labels, labels_from_roots
+from pdsim.fragment_labels import (
+    DeviceLabeller,
+    FragmentTracker,
+    connected_components,
+    fragment_labels,
+    labels_from_roots,
+)
 from pdsim.lattice import Lattice, LatticeBody, LatticeFracture, LatticeKind
 from pdsim.run import advance_frame, method_contact
 

@@ -1,5 +1,5 @@
 """The lattice on the method-neutral core (pdsim/solver.py): features it refuses, output views, precision independent
-of world position, and fragments from the one labeller (pdsim/graph.py). CPU backend. Everything here drives
+of world position, and fragments from the one labeller (pdsim/fragment_labels.py). CPU backend. Everything here drives
 SolverLattice directly, except the two scene tests at the end (they go through Scene.build_solvers)."""
 
 from __future__ import annotations
@@ -180,7 +180,7 @@ def test_displacements_do_not_depend_on_world_position():
 # ---------------------------------------------------------------------------------------------------- fragments
 def _reference_fragments(body, alive):
     """Fragments by min-label propagation over intact links between non-frame points (numpy, independent of
-    pdsim.graph), renumbered 0, 1, ... by smallest particle index; -1 on the frame."""
+    pdsim.fragment_labels), renumbered 0, 1, ... by smallest particle index; -1 on the frame."""
     n = body.particle_count
     solid = body.kind != LatticeKind.FRAME
     owner = np.repeat(np.arange(n), np.diff(body.row_offsets))
@@ -202,7 +202,7 @@ def _reference_fragments(body, alive):
 def test_fragments_come_from_the_one_labeller_and_are_cached(monkeypatch):
     """Fragment ids equal those of min-label propagation over the intact links (the former device labelling):
     0, 1, ... by smallest particle index, -1 on the frame; every intact link between body points joins one fragment.
-    They are recomputed (pdsim.graph.fragment_labels) only when links broke since the last call."""
+    They are recomputed (pdsim.fragment_labels.fragment_labels) only when links broke since the last call."""
     import pdsim.lattice.solver as lattice_solver
 
     calls = []

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import pdsim
-from pdsim.graph import FragmentTracker, fragment_labels
+from pdsim.fragment_labels import FragmentTracker, fragment_labels
 from pdsim.fragment_surfaces import FragmentSurfaces
 
 MATERIAL = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.25)

@@ -18,12 +18,12 @@ import signal
 
 import numpy as np
 import pytest
+from test_watchdog_resume import _StopAfter  # a deterministic SIGTERM at the n-th poll
 
 import pdsim
 from pdsim.checkpoint import RunInterrupted, checkpoint_path
 from pdsim.output.usd import UsdCache
 from pdsim.output.usd_files import usd_problems
-from test_watchdog_resume import _StopAfter  # a deterministic SIGTERM at the n-th poll
 
 
 class _StopAt:

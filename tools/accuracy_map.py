@@ -1,5 +1,5 @@
-"""Run time against error: sweeps the accuracy knobs of every validation problem (pdsim/validation.py) on Dask and
-writes docs/accuracy_map.json, the "Run time against error" section of docs/accuracy.md (tables, convergence rates,
+"""Run time against error: sweeps the accuracy knobs of every validation problem (pdsim/reference_problems.py) on Dask
+and writes docs/accuracy_map.json, the "Run time against error" section of docs/accuracy.md (tables, convergence rates,
 the cheapest knobs per tolerance, the recommended defaults) and the Pareto plots docs/accuracy_*.png.
 
     python tools/accuracy_map.py                          # the committed map (a LocalCluster, one worker per core)
@@ -33,7 +33,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 
 import pdsim  # noqa: E402
-from pdsim import validation  # noqa: E402
+import pdsim.reference_problems as problems  # noqa: E402
 from pdsim.fem import FemBody, SolverFem  # noqa: E402
 from pdsim.fem.mesh import box_tet_mesh  # noqa: E402
 from pdsim.sweep import run_sweeps  # noqa: E402
@@ -128,10 +128,10 @@ def lammps_wave_speed(n: int = 5, *, horizon_factor: float = 3.015, dt_factor: f
     argv, env, describe = _lammps_command()
     width, length, pulse, x0, amp = 0.1, 3.0, 0.48, 0.8, 1.0e-4
     h = width / n
-    mat = pdsim.Material(density=validation.RHO, youngs_modulus=validation.E_SOFT, poisson_ratio=0.0)
+    mat = pdsim.Material(density=problems.RHO, youngs_modulus=problems.E_SOFT, poisson_ratio=0.0)
     c = mat.bar_wave_speed
     knobs = {"n": n, "horizon_factor": horizon_factor, "dt_factor": dt_factor, "spacing": h}
-    with validation._Meter() as meter:
+    with problems._Meter() as meter:
         probe = pdsim.PeridynamicBody(
             pdsim.box((length, width, width)), mat, h, horizon_factor=horizon_factor, surface_correction="none"
         )
@@ -192,7 +192,7 @@ write_dump all custom end.txt id x modify sort id format float %.15g
             return slices[i] + 0.5 * h * (a - cc) / (a - 2 * b + cc)
 
         speed = (peak(xs[1]) - peak(xs[0])) / (steps * dt)
-    rec = validation._record(
+    rec = problems._record(
         "pd_wave_speed", "lammps", knobs, meter, speed, c, abs(speed / c - 1.0), len(rest), steps=steps
     )
     rec["seconds"] = seconds  # the LAMMPS process alone (pdsim's probe for dt is not the peer's time)
@@ -220,20 +220,21 @@ def _scale_kernel():
 
 
 def newton_cantilever(n: int = 2) -> dict:
-    """validation.cantilever's beam, mesh, clamp and tip load run by Newton's SolverSemiImplicit (stable neo-Hookean
-    tetrahedra) with nu = 0.05 instead of 0: its volume term's alpha = 1 + mu / lambda needs lambda > 0, and a
+    """reference_problems.cantilever's beam, mesh, clamp and tip load run by Newton's SolverSemiImplicit (stable
+    neo-Hookean tetrahedra) with nu = 0.05 instead of 0: its volume term's alpha = 1 + mu / lambda needs lambda > 0, and
+    a
     small lambda puts alpha so far from J = 1 that float32 loses the strain (the reference uses the same E and this
     G), damped to rest at 2 omega_1 for 1.5 periods of the first bending mode
     (the tip load and the damping applied after each step as v <- (v + dt f / m) / (1 + c dt): symplectic Euler
     with an external force), at 0.7 x pdsim's explicit step for the mesh."""
     import newton
 
-    t, L, F = validation.CANTILEVER_T, validation.CANTILEVER_L, validation.CANTILEVER_F
-    mat = pdsim.Material(density=validation.RHO, youngs_modulus=validation.E_SOFT, poisson_ratio=0.0)
-    peer = pdsim.Material(density=validation.RHO, youngs_modulus=validation.E_SOFT, poisson_ratio=NEWTON_NU)
-    omega1 = 1.875**2 * math.sqrt(validation.E_SOFT * t**2 / 12.0 / validation.RHO) / L**2
+    t, L, F = problems.CANTILEVER_T, problems.CANTILEVER_L, problems.CANTILEVER_F
+    mat = pdsim.Material(density=problems.RHO, youngs_modulus=problems.E_SOFT, poisson_ratio=0.0)
+    peer = pdsim.Material(density=problems.RHO, youngs_modulus=problems.E_SOFT, poisson_ratio=NEWTON_NU)
+    omega1 = 1.875**2 * math.sqrt(problems.E_SOFT * t**2 / 12.0 / problems.RHO) / L**2
     knobs = {"n": n, "spacing": t / n, "poisson_ratio": NEWTON_NU}
-    with validation._Meter() as meter:
+    with problems._Meter() as meter:
         mesh = box_tet_mesh((L, t, t), (8 * n, n, n), center=(0.5 * L, 0.0, 0.0))
         dt = NEWTON_DT_FACTOR * SolverFem([FemBody(mesh, mat)], device="cpu").explicit_time_step()
         builder = newton.ModelBuilder()
@@ -266,7 +267,7 @@ def newton_cantilever(n: int = 2) -> dict:
         f_ext = wp.array(load, dtype=wp.vec3, device="cpu")
         scale = 1.0 / (1.0 + 2.0 * omega1 * dt)
         load_and_damp = _scale_kernel()
-        steps = math.ceil(validation.RELAX_PERIODS * 2.0 * math.pi / omega1 / dt)
+        steps = math.ceil(problems.RELAX_PERIODS * 2.0 * math.pi / omega1 / dt)
         for _ in range(steps):
             s0.clear_forces()
             solver.step(s0, s1, control, None, dt)
@@ -279,8 +280,8 @@ def newton_cantilever(n: int = 2) -> dict:
             )
         u = s0.particle_q.numpy().astype(np.float64) - mesh.vertices
         deflection = float(u[tip, 2].mean())
-    ref = validation._timoshenko(L, peer.shear_modulus)
-    rec = validation._record(
+    ref = problems._timoshenko(L, peer.shear_modulus)
+    rec = problems._record(
         "cantilever", "newton", knobs, meter, deflection, ref, abs(deflection / ref - 1.0), mesh.vertex_count
     )
     rec.update(steps=steps, peer_version=getattr(newton, "__version__", "?"))
@@ -302,7 +303,7 @@ def run_map(scheduler=None, *, quick=False, peers=True, newton=False, workers=No
     jobs, labels = [], []
     for problem, label, knobs, levels in PLAN:
         run = levels[:2] if quick else levels
-        refinement = validation.PROBLEMS[problem].refinement
+        refinement = problems.PROBLEMS[problem].refinement
         jobs.append((problem, [{refinement: lv, **knobs} for lv in reversed(run)]))  # costly first
         labels.append((problem, label))
     status = {}
@@ -400,8 +401,8 @@ LEVEL_NAMES = {
 PROSE_TOP = """
 ## Run time against error (generated by `python tools/accuracy_map.py`)
 
-Every problem of `pdsim/validation.py` (module docstring and each function's docstring give the set-up) swept over
-its refinement and knobs, one Dask task per point (`pdsim.sweep.run_sweeps`; a `LocalCluster`, one single-threaded
+Every problem of `pdsim/reference_problems.py` (module docstring and each function's docstring give the set-up) swept
+over its refinement and knobs, one Dask task per point (`pdsim.sweep.run_sweeps`; a `LocalCluster`, one single-threaded
 worker process per core). `seconds` is one point's wall time on one worker (model build and run; Warp's start-up
 and kernel compilation excluded, the kernel cache being warm), `MiB` the worker's peak resident memory during the
 point over its resident memory before it (Linux VmHWM, reset per point; the workers run with
@@ -480,7 +481,7 @@ def write_doc(records, status, meta, out_dir):
         lines.append("|---|---|---|---|---|---|---|---|")
         for key in keys:
             for r in groups[key]:
-                level = r["knobs"].get(validation.PROBLEMS[problem].refinement)
+                level = r["knobs"].get(problems.PROBLEMS[problem].refinement)
                 err = "failed" if "failed" in r else _fmt(r["error"])
                 lines.append(
                     f"| {key[1]} | {level} | {_fmt(r['knobs']['spacing'])} | {err} | {_fmt(r.get('seconds'))} | "
@@ -519,7 +520,7 @@ def write_doc(records, status, meta, out_dir):
         cells = []
         for tol in (0.10, 0.05, 0.02):
             r = cheapest(recs, tol)
-            ref = validation.PROBLEMS[key[0]].refinement
+            ref = problems.PROBLEMS[key[0]].refinement
             cells.append("-" if r is None else f"{ref} = {r['knobs'][ref]}, {_fmt(r['seconds'], 2)} s")
         lines.append(f"| {key[0]} | {key[1]} | " + " | ".join(cells) + " |")
     lines += ["", "![PD problems](accuracy_pd.png)", "", "![Cantilever, both methods](accuracy_cantilever.png)", ""]
@@ -626,7 +627,7 @@ run_wedge("scenes/four_walls.py", {"material.critical_stretch": [0.008, 0.01]}, 
 
 A wedge's workers must see the scene script and the output folder at the same paths. A script that uses the default
 `LocalCluster` (worker processes) must call these under `if __name__ == "__main__":`, as any script that starts
-processes. `tests/test_validation_problems.py` checks the two cheapest levels of each problem (the error falls, at
+processes. `tests/test_reference_problems.py` checks the two cheapest levels of each problem (the error falls, at
 the rates above), `tests/test_sweep.py` a tiny sweep and a tiny wedge on an in-process cluster, from Python and
 through `pdsim wedge ... --scheduler ADDRESS`.
 """
@@ -711,7 +712,7 @@ def main(argv=None) -> int:
         )
         meta = {
             "date": str(datetime.date.today()),
-            "machine": validation.machine(),
+            "machine": problems.machine(),
             "workers": args.workers or (os.cpu_count() if args.scheduler is None else "farm"),
             "wall_seconds": status.pop("_wall_seconds"),
             "quick": args.quick,

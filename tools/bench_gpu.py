@@ -4,7 +4,7 @@
 kg/m^3, horizon 3 h, families cut at the horizon without partial volumes), given uniform random velocities of +-0.1 m/s
 (numpy default_rng(0)), stepped by the run's frame loop (``pdsim.run.advance_frame``) in frames of ``--substeps``
 steps of 0.7 x the stable step: first with every step launched from the host, then with each frame replayed as a
-captured graph (pdsim/frame_graph.py; the first frame of each mode is a warm-up and is not timed). Reported per mode:
+captured graph (pdsim/capture.py; the first frame of each mode is a warm-up and is not timed). Reported per mode:
 
     bond_visits_per_s = bond_count * steps / seconds      (seconds between device synchronisations)
 
@@ -34,7 +34,7 @@ import numpy as np
 import warp as wp
 
 import pdsim
-from pdsim.frame_graph import FrameGraphs
+from pdsim.capture import FrameGraphs
 from pdsim.run import advance_frame
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes"))

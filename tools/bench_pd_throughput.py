@@ -69,11 +69,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import warp as wp
-
-import pdsim
 from pdsim.kernels import integration
 from pdsim.kernels.peridynamics import bonds as pd_bonds
 from pdsim.kernels.peridynamics import step as pd_step
+
+import pdsim
 
 SPACING = 1.0e-3
 """Lattice spacing h [m]."""

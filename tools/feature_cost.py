@@ -53,11 +53,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import warp as wp
-
 import bench_pd_throughput as bench
-import pdsim
+import warp as wp
 from pdsim.kernels.peridynamics import step as pd_step
+
+import pdsim
 from pdsim.watchdog import Watchdog
 
 SPACING = 1.0e-3

@@ -270,6 +270,7 @@ def lattice_case(relaxation: float, k: float, twist: bool = False):
     """A 12 x 5 x 5 simple-cubic block (spacing 1 cm) with fracture and the mixed-coordinate rule, clamped at one end
     and pulled at 0.1 spacing a step at the other (``twist``: the other end's points turned 360 degrees about the
     bar's axis by leader paths over 72 steps)."""
+
     def build():
         scene = pdsim.Scene(fps=24, frames=FRAMES, name="lattice")
         h = SPACING

@@ -322,7 +322,6 @@ def assembled_kernels(dtype):
     }
 
 
-
 # -- launches ----------------------------------------------------------------------------------------------------------
 # One function per kernel, the kernel's arguments in its order; ``dtype`` is the solver's scalar type (wp.float32 or
 # wp.float64). The chunked kernels run one thread per chunk of ``chunk`` vertices (``chunks`` threads: the length of

@@ -438,20 +438,20 @@ def placeholders(device):
 def plastic_placeholders(f1, i1) -> dict:
     """The dilatation pass's plasticity arguments for a variant without plasticity: length-1 placeholders ``f1``
     (float) and ``i1`` (int32), and no yielding particle."""
-    return dict(
-        plastic_particle_count=0,
-        bond_wv=f1,
-        bond_wv_dev=f1,
-        horizon=f1,
-        weighted_volume=f1,
-        yield_stress=f1,
-        hardening=f1,
-        psi_scale=f1,
-        bond_plastic=f1,
-        eqps=f1,
-        bond_reverse=i1,
-        bond_plastic_reverse=f1,
-    )
+    return {
+        "plastic_particle_count": 0,
+        "bond_wv": f1,
+        "bond_wv_dev": f1,
+        "horizon": f1,
+        "weighted_volume": f1,
+        "yield_stress": f1,
+        "hardening": f1,
+        "psi_scale": f1,
+        "bond_plastic": f1,
+        "eqps": f1,
+        "bond_reverse": i1,
+        "bond_plastic_reverse": f1,
+    }
 
 
 def dilatation(

@@ -9,12 +9,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..bodies import PointBody
+from ..checks import check_range
 from ..errors import ParameterError
 from ..geometry import SolidShape
 from ..loads import surface_forces_from_triangles
 from ..materials import Material
 from ..regions import region_mask
-from ..validate import check_range
 from .fracture import closed_surface_defects
 from .mesh import DEFAULT_MIN_QUALITY, TetMesh, signed_volumes, tetrahedralize
 

@@ -35,8 +35,8 @@ After the splits, :func:`make_manifold` (:func:`separate_pieces`, :func:`separat
 whose incident elements are no longer connected through faces that contain it and every edge held by several fans of
 elements. This separates pieces that only touch at an edge or a point, and keeps every piece's boundary a closed
 surface in which each edge has exactly two faces. It is a slot-graph construction (nodes: element corners, edges:
-corners of one vertex in two elements sharing a face) labelled by pdsim.graph.connected_components (the one labeller
-of pdsim), local to the split vertices, run only on steps where some element exceeded its strength.
+corners of one vertex in two elements sharing a face) labelled by pdsim.fragment_labels.connected_components (the one
+labeller of pdsim), local to the split vertices, run only on steps where some element exceeded its strength.
 
 Fracture energy (``FemBody(fracture_energy=G_c)`` [J/m^2], 0 by default):
 
@@ -66,7 +66,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..graph import connected_components
+from ..fragment_labels import connected_components
 from .mesh import TET_EDGES, TET_FACES, boundary_faces, interior_face_pairs
 
 MIN_SIDE = 2  # elements each side of a crack plane must keep around the split vertex
@@ -634,7 +634,7 @@ def make_manifold(tets: np.ndarray, vertex_count: int, dirty_vertices=None, *, m
 
 def element_pieces(tets: np.ndarray):
     """Face-connected pieces: (piece count, piece label per element int64 [element_count]); pieces are numbered 0,
-    1, ... in the order of their smallest element (pdsim.graph.connected_components)."""
+    1, ... in the order of their smallest element (pdsim.fragment_labels.connected_components)."""
     m = len(tets)
     pairs = interior_face_pairs(tets) // 4
     labels = connected_components(m, pairs[:, 0], pairs[:, 1])

@@ -55,8 +55,6 @@ class SplitBody(PointLoads):
         return face_point_forces(self._rest, self._faces, region, traction, pressure)
 
 
-
-
 class FemFractureEvents:
     """The fracture events of :class:`pdsim.fem.solver.SolverFem` (a mixin: they read and replace the solver's
     topology arrays, ``_tets_h``, ``_rest_h``, ``_crack_vertex_h``, ``_crack_plane_h``, ``_debt_h`` and the

@@ -33,9 +33,9 @@ from dataclasses import dataclass, field
 import meshio
 import numpy as np
 
+from ..checks import check_range, unit_hint
 from ..errors import GeometryError, ParameterError
 from ..geometry import SolidShape
-from ..validate import check_range, unit_hint
 
 TET_MESH_SUFFIXES = (".msh", ".vtk", ".vtu", ".mesh", ".inp", ".xdmf", ".med", ".usd", ".usda", ".usdc")
 

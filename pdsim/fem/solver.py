@@ -65,7 +65,6 @@ vertices (the copies fracture adds included; spacing the mean edge length; every
 rebuilt when fracture changed the body's vertices (docs/fem_fracture.md).
 """
 
-
 from __future__ import annotations
 
 import warnings
@@ -74,12 +73,12 @@ from typing import ClassVar
 import numpy as np
 import warp as wp
 
+from ..checks import check_range
 from ..errors import FeatureNotAvailableError, ParameterError
 from ..kernels.fem import elements as ke
 from ..kernels.fem import solver as ks
 from ..kinematics import PointKinematics, scene_origin
 from ..solver import PointSolver, SolverContext, register_solver
-from ..validate import check_range
 from .body import PRECISIONS, STIFFNESS_MODES, FemBody, lumped_masses
 from .cg import CgReport, FemCg
 from .checkpoint import FemCheckpoint
@@ -560,7 +559,6 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
     def gravity_potential(self) -> float:
         """-sum m g . x [J] (world positions)."""
         return float(-np.dot(self.lumped_mass_host, self.positions() @ self.gravity_host))
-
 
 
 __all__ = ["CgReport", "SolverFem", "StaticSolveReport"]

@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from ..checks import check_range
 from ..errors import ParameterError
 from ..kernels.fem import solver as ks
-from ..validate import check_range
 from .operators import FemOperators
 
 

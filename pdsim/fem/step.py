@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import math
 
+from ..checks import check_range
 from ..errors import ParameterError
 from ..kernels.fem import elements as ke
 from ..kernels.fem import solver as ks
-from ..validate import check_range
 from .cg import CgReport
 from .static import StaticSolveReport, solve_static
 

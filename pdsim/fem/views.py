@@ -108,7 +108,6 @@ class SmoothSurface:
         )
 
 
-
 class FemViews:
     """The views of :class:`pdsim.fem.solver.SolverFem` (a mixin: they read the solver's topology, kinematics and
     model, and cache per topology the surfaces ``_surfaces``, the pieces ``_fragments``, the contact mesh

@@ -24,7 +24,7 @@ import manifold3d
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..graph import connected_components
+from ..fragment_labels import connected_components
 from .cleanup import clean_complex, shells_closed
 
 __all__ = ["clip_regions", "input_manifold", "plane_groups", "refine_surface", "shared_complex"]

@@ -20,11 +20,11 @@ from enum import IntEnum
 
 import numpy as np
 
+from ..checks import check_range
 from ..errors import GeometryError, ParameterError
 from ..geometry import SolidShape
 from ..regions import BoxRegion, SphereRegion, region_mask
 from ..sampling import points_inside
-from ..validate import check_range
 from .geometry import Lattice, LatticeNeighbourhood, LatticeType
 from .rules import LatticeFracture, LatticeRule, LatticeRuleCentroid
 

@@ -10,8 +10,8 @@ from enum import Enum
 
 import numpy as np
 
+from ..checks import check_range
 from ..errors import ParameterError
-from ..validate import check_range
 
 MAX_OFFSETS = 255  # per-link offset ids are uint8
 _TOL = 1.0e-6  # relative tolerance for lattice-vector comparisons
@@ -248,4 +248,3 @@ def _paired(lattice: Lattice, c: np.ndarray) -> np.ndarray:
     out[0::2] = rep
     out[1::2] = -rep
     return out
-

@@ -9,9 +9,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..checks import check_range
 from ..errors import ParameterError
 from ..kernels.lattice import rules as kl
-from ..validate import check_range
 
 if TYPE_CHECKING:  # annotations only: body.py imports this module
     from .body import LatticeBody
@@ -149,4 +149,3 @@ class LatticeFracture:
         """(d1, d2) [m]."""
         d = np.atleast_1d(np.asarray(self.distances, dtype=np.float64))
         return float(d[0]), float(d[-1])
-

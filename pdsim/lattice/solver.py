@@ -17,7 +17,7 @@ import numpy as np
 import warp as wp
 
 from ..errors import InstabilityError, ParameterError
-from ..graph import fragment_labels
+from ..fragment_labels import fragment_labels
 from ..kernels.lattice import rules as kl
 from ..output.views import PointsView
 from ..solver import Solver, SolverContext, array_state, assign_state, register_solver
@@ -210,7 +210,7 @@ class _LatticeRuntime:
         self.step_count = t
         self._record_tracks()
 
-    # -- frames replayed as graphs (pdsim/frame_graph.py) ----------------------------------------------------------
+    # -- frames replayed as graphs (pdsim/capture.py) ----------------------------------------------------------
     def capture_blocker(self) -> str | None:
         """Why this body's steps cannot be replayed as a graph, or None: tracked particles are recorded into a slot
         that is a launch argument and flushed to the host every few thousand steps."""
@@ -300,8 +300,8 @@ class _LatticeRuntime:
 
     def fragments(self) -> np.ndarray:
         """Fragment id per particle, int64 [n]: connected components of the leaders and followers over intact links
-        (pdsim.graph, the one labeller), numbered 0, 1, ... in the order of their smallest particle index; -1 for
-        frame points. Relabelled only when links broke since the last call (one 4-byte read otherwise)."""
+        (pdsim.fragment_labels, the one labeller), numbered 0, 1, ... in the order of their smallest particle index; -1
+        for frame points. Relabelled only when links broke since the last call (one 4-byte read otherwise)."""
         broken = int(self.broken_total.numpy()[0]) if self.fracture else 0
         if self._fragments is not None and self._fragments[0] == broken:
             return self._fragments[1].copy()  # nothing broke since the last labelling
@@ -428,7 +428,7 @@ class SolverLattice(Solver):
         self.run_steps(self.steps_per_frame)
         self.time += float(dt) * int(steps)
 
-    # -- frames replayed as graphs (pdsim/frame_graph.py) ----------------------------------------------------------
+    # -- frames replayed as graphs (pdsim/capture.py) ----------------------------------------------------------
     def graph_capture_blocker(self, dt: float) -> str | None:
         """Why a frame cannot be replayed as a graph (tracked particles), or None."""
         for r in self._runtimes:

@@ -7,13 +7,13 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..bodies import PointBody
+from ..checks import check_range
 from ..errors import ParameterError
 from ..geometry import SolidShape
 from ..loads import surface_forces_from_triangles
 from ..materials import Material
 from ..regions import BoxRegion, region_mask
 from ..sampling import fill_solid, jitter_points, morton_order
-from ..validate import check_range
 
 SURFACE_CORRECTIONS = ("directional", "family", "none")
 SAMPLINGS = ("lattice", "jittered")
@@ -159,6 +159,7 @@ class PeridynamicBody(PointBody):
         traction x area (minus pressure x area x outward normal) and gives it to the particle nearest to its
         centroid, so a uniform traction on a flat face reaches each face particle in proportion to the area it is
         nearest to (within about 10 %). Returns (particle indices int64 [k], forces float64 [k, 3])."""
+
         def every(p):  # all triangles: their pieces are selected below
             return np.ones(len(p), dtype=bool)
 

@@ -95,9 +95,10 @@ class ParticleRanges:
     thread count. On a CUDA device there is one range: one launch over all particles.
 
     Warp (1.19) passes each launch's thread index as an argument of the generated CPU function and builds each
-    launch's argument block afresh, so concurrent CPU launches are safe; what is not safe is loading a module from several threads at once, so the kernels' modules are loaded
-    from the calling thread before the first threaded launch (``_load``). While the device records a graph
-    (``wp.ScopedCapture``, pdsim/frame_graph.py) the ranges are launched one after another from the calling thread,
+    launch's argument block afresh, so concurrent CPU launches are safe; what is not safe is loading a module from
+    several threads at once, so the kernels' modules are loaded from the calling thread before the first threaded launch
+    (``_load``). While the device records a graph
+    (``wp.ScopedCapture``, pdsim/capture.py) the ranges are launched one after another from the calling thread,
     which is the only thread a capture records; a CPU replay then runs them on one thread."""
 
     def __init__(self, offsets_host: np.ndarray, threads: int, device):

@@ -38,8 +38,8 @@ import warp as wp
 
 from ..contact import ParticleContact
 from ..errors import ParameterError
+from ..fragment_labels import FragmentTracker
 from ..fragment_surfaces import FragmentSurfaces
-from ..graph import FragmentTracker
 from ..kernels.peridynamics import bonds as kb
 from ..kernels.peridynamics import damping as pd_damping
 from ..kernels.peridynamics import step as pd_step
@@ -243,20 +243,20 @@ class SolverPeridynamics(PointSolver):
         alive, plastic, reverse = self._feature_arrays()
         frac = m.fracture
         plastic_args = (
-            dict(
-                plastic_particle_count=m.plastic_particle_count,
-                bond_wv=m.bond_wv,
-                bond_wv_dev=m.bond_wv_dev,
-                horizon=m.horizon,
-                weighted_volume=m.weighted_volume,
-                yield_stress=m.yield_stress,
-                hardening=m.hardening,
-                psi_scale=m.psi_scale,
-                bond_plastic=plastic,
-                eqps=s.eqps,
-                bond_reverse=reverse,
-                bond_plastic_reverse=s.bond_plastic_reverse,
-            )
+            {
+                "plastic_particle_count": m.plastic_particle_count,
+                "bond_wv": m.bond_wv,
+                "bond_wv_dev": m.bond_wv_dev,
+                "horizon": m.horizon,
+                "weighted_volume": m.weighted_volume,
+                "yield_stress": m.yield_stress,
+                "hardening": m.hardening,
+                "psi_scale": m.psi_scale,
+                "bond_plastic": plastic,
+                "eqps": s.eqps,
+                "bond_reverse": reverse,
+                "bond_plastic_reverse": s.bond_plastic_reverse,
+            }
             if m.plastic
             else pd_step.plastic_placeholders(f1, reverse)
         )

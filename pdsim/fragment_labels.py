@@ -11,8 +11,9 @@ of its smallest particle; that number never changes over an animation (the piece
 particle keeps its label when the fragment splits), which keeps per-fragment colours stable in a render.
 
 Two labellers give the same labels: scipy's on the host (numpy input), and :class:`DeviceLabeller` on the Warp device
-(kernels/graph.py: label propagation with pointer jumping, its loop captured with ``wp.capture_while`` so that it runs
-on the device without a launch and a read per iteration); :class:`FragmentTracker` uses the device one when it is
+(kernels/fragment_labels.py: label propagation with pointer jumping, its loop captured with ``wp.capture_while`` so that
+it runs on the device without a launch and a read per iteration); :class:`FragmentTracker` uses the device one when it
+is
 given Warp arrays, and then reads only the live-bond count and, when bonds broke, one label per particle.
 """
 
@@ -25,7 +26,7 @@ import warp as wp
 from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components as scipy_components
 
-from .kernels import graph as kg
+from .kernels import fragment_labels as kg
 
 __all__ = ["DeviceLabeller", "FragmentTracker", "connected_components", "fragment_labels"]
 
@@ -139,7 +140,7 @@ def labels_from_roots(root, body_offsets, *, compact: bool = True) -> np.ndarray
 
 
 class DeviceLabeller:
-    """Connected components of the live edges of a CSR graph on the Warp device (kernels/graph.py).
+    """Connected components of the live edges of a CSR graph on the Warp device (kernels/fragment_labels.py).
 
     The labelling (an initialisation, then hook and jump passes until a pass changes nothing) is captured once as a
     graph whose loop is ``wp.capture_while`` on a device flag: on CUDA a conditional node, so one graph launch runs

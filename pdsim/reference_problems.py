@@ -26,7 +26,7 @@ The problems (``PROBLEMS`` maps each name to its function, refinement knob and l
 - ``lattice_laplace``: the lattice's centroid rule relaxed to rest against its continuum limit, Laplace's equation
   (each displacement component harmonic), on a square with a harmonic boundary displacement.
 
-Run one: ``pdsim.validation.run_problem("cantilever", 4, method="fem")``; sweep many with :mod:`pdsim.sweep`.
+Run one: ``pdsim.reference_problems.run_problem("cantilever", 4, method="fem")``; sweep many with :mod:`pdsim.sweep`.
 """
 
 from __future__ import annotations

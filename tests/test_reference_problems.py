@@ -1,12 +1,13 @@
-"""The validation problems of pdsim/validation.py at the two cheapest points of their refinement: the error against the
-reference answer must fall (docs/accuracy.md, "Run time against error", states the measured rates), or, for the
+"""The validation problems of pdsim/reference_problems.py at the two cheapest points of their refinement: the error
+against the reference answer must fall (docs/accuracy.md, "Run time against error", states the measured rates), or, for
+the
 patch test and the crack-speed bound, hold at both. CPU backend; each test runs in a few seconds."""
 
 import math
 
 import pytest
 
-from pdsim import validation as v
+from pdsim import reference_problems as v
 
 
 def _pair(function, levels, **knobs):
