@@ -5,16 +5,12 @@ position-based particle lattice."""
 from __future__ import annotations
 
 from dataclasses import KW_ONLY, dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..checks import check_range
 from ..errors import ParameterError
 from ..kernels.lattice import rules as kl
-
-if TYPE_CHECKING:  # annotations only: body.py imports this module
-    from .body import LatticeBody
 
 
 # ------------------------------------------------------------------------------------------------------------- rules
@@ -41,8 +37,8 @@ class LatticeRule:
         """(weight function, update function) as Warp ``@wp.func`` objects."""
         return kl.lattice_weight_uniform, kl.lattice_update_centroid
 
-    def parameters(self, body: LatticeBody) -> tuple:
-        """(scalars[4], axis[3], origin[3]) of the parameter block for ``body``."""
+    def parameters(self, body) -> tuple:
+        """(scalars[4], axis[3], origin[3]) of the parameter block for ``body`` (a LatticeBody)."""
         return (self.relaxation, 0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 0.0)
 
 

@@ -5,16 +5,11 @@ reopened cache."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, Vt
 
 from .usd_values import PRIMVAR_KINDS
-
-if TYPE_CHECKING:  # annotations only: usd imports this module
-    from .usd import UsdCache
-    from .usd_stream import FrameStream
 
 
 @dataclass(eq=False)
@@ -22,7 +17,7 @@ class XformHandle:
     """A ``UsdGeom.Xform`` prim that groups other prims (``/World/colliders``, the fragment prims of a surface)."""
 
     path: str
-    _cache: UsdCache | None = field(default=None, repr=False)
+    _cache: object = field(default=None, repr=False)  # the UsdCache that made it
 
 
 @dataclass(eq=False)
@@ -38,7 +33,7 @@ class PointsHandle:
     path: str
     point_count: int
     primvar_kinds: dict[str, str]
-    _cache: UsdCache = field(repr=False)
+    _cache: object = field(repr=False)  # the UsdCache that made it
     _widths: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, np.float32))
 
 
@@ -61,7 +56,7 @@ class MeshHandle:
     vertex_primvar_kinds: dict[str, str] = field(default_factory=dict)
     normals: str | None = None
     subsets: tuple[str, ...] = ()
-    _cache: UsdCache | None = field(default=None, repr=False)
+    _cache: object = field(default=None, repr=False)  # the UsdCache that made it
     topology_set: str = ""  # name of the value-clip set that holds its topology
     _has_topology: bool = field(default=False, repr=False)
     _face_count: int = field(default=0, repr=False)
@@ -147,7 +142,7 @@ def define_material(stage: Usd.Stage, path: str, color: np.ndarray) -> None:
     material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
 
 
-def reopened_handles(cache: UsdCache, stream: FrameStream, frame: int) -> dict:
+def reopened_handles(cache, stream, frame: int) -> dict:
     """``{prim path: handle}`` for the Points, Mesh and Xform prims of the stage of a reopened ``cache``, with the
     vertex and face counts of their geometry at ``frame`` (read from the frame and topology layers of ``stream``). A
     mesh without topology clips gets its own, empty, manifest; a static mesh (``set_mesh``) none."""
