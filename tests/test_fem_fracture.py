@@ -13,10 +13,10 @@ from pdsim.fem.fracture import boundary_faces, closed_surface_defects, element_p
 from pdsim.fem.mesh import (
     box_tet_mesh,
     element_quality,
-    load_tet_mesh,
     signed_volumes,
     tet_mesh_from_arrays,
 )
+from pdsim.fem.mesh_files import load_tet_mesh
 
 MAT = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)
 STRENGTH = 2.0e4  # [Pa]: a strain of about 2 %

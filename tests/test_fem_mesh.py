@@ -9,12 +9,12 @@ from pdsim.fem import FemBody, FemPlasticity
 from pdsim.fem.fracture import closed_surface_defects
 from pdsim.fem.mesh import (
     box_tet_mesh,
-    load_tet_mesh,
     signed_volumes,
     tet_mesh_from_arrays,
     tetrahedralize,
     write_tet_mesh,
 )
+from pdsim.fem.mesh_files import load_tet_mesh
 
 MAT = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)
 
