@@ -211,6 +211,48 @@ def pd_wave_speed(
     return _record("pd_wave_speed", "pd", knobs, meter, speed, c, abs(speed / c - 1.0), body.particle_count)
 
 
+def bar_tension_modulus(mat, h, width, length, horizon_factor, surface_correction, dt_factor) -> tuple[float, int]:
+    """(E_eff [Pa], particle count) of a free-sided peridynamic bar (``width`` square, ``length`` along x, spacing
+    ``h`` [m]) in quasi-static tension: 3-layer grips held at the affine uniaxial-stress displacement of strain ZETA,
+    the rest relaxed under damping critical for the fundamental axial mode, at ``dt_factor`` x the stable step, until
+    the modulus changes by less than 1e-4 between checks. E_eff = (grip reaction / area) / (strain fitted over the
+    middle third)."""
+    nu = mat.poisson_ratio
+    omega = math.pi * mat.bar_wave_speed / length
+    body = pdsim.PeridynamicBody(
+        pdsim.box((length, width, width)),
+        mat,
+        h,
+        horizon_factor=horizon_factor,
+        surface_correction=surface_correction,
+        damping=omega,
+    )
+    X = body.rest_positions
+    grip = 0.5 * length - 3.0 * h
+    body.set_velocity(lambda p: np.abs(p[:, 0]) > grip, (0.0, 0.0, 0.0))  # held where they are placed
+    s = pdsim.SolverPeridynamics([body], device="cpu")
+    s.set_positions(X + ZETA * X * np.array([1.0, -nu, -nu]))
+    dt = dt_factor * s.stable_time_step()
+    right = X[:, 0] > grip
+    mid = np.abs(X[:, 0]) < length / 6.0
+    volumes = body.volumes
+
+    def modulus():
+        force = -(volumes[right] @ s.force_density()[right, 0])
+        strain = np.polyfit(X[mid, 0], s.positions()[mid, 0] - X[mid, 0], 1)[0]
+        return force / width**2 / strain
+
+    steps = int(8.0 * length / mat.bar_wave_speed / dt)
+    prev = cur = None
+    for _ in range(40):
+        s.simulate(dt, steps)
+        cur = modulus()
+        if prev is not None and abs(cur - prev) < 1.0e-4 * abs(cur):
+            break
+        prev = cur
+    return float(cur), body.particle_count
+
+
 def pd_bar_stiffness(
     n: int = 5,
     *,
@@ -244,41 +286,10 @@ def pd_bar_stiffness(
     }
     with _Meter() as meter:
         mat = pdsim.Material(density=RHO, youngs_modulus=E_SOFT, poisson_ratio=nu)
-        h = width / n
-        length = 4.0 * width
-        omega = math.pi * mat.bar_wave_speed / length
-        body = pdsim.PeridynamicBody(
-            pdsim.box((length, width, width)),
-            mat,
-            h,
-            horizon_factor=horizon_factor,
-            surface_correction=surface_correction,
-            damping=omega,
+        cur, count = bar_tension_modulus(
+            mat, width / n, width, 4.0 * width, horizon_factor, surface_correction, dt_factor
         )
-        X = body.rest_positions
-        grip = 0.5 * length - 3.0 * h
-        body.set_velocity(lambda p: np.abs(p[:, 0]) > grip, (0.0, 0.0, 0.0))  # held where they are placed
-        s = pdsim.SolverPeridynamics([body], device="cpu")
-        s.set_positions(X + ZETA * X * np.array([1.0, -nu, -nu]))
-        dt = dt_factor * s.stable_time_step()
-        right = X[:, 0] > grip
-        mid = np.abs(X[:, 0]) < length / 6.0
-        volumes = body.volumes
-
-        def modulus():
-            force = -(volumes[right] @ s.force_density()[right, 0])
-            strain = np.polyfit(X[mid, 0], s.positions()[mid, 0] - X[mid, 0], 1)[0]
-            return force / width**2 / strain
-
-        steps = int(8.0 * length / mat.bar_wave_speed / dt)
-        prev = cur = None
-        for _ in range(40):
-            s.simulate(dt, steps)
-            cur = modulus()
-            if prev is not None and abs(cur - prev) < 1.0e-4 * abs(cur):
-                break
-            prev = cur
-    return _record("pd_bar_stiffness", "pd", knobs, meter, cur, E_SOFT, abs(cur / E_SOFT - 1.0), body.particle_count)
+    return _record("pd_bar_stiffness", "pd", knobs, meter, cur, E_SOFT, abs(cur / E_SOFT - 1.0), count)
 
 
 def pd_energy_density(

@@ -24,6 +24,7 @@ import numpy as np
 import warp as wp
 
 import pdsim
+from pdsim.reference_problems import bar_tension_modulus
 
 CORRECTIONS = ("none", "family", "directional")
 CONCLUSIONS = """
@@ -95,39 +96,13 @@ def supplement_checks(m: float, correction: str, delta: float = 3.015 / 8.0):
 def bar_tension_modulus_ratio(n: int, correction: str, nu: float = 0.3, m: float = 3.015) -> float:
     """Quasi-static tension of a free-sided bar of n x n particles: both grips (3 layers) are held at the affine
     uniaxial-stress displacement of strain ZETA, the rest relaxes under damping to equilibrium. Returns
-    E_eff / E with E_eff = (reaction force / area) / (strain measured in the middle third)."""
+    E_eff / E with E_eff = (reaction force / area) / (strain measured in the middle third); the run is
+    pdsim.reference_problems.bar_tension_modulus with this tool's spacing 1 cm and bar length."""
     mat = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=nu)
     h = 0.01
     width = n * h
-    length = max(0.3, 4.0 * width)
-    omega = math.pi * mat.bar_wave_speed / length  # fundamental axial mode of the held bar
-    body = pdsim.PeridynamicBody(
-        pdsim.box((length, width, width)), mat, h, horizon_factor=m, surface_correction=correction, damping=omega
-    )
-    X = body.rest_positions
-    grip = 0.5 * length - 3.0 * h
-    body.set_velocity(lambda p: np.abs(p[:, 0]) > grip, (0.0, 0.0, 0.0))  # held where they are placed
-    s = pdsim.SolverPeridynamics([body], device="cpu")
-    s.set_positions(X + ZETA * X * np.array([1.0, -nu, -nu]))
-    dt = 0.7 * s.stable_time_step()
-    right = X[:, 0] > grip
-    mid = np.abs(X[:, 0]) < length / 6.0
-    volumes = body.volumes
-
-    def measure():
-        force = -(volumes[right] @ s.force_density()[right, 0])
-        strain = np.polyfit(X[mid, 0], s.positions()[mid, 0] - X[mid, 0], 1)[0]
-        return force / width**2 / strain
-
-    steps = int(8.0 * length / mat.bar_wave_speed / dt)
-    prev = None
-    for _ in range(40):
-        s.simulate(dt, steps)
-        cur = measure()
-        if prev is not None and abs(cur - prev) < 1.0e-4 * abs(cur):
-            break
-        prev = cur
-    return float(cur / mat.youngs_modulus)
+    modulus, _ = bar_tension_modulus(mat, h, width, max(0.3, 4.0 * width), m, correction, 0.7)
+    return float(modulus / mat.youngs_modulus)
 
 
 def pulse_speed_ratio(n: int, correction: str) -> float:
