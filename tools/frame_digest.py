@@ -22,6 +22,7 @@ import os
 import subprocess
 import sys
 import tempfile
+from pathlib import Path
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "tools"))
@@ -104,8 +105,7 @@ def main(argv=None) -> int:
         print(f"{name:20s} {'error' if line is None else 'ok'}", flush=True)
     text = json.dumps(result, indent=1, sort_keys=True)
     if args.out:
-        with open(args.out, "w") as fh:
-            fh.write(text)
+        Path(args.out).write_text(text)
     else:
         print(text)
     return 0
