@@ -232,9 +232,10 @@ def test_feature_gate_of_each_method():
     assert "gravity" in str(ei.value)
 
 
-def test_only_the_output_package_imports_pxr():
-    """Solvers expose views and one writer makes USD: no module of pdsim/ outside pdsim/output/, and no kernel,
-    imports pxr (the USD input reader of tetrahedral meshes lives in pdsim/output/usd.py too)."""
+def test_only_the_output_and_preview_packages_import_pxr():
+    """Solvers expose views and one writer makes USD: no module of pdsim/ outside pdsim/output/ (the writer, and the
+    USD input reader of tetrahedral meshes) and pdsim/preview/ (which reads caches back), and no kernel, imports pxr.
+    tests/test_layout.py checks that no solver reaches them through its imports."""
     import pathlib
     import re
 
@@ -244,6 +245,6 @@ def test_only_the_output_package_imports_pxr():
         str(p.relative_to(root))
         for folder in ("pdsim", "kernels")
         for p in (root / folder).rglob("*.py")
-        if pattern.search(p.read_text()) and "output" not in p.relative_to(root).parts
+        if pattern.search(p.read_text()) and not {"output", "preview"} & set(p.relative_to(root).parts)
     ]
     assert offenders == []

@@ -31,6 +31,7 @@ import warp as wp
 
 import pdsim
 import pdsim.fem.mesh
+import pdsim.memory
 import pdsim.preflight
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -631,7 +632,7 @@ def _(ws):
       "a scene that fits the free memory", pdsim.ParameterError, "spacing=0.01", "GB of free host memory",
       "spacing >=")  # fmt: skip
 def _(ws):
-    with _patched(pdsim.preflight, "free_host_memory", lambda: 8.0e9):
+    with _patched(pdsim.memory, "free_host_memory", lambda: 8.0e9):
         scene = pdsim.Scene(fps=24.0, frames=2)
         scene.add_peridynamic_body(pdsim.box((0.46, 0.46, 0.46)), _material(), 0.01, horizon_factor=8.0, name="block")
         _run(scene, ws)
@@ -642,7 +643,7 @@ def _(ws):
 def _(ws):
     scene = pdsim.Scene(fps=24.0, frames=48)
     scene.add_peridynamic_body(pdsim.box((0.2, 0.2, 0.2)), _material(), spacing=0.02, name="block")
-    with _patched(pdsim.preflight, "free_disk_space", lambda folder: 1.0e6):
+    with _patched(pdsim.memory, "free_disk_space", lambda folder: 1.0e6):
         _run(scene, ws)
 
 
