@@ -230,7 +230,7 @@ class Scene:
         ``/World/colliders/<name>`` (projectiles with their pose at each frame's time) and the ground plane as
         ``/World/ground``.
 
-        The watchdog (pdsim.kinematics.Watchdog, docs/stability.md) checks every ``check_interval`` steps and at each
+        The watchdog (pdsim.watchdog.Watchdog, docs/stability.md) checks every ``check_interval`` steps and at each
         frame end that the state is finite, no point is faster than the speed limit, the energy has not grown past
         what the run started with plus the work put in, and strains are bounded; it raises InstabilityError naming the
         frame, the body and the likely cause, and the cache keeps every finished frame.

@@ -61,7 +61,7 @@ class Solver(ABC):
     _force_time: float = 0.0
     time: float = 0.0
     step_count: int = 0
-    watchdog = None  # a pdsim.kinematics.Watchdog the scene attached, used by check_state
+    watchdog = None  # a pdsim.watchdog.Watchdog the scene attached, used by check_state
 
     @classmethod
     def requested_features(cls, bodies, context: SolverContext) -> dict:

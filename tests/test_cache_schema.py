@@ -178,7 +178,7 @@ def test_every_mesh_sample_has_velocities_and_normals(caches, method):
             velocities = mesh.GetVelocitiesAttr().Get(frame)
             assert velocities is not None and len(velocities) == len(points), (
                 f"{name} has no vertex velocities at frame {frame}: the solver's MeshView.velocities is None "
-                "(peridynamics: pdsim/fragment_surfaces.py must give the surface vertices their velocities)"
+                "(peridynamics: pdsim/fragment_surfaces/ must give the surface vertices their velocities)"
             )
             assert np.isfinite(np.asarray(velocities)).all()
             normals = mesh.GetNormalsAttr().Get(frame)

@@ -1,5 +1,5 @@
-"""Smooth crack surfaces of cracking FEM bodies (FemBody(crack_surfaces="smooth"), the default; pdsim/fem/solver.py
-_SmoothSurface over pdsim/fragment_surfaces.py): flat cracks that face the pull where the element faces make a
+"""Smooth crack surfaces of cracking FEM bodies (FemBody(crack_surfaces="smooth"), the default; pdsim/fem/views.py
+SmoothSurface over pdsim/fragment_surfaces/): flat cracks that face the pull where the element faces make a
 staircase, closed shells on every frame, pieces smaller than a grid cell drawn by their elements, the unbroken and
 non-fracturing surfaces, and the cache written as before. Scenes sit away from the origin."""
 
@@ -218,8 +218,8 @@ def _bar_scene(crack_surfaces):
 
 def test_cache_keeps_its_layout(tmp_path):
     """Scene.run of the cracking bar with crack_surfaces "smooth" (the default) and "elements": both caches pass
-    pdsim.output.validate_usd, and they hold the same prims (types and paths) with the same attribute names; the
-    smooth surface's crack faces are bound to the crack subset. (tests/test_cache_schema.py checks the schema.)"""
+    pdsim.output.usd_files.usd_problems, and they hold the same prims (types and paths) with the same attribute names;
+    the smooth surface's crack faces are bound to the crack subset. (tests/test_cache_schema.py checks the schema.)"""
     from pxr import Usd, UsdGeom
 
     from pdsim.output.usd_files import usd_problems

@@ -1,7 +1,7 @@
 """CI smoke test of the gallery: every scene of scenes/ (a script defining build_scene; scenes/lattice_paper.py is the
 lattice cases' library) runs at its preview resolution (its ``PREVIEW`` keyword arguments of build_scene) for two
-frames into a cache that passes pxr.UsdValidation (pdsim.output.usd.validate_usd) and reads back with finite points
-on every frame.
+frames into a cache that passes pxr.UsdValidation (pdsim.output.usd_files.usd_problems) and reads back with finite
+points on every frame.
 
 tools/make_gallery.py runs the same scenes for all their preview frames and renders docs/gallery.md.
 """

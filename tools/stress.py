@@ -21,7 +21,7 @@ must keep
     E(t) - E(0) <= W(t) + tolerance (|E(0)| + W(t) + |U_g(t)|) + 1e-9 J,   tolerance 30 % (step factor <= 1), 55 %
 
 with U_g the gravity potential relative to the rest configuration (a body that falls moves |U_g| about). Velocity
-Verlet's measured energy legitimately sits above E(0) at large steps (pdsim.kinematics.TOTAL_TOLERANCE: 2-3 % at the
+Verlet's measured energy legitimately sits above E(0) at large steps (pdsim.watchdog.TOTAL_TOLERANCE: 2-3 % at the
 automatic step, 15-20 % at 2x). The watchdog's own frame-end bound is 5 % stricter (25 %, 50 %), so a run that
 passes it fails the audit only if the host and device energies disagree; its fast bound (every 16 steps) allows
 100 %.
@@ -78,7 +78,7 @@ BLOCK = (0.08, 0.08, 0.04)  # [m]
 STEPS = 600  # automatic steps simulated per run (frames x steps per frame, whatever the step factor)
 FRAMES = 6
 # energy audit tolerance, relative to the energy moved about, |E(0)| + W + |U_g|: at or below the automatic step and
-# above it (the watchdog's frame-end bound, pdsim.kinematics.TOTAL_TOLERANCE, plus 5 %)
+# above it (the watchdog's frame-end bound, pdsim.watchdog.TOTAL_TOLERANCE, plus 5 %)
 AUDIT_REL = {"automatic": 0.30, "larger": 0.55}
 AUDIT_ABS = 1.0e-9  # [J]
 DENSITY = 1000.0  # [kg/m^3]
