@@ -27,6 +27,7 @@ import functools
 import warp as wp
 
 from ..integration import POINT_FREE, integration_kernels
+from ..launch import launch
 from .elements import fem_types
 
 
@@ -263,147 +264,52 @@ def implicit_rhs_kernel(dtype):
 
 
 # -- launches ----------------------------------------------------------------------------------------------------------
-# One function per kernel, the kernel's arguments in its order; ``dtype`` is the solver's scalar type (wp.float32 or
-# wp.float64), one thread per vertex.
+# One function per kernel, its arguments given by the kernel's parameter names (kernels/launch.py); ``dtype`` is the
+# solver's scalar type (wp.float32 or wp.float64), one thread per vertex.
 
 
-def _gather(kernel: str, vertex_offsets, vertex_slots, corner_forces, forces, dtype, device):
-    """The launch of the gather ``kernel`` ("gather_forces" or "gather_add"), which share their arguments."""
-    wp.launch(
-        vertex_kernels(dtype)[kernel],
-        dim=forces.shape[0],
-        inputs=[vertex_offsets, vertex_slots, corner_forces, forces],
-        device=device,
-    )
+def gather_forces(*, dtype, device, **arguments):
+    """forces[i] = sum of the corner vectors of vertex i [N] (overwrites; vertex_kernels' gather_forces)."""
+    launch(vertex_kernels(dtype)["gather_forces"], arguments["forces"].shape[0], device=device, **arguments)
 
 
-def gather_forces(vertex_offsets, vertex_slots, corner_forces, forces, *, dtype, device):
-    """forces[i] = sum of the corner vectors of vertex i [N] (overwrites)."""
-    _gather("gather_forces", vertex_offsets, vertex_slots, corner_forces, forces, dtype, device)
+def gather_add(*, dtype, device, **arguments):
+    """forces[i] += sum of the corner vectors of vertex i [N] (onto the loads already in ``forces``; vertex_kernels'
+    gather_add)."""
+    launch(vertex_kernels(dtype)["gather_add"], arguments["forces"].shape[0], device=device, **arguments)
 
 
-def gather_add(vertex_offsets, vertex_slots, corner_forces, forces, *, dtype, device):
-    """forces[i] += sum of the corner vectors of vertex i [N] (onto the loads already in ``forces``)."""
-    _gather("gather_add", vertex_offsets, vertex_slots, corner_forces, forces, dtype, device)
-
-
-def gather_kick(
-    vertex_offsets,
-    vertex_slots,
-    corner_forces,
-    inv_mass,
-    gravity,
-    damping,
-    dt,
-    point_condition,
-    point_kind,
-    cond_axes,
-    forces,
-    velocities,
-    accelerations,
-    *,
-    dtype,
-    device,
-):
+def gather_kick(*, dtype, device, **arguments):
     """gather_add, then the second half kick: a = f / m + g - c v [m/s^2], v += dt/2 a on the free axes (dt [s]; 0:
-    the accelerations only)."""
-    wp.launch(
-        vertex_kernels(dtype)["gather_kick"],
-        dim=forces.shape[0],
-        inputs=[
-            vertex_offsets,
-            vertex_slots,
-            corner_forces,
-            inv_mass,
-            gravity,
-            damping,
-            dt,
-            point_condition,
-            point_kind,
-            cond_axes,
-            forces,
-            velocities,
-            accelerations,
-        ],
-        device=device,
+    the accelerations only; vertex_kernels' gather_kick)."""
+    launch(vertex_kernels(dtype)["gather_kick"], arguments["forces"].shape[0], device=device, **arguments)
+
+
+def advance_displacements(*, dtype, device, **arguments):
+    """u += dt v [m] (dt [s]; vertex_kernels' advance_displacements)."""
+    launch(
+        vertex_kernels(dtype)["advance_displacements"], arguments["displacements"].shape[0], device=device, **arguments
     )
 
 
-def advance_displacements(displacements, velocities, dt, *, dtype, device):
-    """u += dt v [m] (dt [s])."""
-    wp.launch(
-        vertex_kernels(dtype)["advance_displacements"],
-        dim=displacements.shape[0],
-        inputs=[displacements, velocities, dt],
-        device=device,
-    )
-
-
-def constraint_bits(point_condition, active_kind, cond_axes, point_kind, constrained, *, dtype, device):
+def constraint_bits(*, dtype, device, **arguments):
     """The bit mask of each vertex's active condition into ``constrained`` (0 when free) and its kind into
-    ``point_kind``."""
-    wp.launch(
-        vertex_kernels(dtype)["constraint_bits"],
-        dim=constrained.shape[0],
-        inputs=[point_condition, active_kind, cond_axes, point_kind, constrained],
-        device=device,
-    )
+    ``point_kind`` (vertex_kernels' constraint_bits)."""
+    launch(vertex_kernels(dtype)["constraint_bits"], arguments["constrained"].shape[0], device=device, **arguments)
 
 
-def residual_forces(forces, mass, gravity, constrained, residual, *, dtype, device):
-    """residual_i = f_i + m_i g [N] on the free components (the static equilibrium residual)."""
-    wp.launch(
-        vertex_kernels(dtype)["residual_forces"],
-        dim=residual.shape[0],
-        inputs=[forces, mass, gravity, constrained, residual],
-        device=device,
-    )
+def residual_forces(*, dtype, device, **arguments):
+    """residual_i = f_i + m_i g [N] on the free components (the static equilibrium residual; vertex_kernels'
+    residual_forces)."""
+    launch(vertex_kernels(dtype)["residual_forces"], arguments["residual"].shape[0], device=device, **arguments)
 
 
-def apply_increment(displacements, du, *, dtype, device):
-    """u += du [m]."""
-    wp.launch(
-        vertex_kernels(dtype)["apply_increment"], dim=displacements.shape[0], inputs=[displacements, du], device=device
-    )
+def apply_increment(*, dtype, device, **arguments):
+    """u += du [m] (vertex_kernels' apply_increment)."""
+    launch(vertex_kernels(dtype)["apply_increment"], arguments["displacements"].shape[0], device=device, **arguments)
 
 
-def implicit_rhs(
-    forces,
-    mass,
-    velocities,
-    point_condition,
-    active_kind,
-    cond_axes,
-    active_velocity,
-    gravity,
-    dt,
-    rhs,
-    guess,
-    constrained,
-    point_kind,
-    *,
-    dtype,
-    device,
-):
+def implicit_rhs(*, dtype, device, **arguments):
     """The backward-Euler right-hand side b = m v + dt (f + m g) [N s] into ``rhs``, the initial guess of the new
     velocity [m/s] into ``guess``, the constraint bit masks and the vertex kinds (implicit_rhs_kernel)."""
-    wp.launch(
-        implicit_rhs_kernel(dtype),
-        dim=rhs.shape[0],
-        inputs=[
-            forces,
-            mass,
-            velocities,
-            point_condition,
-            active_kind,
-            cond_axes,
-            active_velocity,
-            gravity,
-            dt,
-            rhs,
-            guess,
-            constrained,
-            point_kind,
-        ],
-        device=device,
-    )
+    launch(implicit_rhs_kernel(dtype), arguments["rhs"].shape[0], device=device, **arguments)

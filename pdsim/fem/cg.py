@@ -95,13 +95,13 @@ class FemCg:
         """Corner products (K_R u) per element corner into ``out_corner`` (the matrix-free operator)."""
         m = self.model
         ke.element_stiffness_product(
-            u,
-            self.tets,
-            m.dm_inv,
-            m.volume,
-            m.lame,
-            self.rotation,
-            out_corner,
+            u=u,
+            tets=self.tets,
+            dm_inv=m.dm_inv,
+            volume=m.volume,
+            lame=m.lame,
+            rotation=self.rotation,
+            corner_out=out_corner,
             dtype=self.dtype,
             rotated=self.rotated,
             device=self.device,
@@ -120,91 +120,74 @@ class FemCg:
         tol = tolerance
         max_it = int(max_iterations)
         c_mass, c_stiff = dtype(c_mass), dtype(c_stiff)
+        # the arguments every operator and preconditioner launch shares (named like the kernels' parameters)
+        operator = {
+            "mass": op_mass,
+            "c_mass": c_mass,
+            "c_stiff": c_stiff,
+            "constrained": self.constrained,
+            "dtype": dtype,
+            "device": d,
+        }
         if assembled:
             bsr = self.assemble_stiffness()
-            kc.bsr_block_jacobi(
-                bsr["diagonal"],
-                bsr["values"],
-                op_mass,
-                c_mass,
-                c_stiff,
-                self.constrained,
-                self.precond,
-                dtype=dtype,
-                device=d,
-            )
+            kc.bsr_block_jacobi(diagonal=bsr["diagonal"], values=bsr["values"], precond=self.precond, **operator)
 
             def apply_operator(p):
                 """q = A p into ``q`` and the chunks' p . q into ``partial``."""
                 kc.bsr_operator_gather(
-                    bsr["row_offsets"],
-                    bsr["columns"],
-                    bsr["values"],
-                    op_mass,
-                    c_mass,
-                    c_stiff,
-                    self.constrained,
-                    p,
-                    ch,
-                    self.q,
-                    self.partial,
-                    dtype=dtype,
-                    device=d,
+                    row_offsets=bsr["row_offsets"],
+                    columns=bsr["columns"],
+                    values=bsr["values"],
+                    p=p,
+                    chunk=ch,
+                    q_out=self.q,
+                    partial=self.partial,
+                    **operator,
                 )
 
         else:
+            csr = {"vertex_offsets": self.vertex_offsets, "vertex_slots": self.vertex_slots}
             kc.block_jacobi(
-                self.vertex_offsets,
-                self.vertex_slots,
-                mdl.dm_inv,
-                mdl.volume,
-                mdl.lame,
-                self.rotation,
-                op_mass,
-                c_mass,
-                c_stiff,
-                self.constrained,
-                self.precond,
-                dtype=dtype,
+                dm_inv=mdl.dm_inv,
+                volume=mdl.volume,
+                lame=mdl.lame,
+                rotation=self.rotation,
+                precond=self.precond,
                 rotated=self.rotated,
-                device=d,
+                **csr,
+                **operator,
             )
 
             def apply_operator(p):
                 """q = A p into ``q`` (the corner products first) and the chunks' p . q into ``partial``."""
                 self.apply_stiffness(p, self.corner_product)
                 kc.operator_gather(
-                    self.vertex_offsets,
-                    self.vertex_slots,
-                    self.corner_product,
-                    op_mass,
-                    c_mass,
-                    c_stiff,
-                    self.constrained,
-                    p,
-                    ch,
-                    self.q,
-                    self.partial,
-                    dtype=dtype,
-                    device=d,
+                    corner_products=self.corner_product,
+                    p=p,
+                    chunk=ch,
+                    q_out=self.q,
+                    partial=self.partial,
+                    **csr,
+                    **operator,
                 )
 
         # q = A x0 (constrained components zeroed), r = b - q, z = P r, p = z
         apply_operator(self.x)
         kc.residual_init(
-            self.rhs,
-            self.q,
-            self.constrained,
-            self.precond,
-            ch,
-            self.r,
-            self.z,
-            self.p,
-            self.partial3,
+            b=self.rhs,
+            ax=self.q,
+            constrained=self.constrained,
+            precond=self.precond,
+            chunk=ch,
+            r=self.r,
+            z=self.z,
+            p=self.p,
+            partial3=self.partial3,
             dtype=dtype,
             device=d,
         )
-        kc.reduce_init(self.partial3, self.scalars, dtype=dtype, device=d)
+        kc.reduce_init(partial3=self.partial3, scalars=self.scalars, dtype=dtype, device=d)
         s = self.scalars.numpy()
         bb = float(s[kc.CG_BB])
         if bb == 0.0:
@@ -214,22 +197,22 @@ class FemCg:
         rr = float(s[kc.CG_RR])
         while rr > target and it < max_it:
             apply_operator(self.p)
-            kc.reduce_alpha(self.partial, self.scalars, dtype=dtype, device=d)
+            kc.reduce_alpha(partial=self.partial, scalars=self.scalars, dtype=dtype, device=d)
             kc.update_xr(
-                self.p,
-                self.q,
-                self.precond,
-                self.scalars,
-                ch,
-                self.x,
-                self.r,
-                self.z,
-                self.partial2,
+                p=self.p,
+                q=self.q,
+                precond=self.precond,
+                scalars=self.scalars,
+                chunk=ch,
+                x=self.x,
+                r=self.r,
+                z=self.z,
+                partial2=self.partial2,
                 dtype=dtype,
                 device=d,
             )
-            kc.reduce_beta(self.partial2, self.scalars, dtype=dtype, device=d)
-            kc.update_p(self.z, self.scalars, ch, self.p, chunks=chunks, dtype=dtype, device=d)
+            kc.reduce_beta(partial2=self.partial2, scalars=self.scalars, dtype=dtype, device=d)
+            kc.update_p(z=self.z, scalars=self.scalars, chunk=ch, p=self.p, chunks=chunks, dtype=dtype, device=d)
             it += 1
             rr = float(self.scalars.numpy()[kc.CG_RR])
         rel = math.sqrt(max(rr, 0.0) / bb)
@@ -269,17 +252,22 @@ class FemCg:
             }
         bsr = self._bsr
         ke.element_stiffness_blocks(
-            mdl.dm_inv,
-            mdl.volume,
-            mdl.lame,
-            self.rotation,
-            bsr["element_blocks"],
+            dm_inv=mdl.dm_inv,
+            volume=mdl.volume,
+            lame=mdl.lame,
+            rotation=self.rotation,
+            blocks=bsr["element_blocks"],
             dtype=self.dtype,
             rotated=self.rotated,
             device=d,
         )
         kc.assemble_blocks(
-            bsr["contrib_offsets"], bsr["contrib_ids"], bsr["element_blocks"], bsr["values"], dtype=self.dtype, device=d
+            contrib_offsets=bsr["contrib_offsets"],
+            contrib_ids=bsr["contrib_ids"],
+            element_blocks=bsr["element_blocks"],
+            values=bsr["values"],
+            dtype=self.dtype,
+            device=d,
         )
         return bsr
 

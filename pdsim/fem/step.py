@@ -39,20 +39,20 @@ class FemStep:
         if self.fracture:
             self._over_count.zero_()
         ke.element_forces(
-            self.kin.u if displacements is None else displacements,
-            self._tets,
-            m.dm_inv,
-            m.volume,
-            m.lame,
-            m.plastic_params,
-            self._plastic_strain,
-            self.dtype(dt),
-            self._strength,
-            self._principal,
-            self._over_count,
-            self._rotation_q,
-            self._rotation,
-            self._corner,
+            displacements=self.kin.u if displacements is None else displacements,
+            tets=self._tets,
+            dm_inv=m.dm_inv,
+            volume=m.volume,
+            lame=m.lame,
+            plastic_params=m.plastic_params,
+            plastic_strain=self._plastic_strain,
+            dt=self.dtype(dt),
+            strength=self._strength,
+            principal=self._principal,
+            over_count=self._over_count,
+            rotation_q=self._rotation_q,
+            rotation=self._rotation,
+            corner_forces=self._corner,
             dtype=self.dtype,
             measure=self._measure_id,
             plastic=self.plastic,
@@ -68,7 +68,12 @@ class FemStep:
     def add_element_forces(self) -> None:
         """``force`` += the element corner forces gathered per vertex [N]."""
         ks.gather_add(
-            self._vertex_offsets, self._vertex_slots, self._corner, self.force, dtype=self.dtype, device=self.device
+            vertex_offsets=self._vertex_offsets,
+            vertex_slots=self._vertex_slots,
+            corner_forces=self._corner,
+            forces=self.force,
+            dtype=self.dtype,
+            device=self.device,
         )
 
     def _gather_kick(self, dt: float) -> None:
@@ -76,19 +81,19 @@ class FemStep:
         accelerations a = f / m + g - c v only)."""
         kin = self.kin
         ks.gather_kick(
-            self._vertex_offsets,
-            self._vertex_slots,
-            self._corner,
-            self.inv_mass,
-            self.gravity,
-            kin.damping,
-            self.dtype(dt),
-            kin.point_condition,
-            kin.point_kind,
-            kin.cond_axes,
-            self.force,
-            kin.v,
-            kin.a,
+            vertex_offsets=self._vertex_offsets,
+            vertex_slots=self._vertex_slots,
+            corner_forces=self._corner,
+            inv_mass=self.inv_mass,
+            gravity=self.gravity,
+            damping=kin.damping,
+            dt=self.dtype(dt),
+            point_condition=kin.point_condition,
+            point_kind=kin.point_kind,
+            cond_axes=kin.cond_axes,
+            forces=self.force,
+            velocities=kin.v,
+            accelerations=kin.a,
             dtype=self.dtype,
             device=self.device,
         )
