@@ -112,25 +112,23 @@ def vertex_kernels(dtype):
             acc += corner_forces[vertex_slots[q]]
         return acc
 
-    @wp.kernel(module="unique")
-    def gather_forces(
-        vertex_offsets: wp.array(dtype=wp.int32),
-        vertex_slots: wp.array(dtype=wp.int32),
-        corner_forces: wp.array(dtype=vec3),
-        forces: wp.array(dtype=vec3),
-    ):
-        i = wp.tid()
-        forces[i] = gather_corners(vec3(dtype(0.0)), i, vertex_offsets, vertex_slots, corner_forces)
+    def gather_kernel(add: bool):
+        """gather_add (``add``: onto the loads already in f) or gather_forces (overwrites)."""
 
-    @wp.kernel(module="unique")
-    def gather_add(
-        vertex_offsets: wp.array(dtype=wp.int32),
-        vertex_slots: wp.array(dtype=wp.int32),
-        corner_forces: wp.array(dtype=vec3),
-        forces: wp.array(dtype=vec3),
-    ):
-        i = wp.tid()
-        forces[i] = gather_corners(forces[i], i, vertex_offsets, vertex_slots, corner_forces)
+        @wp.kernel(module="unique")
+        def gather(
+            vertex_offsets: wp.array(dtype=wp.int32),
+            vertex_slots: wp.array(dtype=wp.int32),
+            corner_forces: wp.array(dtype=vec3),
+            forces: wp.array(dtype=vec3),
+        ):
+            i = wp.tid()
+            if wp.static(add):
+                forces[i] = gather_corners(forces[i], i, vertex_offsets, vertex_slots, corner_forces)
+            else:
+                forces[i] = gather_corners(vec3(dtype(0.0)), i, vertex_offsets, vertex_slots, corner_forces)
+
+        return gather
 
     @wp.kernel(module="unique")
     def gather_kick(
@@ -208,8 +206,8 @@ def vertex_kernels(dtype):
         displacements[i] = displacements[i] + du[i]
 
     return {
-        "gather_forces": gather_forces,
-        "gather_add": gather_add,
+        "gather_forces": gather_kernel(False),
+        "gather_add": gather_kernel(True),
         "gather_kick": gather_kick,
         "advance_displacements": advance_displacements,
         "constraint_bits": constraint_bits,
