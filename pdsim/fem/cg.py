@@ -71,8 +71,7 @@ class FemCg:
         self.rotated = rotated
         self.tets_h = tets_h
         self.tets = tets
-        self.vertex_offsets = vertex_offsets
-        self.vertex_slots = vertex_slots
+        self.incidence = {"vertex_offsets": vertex_offsets, "vertex_slots": vertex_slots}  # keyed by kernel names
         n = self.vertex_count = vertex_count
         self.chunk = CG_CHUNK
         chunks = self.chunks = max(1, math.ceil(n / CG_CHUNK))
@@ -97,9 +96,7 @@ class FemCg:
         ke.element_stiffness_product(
             u=u,
             tets=self.tets,
-            dm_inv=m.dm_inv,
-            volume=m.volume,
-            lame=m.lame,
+            **m.element_arrays,
             rotation=self.rotation,
             corner_out=out_corner,
             dtype=self.dtype,
@@ -147,15 +144,12 @@ class FemCg:
                 )
 
         else:
-            csr = {"vertex_offsets": self.vertex_offsets, "vertex_slots": self.vertex_slots}
             kc.block_jacobi(
-                dm_inv=mdl.dm_inv,
-                volume=mdl.volume,
-                lame=mdl.lame,
+                **mdl.element_arrays,
                 rotation=self.rotation,
                 precond=self.precond,
                 rotated=self.rotated,
-                **csr,
+                **self.incidence,
                 **operator,
             )
 
@@ -168,7 +162,7 @@ class FemCg:
                     chunk=ch,
                     q_out=self.q,
                     partial=self.partial,
-                    **csr,
+                    **self.incidence,
                     **operator,
                 )
 
@@ -252,9 +246,7 @@ class FemCg:
             }
         bsr = self._bsr
         ke.element_stiffness_blocks(
-            dm_inv=mdl.dm_inv,
-            volume=mdl.volume,
-            lame=mdl.lame,
+            **mdl.element_arrays,
             rotation=self.rotation,
             blocks=bsr["element_blocks"],
             dtype=self.dtype,

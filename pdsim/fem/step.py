@@ -41,9 +41,7 @@ class FemStep:
         ke.element_forces(
             displacements=self.kin.u if displacements is None else displacements,
             tets=self._tets,
-            dm_inv=m.dm_inv,
-            volume=m.volume,
-            lame=m.lame,
+            **m.element_arrays,
             plastic_params=m.plastic_params,
             plastic_strain=self._plastic_strain,
             dt=self.dtype(dt),
@@ -68,8 +66,7 @@ class FemStep:
     def add_element_forces(self) -> None:
         """``force`` += the element corner forces gathered per vertex [N]."""
         ks.gather_add(
-            vertex_offsets=self._vertex_offsets,
-            vertex_slots=self._vertex_slots,
+            **self._incidence,
             corner_forces=self._corner,
             forces=self.force,
             dtype=self.dtype,
@@ -81,8 +78,7 @@ class FemStep:
         accelerations a = f / m + g - c v only)."""
         kin = self.kin
         ks.gather_kick(
-            vertex_offsets=self._vertex_offsets,
-            vertex_slots=self._vertex_slots,
+            **self._incidence,
             corner_forces=self._corner,
             inv_mass=self.inv_mass,
             gravity=self.gravity,
