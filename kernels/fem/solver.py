@@ -33,7 +33,8 @@ from .elements import fem_types
 
 @functools.cache
 def constraint_funcs(dtype):
-    """Warp functions on the per-vertex constraint bit masks: axis_bits, free_components, filter_block (a dict)."""
+    """Warp functions on the per-vertex constraint bit masks: axis_bits, free_components, filter_block,
+    condition_bits (a dict)."""
     vec3, mat33, _ = fem_types(dtype)
 
     @wp.func
@@ -75,7 +76,24 @@ def constraint_funcs(dtype):
                     p[j, k] = dtype(0.0)
         return p
 
-    return {"axis_bits": axis_bits, "free_components": free_components, "filter_block": filter_block}
+    @wp.func
+    def condition_bits(c: int, active_kind: wp.array(dtype=wp.int32), cond_axes: wp.array(dtype=wp.vec3)):
+        """(kind this step, bit mask of the constrained axes) of a vertex under condition ``c`` (-1: none):
+        (POINT_FREE, 0) without a condition or with an inactive one."""
+        kind = POINT_FREE
+        bits = int(0)
+        if c >= 0:
+            kind = active_kind[c]
+            if kind != POINT_FREE:
+                bits = axis_bits(cond_axes[c])
+        return kind, bits
+
+    return {
+        "axis_bits": axis_bits,
+        "free_components": free_components,
+        "filter_block": filter_block,
+        "condition_bits": condition_bits,
+    }
 
 
 @functools.cache
@@ -95,7 +113,7 @@ def vertex_kernels(dtype):
     ik = integration_kernels(dtype)
     kick_point = ik.kick_point
     cf = constraint_funcs(dtype)
-    axis_bits = cf["axis_bits"]
+    condition_bits = cf["condition_bits"]
     free_components = cf["free_components"]
 
     @wp.func
@@ -179,13 +197,7 @@ def vertex_kernels(dtype):
         constrained: wp.array(dtype=wp.int32),
     ):
         i = wp.tid()
-        kind = POINT_FREE
-        bits = int(0)
-        c = point_condition[i]
-        if c >= 0:
-            kind = active_kind[c]
-            if kind != POINT_FREE:
-                bits = axis_bits(cond_axes[c])
+        kind, bits = condition_bits(point_condition[i], active_kind, cond_axes)
         point_kind[i] = kind
         constrained[i] = bits
 
@@ -224,7 +236,7 @@ def implicit_rhs_kernel(dtype):
     vec3, _, _ = fem_types(dtype)
     ik = integration_kernels(dtype)
     constrained_velocity = ik.constrained_velocity
-    axis_bits = constraint_funcs(dtype)["axis_bits"]
+    condition_bits = constraint_funcs(dtype)["condition_bits"]
 
     @wp.kernel(module="unique")
     def implicit_rhs(
@@ -246,14 +258,10 @@ def implicit_rhs_kernel(dtype):
         m = mass[i]
         v = velocities[i]
         rhs[i] = m * v + dt * (forces[i] + m * gravity)
-        kind = POINT_FREE
-        bits = int(0)
         c = point_condition[i]
-        if c >= 0:
-            kind = active_kind[c]
-            if kind != POINT_FREE:
-                bits = axis_bits(cond_axes[c])
-                v = constrained_velocity(v, cond_axes[c], active_velocity[c])
+        kind, bits = condition_bits(c, active_kind, cond_axes)
+        if kind != POINT_FREE:
+            v = constrained_velocity(v, cond_axes[c], active_velocity[c])
         guess[i] = v
         constrained[i] = bits
         point_kind[i] = kind
