@@ -90,6 +90,10 @@ class FemCg:
         self.corner_product = wp.zeros(4 * model.element_count, dtype=vec3, device=dev)  # matrix-free K_R p
         self._bsr = None  # assembled stiffness pattern, built lazily
 
+    def _arrays(self, *names: str) -> dict:
+        """The work arrays ``names`` of this CG (named like the CG kernels' parameters), as launch arguments."""
+        return {n: getattr(self, n) for n in names}
+
     def apply_stiffness(self, u, out_corner):
         """Corner products (K_R u) per element corner into ``out_corner`` (the matrix-free operator)."""
         m = self.model
@@ -171,15 +175,10 @@ class FemCg:
         kc.residual_init(
             b=self.rhs,
             ax=self.q,
-            constrained=self.constrained,
-            precond=self.precond,
             chunk=ch,
-            r=self.r,
-            z=self.z,
-            p=self.p,
-            partial3=self.partial3,
             dtype=dtype,
             device=d,
+            **self._arrays("constrained", "precond", "r", "z", "p", "partial3"),
         )
         kc.reduce_init(partial3=self.partial3, scalars=self.scalars, dtype=dtype, device=d)
         s = self.scalars.numpy()
@@ -193,17 +192,10 @@ class FemCg:
             apply_operator(self.p)
             kc.reduce_alpha(partial=self.partial, scalars=self.scalars, dtype=dtype, device=d)
             kc.update_xr(
-                p=self.p,
-                q=self.q,
-                precond=self.precond,
-                scalars=self.scalars,
                 chunk=ch,
-                x=self.x,
-                r=self.r,
-                z=self.z,
-                partial2=self.partial2,
                 dtype=dtype,
                 device=d,
+                **self._arrays("p", "q", "precond", "scalars", "x", "r", "z", "partial2"),
             )
             kc.reduce_beta(partial2=self.partial2, scalars=self.scalars, dtype=dtype, device=d)
             kc.update_p(z=self.z, scalars=self.scalars, chunk=ch, p=self.p, chunks=chunks, dtype=dtype, device=d)
