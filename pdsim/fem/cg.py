@@ -25,6 +25,13 @@ from .model import FemModel
 CG_CHUNK = 256  # vertices per partial sum of the CG reductions
 
 
+def arrays_named(owner, *names: str) -> dict:
+    """The attributes ``names`` of ``owner`` as launch keyword arguments: for arrays that carry the names of the kernel
+    parameters they feed (kernels/launch.py), e.g. the CG work arrays of :class:`FemCg` or the condition arrays of the
+    kinematics."""
+    return {n: getattr(owner, n) for n in names}
+
+
 @dataclass
 class CgReport:
     """Outcome of one CG solve: iterations, final relative residual |r| / |b|, and whether it reached the tolerance."""
@@ -89,10 +96,6 @@ class FemCg:
         self.scalars = wp.zeros(8, dtype=dtype, device=dev)  # kernels/fem/cg.py's CG_* slots
         self.corner_product = wp.zeros(4 * model.element_count, dtype=vec3, device=dev)  # matrix-free K_R p
         self._bsr = None  # assembled stiffness pattern, built lazily
-
-    def _arrays(self, *names: str) -> dict:
-        """The work arrays ``names`` of this CG (named like the CG kernels' parameters), as launch arguments."""
-        return {n: getattr(self, n) for n in names}
 
     def apply_stiffness(self, u, out_corner):
         """Corner products (K_R u) per element corner into ``out_corner`` (the matrix-free operator)."""
@@ -178,7 +181,7 @@ class FemCg:
             chunk=ch,
             dtype=dtype,
             device=d,
-            **self._arrays("constrained", "precond", "r", "z", "p", "partial3"),
+            **arrays_named(self, "constrained", "precond", "r", "z", "p", "partial3"),
         )
         kc.reduce_init(partial3=self.partial3, scalars=self.scalars, dtype=dtype, device=d)
         s = self.scalars.numpy()
@@ -195,7 +198,7 @@ class FemCg:
                 chunk=ch,
                 dtype=dtype,
                 device=d,
-                **self._arrays("p", "q", "precond", "scalars", "x", "r", "z", "partial2"),
+                **arrays_named(self, "p", "q", "precond", "scalars", "x", "r", "z", "partial2"),
             )
             kc.reduce_beta(partial2=self.partial2, scalars=self.scalars, dtype=dtype, device=d)
             kc.update_p(z=self.z, scalars=self.scalars, chunk=ch, p=self.p, chunks=chunks, dtype=dtype, device=d)
@@ -256,4 +259,4 @@ class FemCg:
         return bsr
 
 
-__all__ = ["CG_CHUNK", "CgReport", "FemCg"]
+__all__ = ["CG_CHUNK", "CgReport", "FemCg", "arrays_named"]

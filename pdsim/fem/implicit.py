@@ -13,6 +13,7 @@ from __future__ import annotations
 import warp as wp
 
 from ..kernels.fem import solver as ks
+from .cg import arrays_named
 from .operators import FemOperators
 
 
@@ -50,16 +51,12 @@ class BackwardEuler:
             forces=s.force,
             mass=s.lumped_mass,
             velocities=kin.v,
-            point_condition=kin.point_condition,
-            active_kind=kin.active_kind,
-            cond_axes=kin.cond_axes,
-            active_velocity=kin.active_velocity,
+            **arrays_named(kin, "point_condition", "active_kind", "cond_axes", "active_velocity", "point_kind"),
             gravity=s.gravity,
             dt=s.dtype(dt),
             rhs=cg.rhs,
             guess=cg.x,
             constrained=cg.constrained,
-            point_kind=kin.point_kind,
             dtype=s.dtype,
             device=d,
         )

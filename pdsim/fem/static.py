@@ -17,6 +17,7 @@ import warp as wp
 from ..checks import check_range
 from ..errors import ParameterError
 from ..kernels.fem import solver as ks
+from .cg import arrays_named
 from .operators import FemOperators
 
 
@@ -53,10 +54,7 @@ def solve_static(
         if kin.condition_count:
             kin.evaluate_conditions(t)
         ks.constraint_bits(
-            point_condition=kin.point_condition,
-            active_kind=kin.active_kind,
-            cond_axes=kin.cond_axes,
-            point_kind=kin.point_kind,
+            **arrays_named(kin, "point_condition", "active_kind", "cond_axes", "point_kind"),
             constrained=cg.constrained,
             dtype=dtype,
             device=d,

@@ -12,7 +12,7 @@ from ..checks import check_range
 from ..errors import ParameterError
 from ..kernels.fem import elements as ke
 from ..kernels.fem import solver as ks
-from .cg import CgReport
+from .cg import CgReport, arrays_named
 from .static import StaticSolveReport, solve_static
 
 
@@ -82,11 +82,8 @@ class FemStep:
             corner_forces=self._corner,
             inv_mass=self.inv_mass,
             gravity=self.gravity,
-            damping=kin.damping,
             dt=self.dtype(dt),
-            point_condition=kin.point_condition,
-            point_kind=kin.point_kind,
-            cond_axes=kin.cond_axes,
+            **arrays_named(kin, "damping", "point_condition", "point_kind", "cond_axes"),
             forces=self.force,
             velocities=kin.v,
             accelerations=kin.a,
