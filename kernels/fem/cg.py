@@ -18,6 +18,7 @@ import functools
 
 import warp as wp
 
+from ..launch import launch
 from .elements import fem_funcs, fem_types
 from .solver import constraint_funcs
 
@@ -323,166 +324,66 @@ def assembled_kernels(dtype):
 
 
 # -- launches ----------------------------------------------------------------------------------------------------------
-# One function per kernel, the kernel's arguments in its order; ``dtype`` is the solver's scalar type (wp.float32 or
-# wp.float64). The chunked kernels run one thread per chunk of ``chunk`` vertices (``chunks`` threads: the length of
-# their partial-sum array), the reductions one thread.
+# One function per kernel, its arguments given by the kernel's parameter names (kernels/launch.py); ``dtype`` is the
+# solver's scalar type (wp.float32 or wp.float64). The chunked kernels run one thread per chunk of ``chunk`` vertices
+# (``chunks`` threads: the length of their partial-sum array), the reductions one thread.
 
 
-def block_jacobi(
-    vertex_offsets,
-    vertex_slots,
-    dm_inv,
-    volume,
-    lame,
-    rotation,
-    mass,
-    c_mass,
-    c_stiff,
-    constrained,
-    precond,
-    *,
-    dtype,
-    rotated: bool,
-    device,
-):
+def block_jacobi(*, dtype, rotated: bool, device, **arguments):
     """The matrix-free block-Jacobi preconditioner P_i of every vertex into ``precond`` (block_jacobi_kernel)."""
-    wp.launch(
-        block_jacobi_kernel(dtype, rotated),
-        dim=precond.shape[0],
-        inputs=[
-            vertex_offsets,
-            vertex_slots,
-            dm_inv,
-            volume,
-            lame,
-            rotation,
-            mass,
-            c_mass,
-            c_stiff,
-            constrained,
-            precond,
-        ],
-        device=device,
-    )
+    launch(block_jacobi_kernel(dtype, rotated), arguments["precond"].shape[0], device=device, **arguments)
 
 
-def operator_gather(
-    vertex_offsets,
-    vertex_slots,
-    corner_products,
-    mass,
-    c_mass,
-    c_stiff,
-    constrained,
-    p,
-    chunk,
-    q_out,
-    partial,
-    *,
-    dtype,
-    device,
-):
-    """q = A p [N] from the matrix-free corner products (constrained components zeroed) and the chunks' p . q."""
-    wp.launch(
-        cg_kernels(dtype)["operator_gather"],
-        dim=partial.shape[0],
-        inputs=[
-            vertex_offsets,
-            vertex_slots,
-            corner_products,
-            mass,
-            c_mass,
-            c_stiff,
-            constrained,
-            p,
-            chunk,
-            q_out,
-            partial,
-        ],
-        device=device,
-    )
+def operator_gather(*, dtype, device, **arguments):
+    """q = A p [N] from the matrix-free corner products (constrained components zeroed) and the chunks' p . q
+    (cg_kernels' operator_gather)."""
+    launch(cg_kernels(dtype)["operator_gather"], arguments["partial"].shape[0], device=device, **arguments)
 
 
-def residual_init(b, ax, constrained, precond, chunk, r, z, p, partial3, *, dtype, device):
-    """r = b - A x, z = P r, p = z (free components) and the chunks' r . z, r . r and b . b."""
-    wp.launch(
-        cg_kernels(dtype)["residual_init"],
-        dim=partial3.shape[0],
-        inputs=[b, ax, constrained, precond, chunk, r, z, p, partial3],
-        device=device,
-    )
+def residual_init(*, dtype, device, **arguments):
+    """r = b - A x, z = P r, p = z (free components) and the chunks' r . z, r . r and b . b (cg_kernels'
+    residual_init)."""
+    launch(cg_kernels(dtype)["residual_init"], arguments["partial3"].shape[0], device=device, **arguments)
 
 
-def reduce_init(partial3, scalars, *, dtype, device):
-    """Sums the chunks' r . z, r . r and b . b into ``scalars`` (CG_RZ, CG_RR, CG_BB)."""
-    wp.launch(cg_kernels(dtype)["reduce_init"], dim=1, inputs=[partial3, scalars], device=device)
+def reduce_init(*, dtype, device, **arguments):
+    """Sums the chunks' r . z, r . r and b . b into ``scalars`` (CG_RZ, CG_RR, CG_BB; cg_kernels' reduce_init)."""
+    launch(cg_kernels(dtype)["reduce_init"], 1, device=device, **arguments)
 
 
-def reduce_alpha(partial, scalars, *, dtype, device):
-    """Sums the chunks' p . q into ``scalars[CG_PQ]`` and sets alpha = r . z / p . q."""
-    wp.launch(cg_kernels(dtype)["reduce_alpha"], dim=1, inputs=[partial, scalars], device=device)
+def reduce_alpha(*, dtype, device, **arguments):
+    """Sums the chunks' p . q into ``scalars[CG_PQ]`` and sets alpha = r . z / p . q (cg_kernels' reduce_alpha)."""
+    launch(cg_kernels(dtype)["reduce_alpha"], 1, device=device, **arguments)
 
 
-def update_xr(p, q, precond, scalars, chunk, x, r, z, partial2, *, dtype, device):
-    """x += alpha p, r -= alpha q, z = P r and the chunks' r . z and r . r."""
-    wp.launch(
-        cg_kernels(dtype)["update_xr"],
-        dim=partial2.shape[0],
-        inputs=[p, q, precond, scalars, chunk, x, r, z, partial2],
-        device=device,
-    )
+def update_xr(*, dtype, device, **arguments):
+    """x += alpha p, r -= alpha q, z = P r and the chunks' r . z and r . r (cg_kernels' update_xr)."""
+    launch(cg_kernels(dtype)["update_xr"], arguments["partial2"].shape[0], device=device, **arguments)
 
 
-def reduce_beta(partial2, scalars, *, dtype, device):
-    """Sums the chunks' r . z and r . r and sets beta = new r . z / old r . z."""
-    wp.launch(cg_kernels(dtype)["reduce_beta"], dim=1, inputs=[partial2, scalars], device=device)
+def reduce_beta(*, dtype, device, **arguments):
+    """Sums the chunks' r . z and r . r and sets beta = new r . z / old r . z (cg_kernels' reduce_beta)."""
+    launch(cg_kernels(dtype)["reduce_beta"], 1, device=device, **arguments)
 
 
-def update_p(z, scalars, chunk, p, *, chunks: int, dtype, device):
-    """p = z + beta p over ``chunks`` chunks of ``chunk`` vertices."""
-    wp.launch(cg_kernels(dtype)["update_p"], dim=chunks, inputs=[z, scalars, chunk, p], device=device)
+def update_p(*, chunks: int, dtype, device, **arguments):
+    """p = z + beta p over ``chunks`` chunks of ``chunk`` vertices (cg_kernels' update_p)."""
+    launch(cg_kernels(dtype)["update_p"], chunks, device=device, **arguments)
 
 
-def assemble_blocks(contrib_offsets, contrib_ids, element_blocks, values, *, dtype, device):
-    """The assembled stiffness blocks [N/m] into ``values`` (a gather of the element blocks)."""
-    wp.launch(
-        assembled_kernels(dtype)["assemble_blocks"],
-        dim=values.shape[0],
-        inputs=[contrib_offsets, contrib_ids, element_blocks, values],
-        device=device,
-    )
+def assemble_blocks(*, dtype, device, **arguments):
+    """The assembled stiffness blocks [N/m] into ``values`` (a gather of the element blocks; assembled_kernels'
+    assemble_blocks)."""
+    launch(assembled_kernels(dtype)["assemble_blocks"], arguments["values"].shape[0], device=device, **arguments)
 
 
-def bsr_operator_gather(
-    row_offsets,
-    columns,
-    values,
-    mass,
-    c_mass,
-    c_stiff,
-    constrained,
-    p,
-    chunk,
-    q_out,
-    partial,
-    *,
-    dtype,
-    device,
-):
-    """q = A p [N] with the assembled stiffness (constrained components zeroed) and the chunks' p . q."""
-    wp.launch(
-        assembled_kernels(dtype)["bsr_operator_gather"],
-        dim=partial.shape[0],
-        inputs=[row_offsets, columns, values, mass, c_mass, c_stiff, constrained, p, chunk, q_out, partial],
-        device=device,
-    )
+def bsr_operator_gather(*, dtype, device, **arguments):
+    """q = A p [N] with the assembled stiffness (constrained components zeroed) and the chunks' p . q
+    (assembled_kernels' bsr_operator_gather)."""
+    launch(assembled_kernels(dtype)["bsr_operator_gather"], arguments["partial"].shape[0], device=device, **arguments)
 
 
-def bsr_block_jacobi(diagonal, values, mass, c_mass, c_stiff, constrained, precond, *, dtype, device):
-    """The block-Jacobi preconditioner P_i of every vertex from the assembled diagonal blocks into ``precond``."""
-    wp.launch(
-        assembled_kernels(dtype)["bsr_block_jacobi"],
-        dim=precond.shape[0],
-        inputs=[diagonal, values, mass, c_mass, c_stiff, constrained, precond],
-        device=device,
-    )
+def bsr_block_jacobi(*, dtype, device, **arguments):
+    """The block-Jacobi preconditioner P_i of every vertex from the assembled diagonal blocks into ``precond``
+    (assembled_kernels' bsr_block_jacobi)."""
+    launch(assembled_kernels(dtype)["bsr_block_jacobi"], arguments["precond"].shape[0], device=device, **arguments)

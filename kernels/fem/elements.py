@@ -50,6 +50,8 @@ import functools
 
 import warp as wp
 
+from ..launch import launch
+
 MEASURE_LINEAR = 0
 MEASURE_COROTATED = 1
 MEASURE_GREEN = 2
@@ -502,96 +504,35 @@ def embed_points_kernel(dtype):
 
 
 # -- launches ----------------------------------------------------------------------------------------------------------
-# One function per kernel, the kernel's arguments in its order; ``dtype`` is the solver's scalar type (wp.float32 or
-# wp.float64), one thread per element (per embedded point for embed_points).
+# One function per kernel, its arguments given by the kernel's parameter names (kernels/launch.py); ``dtype`` is the
+# solver's scalar type (wp.float32 or wp.float64), one thread per element (per embedded point for embed_points).
 
 
-def element_forces(
-    displacements,
-    tets,
-    dm_inv,
-    volume,
-    lame,
-    plastic_params,
-    plastic_strain,
-    dt,
-    strength,
-    principal,
-    over_count,
-    rotation_q,
-    rotation,
-    corner_forces,
-    *,
-    dtype,
-    measure: int,
-    plastic: bool,
-    fracture: bool,
-    device,
-):
+def element_forces(*, dtype, measure: int, plastic: bool, fracture: bool, device, **arguments):
     """Corner forces [N] of every element into ``corner_forces`` at ``displacements`` [m], with the plastic update of
     step ``dt`` [s], the principal stresses and the over-strength count (fracture) and the rotations (corotated) as
     element_force_kernel documents (the rotation matrix stored)."""
-    wp.launch(
-        element_force_kernel(dtype, measure, plastic, fracture, True),
-        dim=tets.shape[0],
-        inputs=[
-            displacements,
-            tets,
-            dm_inv,
-            volume,
-            lame,
-            plastic_params,
-            plastic_strain,
-            dt,
-            strength,
-            principal,
-            over_count,
-            rotation_q,
-            rotation,
-            corner_forces,
-        ],
-        device=device,
-    )
+    kernel = element_force_kernel(dtype, measure, plastic, fracture, True)
+    launch(kernel, arguments["tets"].shape[0], device=device, **arguments)
 
 
-def element_energy(
-    displacements, tets, dm_inv, volume, lame, plastic_strain, energy, *, dtype, measure: int, plastic: bool, device
-):
+def element_energy(*, dtype, measure: int, plastic: bool, device, **arguments):
     """Elastic energy [J] of every element into ``energy`` at ``displacements`` [m] (element_energy_kernel)."""
-    wp.launch(
-        element_energy_kernel(dtype, measure, plastic),
-        dim=tets.shape[0],
-        inputs=[displacements, tets, dm_inv, volume, lame, plastic_strain, energy],
-        device=device,
-    )
+    launch(element_energy_kernel(dtype, measure, plastic), arguments["tets"].shape[0], device=device, **arguments)
 
 
-def element_stiffness_product(u, tets, dm_inv, volume, lame, rotation, corner_out, *, dtype, rotated: bool, device):
+def element_stiffness_product(*, dtype, rotated: bool, device, **arguments):
     """Corner products (K_e u)_a [N] of every element into ``corner_out`` for a vector field ``u`` [m]
     (element_stiffness_product_kernel: the matrix-free stiffness)."""
-    wp.launch(
-        element_stiffness_product_kernel(dtype, rotated),
-        dim=tets.shape[0],
-        inputs=[u, tets, dm_inv, volume, lame, rotation, corner_out],
-        device=device,
-    )
+    launch(element_stiffness_product_kernel(dtype, rotated), arguments["tets"].shape[0], device=device, **arguments)
 
 
-def element_stiffness_blocks(dm_inv, volume, lame, rotation, blocks, *, dtype, rotated: bool, device):
-    """The 16 stiffness blocks R K_ab R^T [N/m] of every element into ``blocks[16 e + 4 a + b]``."""
-    wp.launch(
-        element_stiffness_blocks_kernel(dtype, rotated),
-        dim=volume.shape[0],
-        inputs=[dm_inv, volume, lame, rotation, blocks],
-        device=device,
-    )
+def element_stiffness_blocks(*, dtype, rotated: bool, device, **arguments):
+    """The 16 stiffness blocks R K_ab R^T [N/m] of every element into ``blocks[16 e + 4 a + b]``
+    (element_stiffness_blocks_kernel)."""
+    launch(element_stiffness_blocks_kernel(dtype, rotated), arguments["volume"].shape[0], device=device, **arguments)
 
 
-def embed_points(displacements, velocities, tets, element, weights, out_displacement, out_velocity, *, dtype, device):
+def embed_points(*, dtype, device, **arguments):
     """Displacements [m] and velocities [m/s] of the barycentrically embedded points (embed_points_kernel)."""
-    wp.launch(
-        embed_points_kernel(dtype),
-        dim=weights.shape[0],
-        inputs=[displacements, velocities, tets, element, weights, out_displacement, out_velocity],
-        device=device,
-    )
+    launch(embed_points_kernel(dtype), arguments["weights"].shape[0], device=device, **arguments)

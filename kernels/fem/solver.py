@@ -27,12 +27,14 @@ import functools
 import warp as wp
 
 from ..integration import POINT_FREE, integration_kernels
+from ..launch import launch
 from .elements import fem_types
 
 
 @functools.cache
 def constraint_funcs(dtype):
-    """Warp functions on the per-vertex constraint bit masks: axis_bits, free_components, filter_block (a dict)."""
+    """Warp functions on the per-vertex constraint bit masks: axis_bits, free_components, filter_block,
+    condition_bits (a dict)."""
     vec3, mat33, _ = fem_types(dtype)
 
     @wp.func
@@ -74,7 +76,24 @@ def constraint_funcs(dtype):
                     p[j, k] = dtype(0.0)
         return p
 
-    return {"axis_bits": axis_bits, "free_components": free_components, "filter_block": filter_block}
+    @wp.func
+    def condition_bits(c: int, active_kind: wp.array(dtype=wp.int32), cond_axes: wp.array(dtype=wp.vec3)):
+        """(kind this step, bit mask of the constrained axes) of a vertex under condition ``c`` (-1: none):
+        (POINT_FREE, 0) without a condition or with an inactive one."""
+        kind = POINT_FREE
+        bits = int(0)
+        if c >= 0:
+            kind = active_kind[c]
+            if kind != POINT_FREE:
+                bits = axis_bits(cond_axes[c])
+        return kind, bits
+
+    return {
+        "axis_bits": axis_bits,
+        "free_components": free_components,
+        "filter_block": filter_block,
+        "condition_bits": condition_bits,
+    }
 
 
 @functools.cache
@@ -94,7 +113,7 @@ def vertex_kernels(dtype):
     ik = integration_kernels(dtype)
     kick_point = ik.kick_point
     cf = constraint_funcs(dtype)
-    axis_bits = cf["axis_bits"]
+    condition_bits = cf["condition_bits"]
     free_components = cf["free_components"]
 
     @wp.func
@@ -111,25 +130,23 @@ def vertex_kernels(dtype):
             acc += corner_forces[vertex_slots[q]]
         return acc
 
-    @wp.kernel(module="unique")
-    def gather_forces(
-        vertex_offsets: wp.array(dtype=wp.int32),
-        vertex_slots: wp.array(dtype=wp.int32),
-        corner_forces: wp.array(dtype=vec3),
-        forces: wp.array(dtype=vec3),
-    ):
-        i = wp.tid()
-        forces[i] = gather_corners(vec3(dtype(0.0)), i, vertex_offsets, vertex_slots, corner_forces)
+    def gather_kernel(add: bool):
+        """gather_add (``add``: onto the loads already in f) or gather_forces (overwrites)."""
 
-    @wp.kernel(module="unique")
-    def gather_add(
-        vertex_offsets: wp.array(dtype=wp.int32),
-        vertex_slots: wp.array(dtype=wp.int32),
-        corner_forces: wp.array(dtype=vec3),
-        forces: wp.array(dtype=vec3),
-    ):
-        i = wp.tid()
-        forces[i] = gather_corners(forces[i], i, vertex_offsets, vertex_slots, corner_forces)
+        @wp.kernel(module="unique")
+        def gather(
+            vertex_offsets: wp.array(dtype=wp.int32),
+            vertex_slots: wp.array(dtype=wp.int32),
+            corner_forces: wp.array(dtype=vec3),
+            forces: wp.array(dtype=vec3),
+        ):
+            i = wp.tid()
+            if wp.static(add):
+                forces[i] = gather_corners(forces[i], i, vertex_offsets, vertex_slots, corner_forces)
+            else:
+                forces[i] = gather_corners(vec3(dtype(0.0)), i, vertex_offsets, vertex_slots, corner_forces)
+
+        return gather
 
     @wp.kernel(module="unique")
     def gather_kick(
@@ -180,13 +197,7 @@ def vertex_kernels(dtype):
         constrained: wp.array(dtype=wp.int32),
     ):
         i = wp.tid()
-        kind = POINT_FREE
-        bits = int(0)
-        c = point_condition[i]
-        if c >= 0:
-            kind = active_kind[c]
-            if kind != POINT_FREE:
-                bits = axis_bits(cond_axes[c])
+        kind, bits = condition_bits(point_condition[i], active_kind, cond_axes)
         point_kind[i] = kind
         constrained[i] = bits
 
@@ -207,8 +218,8 @@ def vertex_kernels(dtype):
         displacements[i] = displacements[i] + du[i]
 
     return {
-        "gather_forces": gather_forces,
-        "gather_add": gather_add,
+        "gather_forces": gather_kernel(False),
+        "gather_add": gather_kernel(True),
         "gather_kick": gather_kick,
         "advance_displacements": advance_displacements,
         "constraint_bits": constraint_bits,
@@ -225,7 +236,7 @@ def implicit_rhs_kernel(dtype):
     vec3, _, _ = fem_types(dtype)
     ik = integration_kernels(dtype)
     constrained_velocity = ik.constrained_velocity
-    axis_bits = constraint_funcs(dtype)["axis_bits"]
+    condition_bits = constraint_funcs(dtype)["condition_bits"]
 
     @wp.kernel(module="unique")
     def implicit_rhs(
@@ -247,14 +258,10 @@ def implicit_rhs_kernel(dtype):
         m = mass[i]
         v = velocities[i]
         rhs[i] = m * v + dt * (forces[i] + m * gravity)
-        kind = POINT_FREE
-        bits = int(0)
         c = point_condition[i]
-        if c >= 0:
-            kind = active_kind[c]
-            if kind != POINT_FREE:
-                bits = axis_bits(cond_axes[c])
-                v = constrained_velocity(v, cond_axes[c], active_velocity[c])
+        kind, bits = condition_bits(c, active_kind, cond_axes)
+        if kind != POINT_FREE:
+            v = constrained_velocity(v, cond_axes[c], active_velocity[c])
         guess[i] = v
         constrained[i] = bits
         point_kind[i] = kind
@@ -263,147 +270,52 @@ def implicit_rhs_kernel(dtype):
 
 
 # -- launches ----------------------------------------------------------------------------------------------------------
-# One function per kernel, the kernel's arguments in its order; ``dtype`` is the solver's scalar type (wp.float32 or
-# wp.float64), one thread per vertex.
+# One function per kernel, its arguments given by the kernel's parameter names (kernels/launch.py); ``dtype`` is the
+# solver's scalar type (wp.float32 or wp.float64), one thread per vertex.
 
 
-def _gather(kernel: str, vertex_offsets, vertex_slots, corner_forces, forces, dtype, device):
-    """The launch of the gather ``kernel`` ("gather_forces" or "gather_add"), which share their arguments."""
-    wp.launch(
-        vertex_kernels(dtype)[kernel],
-        dim=forces.shape[0],
-        inputs=[vertex_offsets, vertex_slots, corner_forces, forces],
-        device=device,
-    )
+def gather_forces(*, dtype, device, **arguments):
+    """forces[i] = sum of the corner vectors of vertex i [N] (overwrites; vertex_kernels' gather_forces)."""
+    launch(vertex_kernels(dtype)["gather_forces"], arguments["forces"].shape[0], device=device, **arguments)
 
 
-def gather_forces(vertex_offsets, vertex_slots, corner_forces, forces, *, dtype, device):
-    """forces[i] = sum of the corner vectors of vertex i [N] (overwrites)."""
-    _gather("gather_forces", vertex_offsets, vertex_slots, corner_forces, forces, dtype, device)
+def gather_add(*, dtype, device, **arguments):
+    """forces[i] += sum of the corner vectors of vertex i [N] (onto the loads already in ``forces``; vertex_kernels'
+    gather_add)."""
+    launch(vertex_kernels(dtype)["gather_add"], arguments["forces"].shape[0], device=device, **arguments)
 
 
-def gather_add(vertex_offsets, vertex_slots, corner_forces, forces, *, dtype, device):
-    """forces[i] += sum of the corner vectors of vertex i [N] (onto the loads already in ``forces``)."""
-    _gather("gather_add", vertex_offsets, vertex_slots, corner_forces, forces, dtype, device)
-
-
-def gather_kick(
-    vertex_offsets,
-    vertex_slots,
-    corner_forces,
-    inv_mass,
-    gravity,
-    damping,
-    dt,
-    point_condition,
-    point_kind,
-    cond_axes,
-    forces,
-    velocities,
-    accelerations,
-    *,
-    dtype,
-    device,
-):
+def gather_kick(*, dtype, device, **arguments):
     """gather_add, then the second half kick: a = f / m + g - c v [m/s^2], v += dt/2 a on the free axes (dt [s]; 0:
-    the accelerations only)."""
-    wp.launch(
-        vertex_kernels(dtype)["gather_kick"],
-        dim=forces.shape[0],
-        inputs=[
-            vertex_offsets,
-            vertex_slots,
-            corner_forces,
-            inv_mass,
-            gravity,
-            damping,
-            dt,
-            point_condition,
-            point_kind,
-            cond_axes,
-            forces,
-            velocities,
-            accelerations,
-        ],
-        device=device,
+    the accelerations only; vertex_kernels' gather_kick)."""
+    launch(vertex_kernels(dtype)["gather_kick"], arguments["forces"].shape[0], device=device, **arguments)
+
+
+def advance_displacements(*, dtype, device, **arguments):
+    """u += dt v [m] (dt [s]; vertex_kernels' advance_displacements)."""
+    launch(
+        vertex_kernels(dtype)["advance_displacements"], arguments["displacements"].shape[0], device=device, **arguments
     )
 
 
-def advance_displacements(displacements, velocities, dt, *, dtype, device):
-    """u += dt v [m] (dt [s])."""
-    wp.launch(
-        vertex_kernels(dtype)["advance_displacements"],
-        dim=displacements.shape[0],
-        inputs=[displacements, velocities, dt],
-        device=device,
-    )
-
-
-def constraint_bits(point_condition, active_kind, cond_axes, point_kind, constrained, *, dtype, device):
+def constraint_bits(*, dtype, device, **arguments):
     """The bit mask of each vertex's active condition into ``constrained`` (0 when free) and its kind into
-    ``point_kind``."""
-    wp.launch(
-        vertex_kernels(dtype)["constraint_bits"],
-        dim=constrained.shape[0],
-        inputs=[point_condition, active_kind, cond_axes, point_kind, constrained],
-        device=device,
-    )
+    ``point_kind`` (vertex_kernels' constraint_bits)."""
+    launch(vertex_kernels(dtype)["constraint_bits"], arguments["constrained"].shape[0], device=device, **arguments)
 
 
-def residual_forces(forces, mass, gravity, constrained, residual, *, dtype, device):
-    """residual_i = f_i + m_i g [N] on the free components (the static equilibrium residual)."""
-    wp.launch(
-        vertex_kernels(dtype)["residual_forces"],
-        dim=residual.shape[0],
-        inputs=[forces, mass, gravity, constrained, residual],
-        device=device,
-    )
+def residual_forces(*, dtype, device, **arguments):
+    """residual_i = f_i + m_i g [N] on the free components (the static equilibrium residual; vertex_kernels'
+    residual_forces)."""
+    launch(vertex_kernels(dtype)["residual_forces"], arguments["residual"].shape[0], device=device, **arguments)
 
 
-def apply_increment(displacements, du, *, dtype, device):
-    """u += du [m]."""
-    wp.launch(
-        vertex_kernels(dtype)["apply_increment"], dim=displacements.shape[0], inputs=[displacements, du], device=device
-    )
+def apply_increment(*, dtype, device, **arguments):
+    """u += du [m] (vertex_kernels' apply_increment)."""
+    launch(vertex_kernels(dtype)["apply_increment"], arguments["displacements"].shape[0], device=device, **arguments)
 
 
-def implicit_rhs(
-    forces,
-    mass,
-    velocities,
-    point_condition,
-    active_kind,
-    cond_axes,
-    active_velocity,
-    gravity,
-    dt,
-    rhs,
-    guess,
-    constrained,
-    point_kind,
-    *,
-    dtype,
-    device,
-):
+def implicit_rhs(*, dtype, device, **arguments):
     """The backward-Euler right-hand side b = m v + dt (f + m g) [N s] into ``rhs``, the initial guess of the new
     velocity [m/s] into ``guess``, the constraint bit masks and the vertex kinds (implicit_rhs_kernel)."""
-    wp.launch(
-        implicit_rhs_kernel(dtype),
-        dim=rhs.shape[0],
-        inputs=[
-            forces,
-            mass,
-            velocities,
-            point_condition,
-            active_kind,
-            cond_axes,
-            active_velocity,
-            gravity,
-            dt,
-            rhs,
-            guess,
-            constrained,
-            point_kind,
-        ],
-        device=device,
-    )
+    launch(implicit_rhs_kernel(dtype), arguments["rhs"].shape[0], device=device, **arguments)

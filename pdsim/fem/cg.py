@@ -25,6 +25,13 @@ from .model import FemModel
 CG_CHUNK = 256  # vertices per partial sum of the CG reductions
 
 
+def arrays_named(owner, *names: str) -> dict:
+    """The attributes ``names`` of ``owner`` as launch keyword arguments: for arrays that carry the names of the kernel
+    parameters they feed (kernels/launch.py), e.g. the CG work arrays of :class:`FemCg` or the condition arrays of the
+    kinematics."""
+    return {n: getattr(owner, n) for n in names}
+
+
 @dataclass
 class CgReport:
     """Outcome of one CG solve: iterations, final relative residual |r| / |b|, and whether it reached the tolerance."""
@@ -71,8 +78,7 @@ class FemCg:
         self.rotated = rotated
         self.tets_h = tets_h
         self.tets = tets
-        self.vertex_offsets = vertex_offsets
-        self.vertex_slots = vertex_slots
+        self.incidence = {"vertex_offsets": vertex_offsets, "vertex_slots": vertex_slots}  # keyed by kernel names
         n = self.vertex_count = vertex_count
         self.chunk = CG_CHUNK
         chunks = self.chunks = max(1, math.ceil(n / CG_CHUNK))
@@ -95,13 +101,11 @@ class FemCg:
         """Corner products (K_R u) per element corner into ``out_corner`` (the matrix-free operator)."""
         m = self.model
         ke.element_stiffness_product(
-            u,
-            self.tets,
-            m.dm_inv,
-            m.volume,
-            m.lame,
-            self.rotation,
-            out_corner,
+            u=u,
+            tets=self.tets,
+            **m.element_arrays,
+            rotation=self.rotation,
+            corner_out=out_corner,
             dtype=self.dtype,
             rotated=self.rotated,
             device=self.device,
@@ -120,91 +124,66 @@ class FemCg:
         tol = tolerance
         max_it = int(max_iterations)
         c_mass, c_stiff = dtype(c_mass), dtype(c_stiff)
+        # the arguments every operator and preconditioner launch shares (named like the kernels' parameters)
+        operator = {
+            "mass": op_mass,
+            "c_mass": c_mass,
+            "c_stiff": c_stiff,
+            "constrained": self.constrained,
+            "dtype": dtype,
+            "device": d,
+        }
         if assembled:
             bsr = self.assemble_stiffness()
-            kc.bsr_block_jacobi(
-                bsr["diagonal"],
-                bsr["values"],
-                op_mass,
-                c_mass,
-                c_stiff,
-                self.constrained,
-                self.precond,
-                dtype=dtype,
-                device=d,
-            )
+            kc.bsr_block_jacobi(diagonal=bsr["diagonal"], values=bsr["values"], precond=self.precond, **operator)
 
             def apply_operator(p):
                 """q = A p into ``q`` and the chunks' p . q into ``partial``."""
                 kc.bsr_operator_gather(
-                    bsr["row_offsets"],
-                    bsr["columns"],
-                    bsr["values"],
-                    op_mass,
-                    c_mass,
-                    c_stiff,
-                    self.constrained,
-                    p,
-                    ch,
-                    self.q,
-                    self.partial,
-                    dtype=dtype,
-                    device=d,
+                    row_offsets=bsr["row_offsets"],
+                    columns=bsr["columns"],
+                    values=bsr["values"],
+                    p=p,
+                    chunk=ch,
+                    q_out=self.q,
+                    partial=self.partial,
+                    **operator,
                 )
 
         else:
             kc.block_jacobi(
-                self.vertex_offsets,
-                self.vertex_slots,
-                mdl.dm_inv,
-                mdl.volume,
-                mdl.lame,
-                self.rotation,
-                op_mass,
-                c_mass,
-                c_stiff,
-                self.constrained,
-                self.precond,
-                dtype=dtype,
+                **mdl.element_arrays,
+                rotation=self.rotation,
+                precond=self.precond,
                 rotated=self.rotated,
-                device=d,
+                **self.incidence,
+                **operator,
             )
 
             def apply_operator(p):
                 """q = A p into ``q`` (the corner products first) and the chunks' p . q into ``partial``."""
                 self.apply_stiffness(p, self.corner_product)
                 kc.operator_gather(
-                    self.vertex_offsets,
-                    self.vertex_slots,
-                    self.corner_product,
-                    op_mass,
-                    c_mass,
-                    c_stiff,
-                    self.constrained,
-                    p,
-                    ch,
-                    self.q,
-                    self.partial,
-                    dtype=dtype,
-                    device=d,
+                    corner_products=self.corner_product,
+                    p=p,
+                    chunk=ch,
+                    q_out=self.q,
+                    partial=self.partial,
+                    **self.incidence,
+                    **operator,
                 )
 
         # q = A x0 (constrained components zeroed), r = b - q, z = P r, p = z
         apply_operator(self.x)
         kc.residual_init(
-            self.rhs,
-            self.q,
-            self.constrained,
-            self.precond,
-            ch,
-            self.r,
-            self.z,
-            self.p,
-            self.partial3,
+            b=self.rhs,
+            ax=self.q,
+            chunk=ch,
             dtype=dtype,
             device=d,
+            **arrays_named(self, "constrained", "precond", "r", "z", "p", "partial3"),
         )
-        kc.reduce_init(self.partial3, self.scalars, dtype=dtype, device=d)
+        kc.reduce_init(partial3=self.partial3, scalars=self.scalars, dtype=dtype, device=d)
         s = self.scalars.numpy()
         bb = float(s[kc.CG_BB])
         if bb == 0.0:
@@ -214,22 +193,15 @@ class FemCg:
         rr = float(s[kc.CG_RR])
         while rr > target and it < max_it:
             apply_operator(self.p)
-            kc.reduce_alpha(self.partial, self.scalars, dtype=dtype, device=d)
+            kc.reduce_alpha(partial=self.partial, scalars=self.scalars, dtype=dtype, device=d)
             kc.update_xr(
-                self.p,
-                self.q,
-                self.precond,
-                self.scalars,
-                ch,
-                self.x,
-                self.r,
-                self.z,
-                self.partial2,
+                chunk=ch,
                 dtype=dtype,
                 device=d,
+                **arrays_named(self, "p", "q", "precond", "scalars", "x", "r", "z", "partial2"),
             )
-            kc.reduce_beta(self.partial2, self.scalars, dtype=dtype, device=d)
-            kc.update_p(self.z, self.scalars, ch, self.p, chunks=chunks, dtype=dtype, device=d)
+            kc.reduce_beta(partial2=self.partial2, scalars=self.scalars, dtype=dtype, device=d)
+            kc.update_p(z=self.z, scalars=self.scalars, chunk=ch, p=self.p, chunks=chunks, dtype=dtype, device=d)
             it += 1
             rr = float(self.scalars.numpy()[kc.CG_RR])
         rel = math.sqrt(max(rr, 0.0) / bb)
@@ -269,19 +241,22 @@ class FemCg:
             }
         bsr = self._bsr
         ke.element_stiffness_blocks(
-            mdl.dm_inv,
-            mdl.volume,
-            mdl.lame,
-            self.rotation,
-            bsr["element_blocks"],
+            **mdl.element_arrays,
+            rotation=self.rotation,
+            blocks=bsr["element_blocks"],
             dtype=self.dtype,
             rotated=self.rotated,
             device=d,
         )
         kc.assemble_blocks(
-            bsr["contrib_offsets"], bsr["contrib_ids"], bsr["element_blocks"], bsr["values"], dtype=self.dtype, device=d
+            contrib_offsets=bsr["contrib_offsets"],
+            contrib_ids=bsr["contrib_ids"],
+            element_blocks=bsr["element_blocks"],
+            values=bsr["values"],
+            dtype=self.dtype,
+            device=d,
         )
         return bsr
 
 
-__all__ = ["CG_CHUNK", "CgReport", "FemCg"]
+__all__ = ["CG_CHUNK", "CgReport", "FemCg", "arrays_named"]

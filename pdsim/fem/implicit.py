@@ -13,6 +13,7 @@ from __future__ import annotations
 import warp as wp
 
 from ..kernels.fem import solver as ks
+from .cg import arrays_named
 from .operators import FemOperators
 
 
@@ -47,26 +48,22 @@ class BackwardEuler:
         s.loads_into_force(t + dt)
         s.add_element_forces()
         ks.implicit_rhs(
-            s.force,
-            s.lumped_mass,
-            kin.v,
-            kin.point_condition,
-            kin.active_kind,
-            kin.cond_axes,
-            kin.active_velocity,
-            s.gravity,
-            s.dtype(dt),
-            cg.rhs,
-            cg.x,
-            cg.constrained,
-            kin.point_kind,
+            forces=s.force,
+            mass=s.lumped_mass,
+            velocities=kin.v,
+            **arrays_named(kin, "point_condition", "active_kind", "cond_axes", "active_velocity", "point_kind"),
+            gravity=s.gravity,
+            dt=s.dtype(dt),
+            rhs=cg.rhs,
+            guess=cg.x,
+            constrained=cg.constrained,
             dtype=s.dtype,
             device=d,
         )
         report = s.cg_solve(self.operator_mass(dt), 1.0, dt * dt)
         s.cg_reports = [report]
         wp.copy(kin.v, cg.x)
-        ks.advance_displacements(kin.u, kin.v, s.dtype(dt), dtype=s.dtype, device=d)
+        ks.advance_displacements(displacements=kin.u, velocities=kin.v, dt=s.dtype(dt), dtype=s.dtype, device=d)
         s.apply_colliders(t + dt, dt)
 
 

@@ -85,8 +85,9 @@ class FemModel:
     ``fracture_energy_h`` (G_c per element [J/m^2], None when no body fractures),
     ``surface_face_ids`` (the boundary faces 4 e + k of the input meshes: every other boundary face is a crack face),
     ``widths`` (half the mean edge length of each body [m], the PointsView widths), ``explicit_dt`` (0.5 h_min / c_p
-    [s]); Warp arrays ``dm_inv``, ``volume``, ``lame`` ((lambda, mu) per element [Pa]) and ``plastic_params`` ((yield
-    strain, creep, max strain) per element; None without plasticity); ``render``: a :class:`RenderEmbedding` per body
+    [s]); Warp arrays ``dm_inv``, ``volume``, ``lame`` ((lambda, mu) per element [Pa]; the three also as the dict
+    ``element_arrays``, keyed by the kernels' parameter names) and ``plastic_params`` ((yield strain, creep, max strain)
+    per element; None without plasticity); ``render``: a :class:`RenderEmbedding` per body
     with a render mesh.
 
     Input vertex data (the solver's initial topology): ``rest`` (world rest positions [m]), ``rest_local64`` (local
@@ -138,6 +139,8 @@ class FemModel:
         self.dm_inv = wp.array(dm_inv.astype(f), dtype=mat33, device=dev)
         self.volume = wp.array(self.volume_h.astype(f), dtype=dtype, device=dev)
         self.lame = wp.array(np.stack([lam, mu], axis=1).astype(f), dtype=vec2, device=dev)
+        # the element material arrays under the element kernels' parameter names (kernels/fem/elements.py)
+        self.element_arrays = {"dm_inv": self.dm_inv, "volume": self.volume, "lame": self.lame}
         self.plastic_params = None
         if self.plastic:
             inf = np.inf

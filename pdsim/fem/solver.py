@@ -358,6 +358,8 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
         offsets, slots = vertex_incidence(tets, n)
         self._vertex_offsets = wp.array(offsets.astype(np.int32), dtype=wp.int32, device=dev)
         self._vertex_slots = wp.array(slots.astype(np.int32), dtype=wp.int32, device=dev)
+        # the CSR incidence list under the vertex kernels' parameter names (kernels/fem/solver.py)
+        self._incidence = {"vertex_offsets": self._vertex_offsets, "vertex_slots": self._vertex_slots}
         mass = lumped_masses(self._rest_local64_h, tets, self.model.density_h)
         self.lumped_mass_host = mass
         self.vertex_damping_host = np.asarray([b.damping for b in self.bodies], dtype=np.float64)[self._vertex_body_h]
@@ -502,7 +504,11 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
         self.element_forces(0.0, u)
         out = wp.zeros(self.point_count, dtype=self.vec3, device=self.device)
         ks.gather_forces(
-            self._vertex_offsets, self._vertex_slots, self._corner, out, dtype=self.dtype, device=self.device
+            **self._incidence,
+            corner_forces=self._corner,
+            forces=out,
+            dtype=self.dtype,
+            device=self.device,
         )
         self.reset_over_count()
         return out.numpy().astype(np.float64)
@@ -513,11 +519,9 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
         m = self.model
         blocks = wp.zeros(16 * self.element_count, dtype=self.mat33, device=self.device)
         ke.element_stiffness_blocks(
-            m.dm_inv,
-            m.volume,
-            m.lame,
-            self._rotation,
-            blocks,
+            **m.element_arrays,
+            rotation=self._rotation,
+            blocks=blocks,
             dtype=self.dtype,
             rotated=self._rotated,
             device=self.device,
@@ -542,13 +546,11 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
         """Elastic energy sum_e V (mu |eps_el|^2 + lambda/2 tr(eps_el)^2) [J] at the current displacements."""
         m = self.model
         ke.element_energy(
-            self.kin.u,
-            self._tets,
-            m.dm_inv,
-            m.volume,
-            m.lame,
-            self._plastic_strain,
-            self._energy,
+            displacements=self.kin.u,
+            tets=self._tets,
+            **m.element_arrays,
+            plastic_strain=self._plastic_strain,
+            energy=self._energy,
             dtype=self.dtype,
             measure=self._measure_id,
             plastic=self.plastic,

@@ -17,6 +17,7 @@ import warp as wp
 from ..checks import check_range
 from ..errors import ParameterError
 from ..kernels.fem import solver as ks
+from .cg import arrays_named
 from .operators import FemOperators
 
 
@@ -53,7 +54,10 @@ def solve_static(
         if kin.condition_count:
             kin.evaluate_conditions(t)
         ks.constraint_bits(
-            kin.point_condition, kin.active_kind, kin.cond_axes, kin.point_kind, cg.constrained, dtype=dtype, device=d
+            **arrays_named(kin, "point_condition", "active_kind", "cond_axes", "point_kind"),
+            constrained=cg.constrained,
+            dtype=dtype,
+            device=d,
         )
         bits = cg.constrained.numpy()
     else:
@@ -75,7 +79,15 @@ def solve_static(
         s.element_forces(0.0)
         s.loads_into_force(t)
         s.add_element_forces()
-        ks.residual_forces(s.force, s.lumped_mass, s.gravity, cg.constrained, cg.rhs, dtype=dtype, device=d)
+        ks.residual_forces(
+            forces=s.force,
+            mass=s.lumped_mass,
+            gravity=s.gravity,
+            constrained=cg.constrained,
+            residual=cg.rhs,
+            dtype=dtype,
+            device=d,
+        )
         return float(np.linalg.norm(cg.rhs.numpy().astype(np.float64)))
 
     try:
@@ -86,7 +98,7 @@ def solve_static(
                 break
             cg.x.zero_()
             reports.append(s.cg_solve(zero_mass, 0.0, 1.0, tolerance=cg_tolerance, max_iterations=cg_max_iterations))
-            ks.apply_increment(kin.u, cg.x, dtype=dtype, device=d)
+            ks.apply_increment(displacements=kin.u, du=cg.x, dtype=dtype, device=d)
             du = float(np.linalg.norm(cg.x.numpy().astype(np.float64)))
             u = float(np.linalg.norm(kin.displacements() - u_start))
             res = residual_norm()

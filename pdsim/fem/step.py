@@ -12,7 +12,7 @@ from ..checks import check_range
 from ..errors import ParameterError
 from ..kernels.fem import elements as ke
 from ..kernels.fem import solver as ks
-from .cg import CgReport
+from .cg import CgReport, arrays_named
 from .static import StaticSolveReport, solve_static
 
 
@@ -39,20 +39,18 @@ class FemStep:
         if self.fracture:
             self._over_count.zero_()
         ke.element_forces(
-            self.kin.u if displacements is None else displacements,
-            self._tets,
-            m.dm_inv,
-            m.volume,
-            m.lame,
-            m.plastic_params,
-            self._plastic_strain,
-            self.dtype(dt),
-            self._strength,
-            self._principal,
-            self._over_count,
-            self._rotation_q,
-            self._rotation,
-            self._corner,
+            displacements=self.kin.u if displacements is None else displacements,
+            tets=self._tets,
+            **m.element_arrays,
+            plastic_params=m.plastic_params,
+            plastic_strain=self._plastic_strain,
+            dt=self.dtype(dt),
+            strength=self._strength,
+            principal=self._principal,
+            over_count=self._over_count,
+            rotation_q=self._rotation_q,
+            rotation=self._rotation,
+            corner_forces=self._corner,
             dtype=self.dtype,
             measure=self._measure_id,
             plastic=self.plastic,
@@ -68,7 +66,11 @@ class FemStep:
     def add_element_forces(self) -> None:
         """``force`` += the element corner forces gathered per vertex [N]."""
         ks.gather_add(
-            self._vertex_offsets, self._vertex_slots, self._corner, self.force, dtype=self.dtype, device=self.device
+            **self._incidence,
+            corner_forces=self._corner,
+            forces=self.force,
+            dtype=self.dtype,
+            device=self.device,
         )
 
     def _gather_kick(self, dt: float) -> None:
@@ -76,19 +78,15 @@ class FemStep:
         accelerations a = f / m + g - c v only)."""
         kin = self.kin
         ks.gather_kick(
-            self._vertex_offsets,
-            self._vertex_slots,
-            self._corner,
-            self.inv_mass,
-            self.gravity,
-            kin.damping,
-            self.dtype(dt),
-            kin.point_condition,
-            kin.point_kind,
-            kin.cond_axes,
-            self.force,
-            kin.v,
-            kin.a,
+            **self._incidence,
+            corner_forces=self._corner,
+            inv_mass=self.inv_mass,
+            gravity=self.gravity,
+            dt=self.dtype(dt),
+            **arrays_named(kin, "damping", "point_condition", "point_kind", "cond_axes"),
+            forces=self.force,
+            velocities=kin.v,
+            accelerations=kin.a,
             dtype=self.dtype,
             device=self.device,
         )

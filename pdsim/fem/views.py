@@ -244,7 +244,15 @@ class FemViews:
             )
         for body_index, elem, w, faces, rest_points, out_u, out_v in self.model.render:
             ke.embed_points(
-                self.kin.u, self.kin.v, self._tets, elem, w, out_u, out_v, dtype=self.dtype, device=self.device
+                displacements=self.kin.u,
+                velocities=self.kin.v,
+                tets=self._tets,
+                element=elem,
+                weights=w,
+                out_displacement=out_u,
+                out_velocity=out_v,
+                dtype=self.dtype,
+                device=self.device,
             )
             out.append(
                 MeshView(
