@@ -142,6 +142,11 @@ def _rotation_vector(q: np.ndarray) -> np.ndarray:
     return q[:3] * (2.0 * math.atan2(s, q[3]) / s)
 
 
+def rotation_between(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """Rotation vector [rad] (world axes) that turns the orientation q0 into q1 (unit quaternions (x, y, z, w))."""
+    return _rotation_vector(_quat_mul(q1, q0 * np.array([-1.0, -1.0, -1.0, 1.0])))
+
+
 def _vec3(name: str, value) -> np.ndarray:
     a = np.asarray(value, dtype=np.float64)
     if a.shape != (3,) or not np.all(np.isfinite(a)):
@@ -435,7 +440,7 @@ class RigidProjectile(Collider):
         self._last = (float(time), p1, q1)
         if dt > 0.0:
             v = (p1 - p0) / dt
-            w = _rotation_vector(_quat_mul(q1, q0 * np.array([-1.0, -1.0, -1.0, 1.0]))) / dt
+            w = rotation_between(q0, q1) / dt
         else:
             v = w = np.zeros(3)
         sweep = float(np.linalg.norm(p1 - p0) + np.linalg.norm(w) * dt * self._bounding_radius())

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import warp as wp
 
-from .colliders import _quat_mul, _rotation_vector
+from .colliders import rotation_between
 from .solver import PointSolver
 from .watchdog import TOTAL_TOLERANCE, Watchdog
 
@@ -215,7 +215,7 @@ def surface_speed(projectiles):
         for c in projectiles:
             p0, q0 = c.pose(t - dt)
             p1, q1 = c.pose(t)
-            w = _rotation_vector(_quat_mul(q1, q0 * np.array([-1.0, -1.0, -1.0, 1.0]))) / dt
+            w = rotation_between(q0, q1) / dt
             radius = float(c._bounding_radius()) if hasattr(c, "_bounding_radius") else 0.0
             best = max(best, float(np.linalg.norm(p1 - p0)) / dt + float(np.linalg.norm(w)) * radius)
         return best

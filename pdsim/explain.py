@@ -28,7 +28,7 @@ from .errors import ParameterError
 from .run import method_contact, rest_bounds, speed_limit
 from .scene_script import load_scene_script
 from .solver import PointSolver
-from .timestep import frame_steps
+from .timestep import frame_steps, projectile_step_limit
 
 __all__ = ["capture_launches", "explain_scene", "scene_plan"]
 
@@ -282,7 +282,8 @@ def scene_plan(
     build_seconds = time.perf_counter() - t0
     stable_dt = min(s.stable_time_step() for s in solvers)
     frame_dt = float(scene.frame_time)
-    steps = frame_steps(frame_dt, stable_dt, scene.time_step_safety, dt=dt, dt_factor=dt_factor)
+    travel = projectile_step_limit(scene, scene.frames)
+    steps = frame_steps(frame_dt, stable_dt, scene.time_step_safety, dt=dt, dt_factor=dt_factor, travel_limit=travel)
     substeps, step_dt = steps.substeps, steps.dt
     limit = speed_limit(work, solvers)
 

@@ -45,7 +45,7 @@ from .errors import GeometryError, ParameterError
 from .fem.mesh import quality_problem
 from .geometry import SolidShape
 from .sampling import points_inside
-from .timestep import MAX_SUBSTEPS_PER_FRAME, chosen_step, estimated_stable_step
+from .timestep import MAX_SUBSTEPS_PER_FRAME, chosen_step, estimated_stable_step, projectile_step_limit
 
 MAX_INDEX = 2**31 - 1  # particles, vertices, bonds and elements are indexed with int32 on the device
 
@@ -263,7 +263,7 @@ def _check_float32(body) -> None:
         )
 
 
-def _check_substeps(scene, dt, report: PreflightReport, dt_factor: float = 1.0) -> None:
+def _check_substeps(scene, dt, report: PreflightReport, frames: int, dt_factor: float = 1.0) -> None:
     frame_time = float(scene.frame_time)
     steps = [(estimated_stable_step(b), b) for b in scene.bodies]
     dt_est, binding = min(steps, key=lambda s: s[0]) if steps else (math.inf, None)
@@ -280,7 +280,8 @@ def _check_substeps(scene, dt, report: PreflightReport, dt_factor: float = 1.0) 
             )
         report.dt = dt
     else:
-        report.dt = chosen_step(frame_time, dt_est, scene.time_step_safety, dt_factor=dt_factor)
+        travel = projectile_step_limit(scene, frames)
+        report.dt = chosen_step(frame_time, dt_est, scene.time_step_safety, dt_factor=dt_factor, travel_limit=travel)
         substeps = frame_time / report.dt if report.dt > 0.0 else math.inf
         if substeps > MAX_SUBSTEPS_PER_FRAME and dt_factor < 1.0 and substeps * dt_factor <= MAX_SUBSTEPS_PER_FRAME:
             raise ParameterError(
@@ -528,7 +529,7 @@ def preflight(
     if device is None:
         device = default_device()
     _check_memory(scene, str(device), report)
-    _check_substeps(scene, dt, report, check_range("dt_factor", dt_factor, 0.0, None))
+    _check_substeps(scene, dt, report, frame_count, check_range("dt_factor", dt_factor, 0.0, None))
     _check_fem_quality(scene)
     _check_ground(scene)
     _check_overlaps(scene, str(device))

@@ -31,7 +31,7 @@ from .output.usd import UsdCache
 from .output.writer import ViewWriter
 from .preflight import preflight
 from .solver import PointSolver
-from .timestep import frame_steps
+from .timestep import frame_steps, projectile_step_limit
 
 
 @dataclass
@@ -216,8 +216,15 @@ def run_scene(
     preflight(scene, device=device, out=out, dt=options.dt, frames=options.frames)  # before anything is allocated
     solvers = scene.build_solvers(device=device, check=False)
     stable_dt = min(s.stable_time_step() for s in solvers)
+    travel = projectile_step_limit(scene, options.frames)
     steps = frame_steps(
-        scene.frame_time, stable_dt, scene.time_step_safety, dt=options.dt, dt_factor=options.dt_factor, warn=True
+        scene.frame_time,
+        stable_dt,
+        scene.time_step_safety,
+        dt=options.dt,
+        dt_factor=options.dt_factor,
+        travel_limit=travel,
+        warn=True,
     )
     limit = speed_limit(scene, solvers)
     bounds = rest_bounds(scene)

@@ -2,8 +2,11 @@
 checks (pdsim.preflight) all take the step from here.
 
 The rule: the automatic step is ``time_step_safety`` x the smallest stable step of the scene's solvers, times the
-user's ``dt_factor``, and at most one frame; a user ``dt`` replaces it. The frame is then cut into
-``substeps = ceil(frame_time / step)`` equal steps, so the step used is ``frame_time / substeps`` <= the chosen step.
+user's ``dt_factor``, at most the step in which the fastest projectile's surface travels PROJECTILE_TRAVEL spacings
+of the finest body (so that no projectile passes through a body between two steps), and at most one frame; a user
+``dt`` replaces it (with a warning when it is past the stable estimate or the projectiles' limit). The frame is then
+cut into ``substeps = ceil(frame_time / step)`` equal steps, so the step used is ``frame_time / substeps`` <= the
+chosen step.
 
 Before the solvers exist (the pre-flight), the stable step is estimated from the bodies: 0.3 m h / c_p for a
 peridynamic body (m = horizon / spacing), 0.5 h_min / c_p for an FEM body (times ``implicit_step_ratio`` with the
@@ -12,15 +15,20 @@ implicit integrator), no limit for the lattice.
 
 from __future__ import annotations
 
+import itertools
 import math
 import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
+from .colliders import RigidProjectile, rotation_between
 from .fem.mesh import element_heights
 
 MAX_SUBSTEPS_PER_FRAME = 10_000_000
+# most a projectile's surface may travel in one automatic step [spacings of the finest body]: a particle a projectile
+# reaches is then inside it by at most half a spacing, and pushed out, at the step it reaches it
+PROJECTILE_TRAVEL = 0.5
 # Silling-Askari step ~ 0.3 m h / c_p (measured 0.55 / 0.92 / 1.76 h / c_p at m = 1.5 / 3 / 6: docs/stability.md)
 PD_STEP_COEFFICIENT = 0.3
 
@@ -35,18 +43,22 @@ class FrameSteps:
     stable_dt: float
     automatic: float
 
+    travel_limit: float = math.inf  # the projectiles' limit on the automatic step [s] (inf without projectiles)
+
     @property
     def factor(self) -> float:
         """The step used over the automatic one (1 at the automatic step)."""
         return self.dt / self.automatic if self.automatic > 0.0 and math.isfinite(self.automatic) else 1.0
 
 
-def chosen_step(frame_time: float, stable_dt: float, safety: float, *, dt=None, dt_factor: float = 1.0) -> float:
+def chosen_step(
+    frame_time: float, stable_dt: float, safety: float, *, dt=None, dt_factor: float = 1.0, travel_limit=math.inf
+) -> float:
     """The step [s] before the frame is cut into substeps: ``dt`` when given, else
-    ``min(dt_factor * safety * stable_dt, frame_time)``."""
+    ``min(dt_factor * safety * stable_dt, travel_limit, frame_time)``."""
     if dt is not None:
         return float(dt)
-    return min(dt_factor * (safety * stable_dt), frame_time)
+    return min(dt_factor * (safety * stable_dt), travel_limit, frame_time)
 
 
 def substeps_for(frame_time: float, step: float) -> int:
@@ -55,13 +67,20 @@ def substeps_for(frame_time: float, step: float) -> int:
 
 
 def frame_steps(
-    frame_time: float, stable_dt: float, safety: float, *, dt=None, dt_factor: float = 1.0, warn: bool = False
+    frame_time: float,
+    stable_dt: float,
+    safety: float,
+    *,
+    dt=None,
+    dt_factor: float = 1.0,
+    travel_limit: float = math.inf,
+    warn: bool = False,
 ) -> FrameSteps:
-    """The rule (module docstring) for a frame of ``frame_time`` [s]; ``warn`` warns when the step is past the
-    automatic one (``dt_factor`` > 1) or a user ``dt`` is past the stable estimate (the watchdog still catches a
-    divergence)."""
+    """The rule (module docstring) for a frame of ``frame_time`` [s]; ``travel_limit`` [s] is the projectiles' limit
+    (:func:`projectile_step_limit`). ``warn`` warns when the step is past the automatic one (``dt_factor`` > 1), or a
+    user ``dt`` is past the stable estimate (the watchdog still catches a divergence) or the projectiles' limit."""
     automatic = safety * stable_dt
-    step = chosen_step(frame_time, stable_dt, safety, dt=dt, dt_factor=dt_factor)
+    step = chosen_step(frame_time, stable_dt, safety, dt=dt, dt_factor=dt_factor, travel_limit=travel_limit)
     if warn and dt is None and dt_factor > 1.0:
         warnings.warn(
             f"dt_factor={dt_factor:g}: the time step is {dt_factor:g}x the automatic one ({automatic:.3g} s, "
@@ -74,8 +93,58 @@ def frame_steps(
             "divergence every few steps",
             stacklevel=4,
         )
+    if warn and dt is not None and dt > travel_limit:
+        warnings.warn(
+            f"time step {dt:.3g} s lets a projectile travel more than {PROJECTILE_TRAVEL:g} spacings per step (at most "
+            f"{travel_limit:.3g} s keeps it within): it can pass through thin parts without touching them",
+            stacklevel=4,
+        )
     substeps = substeps_for(frame_time, step)
-    return FrameSteps(dt=frame_time / substeps, substeps=substeps, stable_dt=stable_dt, automatic=automatic)
+    return FrameSteps(frame_time / substeps, substeps, stable_dt, automatic, travel_limit)
+
+
+def finest_spacing(bodies) -> float:
+    """The smallest particle spacing (peridynamics) or element height (FEM) [m] of ``bodies``; inf without such
+    bodies."""
+    sizes = [math.inf]
+    for b in bodies:
+        method = getattr(type(b), "method", "")
+        if method == "peridynamics":
+            sizes.append(float(b.spacing))
+        elif method == "fem":
+            sizes.append(float(np.min(element_heights(b.mesh.vertices, b.mesh.tets))))
+    return min(sizes)
+
+
+def projectile_speed(projectile, duration: float) -> float:
+    """The largest speed [m/s] of a projectile's surface over [0, ``duration``] s: its origin's speed plus its spin
+    times its bounding radius. Ballistic motion: at the ends of the interval (the speed of a constant acceleration is
+    largest there); a path: finite differences over max(256, 1 per 0.1 ms) samples."""
+    radius = float(projectile._bounding_radius())
+    if projectile.path is None:
+        ends = [projectile.velocity, projectile.velocity + projectile.gravity * duration]
+        spin = float(np.linalg.norm(projectile.angular_velocity))
+        return max(float(np.linalg.norm(v)) for v in ends) + spin * radius
+    count = int(min(max(256, duration / 1.0e-4), 100_000))
+    times = np.linspace(0.0, duration, count + 1)
+    poses = [projectile.pose(t) for t in times]
+    step = duration / count
+    speed = 0.0
+    for (p0, q0), (p1, q1) in itertools.pairwise(poses):
+        spin = float(np.linalg.norm(rotation_between(q0, q1))) / step
+        speed = max(speed, float(np.linalg.norm(p1 - p0)) / step + spin * radius)
+    return speed
+
+
+def projectile_step_limit(scene, frames: int) -> float:
+    """The largest step [s] at which no projectile's surface travels more than PROJECTILE_TRAVEL spacings of the
+    scene's finest body in one step over the ``frames`` frames; inf without projectiles or moving ones."""
+    projectiles = [c for c in scene.colliders if isinstance(c, RigidProjectile)]
+    h = finest_spacing(scene.bodies)
+    if not projectiles or not math.isfinite(h):
+        return math.inf
+    speed = max(projectile_speed(c, frames * float(scene.frame_time)) for c in projectiles)
+    return PROJECTILE_TRAVEL * h / speed if speed > 0.0 else math.inf
 
 
 def estimated_stable_step(body) -> float:
