@@ -96,17 +96,17 @@ class GroundPlane(Collider):
             mass = self._no_mass[key]
         n = np.asarray(self.normal, dtype=np.float64)
         kc.push_out_of_plane(
-            rest,
-            displacements,
-            velocities,
-            kind,
-            radius,
-            n,
-            self.offset - n @ self.origin,
-            self.friction,
-            mass,
-            self._impulse[key],
-            rest.device,
+            rest=rest,
+            displacements=displacements,
+            velocities=velocities,
+            kind=kind,
+            radius=radius,
+            normal=n,
+            offset=self.offset - n @ self.origin,
+            friction=self.friction,
+            mass=mass,
+            impulse=self._impulse[key],
+            device=rest.device,
         )
 
 
@@ -308,7 +308,15 @@ class MeshCollider(Collider):
             motion.write(self.center - self.origin, IDENTITY_ROTATION, np.zeros(3), np.zeros(3), band)
             self._motions[band] = motion
         kc.push_out_of_mesh(
-            rest, displacements, velocities, kind, radius, self._mesh.mesh.id, motion.array, self.friction, self.device
+            rest=rest,
+            displacements=displacements,
+            velocities=velocities,
+            kind=kind,
+            radius=radius,
+            mesh=self._mesh.mesh.id,
+            body=motion.array,
+            friction=self.friction,
+            device=self.device,
         )
 
 
@@ -446,14 +454,17 @@ class RigidProjectile(Collider):
 
     def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
         self._update_motion(time, dt, band=self._band(radius))
-        self._push(rest, displacements, velocities, radius, kind)
+        self._push(
+            {"rest": rest, "displacements": displacements, "velocities": velocities, "kind": kind, "radius": radius}
+        )
 
     def _band(self, radius) -> float:
         """Detection depth below the surface [m] (meshes; 0 for the analytic shapes), given the solver's radii."""
         return 0.0
 
-    def _push(self, rest, displacements, velocities, radius, kind) -> None:
-        """Launches the shape's collision kernel with the step's motion (``self._motion``)."""
+    def _push(self, points: dict) -> None:
+        """Launches the shape's collision kernel with the step's motion (``self._motion``) on ``points``, the
+        solver's arrays by kernel parameter name (rest, displacements, velocities, kind, radius)."""
         raise NotImplementedError
 
 
@@ -472,17 +483,13 @@ class SphereProjectile(RigidProjectile):
         m = trimesh.creation.icosphere(subdivisions=3, radius=self.sphere_radius)
         return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int32)
 
-    def _push(self, rest, displacements, velocities, radius, kind) -> None:
+    def _push(self, points: dict) -> None:
         kc.push_out_of_sphere(
-            rest,
-            displacements,
-            velocities,
-            kind,
-            radius,
-            self._motion.array,
-            self.sphere_radius,
-            self.friction,
-            self.device,
+            **points,
+            body=self._motion.array,
+            sphere_radius=self.sphere_radius,
+            friction=self.friction,
+            device=self.device,
         )
 
 
@@ -505,17 +512,13 @@ class BoxProjectile(RigidProjectile):
         m = trimesh.creation.box(extents=2.0 * self.half_extents)
         return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int32)
 
-    def _push(self, rest, displacements, velocities, radius, kind) -> None:
+    def _push(self, points: dict) -> None:
         kc.push_out_of_box(
-            rest,
-            displacements,
-            velocities,
-            kind,
-            radius,
-            self._motion.array,
-            self.half_extents,
-            self.friction,
-            self.device,
+            **points,
+            body=self._motion.array,
+            half_extents=self.half_extents,
+            friction=self.friction,
+            device=self.device,
         )
 
 
@@ -549,17 +552,9 @@ class MeshProjectile(RigidProjectile):
     def _band(self, radius) -> float:
         return _mesh_band(self.band, self._radius_bound, radius)
 
-    def _push(self, rest, displacements, velocities, radius, kind) -> None:
+    def _push(self, points: dict) -> None:
         kc.push_out_of_mesh(
-            rest,
-            displacements,
-            velocities,
-            kind,
-            radius,
-            self._mesh.mesh.id,
-            self._motion.array,
-            self.friction,
-            self.device,
+            **points, mesh=self._mesh.mesh.id, body=self._motion.array, friction=self.friction, device=self.device
         )
 
 
