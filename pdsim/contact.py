@@ -22,6 +22,7 @@ import warp as wp
 from .checks import check_range
 from .errors import ParameterError
 from .kernels import contact as kc
+from .kinematics import by_name
 
 CONTACT_NEIGHBOR_BUDGET = 12
 """Contact modulus calibration: C_k (2 r_k)^3 = S_k / 12, so 12 simultaneous contacts (the kissing number of equal
@@ -210,13 +211,10 @@ class ParticleContact:
         grid.build(self.rest_positions, cell)
         kc.mark_exposed_at_rest(
             grid=grid.id,
-            rest_positions=self.rest_positions,
-            body_id=self.body_id,
-            radius=self.radius,
             shield_factor=SHIELD_FACTOR,
             full_count=SHIELD_COUNT,
-            exposed=self.exposed,
             device=self.device,
+            **by_name(self, "rest_positions", "body_id", "radius", "exposed"),
         )
 
     def update_exposure(self, family_offsets, family_neighbors, bond_alive):
@@ -231,12 +229,10 @@ class ParticleContact:
             family_offsets=family_offsets,
             family_neighbors=family_neighbors,
             bond_alive=bond_alive,
-            rest_positions=self.rest_positions,
-            radius=self.radius,
             shield_factor=SHIELD_FACTOR,
             full_count=SHIELD_COUNT,
-            exposed=self.exposed,
             device=self.device,
+            **by_name(self, "rest_positions", "radius", "exposed"),
         )
 
     def exposed_mask(self) -> np.ndarray:
@@ -281,20 +277,10 @@ class ParticleContact:
         self._build_grid(positions)
         kc.particle_contact_forces(
             self.shield_interior,
-            grid=self.grid.id,
             positions=positions,
             velocities=velocities,
-            rest_positions=self.rest_positions,
-            body_id=self.body_id,
-            radius=self.radius,
-            volume=self.volume,
             mass=self.mass,
-            modulus=self.modulus,
             kind=self._all_free if kind is None else kind,
-            exposed=self.exposed,
-            query_radius=self.query_radius,
-            distance_factor=self.distance_factor,
-            bonded_factor=self.bonded_factor,
             damping_ratio=self.damping_ratio,
             friction=self.friction,
             floor_factor=self.floor_factor,
@@ -305,11 +291,21 @@ class ParticleContact:
             velocity_delta=self._velocity_delta,
             scale_out=self._scale_out,
             device=self.device,
+            **self._pair_arguments(),
         )
         wp.copy(self._scale_next, self._scale)
         wp.copy(self._scale, self._scale_out)
         if self.floor_factor > 0.0:
             kc.hard_floor(displacements, velocities, self._position_delta, self._velocity_delta, self.device)
+
+    def _pair_arguments(self) -> dict:
+        """The arguments the force and energy kernels share by name: the hash grid, the particles' fixed arrays and
+        the contact distance's settings (the two kernels visit the same pairs)."""
+        return {
+            "grid": self.grid.id,
+            **by_name(self, "rest_positions", "body_id", "radius", "volume", "modulus", "exposed"),
+            **by_name(self, "query_radius", "distance_factor", "bonded_factor"),
+        }
 
     def _build_grid(self, positions):
         cell = GRID_CELL_FACTOR * self.query_radius
@@ -324,22 +320,13 @@ class ParticleContact:
         self._build_grid(positions)
         kc.particle_contact_energies(
             self.shield_interior,
-            grid=self.grid.id,
             positions=positions,
-            rest_positions=self.rest_positions,
-            body_id=self.body_id,
-            radius=self.radius,
-            volume=self.volume,
-            modulus=self.modulus,
-            exposed=self.exposed,
-            query_radius=self.query_radius,
-            distance_factor=self.distance_factor,
-            bonded_factor=self.bonded_factor,
             scale=self._scale_next,  # after apply(): the scale its force pass applied (the forces' potential)
             energy=self._energy,
             row_sum=self._row_sum,
             contact_count=self._count,
             device=self.device,
+            **self._pair_arguments(),
         )
         return ContactDiagnostics(
             energy=self._energy.numpy().astype(np.float64),

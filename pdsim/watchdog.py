@@ -24,6 +24,7 @@ from .kernels.watchdog import (
     WATCH_STRAIN_MIN,
     WATCH_VMAX,
 )
+from .kinematics import by_name
 
 STRAIN_EVERY = 8  # the strain pass (a pass over the bonds or elements) runs every 8th check and at frame ends
 
@@ -220,16 +221,12 @@ class Watchdog:
         if kin.load_count:
             kw.load_work(
                 k,
-                load_point=kin.load_point,
-                load_index=kin.load_index,
-                load_force=kin.load_force,
-                load_scale=kin.load_scale,
-                force_to_newton=kin.force_to_newton,
                 velocities=kin.v,
                 dt=dt,
                 count=kin.load_entry_count,
                 acc=self.acc,
                 device=self.device,
+                **by_name(kin, "load_point", "load_index", "load_force", "load_scale", "force_to_newton"),
             )
         if self._before is not None and self._before.shape == kin.v.shape and n:
             slot = self._speed_slot(self._time, dt)
@@ -302,17 +299,12 @@ class Watchdog:
             kw.watchdog_kernels(kin.dtype),
             points=held,
             force=force,
-            force_to_newton=kin.force_to_newton,
-            mass=kin.mass,
-            gravity=kin.gravity,
-            point_condition=kin.point_condition,
-            active_kind=kin.active_kind,
-            cond_axes=kin.cond_axes,
-            active_velocity=kin.active_velocity,
             dt=dt,
             count=int(held.shape[0]),
             acc=self.acc,
             device=self.device,
+            **by_name(kin, "force_to_newton", "mass", "gravity"),
+            **by_name(kin, "point_condition", "active_kind", "cond_axes", "active_velocity"),
         )
 
     # -- the check ---------------------------------------------------------------------------------------------------
@@ -357,14 +349,10 @@ class Watchdog:
             kw.watchdog_kernels(kin.dtype),
             displacements=kin.u,
             velocities=kin.v,
-            mass=kin.mass,
-            point_condition=kin.point_condition,
-            point_kind=kin.point_kind,
-            cond_axes=kin.cond_axes,
-            gravity=kin.gravity,
             count=kin.point_count,
             acc=self.acc,
             device=self.device,
+            **by_name(kin, "mass", "point_condition", "point_kind", "cond_axes", "gravity"),
         )
         strain = None
         if self.full_check or self.checks % STRAIN_EVERY == 0:
