@@ -456,15 +456,17 @@ class RigidProjectile(Collider):
         self._update_motion(time, dt, band=self._band(radius))
         self._push(
             {"rest": rest, "displacements": displacements, "velocities": velocities, "kind": kind, "radius": radius}
+            | {"body": self._motion.array, "friction": self.friction, "device": self.device}
         )
 
     def _band(self, radius) -> float:
         """Detection depth below the surface [m] (meshes; 0 for the analytic shapes), given the solver's radii."""
         return 0.0
 
-    def _push(self, points: dict) -> None:
-        """Launches the shape's collision kernel with the step's motion (``self._motion``) on ``points``, the
-        solver's arrays by kernel parameter name (rest, displacements, velocities, kind, radius)."""
+    def _push(self, arguments: dict) -> None:
+        """Launches the shape's collision kernel with ``arguments``, those its kernels share by parameter name: the
+        solver's arrays (rest, displacements, velocities, kind, radius), the step's motion (``body``), the friction
+        coefficient and the device."""
         raise NotImplementedError
 
 
@@ -483,14 +485,8 @@ class SphereProjectile(RigidProjectile):
         m = trimesh.creation.icosphere(subdivisions=3, radius=self.sphere_radius)
         return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int32)
 
-    def _push(self, points: dict) -> None:
-        kc.push_out_of_sphere(
-            **points,
-            body=self._motion.array,
-            sphere_radius=self.sphere_radius,
-            friction=self.friction,
-            device=self.device,
-        )
+    def _push(self, arguments: dict) -> None:
+        kc.push_out_of_sphere(**arguments, sphere_radius=self.sphere_radius)
 
 
 class BoxProjectile(RigidProjectile):
@@ -512,14 +508,8 @@ class BoxProjectile(RigidProjectile):
         m = trimesh.creation.box(extents=2.0 * self.half_extents)
         return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int32)
 
-    def _push(self, points: dict) -> None:
-        kc.push_out_of_box(
-            **points,
-            body=self._motion.array,
-            half_extents=self.half_extents,
-            friction=self.friction,
-            device=self.device,
-        )
+    def _push(self, arguments: dict) -> None:
+        kc.push_out_of_box(**arguments, half_extents=self.half_extents)
 
 
 class MeshProjectile(RigidProjectile):
@@ -552,10 +542,8 @@ class MeshProjectile(RigidProjectile):
     def _band(self, radius) -> float:
         return _mesh_band(self.band, self._radius_bound, radius)
 
-    def _push(self, points: dict) -> None:
-        kc.push_out_of_mesh(
-            **points, mesh=self._mesh.mesh.id, body=self._motion.array, friction=self.friction, device=self.device
-        )
+    def _push(self, arguments: dict) -> None:
+        kc.push_out_of_mesh(**arguments, mesh=self._mesh.mesh.id)
 
 
 def _rotate(q: np.ndarray, points: np.ndarray) -> np.ndarray:
