@@ -279,11 +279,7 @@ class ParticleContact:
             self.shield_interior,
             positions=positions,
             velocities=velocities,
-            mass=self.mass,
             kind=self._all_free if kind is None else kind,
-            damping_ratio=self.damping_ratio,
-            friction=self.friction,
-            floor_factor=self.floor_factor,
             budget_count=float(CONTACT_NEIGHBOR_BUDGET),
             scale_in=self._scale,
             force_density=force_density,
@@ -292,6 +288,7 @@ class ParticleContact:
             scale_out=self._scale_out,
             device=self.device,
             **self._pair_arguments(),
+            **by_name(self, "mass", "damping_ratio", "friction", "floor_factor"),
         )
         wp.copy(self._scale_next, self._scale)
         wp.copy(self._scale, self._scale_out)
