@@ -18,6 +18,11 @@ from .kernels import colliders as kc
 from .output.views import RigidView
 
 
+def _points(rest, displacements, velocities, radius, kind) -> dict:
+    """The solver's point arrays (the arguments of Collider.apply) under the collision kernels' parameter names."""
+    return {"rest": rest, "displacements": displacements, "velocities": velocities, "kind": kind, "radius": radius}
+
+
 class Collider:
     """A collider pushes penetrating free points out of its volume (see kernels/colliders.py).
 
@@ -96,11 +101,7 @@ class GroundPlane(Collider):
             mass = self._no_mass[key]
         n = np.asarray(self.normal, dtype=np.float64)
         kc.push_out_of_plane(
-            rest=rest,
-            displacements=displacements,
-            velocities=velocities,
-            kind=kind,
-            radius=radius,
+            **_points(rest, displacements, velocities, radius, kind),
             normal=n,
             offset=self.offset - n @ self.origin,
             friction=self.friction,
@@ -308,11 +309,7 @@ class MeshCollider(Collider):
             motion.write(self.center - self.origin, IDENTITY_ROTATION, np.zeros(3), np.zeros(3), band)
             self._motions[band] = motion
         kc.push_out_of_mesh(
-            rest=rest,
-            displacements=displacements,
-            velocities=velocities,
-            kind=kind,
-            radius=radius,
+            **_points(rest, displacements, velocities, radius, kind),
             mesh=self._mesh.mesh.id,
             body=motion.array,
             friction=self.friction,
@@ -455,7 +452,7 @@ class RigidProjectile(Collider):
     def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
         self._update_motion(time, dt, band=self._band(radius))
         self._push(
-            {"rest": rest, "displacements": displacements, "velocities": velocities, "kind": kind, "radius": radius}
+            _points(rest, displacements, velocities, radius, kind)
             | {"body": self._motion.array, "friction": self.friction, "device": self.device}
         )
 

@@ -201,6 +201,12 @@ class ParticleContact:
         self._scale = wp.ones(n, dtype=float, device=d)
         self._scale_next = wp.ones(n, dtype=float, device=d)
         self._scale_out = wp.ones(n, dtype=float, device=d)
+        self._force_buffers = {  # the force pass's scale and hard-floor buffers, by kernel parameter name
+            "scale_in": self._scale,
+            "position_delta": self._position_delta,
+            "velocity_delta": self._velocity_delta,
+            "scale_out": self._scale_out,
+        }
         self._energy = wp.zeros(n, dtype=float, device=d)
         self._row_sum = wp.zeros(n, dtype=float, device=d)
         self._count = wp.zeros(n, dtype=wp.int32, device=d)
@@ -281,12 +287,9 @@ class ParticleContact:
             velocities=velocities,
             kind=self._all_free if kind is None else kind,
             budget_count=float(CONTACT_NEIGHBOR_BUDGET),
-            scale_in=self._scale,
             force_density=force_density,
-            position_delta=self._position_delta,
-            velocity_delta=self._velocity_delta,
-            scale_out=self._scale_out,
             device=self.device,
+            **self._force_buffers,
             **self._pair_arguments(),
             **by_name(self, "mass", "damping_ratio", "friction", "floor_factor"),
         )
