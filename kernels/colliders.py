@@ -10,6 +10,7 @@ not pushed back; the push moves the point's displacement.
 import warp as wp
 
 from .integration import PARTICLE_FREE
+from .launch import launch
 
 
 @wp.kernel
@@ -180,6 +181,8 @@ def collide_sphere(
         push_point(i, x, sdf, n, r, motion, friction, displacements, velocities)
 
 
+# Warp kernels cannot take a function argument (the signed distance of the shape): collide_box and collide_mesh
+# repeat collide_sphere's parameters and point prologue around their own distance test.
 @wp.kernel
 def collide_box(
     rest: wp.array(dtype=wp.vec3),
@@ -230,6 +233,7 @@ def collide_box(
     push_point(i, x, sdf, n, r, motion, friction, displacements, velocities)
 
 
+# Like collide_box, this repeats collide_sphere's parameters and point prologue (a Warp kernel takes no function).
 @wp.kernel
 def collide_mesh(
     rest: wp.array(dtype=wp.vec3),
@@ -261,58 +265,36 @@ def collide_mesh(
 
 # -- launches (pdsim/colliders.py) ------------------------------------------------------------------------------------
 # One thread per point of the solver's arrays: rest positions, displacements, velocities (vec3 [n]), collision radii
-# and kinematic kinds (int32 [n]); ``motion`` is the collider's one-element RigidMotion array.
+# and kinematic kinds (int32 [n]); ``body`` is the collider's one-element RigidMotion array. The kernels' arguments are
+# given as keywords named like their parameters (kernels/launch.py).
 
 
-def push_out_of_plane(rest, displacements, velocities, kind, radius, normal, offset, friction, mass, impulse, device):
+def push_out_of_plane(*, normal, offset, friction, device, **arguments):
     """Ground plane n . x = ``offset`` [m] (local frame), ``normal`` 3 numbers (collide_ground_plane)."""
-    wp.launch(
+    launch(
         collide_ground_plane,
-        dim=rest.shape[0],
-        inputs=[
-            rest,
-            displacements,
-            velocities,
-            kind,
-            radius,
-            wp.vec3(*normal),
-            float(offset),
-            float(friction),
-            mass,
-            impulse,
-        ],
+        arguments["rest"].shape[0],
         device=device,
+        normal=wp.vec3(*normal),
+        offset=float(offset),
+        friction=float(friction),
+        **arguments,
     )
 
 
-def push_out_of_sphere(rest, displacements, velocities, kind, radius, motion, sphere_radius, friction, device):
+def push_out_of_sphere(*, device, **arguments):
     """Kinematic sphere of ``sphere_radius`` [m] (collide_sphere)."""
-    wp.launch(
-        collide_sphere,
-        dim=rest.shape[0],
-        inputs=[rest, displacements, velocities, kind, radius, motion, sphere_radius, friction],
-        device=device,
-    )
+    launch(collide_sphere, arguments["rest"].shape[0], device=device, **arguments)
 
 
-def push_out_of_box(rest, displacements, velocities, kind, radius, motion, half_extents, friction, device):
+def push_out_of_box(*, half_extents, device, **arguments):
     """Kinematic box of ``half_extents`` [m] (3 numbers) (collide_box)."""
-    wp.launch(
-        collide_box,
-        dim=rest.shape[0],
-        inputs=[rest, displacements, velocities, kind, radius, motion, wp.vec3(*half_extents), friction],
-        device=device,
-    )
+    launch(collide_box, arguments["rest"].shape[0], device=device, half_extents=wp.vec3(*half_extents), **arguments)
 
 
-def push_out_of_mesh(rest, displacements, velocities, kind, radius, mesh, motion, friction, device):
-    """Closed triangle mesh ``mesh`` (a wp.Mesh id) in the frame of ``motion`` (collide_mesh)."""
-    wp.launch(
-        collide_mesh,
-        dim=rest.shape[0],
-        inputs=[rest, displacements, velocities, kind, radius, mesh, motion, friction],
-        device=device,
-    )
+def push_out_of_mesh(*, device, **arguments):
+    """Closed triangle mesh ``mesh`` (a wp.Mesh id) in the frame of ``body`` (collide_mesh)."""
+    launch(collide_mesh, arguments["rest"].shape[0], device=device, **arguments)
 
 
 def select_step_motion(table, slot: int, band: float, motion, device):

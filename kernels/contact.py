@@ -48,6 +48,7 @@ import warp as wp
 
 from .colliders import mesh_contact_point
 from .integration import PARTICLE_FREE
+from .launch import launch
 from .neighbors import same_body_count
 from .watchdog import WATCH_COLLIDERS
 
@@ -401,146 +402,32 @@ def gather_positions(
 
 
 # -- launches (pdsim/contact.py) --------------------------------------------------------------------------------------
-# Particle contact: one thread per particle of the contact set (``rest_positions`` [n]).
+# Particle contact: one thread per particle of the contact set (``rest_positions`` [n]). Each launch function takes
+# the kernel's arguments as keywords named like its parameters (kernels/launch.py).
 
 
-def mark_exposed_at_rest(grid, rest_positions, body_id, radius, shield_factor, full_count, exposed, device):
+def mark_exposed_at_rest(*, device, **arguments):
     """Exposure of every particle at rest (count_lattice_neighbors), ``grid`` built on ``rest_positions``."""
-    wp.launch(
-        count_lattice_neighbors,
-        dim=rest_positions.shape[0],
-        inputs=[grid, rest_positions, body_id, radius, shield_factor, full_count, exposed],
-        device=device,
-    )
+    launch(count_lattice_neighbors, arguments["rest_positions"].shape[0], device=device, **arguments)
 
 
-def mark_exposed_by_cracks(
-    family_offsets, family_neighbors, bond_alive, rest_positions, radius, shield_factor, full_count, exposed, device
-):
+def mark_exposed_by_cracks(*, device, **arguments):
     """Exposes the particles near broken bonds (count_live_lattice_bonds)."""
-    wp.launch(
-        count_live_lattice_bonds,
-        dim=rest_positions.shape[0],
-        inputs=[
-            family_offsets,
-            family_neighbors,
-            bond_alive,
-            rest_positions,
-            radius,
-            shield_factor,
-            full_count,
-            exposed,
-        ],
-        device=device,
-    )
+    launch(count_live_lattice_bonds, arguments["rest_positions"].shape[0], device=device, **arguments)
 
 
-def particle_contact_forces(
-    shielded: bool,
-    grid,
-    positions,
-    velocities,
-    rest_positions,
-    body_id,
-    radius,
-    volume,
-    mass,
-    modulus,
-    kind,
-    exposed,
-    query_radius,
-    distance_factor,
-    bonded_factor,
-    damping_ratio,
-    friction,
-    floor_factor,
-    budget_count,
-    scale_in,
-    force_density,
-    position_delta,
-    velocity_delta,
-    scale_out,
-    device,
-):
+def particle_contact_forces(shielded: bool, *, device, **arguments):
     """Contact force density, hard-floor shares and the next stiffness-cap scale (particle_contact_force of
     make_particle_contact_kernels(shielded))."""
     force_kernel, _ = make_particle_contact_kernels(shielded)
-    wp.launch(
-        force_kernel,
-        dim=rest_positions.shape[0],
-        inputs=[
-            grid,
-            positions,
-            velocities,
-            rest_positions,
-            body_id,
-            radius,
-            volume,
-            mass,
-            modulus,
-            kind,
-            exposed,
-            query_radius,
-            distance_factor,
-            bonded_factor,
-            damping_ratio,
-            friction,
-            floor_factor,
-            budget_count,
-            scale_in,
-            force_density,
-            position_delta,
-            velocity_delta,
-            scale_out,
-        ],
-        device=device,
-    )
+    launch(force_kernel, arguments["rest_positions"].shape[0], device=device, **arguments)
 
 
-def particle_contact_energies(
-    shielded: bool,
-    grid,
-    positions,
-    rest_positions,
-    body_id,
-    radius,
-    volume,
-    modulus,
-    exposed,
-    query_radius,
-    distance_factor,
-    bonded_factor,
-    scale,
-    energy,
-    row_sum,
-    contact_count,
-    device,
-):
+def particle_contact_energies(shielded: bool, *, device, **arguments):
     """Per-particle contact energy, stiffness row sum and contact count (particle_contact_energy_and_stiffness of
     make_particle_contact_kernels(shielded))."""
     _, energy_kernel = make_particle_contact_kernels(shielded)
-    wp.launch(
-        energy_kernel,
-        dim=rest_positions.shape[0],
-        inputs=[
-            grid,
-            positions,
-            rest_positions,
-            body_id,
-            radius,
-            volume,
-            modulus,
-            exposed,
-            query_radius,
-            distance_factor,
-            bonded_factor,
-            scale,
-            energy,
-            row_sum,
-            contact_count,
-        ],
-        device=device,
-    )
+    launch(energy_kernel, arguments["rest_positions"].shape[0], device=device, **arguments)
 
 
 def hard_floor(displacements, velocities, position_delta, velocity_delta, device):
@@ -561,54 +448,14 @@ def surface_positions(points, rest, displacements, out):
     wp.launch(gather_positions, dim=points.shape[0], inputs=[points, rest, displacements, out], device=points.device)
 
 
-def particle_mesh_forces(
-    p_points,
-    p_rest,
-    p_u,
-    p_v,
-    p_mass,
-    p_to_force,
-    p_radius,
-    mesh,
-    m_points,
-    m_faces,
-    m_v,
-    m_mass,
-    stiffness_rate,
-    damping_ratio,
-    p_force,
-    m_force,
-    dt: float,
-    p_work,
-    m_work,
-    device,
-):
-    """Contact of the particles ``p_points`` with a surface mesh (particle_mesh_contact); the work goes to slot
-    WATCH_COLLIDERS of ``p_work`` and ``m_work``."""
-    wp.launch(
+def particle_mesh_forces(*, dt: float, device, **arguments):
+    """Contact of the particles ``p_points`` with a surface mesh (particle_mesh_contact, step ``dt`` [s]); the work
+    goes to slot WATCH_COLLIDERS of ``p_work`` and ``m_work``."""
+    launch(
         particle_mesh_contact,
-        dim=p_points.shape[0],
-        inputs=[
-            p_points,
-            p_rest,
-            p_u,
-            p_v,
-            p_mass,
-            p_to_force,
-            p_radius,
-            mesh,
-            m_points,
-            m_faces,
-            m_v,
-            m_mass,
-            stiffness_rate,
-            damping_ratio,
-            p_force,
-            m_force,
-            float(dt),
-            p_work,
-            m_work,
-            WATCH_COLLIDERS,
-        ],
+        arguments["p_points"].shape[0],
         device=device,
+        dt=float(dt),
+        work_slot=WATCH_COLLIDERS,
+        **arguments,
     )

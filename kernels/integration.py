@@ -33,6 +33,8 @@ import functools
 
 import warp as wp
 
+from .launch import launch
+
 POINT_FREE = wp.constant(0)
 POINT_FIXED = wp.constant(1)
 POINT_PRESCRIBED = wp.constant(2)
@@ -313,42 +315,9 @@ def end_clock_step(clock, device):
     wp.launch(clock_end_step, dim=1, inputs=[clock], device=device)
 
 
-def conditions_at(
-    count: int,
-    cond_kind,
-    cond_start,
-    cond_release,
-    cond_velocity,
-    cond_curve,
-    curve_time,
-    curve_data,
-    clock,
-    slot: int,
-    offset: float,
-    active_kind,
-    active_velocity,
-    device,
-):
+def conditions_at(count: int, *, slot: int, offset: float, device, **arguments):
     """The state of ``count`` boundary conditions at the device time clock[slot] + offset [s] (evaluate_conditions)."""
-    wp.launch(
-        evaluate_conditions,
-        dim=count,
-        inputs=[
-            cond_kind,
-            cond_start,
-            cond_release,
-            cond_velocity,
-            cond_curve,
-            curve_time,
-            curve_data,
-            clock,
-            int(slot),
-            wp.float64(offset),
-            active_kind,
-            active_velocity,
-        ],
-        device=device,
-    )
+    launch(evaluate_conditions, count, device=device, slot=int(slot), offset=wp.float64(offset), **arguments)
 
 
 def curves_at(count: int, span, curve_time, curve_data, clock, slot: int, value, device):
@@ -356,72 +325,14 @@ def curves_at(count: int, span, curve_time, curve_data, clock, slot: int, value,
     wp.launch(evaluate_curves, dim=count, inputs=[span, curve_time, curve_data, clock, slot, value], device=device)
 
 
-def kick_drift(
-    k,
-    count: int,
-    displacements,
-    velocities,
-    accelerations,
-    point_condition,
-    active_kind,
-    cond_axes,
-    active_velocity,
-    dt: float,
-    point_kind,
-    device,
-):
+def kick_drift(k, count: int, *, dt: float, device, **arguments):
     """First half kick and drift of ``count`` points over ``dt`` [s] (``k.kick_drift``)."""
-    wp.launch(
-        k.kick_drift,
-        dim=count,
-        inputs=[
-            displacements,
-            velocities,
-            accelerations,
-            point_condition,
-            active_kind,
-            cond_axes,
-            active_velocity,
-            k.dtype(dt),
-            point_kind,
-        ],
-        device=device,
-    )
+    launch(k.kick_drift, count, device=device, dt=k.dtype(dt), **arguments)
 
 
-def kick(
-    k,
-    count: int,
-    force,
-    inv_mass,
-    gravity,
-    damping,
-    dt: float,
-    point_condition,
-    point_kind,
-    cond_axes,
-    velocities,
-    accelerations,
-    device,
-):
+def kick(k, count: int, *, dt: float, device, **arguments):
     """Second half kick of ``count`` points over ``dt`` [s] (``k.kick``)."""
-    wp.launch(
-        k.kick,
-        dim=count,
-        inputs=[
-            force,
-            inv_mass,
-            gravity,
-            damping,
-            k.dtype(dt),
-            point_condition,
-            point_kind,
-            cond_axes,
-            velocities,
-            accelerations,
-        ],
-        device=device,
-    )
+    launch(k.kick, count, device=device, dt=k.dtype(dt), **arguments)
 
 
 def apply_loads(k, count: int, load_point, load_index, load_force, load_scale, force, device):
@@ -434,17 +345,10 @@ def add_velocity(k, points, dv, velocities, device):
     wp.launch(k.add_velocity, dim=points.shape[0], inputs=[points, wp.vec3(*dv), velocities], device=device)
 
 
-def condition_reactions(
-    k, count: int, point_condition, active_kind, cond_axes, force, force_to_newton, mass, gravity, reaction, device
-):
+def condition_reactions(k, count: int, *, device, **arguments):
     """Adds each active condition's force on its body [N] over ``count`` points into ``reaction``
     (``k.condition_reactions``)."""
-    wp.launch(
-        k.condition_reactions,
-        dim=count,
-        inputs=[point_condition, active_kind, cond_axes, force, force_to_newton, mass, gravity, reaction],
-        device=device,
-    )
+    launch(k.condition_reactions, count, device=device, **arguments)
 
 
 def max_speed_and_finite(k, count: int, displacements, velocities, result, device):

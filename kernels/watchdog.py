@@ -14,6 +14,7 @@ import numpy as np
 import warp as wp
 
 from .integration import POINT_FREE, POINT_PRESCRIBED
+from .launch import launch
 
 WATCH_LOADS, WATCH_SUPPORTS, WATCH_KICKS, WATCH_COLLIDERS = 0, 1, 2, 3  # work put in [J] (accumulated over the run)
 WATCH_BAD, WATCH_VMAX, WATCH_KE, WATCH_GRAVITY, WATCH_HELD_KE, WATCH_POINT_KE = 4, 5, 6, 7, 8, 9  # state of a check
@@ -307,143 +308,50 @@ def watchdog_kernels(dtype=wp.float32):
 
 
 # -- launches (pdsim/watchdog.py) -------------------------------------------------------------------------------------
-# Each takes the item count and the accumulator and launches min(count, WATCH_THREADS) grid-stride threads.
+# Each takes the kernel's arguments as keywords named like its parameters (kernels/launch.py), among them the item
+# ``count`` and the accumulator ``acc``, and launches min(count, WATCH_THREADS) grid-stride threads.
 
 
-def bond_stretch_range(bond_ne, bond_geom, bond_alive, use_alive: int, count: int, acc, device):
-    """Live bonds' stretch range into acc[10], acc[11] (watch_bond_stretch); nothing when there are no bonds."""
+def _grid_stride(kernel, count: int, device, **arguments):
+    """Launches ``kernel`` on min(count, WATCH_THREADS) threads striding over ``count`` items (its ``count`` and
+    ``threads`` arguments); nothing when there are no items."""
     threads = min(count, WATCH_THREADS)
     if threads:
-        wp.launch(
-            watch_bond_stretch,
-            dim=threads,
-            inputs=[bond_ne, bond_geom, bond_alive, use_alive, count, threads, acc],
-            device=device,
-        )
+        launch(kernel, threads, device=device, count=count, threads=threads, **arguments)
 
 
-def tet_strain_range(k, displacements, tets, dm_inv, count: int, acc, device):
+def bond_stretch_range(*, count: int, device, **arguments):
+    """Live bonds' stretch range into acc[10], acc[11] (watch_bond_stretch); nothing when there are no bonds."""
+    _grid_stride(watch_bond_stretch, count, device, **arguments)
+
+
+def tet_strain_range(k, *, count: int, device, **arguments):
     """Tetrahedra's volume-ratio range into acc[10], acc[11] (``k.watch_tet_strain``, ``k`` from watchdog_kernels);
     nothing when there are no tetrahedra."""
-    threads = min(count, WATCH_THREADS)
-    if threads:
-        wp.launch(
-            k.watch_tet_strain,
-            dim=threads,
-            inputs=[displacements, tets, dm_inv, count, threads, acc],
-            device=device,
-        )
+    _grid_stride(k.watch_tet_strain, count, device, **arguments)
 
 
-def state_sums(
-    k, displacements, velocities, mass, point_condition, point_kind, cond_axes, gravity, count: int, acc, device
-):
+def state_sums(k, *, count: int, device, **arguments):
     """The state slots of a check (``k.watch_state``); nothing when there are no points."""
-    threads = min(count, WATCH_THREADS)
-    if threads:
-        wp.launch(
-            k.watch_state,
-            dim=threads,
-            inputs=[
-                displacements,
-                velocities,
-                mass,
-                point_condition,
-                point_kind,
-                cond_axes,
-                gravity,
-                count,
-                threads,
-                acc,
-            ],
-            device=device,
-        )
+    _grid_stride(k.watch_state, count, device, **arguments)
 
 
-def support_work(
-    k,
-    points,
-    force,
-    force_to_newton,
-    mass,
-    gravity,
-    point_condition,
-    active_kind,
-    cond_axes,
-    active_velocity,
-    dt: float,
-    count: int,
-    acc,
-    device,
-):
+def support_work(k, *, dt: float, count: int, device, **arguments):
     """Work of the prescribed-velocity conditions over a step of ``dt`` [s] into acc[1] (``k.watch_support_work``)."""
-    threads = min(count, WATCH_THREADS)
-    wp.launch(
-        k.watch_support_work,
-        dim=threads,
-        inputs=[
-            points,
-            force,
-            force_to_newton,
-            mass,
-            gravity,
-            point_condition,
-            active_kind,
-            cond_axes,
-            active_velocity,
-            wp.float64(dt),
-            count,
-            threads,
-            acc,
-        ],
-        device=device,
-    )
+    _grid_stride(k.watch_support_work, count, device, dt=wp.float64(dt), **arguments)
 
 
-def load_work(
-    k, load_point, load_index, load_force, load_scale, force_to_newton, velocities, dt: float, count: int, acc, device
-):
+def load_work(k, *, dt: float, count: int, device, **arguments):
     """Work of the loads over a step of ``dt`` [s] into acc[0] (``k.watch_load_work``)."""
-    threads = min(count, WATCH_THREADS)
-    wp.launch(
-        k.watch_load_work,
-        dim=threads,
-        inputs=[
-            load_point,
-            load_index,
-            load_force,
-            load_scale,
-            force_to_newton,
-            velocities,
-            wp.float64(dt),
-            count,
-            threads,
-            acc,
-        ],
-        device=device,
-    )
+    _grid_stride(k.watch_load_work, count, device, dt=wp.float64(dt), **arguments)
 
 
-def kick_work(k, points, dv, velocities, mass, acc, device):
+def kick_work(k, *, points, dv, device, **arguments):
     """Kinetic energy the velocity kick ``dv`` [m/s] (3 numbers) on ``points`` adds, into acc[2]
     (``k.watch_kick_work``, launched before the kick); nothing when there are no points."""
-    count = int(points.shape[0])
-    threads = min(count, WATCH_THREADS)
-    if threads:
-        wp.launch(
-            k.watch_kick_work,
-            dim=threads,
-            inputs=[points, wp.vec3(*dv), velocities, mass, count, threads, acc],
-            device=device,
-        )
+    _grid_stride(k.watch_kick_work, int(points.shape[0]), device, points=points, dv=wp.vec3(*dv), **arguments)
 
 
-def impulse_work(k, velocities, before, mass, surface_speeds, slot: int, count: int, acc, device):
+def impulse_work(k, *, count: int, device, **arguments):
     """Bound of the moving colliders' work since ``before`` was taken, into acc[3] (``k.watch_impulse_work``)."""
-    threads = min(count, WATCH_THREADS)
-    wp.launch(
-        k.watch_impulse_work,
-        dim=threads,
-        inputs=[velocities, before, mass, surface_speeds, slot, count, threads, acc],
-        device=device,
-    )
+    _grid_stride(k.watch_impulse_work, count, device, **arguments)

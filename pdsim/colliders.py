@@ -18,6 +18,11 @@ from .kernels import colliders as kc
 from .output.views import RigidView
 
 
+def _points(rest, displacements, velocities, radius, kind) -> dict:
+    """The solver's point arrays (the arguments of Collider.apply) under the collision kernels' parameter names."""
+    return {"rest": rest, "displacements": displacements, "velocities": velocities, "kind": kind, "radius": radius}
+
+
 class Collider:
     """A collider pushes penetrating free points out of its volume (see kernels/colliders.py).
 
@@ -96,17 +101,13 @@ class GroundPlane(Collider):
             mass = self._no_mass[key]
         n = np.asarray(self.normal, dtype=np.float64)
         kc.push_out_of_plane(
-            rest,
-            displacements,
-            velocities,
-            kind,
-            radius,
-            n,
-            self.offset - n @ self.origin,
-            self.friction,
-            mass,
-            self._impulse[key],
-            rest.device,
+            **_points(rest, displacements, velocities, radius, kind),
+            normal=n,
+            offset=self.offset - n @ self.origin,
+            friction=self.friction,
+            mass=mass,
+            impulse=self._impulse[key],
+            device=rest.device,
         )
 
 
@@ -313,7 +314,11 @@ class MeshCollider(Collider):
             motion.write(self.center - self.origin, IDENTITY_ROTATION, np.zeros(3), np.zeros(3), band)
             self._motions[band] = motion
         kc.push_out_of_mesh(
-            rest, displacements, velocities, kind, radius, self._mesh.mesh.id, motion.array, self.friction, self.device
+            **_points(rest, displacements, velocities, radius, kind),
+            mesh=self._mesh.mesh.id,
+            body=motion.array,
+            friction=self.friction,
+            device=self.device,
         )
 
 
@@ -451,14 +456,19 @@ class RigidProjectile(Collider):
 
     def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
         self._update_motion(time, dt, band=self._band(radius))
-        self._push(rest, displacements, velocities, radius, kind)
+        self._push(
+            _points(rest, displacements, velocities, radius, kind)
+            | {"body": self._motion.array, "friction": self.friction, "device": self.device}
+        )
 
     def _band(self, radius) -> float:
         """Detection depth below the surface [m] (meshes; 0 for the analytic shapes), given the solver's radii."""
         return 0.0
 
-    def _push(self, rest, displacements, velocities, radius, kind) -> None:
-        """Launches the shape's collision kernel with the step's motion (``self._motion``)."""
+    def _push(self, arguments: dict) -> None:
+        """Launches the shape's collision kernel with ``arguments``, those its kernels share by parameter name: the
+        solver's arrays (rest, displacements, velocities, kind, radius), the step's motion (``body``), the friction
+        coefficient and the device."""
         raise NotImplementedError
 
 
@@ -477,18 +487,8 @@ class SphereProjectile(RigidProjectile):
         m = trimesh.creation.icosphere(subdivisions=3, radius=self.sphere_radius)
         return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int32)
 
-    def _push(self, rest, displacements, velocities, radius, kind) -> None:
-        kc.push_out_of_sphere(
-            rest,
-            displacements,
-            velocities,
-            kind,
-            radius,
-            self._motion.array,
-            self.sphere_radius,
-            self.friction,
-            self.device,
-        )
+    def _push(self, arguments: dict) -> None:
+        kc.push_out_of_sphere(**arguments, sphere_radius=self.sphere_radius)
 
 
 class BoxProjectile(RigidProjectile):
@@ -510,18 +510,8 @@ class BoxProjectile(RigidProjectile):
         m = trimesh.creation.box(extents=2.0 * self.half_extents)
         return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int32)
 
-    def _push(self, rest, displacements, velocities, radius, kind) -> None:
-        kc.push_out_of_box(
-            rest,
-            displacements,
-            velocities,
-            kind,
-            radius,
-            self._motion.array,
-            self.half_extents,
-            self.friction,
-            self.device,
-        )
+    def _push(self, arguments: dict) -> None:
+        kc.push_out_of_box(**arguments, half_extents=self.half_extents)
 
 
 class MeshProjectile(RigidProjectile):
@@ -554,18 +544,8 @@ class MeshProjectile(RigidProjectile):
     def _band(self, radius) -> float:
         return _mesh_band(self.band, self._radius_bound, radius)
 
-    def _push(self, rest, displacements, velocities, radius, kind) -> None:
-        kc.push_out_of_mesh(
-            rest,
-            displacements,
-            velocities,
-            kind,
-            radius,
-            self._mesh.mesh.id,
-            self._motion.array,
-            self.friction,
-            self.device,
-        )
+    def _push(self, arguments: dict) -> None:
+        kc.push_out_of_mesh(**arguments, mesh=self._mesh.mesh.id)
 
 
 def _rotate(q: np.ndarray, points: np.ndarray) -> np.ndarray:

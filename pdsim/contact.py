@@ -22,6 +22,7 @@ import warp as wp
 from .checks import check_range
 from .errors import ParameterError
 from .kernels import contact as kc
+from .kinematics import by_name
 
 CONTACT_NEIGHBOR_BUDGET = 12
 """Contact modulus calibration: C_k (2 r_k)^3 = S_k / 12, so 12 simultaneous contacts (the kissing number of equal
@@ -200,6 +201,12 @@ class ParticleContact:
         self._scale = wp.ones(n, dtype=float, device=d)
         self._scale_next = wp.ones(n, dtype=float, device=d)
         self._scale_out = wp.ones(n, dtype=float, device=d)
+        self._force_buffers = {  # the force pass's scale and hard-floor buffers, by kernel parameter name
+            "scale_in": self._scale,
+            "position_delta": self._position_delta,
+            "velocity_delta": self._velocity_delta,
+            "scale_out": self._scale_out,
+        }
         self._energy = wp.zeros(n, dtype=float, device=d)
         self._row_sum = wp.zeros(n, dtype=float, device=d)
         self._count = wp.zeros(n, dtype=wp.int32, device=d)
@@ -209,14 +216,11 @@ class ParticleContact:
         cell = float(SHIELD_FACTOR * 2.0 * self.radius.numpy().max())
         grid.build(self.rest_positions, cell)
         kc.mark_exposed_at_rest(
-            grid.id,
-            self.rest_positions,
-            self.body_id,
-            self.radius,
-            SHIELD_FACTOR,
-            SHIELD_COUNT,
-            self.exposed,
-            self.device,
+            grid=grid.id,
+            shield_factor=SHIELD_FACTOR,
+            full_count=SHIELD_COUNT,
+            device=self.device,
+            **by_name(self, "rest_positions", "body_id", "radius", "exposed"),
         )
 
     def update_exposure(self, family_offsets, family_neighbors, bond_alive):
@@ -228,15 +232,13 @@ class ParticleContact:
         if not self.shield_interior:
             return
         kc.mark_exposed_by_cracks(
-            family_offsets,
-            family_neighbors,
-            bond_alive,
-            self.rest_positions,
-            self.radius,
-            SHIELD_FACTOR,
-            SHIELD_COUNT,
-            self.exposed,
-            self.device,
+            family_offsets=family_offsets,
+            family_neighbors=family_neighbors,
+            bond_alive=bond_alive,
+            shield_factor=SHIELD_FACTOR,
+            full_count=SHIELD_COUNT,
+            device=self.device,
+            **by_name(self, "rest_positions", "radius", "exposed"),
         )
 
     def exposed_mask(self) -> np.ndarray:
@@ -281,35 +283,29 @@ class ParticleContact:
         self._build_grid(positions)
         kc.particle_contact_forces(
             self.shield_interior,
-            self.grid.id,
-            positions,
-            velocities,
-            self.rest_positions,
-            self.body_id,
-            self.radius,
-            self.volume,
-            self.mass,
-            self.modulus,
-            self._all_free if kind is None else kind,
-            self.exposed,
-            self.query_radius,
-            self.distance_factor,
-            self.bonded_factor,
-            self.damping_ratio,
-            self.friction,
-            self.floor_factor,
-            float(CONTACT_NEIGHBOR_BUDGET),
-            self._scale,
-            force_density,
-            self._position_delta,
-            self._velocity_delta,
-            self._scale_out,
-            self.device,
+            positions=positions,
+            velocities=velocities,
+            kind=self._all_free if kind is None else kind,
+            budget_count=float(CONTACT_NEIGHBOR_BUDGET),
+            force_density=force_density,
+            device=self.device,
+            **self._force_buffers,
+            **self._pair_arguments(),
+            **by_name(self, "mass", "damping_ratio", "friction", "floor_factor"),
         )
         wp.copy(self._scale_next, self._scale)
         wp.copy(self._scale, self._scale_out)
         if self.floor_factor > 0.0:
             kc.hard_floor(displacements, velocities, self._position_delta, self._velocity_delta, self.device)
+
+    def _pair_arguments(self) -> dict:
+        """The arguments the force and energy kernels share by name: the hash grid, the particles' fixed arrays and
+        the contact distance's settings (the two kernels visit the same pairs)."""
+        return {
+            "grid": self.grid.id,
+            **by_name(self, "rest_positions", "body_id", "radius", "volume", "modulus", "exposed"),
+            **by_name(self, "query_radius", "distance_factor", "bonded_factor"),
+        }
 
     def _build_grid(self, positions):
         cell = GRID_CELL_FACTOR * self.query_radius
@@ -324,22 +320,13 @@ class ParticleContact:
         self._build_grid(positions)
         kc.particle_contact_energies(
             self.shield_interior,
-            self.grid.id,
-            positions,
-            self.rest_positions,
-            self.body_id,
-            self.radius,
-            self.volume,
-            self.modulus,
-            self.exposed,
-            self.query_radius,
-            self.distance_factor,
-            self.bonded_factor,
-            self._scale_next,  # after apply(): the scale its force pass applied (the forces' potential)
-            self._energy,
-            self._row_sum,
-            self._count,
-            self.device,
+            positions=positions,
+            scale=self._scale_next,  # after apply(): the scale its force pass applied (the forces' potential)
+            energy=self._energy,
+            row_sum=self._row_sum,
+            contact_count=self._count,
+            device=self.device,
+            **self._pair_arguments(),
         )
         return ContactDiagnostics(
             energy=self._energy.numpy().astype(np.float64),
@@ -424,26 +411,26 @@ class MethodContact:
             for ps in self.particle_solvers:
                 p_points, p_radius = ps.contact_particles()
                 kc.particle_mesh_forces(
-                    p_points,
-                    ps.kin.rest,
-                    ps.kin.u,
-                    ps.kin.v,
-                    ps.kin.mass,
-                    self._force_scale(ps),
-                    p_radius,
-                    mesh.id,
-                    m_points,
-                    m_faces,
-                    ms.kin.v,
-                    ms.kin.mass,
-                    rate,
-                    self.damping_ratio,
-                    ps.force,
-                    ms.force,
-                    dt,
-                    self._work_account(ps),
-                    m_work,
-                    ps.kin.u.device,
+                    p_points=p_points,
+                    p_rest=ps.kin.rest,
+                    p_u=ps.kin.u,
+                    p_v=ps.kin.v,
+                    p_mass=ps.kin.mass,
+                    p_to_force=self._force_scale(ps),
+                    p_radius=p_radius,
+                    mesh=mesh.id,
+                    m_points=m_points,
+                    m_faces=m_faces,
+                    m_v=ms.kin.v,
+                    m_mass=ms.kin.mass,
+                    stiffness_rate=rate,
+                    damping_ratio=self.damping_ratio,
+                    p_force=ps.force,
+                    m_force=ms.force,
+                    dt=dt,
+                    p_work=self._work_account(ps),
+                    m_work=m_work,
+                    device=ps.kin.u.device,
                 )
 
     def _work_account(self, solver):

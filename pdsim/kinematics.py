@@ -24,6 +24,12 @@ from .errors import InstabilityError
 from .kernels import integration as ki
 
 
+def by_name(source, *names: str) -> dict:
+    """{name: source.name} for each of ``names``: the arrays and settings that ``source`` holds under the names of
+    the kernel parameters they go to, for a launch that takes its arguments by name (kernels/launch.py)."""
+    return {name: getattr(source, name) for name in names}
+
+
 class PointKinematics:
     """Displacements, velocities and accelerations of ``point_count`` points, with their boundary conditions and
     loads.
@@ -225,16 +231,12 @@ class PointKinematics:
         ki.kick_drift(
             self.k,
             self.point_count,
-            self.u,
-            self.v,
-            self.a,
-            self.point_condition,
-            self.active_kind,
-            self.cond_axes,
-            self.active_velocity,
-            dt,
-            self.point_kind,
-            d,
+            displacements=self.u,
+            velocities=self.v,
+            accelerations=self.a,
+            dt=dt,
+            device=d,
+            **by_name(self, "point_condition", "active_kind", "cond_axes", "active_velocity", "point_kind"),
         )
         if self.watchdog is not None:
             self.watchdog.after_drift(self)
@@ -261,19 +263,13 @@ class PointKinematics:
         """Each boundary condition's state at the device time clock[slot] + offset [s]."""
         ki.conditions_at(
             self.condition_count,
-            self.cond_kind,
-            self.cond_start,
-            self.cond_release,
-            self.cond_velocity,
-            self.cond_curve,
-            self.cond_curve_time,
-            self.cond_curve_value,
-            self.clock,
-            slot,
-            offset,
-            self.active_kind,
-            self.active_velocity,
-            self.device,
+            curve_time=self.cond_curve_time,
+            curve_data=self.cond_curve_value,
+            slot=slot,
+            offset=offset,
+            device=self.device,
+            **by_name(self, "cond_kind", "cond_start", "cond_release", "cond_velocity", "cond_curve", "clock"),
+            **by_name(self, "active_kind", "active_velocity"),
         )
 
     def add_loads(self, force, t: float):
@@ -312,17 +308,13 @@ class PointKinematics:
         ki.kick(
             self.k,
             self.point_count,
-            force,
-            inv_mass,
-            self.gravity,
-            self.damping,
-            dt,
-            self.point_condition,
-            self.point_kind,
-            self.cond_axes,
-            self.v,
-            self.a,
-            self.device,
+            force=force,
+            inv_mass=inv_mass,
+            dt=dt,
+            velocities=self.v,
+            accelerations=self.a,
+            device=self.device,
+            **by_name(self, "gravity", "damping", "point_condition", "point_kind", "cond_axes"),
         )
         self.end_clock_step()
 
@@ -337,15 +329,10 @@ class PointKinematics:
         ki.condition_reactions(
             self.k,
             self.point_count,
-            self.point_condition,
-            self.active_kind,
-            self.cond_axes,
-            force,
-            self.force_to_newton,
-            self.mass,
-            self.gravity,
-            self._reaction,
-            self.device,
+            force=force,
+            reaction=self._reaction,
+            device=self.device,
+            **by_name(self, "point_condition", "active_kind", "cond_axes", "force_to_newton", "mass", "gravity"),
         )
         r = self._reaction.numpy()
         return {name: r[i].astype(np.float64) for i, name in enumerate(self.condition_names)}

@@ -24,6 +24,7 @@ from .kernels.watchdog import (
     WATCH_STRAIN_MIN,
     WATCH_VMAX,
 )
+from .kinematics import by_name
 
 STRAIN_EVERY = 8  # the strain pass (a pass over the bonds or elements) runs every 8th check and at frame ends
 
@@ -194,7 +195,15 @@ class Watchdog:
         self._step_dt = float(dt)
 
     def kick(self, kin, points, dv) -> None:
-        kw.kick_work(kw.watchdog_kernels(kin.dtype), points, dv, kin.v, kin.mass, self.acc, self.device)
+        kw.kick_work(
+            kw.watchdog_kernels(kin.dtype),
+            points=points,
+            dv=dv,
+            velocities=kin.v,
+            mass=kin.mass,
+            acc=self.acc,
+            device=self.device,
+        )
 
     def after_drift(self, kin) -> None:
         if self._before is not None and self._before.shape == kin.v.shape:
@@ -212,20 +221,26 @@ class Watchdog:
         if kin.load_count:
             kw.load_work(
                 k,
-                kin.load_point,
-                kin.load_index,
-                kin.load_force,
-                kin.load_scale,
-                kin.force_to_newton,
-                kin.v,
-                dt,
-                kin.load_entry_count,
-                self.acc,
-                self.device,
+                velocities=kin.v,
+                dt=dt,
+                count=kin.load_entry_count,
+                acc=self.acc,
+                device=self.device,
+                **by_name(kin, "load_point", "load_index", "load_force", "load_scale", "force_to_newton"),
             )
         if self._before is not None and self._before.shape == kin.v.shape and n:
             slot = self._speed_slot(self._time, dt)
-            kw.impulse_work(k, kin.v, self._before, kin.mass, self._speeds, slot, n, self.acc, self.device)
+            kw.impulse_work(
+                k,
+                velocities=kin.v,
+                before=self._before,
+                mass=kin.mass,
+                surface_speeds=self._speeds,
+                slot=slot,
+                count=n,
+                acc=self.acc,
+                device=self.device,
+            )
         # the support work of this step is counted once its forces are final (next step, or the check), on the
         # kinematics and force array of this step (a fracture may rebuild both at the end of the step)
         self._pending = (dt, kin, getattr(self.solver, "force", None))
@@ -282,19 +297,14 @@ class Watchdog:
             return
         kw.support_work(
             kw.watchdog_kernels(kin.dtype),
-            held,
-            force,
-            kin.force_to_newton,
-            kin.mass,
-            kin.gravity,
-            kin.point_condition,
-            kin.active_kind,
-            kin.cond_axes,
-            kin.active_velocity,
-            dt,
-            int(held.shape[0]),
-            self.acc,
-            self.device,
+            points=held,
+            force=force,
+            dt=dt,
+            count=int(held.shape[0]),
+            acc=self.acc,
+            device=self.device,
+            **by_name(kin, "force_to_newton", "mass", "gravity"),
+            **by_name(kin, "point_condition", "active_kind", "cond_axes", "active_velocity"),
         )
 
     # -- the check ---------------------------------------------------------------------------------------------------
@@ -307,19 +317,27 @@ class Watchdog:
             # peridynamics: the live bonds' stretch, from the bond cache of the last force pass (the current state)
             alive = getattr(state, "bond_alive", None)
             kw.bond_stretch_range(
-                state.bond_ne,
-                model.bond_geom,
-                alive if alive is not None else self._no_alive,  # a placeholder, not read
-                int(alive is not None),
-                int(model.bond_count),
-                self.acc,
-                self.device,
+                bond_ne=state.bond_ne,
+                bond_geom=model.bond_geom,
+                bond_alive=alive if alive is not None else self._no_alive,  # a placeholder, not read
+                use_alive=int(alive is not None),
+                count=int(model.bond_count),
+                acc=self.acc,
+                device=self.device,
             )
             return "bond stretch"
         tets = getattr(solver, "_tets", None)
         if tets is not None and getattr(model, "dm_inv", None) is not None:  # FEM
             k = kw.watchdog_kernels(self.kin.dtype)
-            kw.tet_strain_range(k, self.kin.u, tets, model.dm_inv, int(tets.shape[0]), self.acc, self.device)
+            kw.tet_strain_range(
+                k,
+                displacements=self.kin.u,
+                tets=tets,
+                dm_inv=model.dm_inv,
+                count=int(tets.shape[0]),
+                acc=self.acc,
+                device=self.device,
+            )
             return "volume ratio"
         return None
 
@@ -329,16 +347,12 @@ class Watchdog:
         wp.copy(self.acc, self._reset, dest_offset=4, src_offset=0, count=WATCH_SLOTS - 4)
         kw.state_sums(
             kw.watchdog_kernels(kin.dtype),
-            kin.u,
-            kin.v,
-            kin.mass,
-            kin.point_condition,
-            kin.point_kind,
-            kin.cond_axes,
-            kin.gravity,
-            kin.point_count,
-            self.acc,
-            self.device,
+            displacements=kin.u,
+            velocities=kin.v,
+            count=kin.point_count,
+            acc=self.acc,
+            device=self.device,
+            **by_name(kin, "mass", "point_condition", "point_kind", "cond_axes", "gravity"),
         )
         strain = None
         if self.full_check or self.checks % STRAIN_EVERY == 0:
