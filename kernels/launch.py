@@ -28,3 +28,9 @@ def launch(kernel, dim, *, device, record_cmd: bool = False, **arguments):
         unknown = [n for n in arguments if n not in names]
         raise TypeError(f"kernel {kernel.key}: missing arguments {missing}, unknown arguments {unknown}")
     return wp.launch(kernel, dim=dim, inputs=[arguments[n] for n in names], device=device, record_cmd=record_cmd)
+
+
+def by_name(source, *names: str) -> dict:
+    """{name: source.name} for each of ``names``: the arrays and settings that ``source`` holds under the names of the
+    kernel parameters they go to, as keyword arguments of :func:`launch`."""
+    return {name: getattr(source, name) for name in names}

@@ -22,7 +22,7 @@ import warp as wp
 from .checks import check_range
 from .errors import ParameterError
 from .kernels import contact as kc
-from .kinematics import by_name
+from .kernels.launch import by_name
 
 CONTACT_NEIGHBOR_BUDGET = 12
 """Contact modulus calibration: C_k (2 r_k)^3 = S_k / 12, so 12 simultaneous contacts (the kissing number of equal

@@ -22,12 +22,7 @@ import warp as wp
 
 from .errors import InstabilityError
 from .kernels import integration as ki
-
-
-def by_name(source, *names: str) -> dict:
-    """{name: source.name} for each of ``names``: the arrays and settings that ``source`` holds under the names of
-    the kernel parameters they go to, for a launch that takes its arguments by name (kernels/launch.py)."""
-    return {name: getattr(source, name) for name in names}
+from .kernels.launch import by_name
 
 
 class PointKinematics:

@@ -11,6 +11,7 @@ import warp as wp
 from .checkpoint import RunInterrupted
 from .errors import InstabilityError
 from .kernels import watchdog as kw
+from .kernels.launch import by_name
 from .kernels.watchdog import (
     WATCH_BAD,
     WATCH_FIRST_BAD,
@@ -24,7 +25,6 @@ from .kernels.watchdog import (
     WATCH_STRAIN_MIN,
     WATCH_VMAX,
 )
-from .kinematics import by_name
 
 STRAIN_EVERY = 8  # the strain pass (a pass over the bonds or elements) runs every 8th check and at frame ends
 

@@ -20,16 +20,10 @@ import warp as wp
 
 from ..kernels.fem import cg as kc
 from ..kernels.fem import elements as ke
+from ..kernels.launch import by_name
 from .model import FemModel
 
 CG_CHUNK = 256  # vertices per partial sum of the CG reductions
-
-
-def arrays_named(owner, *names: str) -> dict:
-    """The attributes ``names`` of ``owner`` as launch keyword arguments: for arrays that carry the names of the kernel
-    parameters they feed (kernels/launch.py), e.g. the CG work arrays of :class:`FemCg` or the condition arrays of the
-    kinematics."""
-    return {n: getattr(owner, n) for n in names}
 
 
 @dataclass
@@ -181,7 +175,7 @@ class FemCg:
             chunk=ch,
             dtype=dtype,
             device=d,
-            **arrays_named(self, "constrained", "precond", "r", "z", "p", "partial3"),
+            **by_name(self, "constrained", "precond", "r", "z", "p", "partial3"),
         )
         kc.reduce_init(partial3=self.partial3, scalars=self.scalars, dtype=dtype, device=d)
         s = self.scalars.numpy()
@@ -198,7 +192,7 @@ class FemCg:
                 chunk=ch,
                 dtype=dtype,
                 device=d,
-                **arrays_named(self, "p", "q", "precond", "scalars", "x", "r", "z", "partial2"),
+                **by_name(self, "p", "q", "precond", "scalars", "x", "r", "z", "partial2"),
             )
             kc.reduce_beta(partial2=self.partial2, scalars=self.scalars, dtype=dtype, device=d)
             kc.update_p(z=self.z, scalars=self.scalars, chunk=ch, p=self.p, chunks=chunks, dtype=dtype, device=d)
@@ -259,4 +253,4 @@ class FemCg:
         return bsr
 
 
-__all__ = ["CG_CHUNK", "CgReport", "FemCg", "arrays_named"]
+__all__ = ["CG_CHUNK", "CgReport", "FemCg"]

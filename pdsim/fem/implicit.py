@@ -13,7 +13,7 @@ from __future__ import annotations
 import warp as wp
 
 from ..kernels.fem import solver as ks
-from .cg import arrays_named
+from ..kernels.launch import by_name
 from .operators import FemOperators
 
 
@@ -51,7 +51,7 @@ class BackwardEuler:
             forces=s.force,
             mass=s.lumped_mass,
             velocities=kin.v,
-            **arrays_named(kin, "point_condition", "active_kind", "cond_axes", "active_velocity", "point_kind"),
+            **by_name(kin, "point_condition", "active_kind", "cond_axes", "active_velocity", "point_kind"),
             gravity=s.gravity,
             dt=s.dtype(dt),
             rhs=cg.rhs,

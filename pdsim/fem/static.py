@@ -17,7 +17,7 @@ import warp as wp
 from ..checks import check_range
 from ..errors import ParameterError
 from ..kernels.fem import solver as ks
-from .cg import arrays_named
+from ..kernels.launch import by_name
 from .operators import FemOperators
 
 
@@ -54,7 +54,7 @@ def solve_static(
         if kin.condition_count:
             kin.evaluate_conditions(t)
         ks.constraint_bits(
-            **arrays_named(kin, "point_condition", "active_kind", "cond_axes", "point_kind"),
+            **by_name(kin, "point_condition", "active_kind", "cond_axes", "point_kind"),
             constrained=cg.constrained,
             dtype=dtype,
             device=d,

@@ -12,7 +12,8 @@ from ..checks import check_range
 from ..errors import ParameterError
 from ..kernels.fem import elements as ke
 from ..kernels.fem import solver as ks
-from .cg import CgReport, arrays_named
+from ..kernels.launch import by_name
+from .cg import CgReport
 from .static import StaticSolveReport, solve_static
 
 
@@ -83,7 +84,7 @@ class FemStep:
             inv_mass=self.inv_mass,
             gravity=self.gravity,
             dt=self.dtype(dt),
-            **arrays_named(kin, "damping", "point_condition", "point_kind", "cond_axes"),
+            **by_name(kin, "damping", "point_condition", "point_kind", "cond_axes"),
             forces=self.force,
             velocities=kin.v,
             accelerations=kin.a,
