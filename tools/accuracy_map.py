@@ -31,12 +31,15 @@ import warp as wp
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
+sys.path.insert(0, HERE)
 
 import pdsim  # noqa: E402
 import pdsim.reference_problems as problems  # noqa: E402
 from pdsim.fem import FemBody, SolverFem  # noqa: E402
 from pdsim.fem.mesh import box_tet_mesh  # noqa: E402
 from pdsim.sweep import run_sweeps  # noqa: E402
+
+from bench_fem import newton_soft_mesh  # noqa: E402
 
 BEGIN, END = "<!-- accuracy_map:begin -->", "<!-- accuracy_map:end -->"
 LAMMPS_PERI = os.path.join(HERE, "lammps_peri.py")
@@ -237,25 +240,9 @@ def newton_cantilever(n: int = 2) -> dict:
     with problems._Meter() as meter:
         mesh = box_tet_mesh((L, t, t), (8 * n, n, n), center=(0.5 * L, 0.0, 0.0))
         dt = NEWTON_DT_FACTOR * SolverFem([FemBody(mesh, mat)], device="cpu").explicit_time_step()
-        builder = newton.ModelBuilder()
-        builder.add_soft_mesh(
-            pos=wp.vec3(0.0, 0.0, 0.0),
-            rot=wp.quat_identity(),
-            scale=1.0,
-            vel=wp.vec3(0.0, 0.0, 0.0),
-            vertices=[wp.vec3(*p) for p in mesh.vertices],
-            indices=mesh.tets.ravel().tolist(),
-            density=mat.density,
-            k_mu=peer.shear_modulus,
-            k_lambda=peer.lame_lambda,
-            k_damp=0.0,
-            particle_radius=1.0e-6,  # the default radius (0.1 m) makes neighbouring vertices repel by contact
-        )
         clamped = np.flatnonzero(mesh.vertices[:, 0] <= 1.0e-9)
-        active = int(newton.ParticleFlags.ACTIVE)
-        for i in clamped:
-            builder.particle_mass[i] = 0.0
-            builder.particle_flags[i] = builder.particle_flags[i] & ~active
+        # the default particle radius (0.1 m) makes neighbouring vertices repel by contact
+        builder = newton_soft_mesh(newton, mesh, peer, clamped, particle_radius=1.0e-6)
         model = builder.finalize(device="cpu")
         model.set_gravity((0.0, 0.0, 0.0))
         solver = newton.solvers.SolverSemiImplicit(model, enable_tri_contact=False)

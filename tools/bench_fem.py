@@ -79,12 +79,10 @@ def _time_pdsim(mesh, *, integrator, measure, device, steps, warmup, stiffness="
     return out
 
 
-def _time_newton(mesh, *, solver_name, device, steps, warmup, dt):
-    """Newton's tetrahedral solver on the same mesh; None when newton is not installed."""
-    try:
-        import newton
-    except ImportError:
-        return None
+def newton_soft_mesh(newton, mesh, material, clamped, **options):
+    """A Newton ``ModelBuilder`` holding ``mesh`` as one undamped soft tetrahedral mesh at rest with the density and
+    Lame constants of ``material`` [kg/m^3, Pa], the vertices ``clamped`` (indices) held (mass 0, inactive);
+    ``options`` go to ``add_soft_mesh``. The peer set-up of this benchmark and of tools/accuracy_map.py."""
     builder = newton.ModelBuilder()
     builder.add_soft_mesh(
         pos=wp.vec3(0.0, 0.0, 0.0),
@@ -93,15 +91,26 @@ def _time_newton(mesh, *, solver_name, device, steps, warmup, dt):
         vel=wp.vec3(0.0, 0.0, 0.0),
         vertices=[wp.vec3(*p) for p in mesh.vertices],
         indices=mesh.tets.ravel().tolist(),
-        density=MAT.density,
-        k_mu=MAT.shear_modulus,
-        k_lambda=MAT.lame_lambda,
+        density=material.density,
+        k_mu=material.shear_modulus,
+        k_lambda=material.lame_lambda,
         k_damp=0.0,
+        **options,
     )
     active = int(newton.ParticleFlags.ACTIVE)
-    for i in np.flatnonzero(_clamped(mesh)):
+    for i in clamped:
         builder.particle_mass[i] = 0.0
         builder.particle_flags[i] = builder.particle_flags[i] & ~active
+    return builder
+
+
+def _time_newton(mesh, *, solver_name, device, steps, warmup, dt):
+    """Newton's tetrahedral solver on the same mesh; None when newton is not installed."""
+    try:
+        import newton
+    except ImportError:
+        return None
+    builder = newton_soft_mesh(newton, mesh, MAT, np.flatnonzero(_clamped(mesh)))
     model = builder.finalize(device=device)
     model.set_gravity(GRAVITY)
     if solver_name == "SolverSemiImplicit":
