@@ -200,15 +200,15 @@ class SolverPeridynamics(PointSolver):
         row = wp.zeros(m.particle_count, dtype=float, device=self.device)
         kb.stiffness_row_sum(
             m.particle_count,
-            m.family_offsets,
-            m.family_neighbors,
-            m.bond_wv_dil,
-            m.bond_wv_dev,
-            m.dev_b,
-            m.dil_d,
-            m.dil_c0,
-            row,
-            self.device,
+            family_offsets=m.family_offsets,
+            family_neighbors=m.family_neighbors,
+            bond_wv_dil=m.bond_wv_dil,
+            bond_wv_dev=m.bond_wv_dev,
+            dev_b=m.dev_b,
+            dil_d=m.dil_d,
+            dil_c0=m.dil_c0,
+            row_sum=row,
+            device=self.device,
         )
         s = row.numpy().astype(np.float64)
         ok = s > 0
