@@ -23,7 +23,7 @@ produce the same sums in the same order.
 
 import warp as wp
 
-from kernels.launch import launch
+from ..launch import launch
 
 
 @wp.kernel
