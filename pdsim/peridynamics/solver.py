@@ -304,16 +304,16 @@ class SolverPeridynamics(PointSolver):
         if m.debris_rate is not None:  # Material.debris_damping (kernels/peridynamics/damping.py)
             pd_damping.debris_damping(
                 m.particle_count,
-                m.family_offsets,
-                m.family_neighbors,
-                m.bond_wv,
-                alive,
-                self.kin.v,
-                m.inv_density,
-                m.debris_rate,
-                m.debris_damage,
-                s.force_density,
-                self.device,
+                family_offsets=m.family_offsets,
+                family_neighbors=m.family_neighbors,
+                bond_wv=m.bond_wv,
+                bond_alive=alive,
+                velocities=self.kin.v,
+                inv_density=m.inv_density,
+                rate=m.debris_rate,
+                damage_threshold=m.debris_damage,
+                force_density=s.force_density,
+                device=self.device,
             )
         if self.contact is not None:
             pd_step.deformed_positions(m.particle_count, m.rest_positions, self.kin.u, self._positions, self.device)
