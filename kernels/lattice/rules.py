@@ -30,6 +30,8 @@ Kinds: 0 follower, 1 leader, 2 frame. Fictitious points are not particles: they 
 
 import warp as wp
 
+from ..launch import launch
+
 wp.set_module_options({"enable_backward": False})  # no gradients needed: halves compile time
 
 LATTICE_FOLLOWER = wp.constant(0)
@@ -382,28 +384,15 @@ def set_kind(count, indices, new_kind, new_group, kind, group, device):
     wp.launch(lattice_set_kind, dim=count, inputs=[indices, new_kind, new_group, kind, group], device=device)
 
 
-def move_leaders(count, step_clock, leader_ids, group, key_offsets, key_step, key_disp, group_velocity, u_cur, u_next,
-                 device):  # fmt: skip
+def move_leaders(count, *, device, **arguments):
     """The ``count`` leaders ``leader_ids`` take their path's displacement [m] at this step (lattice_move_leaders)."""
-    wp.launch(
-        lattice_move_leaders,
-        dim=count,
-        inputs=[step_clock, leader_ids, group, key_offsets, key_step, key_disp, group_velocity, u_cur, u_next],
-        device=device,
-    )
+    launch(lattice_move_leaders, count, device=device, **arguments)
 
 
-def follow(kernel, count, rest, kind, row_offsets, link_neighbor, link_offset, link_alive, offset_delta, offset_weight,
-           offset_shell, fictitious_scale, params, u_cur, u_next, device):  # fmt: skip
+def follow(kernel, count, *, device, **arguments):
     """The follower rule over ``count`` particles with a kernel from :func:`make_follow_kernel`: u_next [m] of every
     follower from u_cur."""
-    wp.launch(
-        kernel,
-        dim=count,
-        inputs=[rest, kind, row_offsets, link_neighbor, link_offset, link_alive, offset_delta, offset_weight,
-                offset_shell, fictitious_scale, params, u_cur, u_next],
-        device=device,
-    )  # fmt: skip
+    launch(kernel, count, device=device, **arguments)
 
 
 def copy_frame(first, count, frame_offsets, frame_sources, u_source, u_next, device):
@@ -416,40 +405,19 @@ def copy_frame(first, count, frame_offsets, frame_sources, u_source, u_next, dev
     )
 
 
-def break_links(count, body_count, row_offsets, link_neighbor, link_offset, offset_delta, offset_threshold, u,
-                link_alive, broken_total, device):  # fmt: skip
+def break_links(count, *, device, **arguments):
     """Breaks the over-stretched body links of the ``count`` particles and counts them (lattice_break_links)."""
-    wp.launch(
-        lattice_break_links,
-        dim=count,
-        inputs=[body_count, row_offsets, link_neighbor, link_offset, offset_delta, offset_threshold, u, link_alive,
-                broken_total],
-        device=device,
-    )  # fmt: skip
+    launch(lattice_break_links, count, device=device, **arguments)
 
 
-def pseudo_energy(count, row_offsets, link_neighbor, link_offset, link_alive, use_alive, offset_delta, offset_length, u,
-                  pe1, pe1_intact, broken, device):  # fmt: skip
+def pseudo_energy(count, *, device, **arguments):
     """PE1 [m^2] (all links and intact links) and lost links of the ``count`` particles (lattice_pseudo_energy)."""
-    wp.launch(
-        lattice_pseudo_energy,
-        dim=count,
-        inputs=[row_offsets, link_neighbor, link_offset, link_alive, use_alive, offset_delta, offset_length, u, pe1,
-                pe1_intact, broken],
-        device=device,
-    )  # fmt: skip
+    launch(lattice_pseudo_energy, count, device=device, **arguments)
 
 
-def record_tracks(count, ids, row_offsets, link_neighbor, link_offset, offset_delta, offset_length, u, slot, track_u,
-                  track_pe1, device):  # fmt: skip
+def record_tracks(count, *, device, **arguments):
     """Displacement [m] and PE1 [m^2] of the ``count`` tracked particles into row ``slot`` (lattice_record_tracks)."""
-    wp.launch(
-        lattice_record_tracks,
-        dim=count,
-        inputs=[ids, row_offsets, link_neighbor, link_offset, offset_delta, offset_length, u, slot, track_u,
-                track_pe1],
-        device=device,
-    )  # fmt: skip
+    launch(lattice_record_tracks, count, device=device, **arguments)
 
 
 def check_finite(count, u, result, device):

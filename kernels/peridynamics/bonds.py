@@ -23,6 +23,8 @@ produce the same sums in the same order.
 
 import warp as wp
 
+from ..launch import launch
+
 
 @wp.kernel
 def compute_family_moments(
@@ -229,79 +231,36 @@ def compute_plastic_norm_scale(
 # One launch per kernel above, each over the ``count`` particles of the model (one thread per particle).
 
 
-def bond_geometry(count, rest_positions, volumes, horizon, spacing, partial_volumes, family_offsets, family_neighbors,
-                  bond_geom, bond_wv, device):  # fmt: skip
-    """Writes bond_geom = (xi / L, L) and bond_wv = w V_j beta (compute_bond_geometry)."""
-    wp.launch(
-        compute_bond_geometry,
-        dim=count,
-        inputs=[rest_positions, volumes, horizon, spacing, partial_volumes, family_offsets, family_neighbors,
-                bond_geom, bond_wv],
-        device=device,
-    )  # fmt: skip
+def bond_geometry(count, *, device, **arguments):
+    """Writes bond_geom = (xi / L, L) and bond_wv = w V_j beta [m^3] (compute_bond_geometry)."""
+    launch(compute_bond_geometry, count, device=device, **arguments)
 
 
-def family_moments(count, family_offsets, bond_geom, bond_wv, horizon, volume_sum, weighted_volume, device):
+def family_moments(count, *, device, **arguments):
     """Writes volume_sum [m^3] and weighted_volume m_k [m^5] (compute_family_moments)."""
-    wp.launch(
-        compute_family_moments,
-        dim=count,
-        inputs=[family_offsets, bond_geom, bond_wv, horizon, volume_sum, weighted_volume],
-        device=device,
-    )
+    launch(compute_family_moments, count, device=device, **arguments)
 
 
-def stiffness_row_sum(count, family_offsets, family_neighbors, bond_wv_dil, bond_wv_dev, dev_b, dil_d, dil_c0, row_sum,
-                      device):  # fmt: skip
+def stiffness_row_sum(count, *, device, **arguments):
     """Writes the Silling-Askari stiffness sum S_k [N/m^4] (compute_stiffness_row_sum)."""
-    wp.launch(
-        compute_stiffness_row_sum,
-        dim=count,
-        inputs=[family_offsets, family_neighbors, bond_wv_dil, bond_wv_dev, dev_b, dil_d, dil_c0, row_sum],
-        device=device,
-    )
+    launch(compute_stiffness_row_sum, count, device=device, **arguments)
 
 
-def directional_bond_weights(count, family_offsets, family_neighbors, bond_geom, bond_wv, factor_dil, factor_dev,
-                             bond_wv_dil, bond_wv_dev, device):  # fmt: skip
+def directional_bond_weights(count, *, device, **arguments):
     """Writes the surface-corrected bond weights bond_wv_dil, bond_wv_dev [m^3] (compute_directional_bond_factors)."""
-    wp.launch(
-        compute_directional_bond_factors,
-        dim=count,
-        inputs=[family_offsets, family_neighbors, bond_geom, bond_wv, factor_dil, factor_dev, bond_wv_dil,
-                bond_wv_dev],
-        device=device,
-    )  # fmt: skip
+    launch(compute_directional_bond_factors, count, device=device, **arguments)
 
 
-def bond_strengths(count, family_offsets, family_neighbors, bond_geom, critical_stretch, unbreakable, axis,
-                   strength_ratio, local_index, weibull_modulus, strength_seed, bond_critical_stretch,
-                   device):  # fmt: skip
+def bond_strengths(count, *, device, **arguments):
     """Writes the critical stretch of every bond [-] (init_bond_fracture)."""
-    wp.launch(
-        init_bond_fracture,
-        dim=count,
-        inputs=[family_offsets, family_neighbors, bond_geom, critical_stretch, unbreakable, axis, strength_ratio,
-                local_index, weibull_modulus, strength_seed, bond_critical_stretch],
-        device=device,
-    )  # fmt: skip
+    launch(init_bond_fracture, count, device=device, **arguments)
 
 
-def anisotropic_stiffness(count, family_offsets, bond_geom, axis, stiffness_ratio, bond_wv_dil, bond_wv_dev, device):
+def anisotropic_stiffness(count, *, device, **arguments):
     """Scales bond_wv_dil and bond_wv_dev in place by the anisotropy factor (scale_anisotropic_stiffness)."""
-    wp.launch(
-        scale_anisotropic_stiffness,
-        dim=count,
-        inputs=[family_offsets, bond_geom, axis, stiffness_ratio, bond_wv_dil, bond_wv_dev],
-        device=device,
-    )
+    launch(scale_anisotropic_stiffness, count, device=device, **arguments)
 
 
-def plastic_norm_scale(count, family_offsets, bond_geom, bond_wv, bond_wv_dev, horizon, b_ratio, psi_scale, device):
+def plastic_norm_scale(count, *, device, **arguments):
     """Writes the family's share s_k of the continuum deviatoric-force norm [-] (compute_plastic_norm_scale)."""
-    wp.launch(
-        compute_plastic_norm_scale,
-        dim=count,
-        inputs=[family_offsets, bond_geom, bond_wv, bond_wv_dev, horizon, b_ratio, psi_scale],
-        device=device,
-    )
+    launch(compute_plastic_norm_scale, count, device=device, **arguments)

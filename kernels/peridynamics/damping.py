@@ -18,6 +18,8 @@ effect). Stability of the explicit step needs c dt < 1.
 
 import warp as wp
 
+from ..launch import launch
+
 
 # add_debris_damping repeats compute_damage's sums of live and total bond weight (kernels/peridynamics/step.py) on
 # purpose: it gathers the neighbours' velocities in the same loop, where sharing compute_damage's would take a second
@@ -61,13 +63,6 @@ def add_debris_damping(
         force_density[k] = force_density[k] + (c / inv_density[k]) * (v_bar - velocities[k])
 
 
-def debris_damping(count, family_offsets, family_neighbors, bond_wv, bond_alive, velocities, inv_density, rate,
-                   damage_threshold, force_density, device):  # fmt: skip
+def debris_damping(count, *, device, **arguments):
     """Adds the debris drag to force_density [N/m^3] of the ``count`` particles (add_debris_damping)."""
-    wp.launch(
-        add_debris_damping,
-        dim=count,
-        device=device,
-        inputs=[family_offsets, family_neighbors, bond_wv, bond_alive, velocities, inv_density, rate,
-                damage_threshold, force_density],
-    )  # fmt: skip
+    launch(add_debris_damping, count, device=device, **arguments)

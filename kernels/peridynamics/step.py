@@ -38,6 +38,8 @@ reverse bond, read only by the next pass), and reads other particles' rows only 
 
 import warp as wp
 
+from ..launch import argument_names
+
 _cache = {}
 
 
@@ -454,46 +456,30 @@ def plastic_placeholders(f1, i1) -> dict:
     }
 
 
-def dilatation(
-    launch, ks, *, displacements, family_offsets, family_neighbors, bond_geom, bond_wv_dil, dil_d, dil_coef, dev_b,
-    bond_alive, theta, bp, bond_ne, stretch_min, plastic_particle_count, bond_wv, bond_wv_dev, horizon,
-    weighted_volume, yield_stress, hardening, psi_scale, bond_plastic, eqps, bond_reverse, bond_plastic_reverse,
-):  # fmt: skip
+def range_inputs(kernel, arguments: dict) -> list:
+    """The inputs of a range kernel after its ``first`` argument, in the order the kernel declares them, from
+    ``arguments`` given by parameter name (each exactly once; a TypeError names what is missing or unknown)."""
+    names = argument_names(kernel)[1:]
+    if sorted(arguments) != sorted(names):
+        raise TypeError(f"kernel {kernel.key}: arguments missing or unknown: {sorted(set(names) ^ set(arguments))}")
+    return [arguments[n] for n in names]
+
+
+def dilatation(launch, ks, **arguments):
     """The dilatation pass of the kernels ``ks`` (make_step_kernels) through ``launch(kernel, inputs)``: theta [-],
     (b_k, P_k), the bonds' (n, e) cache and, where compiled in, the most compressive stretch and the plastic update."""
-    launch(
-        ks.dilatation,
-        [displacements, family_offsets, family_neighbors, bond_geom, bond_wv_dil, dil_d, dil_coef, dev_b, bond_alive,
-         theta, bp, bond_ne, stretch_min, plastic_particle_count, bond_wv, bond_wv_dev, horizon, weighted_volume,
-         yield_stress, hardening, psi_scale, bond_plastic, eqps, bond_reverse, bond_plastic_reverse],
-    )  # fmt: skip
+    launch(ks.dilatation, range_inputs(ks.dilatation, arguments))
 
 
-def bond_forces(
-    launch, ks, *, family_offsets, family_neighbors, bond_geom, bond_ne, bond_wv_dil, bond_wv_dev, bp, bond_alive,
-    bond_critical_stretch, compressive_bonus, compressive_stretch_floor, stretch_min, eqps, failure_eqps,
-    plastic_bond_count, bond_plastic, bond_plastic_reverse, force_density,
-):  # fmt: skip
+def bond_forces(launch, ks, **arguments):
     """The force pass of the kernels ``ks`` through ``launch(kernel, inputs)``: force density [N/m^3] and, where
     compiled in, the breaking test of every live bond."""
-    launch(
-        ks.force,
-        [family_offsets, family_neighbors, bond_geom, bond_ne, bond_wv_dil, bond_wv_dev, bp, bond_alive,
-         bond_critical_stretch, compressive_bonus, compressive_stretch_floor, stretch_min, eqps, failure_eqps,
-         plastic_bond_count, bond_plastic, bond_plastic_reverse, force_density],
-    )  # fmt: skip
+    launch(ks.force, range_inputs(ks.force, arguments))
 
 
-def strain_energy_density(
-    launch, ks, *, family_offsets, bond_ne, bond_wv_dev, bond_alive, plastic_bond_count, bond_plastic, theta, dev_b,
-    dil_c0, energy_density,
-):  # fmt: skip
+def strain_energy_density(launch, ks, **arguments):
     """The energy pass of the kernels ``ks`` through ``launch(kernel, inputs)``: elastic energy density [J/m^3]."""
-    launch(
-        ks.energy,
-        [family_offsets, bond_ne, bond_wv_dev, bond_alive, plastic_bond_count, bond_plastic, theta, dev_b, dil_c0,
-         energy_density],
-    )  # fmt: skip
+    launch(ks.energy, range_inputs(ks.energy, arguments))
 
 
 def particle_damage(launch, family_offsets, bond_wv, bond_alive, damage):

@@ -13,6 +13,8 @@ from .rules import (
 )
 from .solver import SolverLattice
 
+# The lattice package's public names; pdsim/__init__.py repeats them within its own alphabetical __all__ (the package's
+# top-level namespace), so each list is complete where it is read.
 __all__ = [
     "Lattice",
     "LatticeBody",

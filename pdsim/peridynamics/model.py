@@ -204,11 +204,32 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
     partial = wp.array(
         per_particle([b.partial_volumes for b in bodies]).astype(np.int32), dtype=wp.int32, device=device
     )
-    kb.bond_geometry(n, rest, volumes, horizon, spacing, partial, offsets, neighbors, bond_geom, bond_wv, device)
+    kb.bond_geometry(
+        n,
+        rest_positions=rest,
+        volumes=volumes,
+        horizon=horizon,
+        spacing=spacing,
+        partial_volumes=partial,
+        family_offsets=offsets,
+        family_neighbors=neighbors,
+        bond_geom=bond_geom,
+        bond_wv=bond_wv,
+        device=device,
+    )
 
     volume_sum = wp.zeros(n, dtype=float, device=device)
     weighted_volume = wp.zeros(n, dtype=float, device=device)
-    kb.family_moments(n, offsets, bond_geom, bond_wv, horizon, volume_sum, weighted_volume, device)
+    kb.family_moments(
+        n,
+        family_offsets=offsets,
+        bond_geom=bond_geom,
+        bond_wv=bond_wv,
+        horizon=horizon,
+        volume_sum=volume_sum,
+        weighted_volume=weighted_volume,
+        device=device,
+    )
     vs = volume_sum.numpy().astype(np.float64)
     m = weighted_volume.numpy().astype(np.float64)
     correction = np.concatenate([np.full(c, b.surface_correction) for c, b in zip(counts, bodies, strict=False)])
@@ -232,15 +253,15 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
         bond_wv_dev = wp.zeros_like(bond_wv)
         kb.directional_bond_weights(
             n,
-            offsets,
-            neighbors,
-            bond_geom,
-            bond_wv,
-            wp.array(f_dil.astype(f32), dtype=wp.vec3, device=device),
-            wp.array(f_dev.astype(f32), dtype=wp.vec3, device=device),
-            bond_wv_dil,
-            bond_wv_dev,
-            device,
+            family_offsets=offsets,
+            family_neighbors=neighbors,
+            bond_geom=bond_geom,
+            bond_wv=bond_wv,
+            factor_dil=wp.array(f_dil.astype(f32), dtype=wp.vec3, device=device),
+            factor_dev=wp.array(f_dev.astype(f32), dtype=wp.vec3, device=device),
+            bond_wv_dil=bond_wv_dil,
+            bond_wv_dev=bond_wv_dev,
+            device=device,
         )
     else:
         bond_wv_dil = bond_wv_dev = bond_wv
@@ -259,7 +280,16 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
     if np.any(anisotropic & (stiff_h != 1.0)):
         if bond_wv_dil is bond_wv:
             bond_wv_dil, bond_wv_dev = wp.clone(bond_wv), wp.clone(bond_wv)
-        kb.anisotropic_stiffness(n, offsets, bond_geom, axis, arr(stiff_h), bond_wv_dil, bond_wv_dev, device)
+        kb.anisotropic_stiffness(
+            n,
+            family_offsets=offsets,
+            bond_geom=bond_geom,
+            axis=axis,
+            stiffness_ratio=arr(stiff_h),
+            bond_wv_dil=bond_wv_dil,
+            bond_wv_dev=bond_wv_dev,
+            device=device,
+        )
 
     extra = {}
     fracture = any(b.fractures for b in bodies)
@@ -270,18 +300,20 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
         bond_sc = wp.zeros(max(bond_count, 1), dtype=float, device=device)
         kb.bond_strengths(
             n,
-            offsets,
-            neighbors,
-            bond_geom,
-            arr(sc_h),
-            wp.array(unbreak, dtype=wp.int32, device=device),
-            axis,
-            arr(strength_h),
-            wp.array((np.arange(n) - np.repeat(body_offsets[:-1], counts)).astype(np.int32), device=device),
-            arr(per_particle([b.material.strength_weibull_modulus or 0.0 for b in bodies])),
-            wp.array(per_particle([b.material.strength_seed for b in bodies]).astype(np.int32), device=device),
-            bond_sc,
-            device,
+            family_offsets=offsets,
+            family_neighbors=neighbors,
+            bond_geom=bond_geom,
+            critical_stretch=arr(sc_h),
+            unbreakable=wp.array(unbreak, dtype=wp.int32, device=device),
+            axis=axis,
+            strength_ratio=arr(strength_h),
+            local_index=wp.array((np.arange(n) - np.repeat(body_offsets[:-1], counts)).astype(np.int32), device=device),
+            weibull_modulus=arr(per_particle([b.material.strength_weibull_modulus or 0.0 for b in bodies])),
+            strength_seed=wp.array(
+                per_particle([b.material.strength_seed for b in bodies]).astype(np.int32), device=device
+            ),
+            bond_critical_stretch=bond_sc,
+            device=device,
         )
         alive = wp.array(np.ones(max(bond_count, 1), dtype=np.uint8), dtype=wp.uint8, device=device)
         for c, b, lo in zip(counts, bodies, body_offsets[:-1]):
@@ -310,7 +342,17 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
         reverse = wp.zeros(max(nb_p, 1), dtype=wp.int32, device=device)
         pd_step.reverse_bonds(n_p, offsets, neighbors, reverse, device)
         psi = wp.zeros(n, dtype=float, device=device)
-        kb.plastic_norm_scale(n, offsets, bond_geom, bond_wv, bond_wv_dev, horizon, arr(b_k / b_cont), psi, device)
+        kb.plastic_norm_scale(
+            n,
+            family_offsets=offsets,
+            bond_geom=bond_geom,
+            bond_wv=bond_wv,
+            bond_wv_dev=bond_wv_dev,
+            horizon=horizon,
+            b_ratio=arr(b_k / b_cont),
+            psi_scale=psi,
+            device=device,
+        )
         extra.update(
             plastic=True,
             plastic_particle_count=n_p,

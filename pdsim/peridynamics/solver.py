@@ -200,15 +200,15 @@ class SolverPeridynamics(PointSolver):
         row = wp.zeros(m.particle_count, dtype=float, device=self.device)
         kb.stiffness_row_sum(
             m.particle_count,
-            m.family_offsets,
-            m.family_neighbors,
-            m.bond_wv_dil,
-            m.bond_wv_dev,
-            m.dev_b,
-            m.dil_d,
-            m.dil_c0,
-            row,
-            self.device,
+            family_offsets=m.family_offsets,
+            family_neighbors=m.family_neighbors,
+            bond_wv_dil=m.bond_wv_dil,
+            bond_wv_dev=m.bond_wv_dev,
+            dev_b=m.dev_b,
+            dil_d=m.dil_d,
+            dil_c0=m.dil_c0,
+            row_sum=row,
+            device=self.device,
         )
         s = row.numpy().astype(np.float64)
         ok = s > 0
@@ -304,16 +304,16 @@ class SolverPeridynamics(PointSolver):
         if m.debris_rate is not None:  # Material.debris_damping (kernels/peridynamics/damping.py)
             pd_damping.debris_damping(
                 m.particle_count,
-                m.family_offsets,
-                m.family_neighbors,
-                m.bond_wv,
-                alive,
-                self.kin.v,
-                m.inv_density,
-                m.debris_rate,
-                m.debris_damage,
-                s.force_density,
-                self.device,
+                family_offsets=m.family_offsets,
+                family_neighbors=m.family_neighbors,
+                bond_wv=m.bond_wv,
+                bond_alive=alive,
+                velocities=self.kin.v,
+                inv_density=m.inv_density,
+                rate=m.debris_rate,
+                damage_threshold=m.debris_damage,
+                force_density=s.force_density,
+                device=self.device,
             )
         if self.contact is not None:
             pd_step.deformed_positions(m.particle_count, m.rest_positions, self.kin.u, self._positions, self.device)
