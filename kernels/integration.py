@@ -239,6 +239,8 @@ def integration_kernels(dtype=wp.float32):
         i = points[q]
         velocities[i] = velocities[i] + vec3(dtype(dv[0]), dtype(dv[1]), dtype(dv[2]))
 
+    # Every kernel that honours the boundary conditions takes the per-point condition arrays (point_condition,
+    # active_kind, cond_axes) as parameters in the same order: the repeated lines are those parameter lists.
     @wp.kernel(module="unique")
     def condition_reactions(
         point_condition: wp.array(dtype=wp.int32),

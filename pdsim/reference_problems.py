@@ -368,6 +368,8 @@ def rayleigh_speed(youngs_modulus: float, poisson_ratio: float, density: float, 
     return cs * math.sqrt(0.5 * (lo + hi))
 
 
+# The peridynamic problems share their knobs (horizon_factor, surface_correction, dt_factor) as keyword arguments of
+# the same names and defaults: the sweep reads each problem's knobs from its signature.
 def pd_crack_speed(
     n: int = 40,
     *,
