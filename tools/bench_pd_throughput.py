@@ -441,19 +441,17 @@ def run_benchmark(
                     entry["ratio_all_cores_cpu"] = alln["ratio_cpu"]
                 entry["lammps_all_cores_bond_visits_per_s"] = alln["bond_visits_per_s"]
         result["states"][state] = entry
-    least = _least_favourable(result["states"], "ratio")
-    if least:
-        result["least_favourable_state"], result["least_favourable_ratio"] = least
-        cpu = _least_favourable(result["states"], "ratio_cpu")
-        if cpu:
-            result["least_favourable_ratio_cpu"] = cpu[1]
-            result["least_favourable_state_cpu"] = cpu[0]
-        allc = _least_favourable(result["states"], "ratio_all_cores")
-        if allc:
-            result["least_favourable_all_cores_state"], result["least_favourable_all_cores_ratio"] = allc
-            allc_cpu = _least_favourable(result["states"], "ratio_all_cores_cpu")
-            if allc_cpu:
-                result["least_favourable_all_cores_ratio_cpu"] = allc_cpu[1]
+    for ratio, state_key, ratio_key in (  # the headline figures: each ratio's least favourable state
+        ("ratio", "least_favourable_state", "least_favourable_ratio"),
+        ("ratio_cpu", "least_favourable_state_cpu", "least_favourable_ratio_cpu"),
+        ("ratio_all_cores", "least_favourable_all_cores_state", "least_favourable_all_cores_ratio"),
+        ("ratio_all_cores_cpu", None, "least_favourable_all_cores_ratio_cpu"),
+    ):
+        found = _least_favourable(result["states"], ratio)
+        if found:
+            if state_key is not None:
+                result[state_key] = found[0]
+            result[ratio_key] = found[1]
     if len(states) == 1:  # the flat keys of a single-state run (what earlier versions of this tool printed)
         only = result["states"][states[0]]
         pd = only["pdsim"]
