@@ -10,6 +10,7 @@ contact between methods.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -22,12 +23,14 @@ from tqdm import tqdm
 
 from .capture import FrameGraphs
 from .checkpoint import CHECKPOINT_FORMAT, RunInterrupted, checkpoint_path, load_checkpoint, save_checkpoint
-from .checks import check_frames, check_range, check_time_step
+from . import memory
+from .checks import check_frames, check_range, check_time_step, format_bytes
 from .colliders import collider_names
 from .contact import MethodContact
 from .divergence import attach_watchdogs, schedule_watchdogs
-from .errors import InstabilityError, ParameterError
+from .errors import InstabilityError, OutputWriteError, ParameterError
 from .output.usd import UsdCache
+from .output.usd_files import pdsim_info
 from .output.writer import ViewWriter
 from .preflight import preflight
 from .solver import PointSolver
@@ -251,7 +254,7 @@ def run_scene(
         raise ParameterError(
             "resume", out, f"a cache holding the run the checkpoint belongs to, at its frame {start} ({exc})"
         ) from None
-    with run.cache as cache:
+    with write_errors(run.cache), run.cache as cache:
         run.writer = ViewWriter(
             cache,
             color_attribute=color_attribute,
@@ -295,6 +298,45 @@ def run_scene(
         first_frame=start + 1 if resume else 0,
         checks=sum(w.checks for w in watchdogs if w is not None),
     )
+
+
+@contextlib.contextmanager
+def write_errors(cache):
+    """Turns an OSError of a write during a run (disk full, a folder turned read-only: a frame layer, the top-level
+    layer, a checkpoint) into a one-line OutputWriteError naming the path, the error, the free space [B] of its file
+    system and the finished frames the cache keeps."""
+    try:
+        yield
+    except OSError as exc:
+        raise write_failure(exc, cache) from None
+
+
+def write_failure(exc: OSError, cache) -> OutputWriteError:
+    """The OutputWriteError of ``exc`` (see :func:`write_errors`)."""
+    path = os.fspath(exc.filename) if exc.filename is not None else str(cache.top_level_path)
+    folder = os.path.dirname(os.path.abspath(path))
+    while folder and not os.path.isdir(folder):
+        folder = os.path.dirname(folder)
+    try:
+        free = f"{format_bytes(memory.free_disk_space(folder))} free on {folder}"
+    except OSError:
+        free = f"free space of {folder} unknown"
+    what = exc.strerror or str(exc)
+    kept = frames_note(cache.top_level_path, _last_frame_on_disk(cache))
+    return OutputWriteError(f"could not write {path}: {what} ({free}); {kept}")
+
+
+def _last_frame_on_disk(cache) -> int:
+    """The last frame the cache's top-level layer on disk names for this run (-1: none), read from the file: after a
+    failed write it may be behind the last finished frame."""
+    top = cache.top_level_path
+    try:
+        info = pdsim_info(top) if top.is_file() else {}
+    except ValueError:
+        info = {}
+    if info.get("run") != cache.run_id:
+        return -1
+    return int(cache.start_frame) + int(info.get("framesWritten", 0)) - 1
 
 
 # -- stepping -----------------------------------------------------------------------------------------------------
