@@ -21,9 +21,17 @@ from dataclasses import dataclass
 import numpy as np
 from tqdm import tqdm
 
-from .capture import FrameGraphs
-from .checkpoint import CHECKPOINT_FORMAT, RunInterrupted, checkpoint_path, load_checkpoint, save_checkpoint
 from . import memory
+from .capture import FrameGraphs
+from .checkpoint import (
+    CHECKPOINT_FORMAT,
+    CheckpointAbandoned,
+    RunInterrupted,
+    checkpoint_path,
+    load_checkpoint,
+    remove_stale_temporaries,
+    save_checkpoint,
+)
 from .checks import check_frames, check_range, check_time_step, format_bytes
 from .colliders import collider_names
 from .contact import MethodContact
@@ -133,8 +141,9 @@ class _FrameRun:
         self.writer.write(frame, views)
         self.cache.end_frame(frame, time=t)
 
-    def write_checkpoint(self, frame: int, substep: int):
-        """The run's state after ``substep`` steps of frame ``frame + 1`` (frame ``frame`` finished)."""
+    def write_checkpoint(self, frame: int, substep: int, abandon=None):
+        """The run's state after ``substep`` steps of frame ``frame + 1`` (frame ``frame`` finished); ``abandon``:
+        see pdsim.checkpoint.save_checkpoint."""
         if self.options.checkpoint_interval_s is None:
             return None
         self.cache.save()  # the top-level layer on disk reaches ``frame``: a resume reopens the cache there
@@ -154,7 +163,7 @@ class _FrameRun:
             "watchdogs": {str(i): ({} if w is None else w.checkpoint()) for i, w in enumerate(self.watchdogs)},
             "colliders": _collider_states(self.scene.colliders),
         }
-        return save_checkpoint(self.ck_path, state)
+        return save_checkpoint(self.ck_path, state, abandon=abandon)
 
 
 def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, limit, bar, stop, on_frame) -> None:
@@ -175,7 +184,7 @@ def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, lim
             if done is None:
                 raise
             # stopped at a step boundary inside the frame, ``done`` steps into it
-            written = run.write_checkpoint(frame - 1, first_substep + done)
+            written = _checkpoint(run, frame - 1, first_substep + done, stop)
             raise RunInterrupted(exc.signal, checkpoint=written, last_frame=frame - 1) from None
         first_substep = 0
         run.write_frame(frame)
@@ -185,10 +194,24 @@ def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, lim
         stopping = stop is not None and stop.requested
         due = every is not None and time.monotonic() - last_checkpoint >= every
         if (stopping or due) and frame < frames:
-            written = run.write_checkpoint(frame, 0)
+            written = _checkpoint(run, frame, 0, stop)
             last_checkpoint = time.monotonic()
-            if stopping:
+            if stopping or (stop is not None and stop.requested):  # asked during the checkpoint: it is the last
                 raise RunInterrupted(stop.signal, checkpoint=written, last_frame=frame)
+
+
+STOP_CHECKPOINT_BUDGET_S = 1.2  # a checkpoint still being written this long after a stop request is abandoned [s]
+
+
+def _checkpoint(run: _FrameRun, frame: int, substep: int, stop):
+    """``run.write_checkpoint``, abandoned when a stop request has waited longer than STOP_CHECKPOINT_BUDGET_S (so
+    that SIGTERM stops a large run within 2 s): then the previous checkpoint file, or None."""
+    overdue = getattr(stop, "overdue", None)  # a StopRequest's; other stop objects never abandon a checkpoint
+    abandon = None if overdue is None else (lambda: overdue(STOP_CHECKPOINT_BUDGET_S))
+    try:
+        return run.write_checkpoint(frame, substep, abandon=abandon)
+    except CheckpointAbandoned:
+        return run.ck_path if run.ck_path.is_file() else None
 
 
 def run_scene(
@@ -214,6 +237,7 @@ def run_scene(
     of :meth:`pdsim.Scene.run`."""
     options = _check_options(scene, out, frames, dt, dt_factor, check_interval, checkpoint_interval_s, color_attribute)
     out = options.out
+    remove_stale_temporaries(out)  # what a killed run on this output left (at most one checkpoint's .tmp)
     names = collider_names(scene.colliders)
     wall0 = time.perf_counter()
     preflight(scene, device=device, out=out, dt=options.dt, frames=options.frames)  # before anything is allocated
