@@ -317,7 +317,7 @@ def _execute(build_scene, args) -> int:
             )
         )
         return 0
-    out = args.out or f"{scene.name}.usdc"
+    out = f"{scene.name}.usdc" if args.out is None else args.out  # --out "": refused by the run's check
     stop = StopRequest()
     in_main = _is_main_thread()
     if in_main:

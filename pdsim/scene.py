@@ -88,6 +88,10 @@ class Scene:
             raise ParameterError("gravity", gravity, "3 finite numbers [m/s^2]")
         self.gravity = tuple(float(x) for x in g)
         self.time_step_safety = check_range("time_step_safety", time_step_safety, 0.0, 1.0, hi_open=False)
+        if not isinstance(name, str) or not name.strip() or "/" in name or os.sep in name:
+            raise ParameterError(
+                "name", name, "a non-empty scene name without '/' (it labels the cache and names <name>.usdc)"
+            )
         self.name = name
         self.bodies: list = []
         self.ground: GroundPlane | None = None
@@ -131,7 +135,12 @@ class Scene:
     def add_collider(self, collider):
         """Adds a static MeshCollider or a kinematic projectile (SphereProjectile, BoxProjectile, MeshProjectile)."""
         if not isinstance(collider, Collider):
-            raise ParameterError("collider", collider, "a pdsim collider (MeshCollider, SphereProjectile, ...)")
+            raise ParameterError(
+                "collider",
+                type(collider).__name__,
+                "a pdsim collider: MeshCollider(shape) for a static shape, SphereProjectile, BoxProjectile or "
+                "MeshProjectile(shape) for a moving one",
+            )
         check_prim_names(self.bodies, [*self.colliders, collider], self.ground)
         self.colliders.append(collider)
         return collider
