@@ -4,6 +4,7 @@ are built. Running a scene is pdsim.run's: ``Scene.run`` hands the scene to :fun
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 import os
 
@@ -18,7 +19,7 @@ from .geometry import SolidShape
 from .kinematics import scene_origin
 from .materials import Material
 from .peridynamics import PeridynamicBody
-from .preflight import check_prim_names, preflight
+from .preflight import check_particle_request, check_prim_names, preflight
 from .run import RunReport, run_scene
 from .solver import SolverContext, solver_for
 
@@ -110,7 +111,17 @@ class Scene:
         return body
 
     def add_peridynamic_body(self, shape: SolidShape, material: Material, spacing: float, **kwargs) -> PeridynamicBody:
-        """Fills ``shape`` with particles of ``spacing`` [m] and adds it (keyword options: see PeridynamicBody)."""
+        """Fills ``shape`` with particles of ``spacing`` [m] and adds it (keyword options: see PeridynamicBody). A
+        spacing whose particles could not fit in memory is refused before any sampling (estimated from the shape's
+        bounding box and volume)."""
+        if isinstance(shape, SolidShape):
+            defaults = inspect.signature(PeridynamicBody).parameters
+            check_particle_request(
+                shape,
+                spacing,
+                kwargs.get("horizon_factor", defaults["horizon_factor"].default),
+                bool(kwargs.get("partial_volumes", defaults["partial_volumes"].default)),
+            )
         return self.add_body(PeridynamicBody(shape, material, spacing, **kwargs))
 
     def add_fem_body(self, shape, material: Material, **kwargs):
