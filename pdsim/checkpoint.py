@@ -128,9 +128,11 @@ def save_checkpoint(path, state: dict, abandon=None) -> Path:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         if tmp.exists():
             tmp.unlink()
+        if isinstance(exc, OSError) and exc.filename is None:  # a failed write (disk full): name the file
+            raise OSError(exc.errno, exc.strerror or str(exc), str(tmp)) from exc
         raise
     return path
 

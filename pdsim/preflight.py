@@ -45,7 +45,7 @@ from .device import default_device
 from .errors import GeometryError, ParameterError
 from .fem.mesh import quality_problem
 from .geometry import SolidShape
-from .sampling import lattice_counts, points_inside
+from .sampling import MAX_LATTICE_POINTS, lattice_counts, points_inside
 from .timestep import MAX_SUBSTEPS_PER_FRAME, chosen_step, estimated_stable_step
 
 MAX_INDEX = 2**31 - 1  # particles, vertices, bonds and elements are indexed with int32 on the device
@@ -152,7 +152,9 @@ def _bonds_per_particle(body) -> float:
     return 4.0 / 3.0 * math.pi * r**3 - 1.0
 
 
-def check_particle_request(shape: SolidShape, spacing: float, horizon_factor: float, partial_volumes: bool) -> float:
+def check_particle_request(
+    shape: SolidShape, spacing: float, horizon_factor: float, partial_volumes: bool, name: str | None = None
+) -> float:
     """Before any sampling: the particle count a peridynamic body of ``spacing`` [m] gets in ``shape``, estimated from
     the lattice over its bounding box times the fraction of the box the shape fills, and ParameterError (one line: the
     estimate, the memory, the spacing that fits) when its solver's memory (PD_BYTES_PER_PARTICLE and
@@ -168,7 +170,10 @@ def check_particle_request(shape: SolidShape, spacing: float, horizon_factor: fl
     lo, hi = shape.bounds
     box_volume = float(np.prod(hi - lo))
     fill = min(max(shape.volume / box_volume, 0.0), 1.0) if box_volume > 0.0 else 1.0
-    n = float(np.prod(lattice_counts(shape, h))) * fill
+    candidates = float(np.prod(lattice_counts(shape, h)))
+    if candidates > MAX_LATTICE_POINTS:
+        return candidates * fill  # the body's own check (pdsim.sampling.check_lattice_size) refuses it, as fast
+    n = candidates * fill
     need = n * (PD_BYTES_PER_PARTICLE + (4.0 / 3.0 * math.pi * r**3 - 1.0) * PD_BYTES_PER_BOND)
     free = [f for f in (memory.free_host_memory(), *_free_cuda_memory()) if f is not None]
     if not free or need <= max(free):
@@ -178,9 +183,9 @@ def check_particle_request(shape: SolidShape, spacing: float, horizon_factor: fl
     raise ParameterError(
         "spacing",
         spacing,
-        f"a spacing whose body fits in memory: '{shape.name}' at this spacing would hold about {n:.3g} particles "
-        f"needing about {format_bytes(need)}, and the most free memory here is {format_bytes(room)}; spacing >= "
-        f"{fits:.3g} m fits (memory grows as 1/spacing^3)" + unit_hint(float(np.max(hi - lo)), h, count=n),
+        f"a spacing whose body fits in memory: '{name or shape.name}' at this spacing would hold about {n:.3g} "
+        f"particles needing about {format_bytes(need)}, and the most free memory here is {format_bytes(room)}; "
+        f"spacing >= {fits:.3g} m fits (memory grows as 1/spacing^3)" + unit_hint(float(np.max(hi - lo)), h, count=n),
     )
 
 

@@ -121,6 +121,7 @@ class Scene:
                 spacing,
                 kwargs.get("horizon_factor", defaults["horizon_factor"].default),
                 bool(kwargs.get("partial_volumes", defaults["partial_volumes"].default)),
+                kwargs.get("name") if isinstance(kwargs.get("name"), str) else None,
             )
         return self.add_body(PeridynamicBody(shape, material, spacing, **kwargs))
 

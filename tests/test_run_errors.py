@@ -91,16 +91,15 @@ def test_disk_full_on_a_checkpoint(tmp_path, monkeypatch):
     """ENOSPC while writing a checkpoint: the message names the checkpoint's temporary file; no temporary file stays;
     the finished frames read back."""
     out = tmp_path / "out.usdc"
-    real = pdsim.checkpoint.np.savez
 
-    def savez(f, **arrays):
-        raise OSError(errno.ENOSPC, "No space left on device", str(f.name))
+    def write_chunk(self, chunk):  # a write to a full disk: OSError(ENOSPC) without a file name
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(pdsim.checkpoint.np, "savez", savez)
+    monkeypatch.setattr(pdsim.checkpoint._ChunkedFile, "write_chunk", write_chunk)
     with pytest.raises(OutputWriteError) as info:
         _scene().run(out, device="cpu", progress=False, checkpoint_interval_s=0.0)
-    monkeypatch.setattr(pdsim.checkpoint.np, "savez", real)
-    _check_message(str(info.value), "checkpoint.npz", 1)
+    monkeypatch.undo()
+    _check_message(str(info.value), ".out.checkpoint.npz.tmp:", 1)
     assert not list(tmp_path.glob(".*.tmp*")), list(tmp_path.iterdir())
     assert _frames_on_disk(out) == [0, 1]
 

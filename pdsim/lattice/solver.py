@@ -679,7 +679,7 @@ def _leader_cause(paths, step: int, limit: float) -> str | None:
     """The likely cause of a diverged lattice body when it is a leader path: the first path whose displacement at
     ``step`` (float64 on the host) is not finite in float32, the precision of the device, or exceeds ``limit`` [m];
     None when every path stays within it (then the rule diverged)."""
-    for i, p in enumerate(paths):  # clamp and hold add a path too (velocity 0)
+    for p in paths:
         if step >= p.steps[-1]:
             u = p.displacements[-1] + p.velocity_after * float(step - p.steps[-1])
         else:
@@ -693,7 +693,7 @@ def _leader_cause(paths, step: int, limit: float) -> str | None:
             )
             beyond = "the float32 range" if not size < np.finfo(np.float32).max else f"{limit:.3g} m"
             return (
-                f"the leaders added with {how} (add_leaders call {i + 1}) move {size:.3g} m by step {step}, beyond "
+                f"the leaders added with {how} move {size:.3g} m by step {step}, beyond "
                 f"{beyond}; give add_leaders' velocity in metres per step and path displacements in metres"
             )
     return None
