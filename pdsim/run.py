@@ -200,7 +200,7 @@ def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, lim
                 raise RunInterrupted(stop.signal, checkpoint=written, last_frame=frame)
 
 
-STOP_CHECKPOINT_BUDGET_S = 1.2  # a checkpoint still being written this long after a stop request is abandoned [s]
+STOP_CHECKPOINT_BUDGET_S = 0.8  # a checkpoint still being written this long after a stop request is abandoned [s]
 
 
 def _checkpoint(run: _FrameRun, frame: int, substep: int, stop):
