@@ -260,7 +260,11 @@ class Scene:
         every frame; None: never), and when ``stop`` is requested, the run writes ``<stem>.checkpoint.npz`` beside
         ``out``; ``resume=True`` continues from it, bit for bit as an uninterrupted run on the CPU, in the same cache
         ``out`` (the frames the interrupted run wrote after its checkpoint are replaced). A finished run removes its
-        checkpoint.
+        checkpoint; a run removes the temporary files a killed run left beside ``out``.
+
+        A write that fails during the run (disk full, the folder turned read-only) raises
+        pdsim.errors.OutputWriteError naming the file, the error and the free space; the cache keeps every finished
+        frame.
 
         Args:
             out: output path.
@@ -282,7 +286,9 @@ class Scene:
             check_interval: steps between watchdog checks, integer >= 1 (default 16; also at every frame end).
             stop: a pdsim.checkpoint.StopRequest (or anything with ``requested`` and ``signal``), polled at every step
                 and frame end; once requested the run stops at the next step boundary, writes a checkpoint (unless
-                checkpoints are off) and raises pdsim.checkpoint.RunInterrupted (a KeyboardInterrupt).
+                checkpoints are off; a checkpoint write still going 0.8 s after the request is abandoned and the
+                previous checkpoint kept, so that a StopRequest stops a large run within 2 s) and raises
+                pdsim.checkpoint.RunInterrupted (a KeyboardInterrupt).
             on_frame: callable(frame, solvers) run after each frame is written (diagnostics such as energy audits;
                 each solver's ``watchdog.last`` holds its frame-end check).
         """
