@@ -8,15 +8,17 @@ import errno
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
-from pxr import Usd, UsdGeom
+from pxr import Sdf, Usd, UsdGeom
 
 import pdsim
 import pdsim.checkpoint
 import pdsim.output.usd_stream
 from pdsim.errors import OutputWriteError
+from pdsim.output.usd_values import export_layer
 
 MAT = {"density": 1000.0, "youngs_modulus": 1.0e5, "poisson_ratio": 0.3}
 
@@ -184,3 +186,12 @@ def test_pdsim_error_keeps_exit_1(tmp_path):
     )  # fmt: skip
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip() and not ln.startswith("Warp CUDA warning:")]
     assert proc.returncode == 1 and len(lines) == 1 and lines[0].startswith("pdsim: error: "), proc.stderr
+
+
+def test_usd_write_failure_is_an_oserror_naming_the_file():
+    """A layer export USD itself fails (a Tf error: here a folder no one may create files in) is an OSError with the
+    errno named in USD's text and the target's path, which the run turns into its one-line message."""
+    target = Path("/sys/pdsim_probe.usdc")
+    with pytest.raises(OSError) as info:
+        export_layer(Sdf.Layer.CreateAnonymous("probe.usdc"), target)
+    assert info.value.errno == errno.EACCES and info.value.filename == str(target), repr(info.value)
