@@ -6,8 +6,10 @@ every solver's ``checkpoint()`` (pdsim/solver.py: displacements, velocities, acc
 state, contact scales, FEM topology after splits, lattice state), the watchdog's energy accounting, the projectiles'
 last poses, the frame and sub-step reached, the cache's run id and what the USD writer needs to continue the same
 prims (pdsim.output.writer.ViewWriter.checkpoint), and a fingerprint of the scene. The file is written to a temporary
-name and renamed (atomic): a kill leaves the previous checkpoint or the new one, never half of one. A run that
-finishes removes it.
+name and renamed (atomic): a kill leaves the previous checkpoint or the new one, never half of one. It is written in
+chunks, and a stop request that has waited longer than the run's stop budget abandons it (the temporary file is
+removed, the previous checkpoint stays), so that SIGTERM stops a large run within seconds. A run that finishes
+removes it; a run starting on the same output removes the temporary files a killed run left.
 
 ``Scene.run(..., resume=True)`` (``pdsim run --resume``) rebuilds the scene, checks the fingerprint, restores the
 state and continues in the same cache: pdsim.output.usd.UsdCache reopens it at the checkpoint's frame (dropping any
@@ -21,6 +23,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import time
 from pathlib import Path
 
 import numpy as np
@@ -60,26 +63,97 @@ def _flatten(tree: dict, prefix: str, arrays: dict, meta: dict) -> None:
             raise ValueError(f"checkpoint value {name!r} of type {type(value).__name__} is not storable")
 
 
-def save_checkpoint(path, state: dict) -> Path:
+CHUNK_BYTES = 4 << 20  # a checkpoint is written in chunks of this size [B]; a stop request is checked between them
+
+
+class CheckpointAbandoned(Exception):
+    """A checkpoint write given up on request (``save_checkpoint(..., abandon=...)``); its temporary file is removed
+    and the previous checkpoint, if any, stays."""
+
+
+class _ChunkedFile:
+    """A binary file that writes in chunks of CHUNK_BYTES and raises CheckpointAbandoned before a chunk when
+    ``abandon()`` is true."""
+
+    def __init__(self, f, abandon):
+        self._f, self._abandon = f, abandon
+
+    def write(self, data) -> int:
+        view = memoryview(data).cast("B")
+        for i in range(0, len(view), CHUNK_BYTES):
+            if self._abandon is not None and self._abandon():
+                raise CheckpointAbandoned("checkpoint write abandoned on a stop request")
+            self.write_chunk(view[i : i + CHUNK_BYTES])
+        return len(view)
+
+    def write_chunk(self, chunk) -> None:
+        self._f.write(chunk)
+
+    def read(self, *args) -> bytes:  # numpy takes an object with read() for a file object
+        return self._f.read(*args)
+
+    def tell(self) -> int:
+        return self._f.tell()
+
+    def seek(self, *args) -> int:
+        return self._f.seek(*args)
+
+    def flush(self) -> None:
+        self._f.flush()
+
+
+def temporary_path(path) -> Path:
+    """The temporary file a checkpoint at ``path`` is written to before it is renamed (``.<name>.tmp``)."""
+    path = Path(path)
+    return path.with_name(f".{path.name}.tmp")
+
+
+def save_checkpoint(path, state: dict, abandon=None) -> Path:
     """Writes the nested dict ``state`` (numpy arrays, plain scalars, lists of scalars, dicts) to the .npz ``path``
     atomically (a temporary file beside it, then ``os.replace``). Arrays are stored bit for bit, scalars as JSON
-    (floats round-trip exactly)."""
+    (floats round-trip exactly). ``abandon`` (a callable or None) is asked before each chunk of CHUNK_BYTES: when it
+    returns true the write stops, the temporary file is removed and CheckpointAbandoned is raised; so is any error
+    (the previous checkpoint at ``path`` stays)."""
     path = Path(path)
     arrays: dict = {}
     meta: dict = {}
     _flatten(state, "", arrays, meta)
-    tmp = path.with_name(f".{path.name}.tmp")
+    tmp = temporary_path(path)
     try:
         with open(tmp, "wb") as f:
-            np.savez(f, **{f"a/{k}": v for k, v in arrays.items()}, **{_META: np.array(json.dumps(meta))})
+            out = _ChunkedFile(f, abandon)
+            np.savez(out, **{f"a/{k}": v for k, v in arrays.items()}, **{_META: np.array(json.dumps(meta))})
+            if abandon is not None and abandon():
+                raise CheckpointAbandoned("checkpoint write abandoned on a stop request")
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         if tmp.exists():
             tmp.unlink()
+        if isinstance(exc, OSError) and exc.filename is None:  # a failed write (disk full): name the file
+            raise OSError(exc.errno, exc.strerror or str(exc), str(tmp)) from exc
         raise
     return path
+
+
+def remove_stale_temporaries(out) -> list[Path]:
+    """Removes the temporary files a killed run left beside the cache ``out`` (its checkpoint's ``.tmp``, the
+    top-level and partial layers' ``.tmp`` exports, those in the frame folders); returns them. Called by a run on
+    ``out`` before it writes anything."""
+    out = Path(out)
+    stem, suffix = out.stem, out.suffix
+    found = [temporary_path(checkpoint_path(out))]
+    found += [out.with_name(f".{name}.tmp{suffix}") for name in (out.name, f"{stem}.partial{suffix}")]
+    frames = out.with_name(f"{stem}.frames")
+    if frames.is_dir():
+        found += [p for p in frames.glob("*/.*.tmp.usd*") if p.is_file()]
+    removed = []
+    for p in found:
+        if p.is_file():
+            p.unlink()
+            removed.append(p)
+    return removed
 
 
 def load_checkpoint(path) -> dict:
@@ -135,6 +209,7 @@ class StopRequest:
 
     def __init__(self):
         self.signal = None
+        self.time = None  # time.monotonic() [s] of the request
         self._previous = {}
 
     @property
@@ -143,11 +218,17 @@ class StopRequest:
 
     def request(self, signum=signal.SIGTERM) -> None:
         self.signal = signum
+        self.time = time.monotonic()
+
+    def overdue(self, budget_s: float) -> bool:
+        """True when a stop was requested more than ``budget_s`` seconds ago (a checkpoint still being written then
+        is abandoned, so that the run stops in time)."""
+        return self.time is not None and time.monotonic() - self.time > budget_s
 
     def _handler(self, signum, frame):
         if self.signal is not None:  # a second signal: stop now
             raise RunInterrupted(signum)
-        self.signal = signum
+        self.request(signum)
 
     def install(self, signals=(signal.SIGINT, signal.SIGTERM)) -> StopRequest:
         """Installs the handlers (main thread only); :meth:`uninstall` puts the previous ones back."""
@@ -168,10 +249,12 @@ def signal_exit_code(signum) -> int:
 
 __all__ = [
     "CHECKPOINT_FORMAT",
+    "CheckpointAbandoned",
     "RunInterrupted",
     "StopRequest",
     "checkpoint_path",
     "load_checkpoint",
+    "remove_stale_temporaries",
     "save_checkpoint",
     "signal_exit_code",
 ]

@@ -5,7 +5,9 @@
 per variant, on Dask) and ``pdsim bench accuracy [--quick] [--scheduler ...]`` (the run-time-vs-error map).
 
 A scene script is a Python file defining ``build_scene()`` that returns a :class:`pdsim.Scene`. With no script the
-shipped default scene runs. Exit status of ``pdsim run``: 0 done; 1 a user mistake (one line); 3 the simulation
+shipped default scene runs. Exit status of ``pdsim run``: 0 done; 1 a user mistake (one line), a refused input or a
+write error (the path, the error and the free space; the cache keeps every finished frame); 2 an exception in the
+scene script (its file, line and message, and the script's own frames of the traceback); 3 the simulation
 diverged (the watchdog's one line names the frame, the body and the likely cause; the cache keeps every finished
 frame); 130 Ctrl-C (SIGINT) and 143 SIGTERM: the run stops within a few steps, writes a checkpoint, prints one line
 and leaves the cache of the finished frames readable; ``--resume`` continues from the checkpoint.
@@ -30,7 +32,7 @@ from .errors import InstabilityError, ParameterError, PdsimError
 from .explain import explain_scene
 from .preview import write_preview
 from .scene import Scene
-from .scene_script import load_scene_script
+from .scene_script import EXIT_SCRIPT_ERROR, load_scene_script, script_error_message
 
 EXIT_DIVERGED = 3  # exit status when the watchdog stops a diverging run
 
@@ -315,7 +317,7 @@ def _execute(build_scene, args) -> int:
             )
         )
         return 0
-    out = args.out or f"{scene.name}.usdc"
+    out = f"{scene.name}.usdc" if args.out is None else args.out  # --out "": refused by the run's check
     stop = StopRequest()
     in_main = _is_main_thread()
     if in_main:
@@ -412,6 +414,12 @@ def main(argv: list[str] | None = None) -> int:
     except PdsimError as exc:
         print(f"pdsim: error: {exc}", file=sys.stderr)
         return 1
+    except Exception as exc:
+        message = script_error_message(exc)  # None: pdsim's own exception, shown with its full traceback
+        if message is None:
+            raise
+        print(message, file=sys.stderr)
+        return EXIT_SCRIPT_ERROR
 
 
 def run_script(build_scene, argv: list[str] | None = None) -> int:
@@ -424,6 +432,12 @@ def run_script(build_scene, argv: list[str] | None = None) -> int:
     except PdsimError as exc:
         print(f"pdsim: error: {exc}", file=sys.stderr)
         code = 1
+    except Exception as exc:
+        message = script_error_message(exc)  # None: pdsim's own exception, shown with its full traceback
+        if message is None:
+            raise
+        print(message, file=sys.stderr)
+        code = EXIT_SCRIPT_ERROR
     sys.exit(code)
 
 

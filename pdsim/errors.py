@@ -31,3 +31,8 @@ class InstabilityError(PdsimError, RuntimeError):
 
 class FeatureNotAvailableError(PdsimError, NotImplementedError):
     """A requested feature is not implemented in this version of pdsim."""
+
+
+class OutputWriteError(PdsimError, RuntimeError):
+    """Writing the cache or a checkpoint failed during a run (disk full, folder turned read-only); the message names
+    the path, the error, the free space and where the finished frames are."""

@@ -96,6 +96,8 @@ def load_mesh(path: str | os.PathLike, *, scale: float = 1.0, translate=(0.0, 0.
         raise GeometryError(f"{path}: no such file")
     scale = check_range("scale", scale, 0.0, None)
     translate = _vec3("translate", translate)
+    if suffix == ".stl":
+        _check_stl(path)
     try:
         mesh = _load_trimesh(path, suffix)
     except Exception as exc:  # noqa: BLE001 (trimesh raises many exception types for unreadable files)
@@ -106,6 +108,28 @@ def load_mesh(path: str | os.PathLike, *, scale: float = 1.0, translate=(0.0, 0.
         mesh.apply_scale(scale)
         mesh.apply_translation(translate)
     return _shape_from_trimesh(mesh, name or os.path.splitext(os.path.basename(path))[0], path)
+
+
+def _check_stl(path: str) -> None:
+    """GeometryError unless ``path`` holds an STL: a binary STL (an 80-byte header, a triangle count N, then exactly
+    50 bytes per triangle: 84 + 50 N bytes) or ASCII STL text ('solid' ... 'facet normal' ... 'endsolid'). An OBJ or
+    OFF file named .stl is named as such."""
+    with open(path, "rb") as f:
+        data = f.read()
+    if len(data) >= 84 and len(data) == 84 + 50 * int.from_bytes(data[80:84], "little"):
+        return  # binary STL
+    text = data[:65536].decode("latin-1")
+    if text.lstrip().startswith("solid") and ("facet" in text or "endsolid" in text):
+        return  # ASCII STL
+    lines = [ln.split(None, 1)[0] for ln in text.splitlines() if ln.strip()]
+    if lines and any(w == "v" for w in lines) and any(w == "f" for w in lines):
+        raise GeometryError(f"{path}: the file holds OBJ text ('v' and 'f' lines), not STL; rename it to .obj")
+    if lines and lines[0] == "OFF":
+        raise GeometryError(f"{path}: the file holds OFF text, not STL; rename it to .off")
+    raise GeometryError(
+        f"{path}: not a readable STL file ({len(data)} bytes): neither ASCII STL text ('solid' ... 'endsolid') nor a "
+        "binary STL (84 + 50 x N bytes for N triangles); export it again as STL"
+    )
 
 
 TEXT_MESH_SUFFIXES = (".obj", ".off")  # always text: read here, so that their encoding never matters to trimesh

@@ -36,6 +36,7 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+import warp as wp
 
 from . import memory
 from .checks import check_frames, check_range, check_time_step, format_bytes, unit_hint
@@ -44,7 +45,7 @@ from .device import default_device
 from .errors import GeometryError, ParameterError
 from .fem.mesh import quality_problem
 from .geometry import SolidShape
-from .sampling import points_inside
+from .sampling import MAX_LATTICE_POINTS, lattice_counts, points_inside
 from .timestep import MAX_SUBSTEPS_PER_FRAME, chosen_step, estimated_stable_step, projectile_step_limit
 
 MAX_INDEX = 2**31 - 1  # particles, vertices, bonds and elements are indexed with int32 on the device
@@ -149,6 +150,48 @@ def _bonds_per_particle(body) -> float:
     partial volumes) spacings; an upper bound of the mean (surface particles have fewer)."""
     r = body.horizon_factor + (0.5 if getattr(body, "partial_volumes", True) else 0.0)
     return 4.0 / 3.0 * math.pi * r**3 - 1.0
+
+
+def check_particle_request(
+    shape: SolidShape, spacing: float, horizon_factor: float, partial_volumes: bool, name: str | None = None
+) -> float:
+    """Before any sampling: the particle count a peridynamic body of ``spacing`` [m] gets in ``shape``, estimated from
+    the lattice over its bounding box times the fraction of the box the shape fills, and ParameterError (one line: the
+    estimate, the memory, the spacing that fits) when its solver's memory (PD_BYTES_PER_PARTICLE and
+    PD_BYTES_PER_BOND per estimated bond) exceeds the largest free memory of the host and the CUDA devices. Returns
+    the estimate. Values the body itself refuses (a spacing <= 0, ...) pass here untouched."""
+    try:
+        h = float(spacing)
+        r = float(horizon_factor) + (0.5 if partial_volumes else 0.0)
+    except (TypeError, ValueError):
+        return 0.0
+    if not (h > 0.0 and math.isfinite(h) and 1.5 <= r <= 9.0):
+        return 0.0
+    lo, hi = shape.bounds
+    box_volume = float(np.prod(hi - lo))
+    fill = min(max(shape.volume / box_volume, 0.0), 1.0) if box_volume > 0.0 else 1.0
+    candidates = float(np.prod(lattice_counts(shape, h)))
+    if candidates > MAX_LATTICE_POINTS:
+        return candidates * fill  # the body's own check (pdsim.sampling.check_lattice_size) refuses it, as fast
+    n = candidates * fill
+    need = n * (PD_BYTES_PER_PARTICLE + (4.0 / 3.0 * math.pi * r**3 - 1.0) * PD_BYTES_PER_BOND)
+    free = [f for f in (memory.free_host_memory(), *_free_cuda_memory()) if f is not None]
+    if not free or need <= max(free):
+        return n
+    room = max(free)
+    fits = h * (need / room) ** (1.0 / 3.0)
+    raise ParameterError(
+        "spacing",
+        spacing,
+        f"a spacing whose body fits in memory: '{name or shape.name}' at this spacing would hold about {n:.3g} "
+        f"particles needing about {format_bytes(need)}, and the most free memory here is {format_bytes(room)}; "
+        f"spacing >= {fits:.3g} m fits (memory grows as 1/spacing^3)" + unit_hint(float(np.max(hi - lo)), h, count=n),
+    )
+
+
+def _free_cuda_memory() -> list[float | None]:
+    """Free memory [B] of each CUDA device (none on a machine without CUDA)."""
+    return [memory.free_device_memory(f"cuda:{i}") for i in range(wp.get_cuda_device_count())]
 
 
 def _body_counts(body) -> tuple[int, float, int]:

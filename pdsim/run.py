@@ -10,6 +10,7 @@ contact between methods.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -20,14 +21,24 @@ from dataclasses import dataclass
 import numpy as np
 from tqdm import tqdm
 
+from . import memory
 from .capture import FrameGraphs
-from .checkpoint import CHECKPOINT_FORMAT, RunInterrupted, checkpoint_path, load_checkpoint, save_checkpoint
-from .checks import check_frames, check_range, check_time_step
+from .checkpoint import (
+    CHECKPOINT_FORMAT,
+    CheckpointAbandoned,
+    RunInterrupted,
+    checkpoint_path,
+    load_checkpoint,
+    remove_stale_temporaries,
+    save_checkpoint,
+)
+from .checks import check_frames, check_range, check_time_step, format_bytes
 from .colliders import collider_names
 from .contact import MethodContact
 from .divergence import attach_watchdogs, schedule_watchdogs
-from .errors import InstabilityError, ParameterError
+from .errors import InstabilityError, OutputWriteError, ParameterError
 from .output.usd import UsdCache
+from .output.usd_files import pdsim_info
 from .output.writer import ViewWriter
 from .preflight import preflight
 from .solver import PointSolver
@@ -130,8 +141,9 @@ class _FrameRun:
         self.writer.write(frame, views)
         self.cache.end_frame(frame, time=t)
 
-    def write_checkpoint(self, frame: int, substep: int):
-        """The run's state after ``substep`` steps of frame ``frame + 1`` (frame ``frame`` finished)."""
+    def write_checkpoint(self, frame: int, substep: int, abandon=None):
+        """The run's state after ``substep`` steps of frame ``frame + 1`` (frame ``frame`` finished); ``abandon``:
+        see pdsim.checkpoint.save_checkpoint."""
         if self.options.checkpoint_interval_s is None:
             return None
         self.cache.save()  # the top-level layer on disk reaches ``frame``: a resume reopens the cache there
@@ -151,7 +163,7 @@ class _FrameRun:
             "watchdogs": {str(i): ({} if w is None else w.checkpoint()) for i, w in enumerate(self.watchdogs)},
             "colliders": _collider_states(self.scene.colliders),
         }
-        return save_checkpoint(self.ck_path, state)
+        return save_checkpoint(self.ck_path, state, abandon=abandon)
 
 
 def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, limit, bar, stop, on_frame) -> None:
@@ -172,7 +184,7 @@ def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, lim
             if done is None:
                 raise
             # stopped at a step boundary inside the frame, ``done`` steps into it
-            written = run.write_checkpoint(frame - 1, first_substep + done)
+            written = _checkpoint(run, frame - 1, first_substep + done, stop)
             raise RunInterrupted(exc.signal, checkpoint=written, last_frame=frame - 1) from None
         first_substep = 0
         run.write_frame(frame)
@@ -182,10 +194,24 @@ def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, lim
         stopping = stop is not None and stop.requested
         due = every is not None and time.monotonic() - last_checkpoint >= every
         if (stopping or due) and frame < frames:
-            written = run.write_checkpoint(frame, 0)
+            written = _checkpoint(run, frame, 0, stop)
             last_checkpoint = time.monotonic()
-            if stopping:
+            if stopping or (stop is not None and stop.requested):  # asked during the checkpoint: it is the last
                 raise RunInterrupted(stop.signal, checkpoint=written, last_frame=frame)
+
+
+STOP_CHECKPOINT_BUDGET_S = 0.8  # a checkpoint still being written this long after a stop request is abandoned [s]
+
+
+def _checkpoint(run: _FrameRun, frame: int, substep: int, stop):
+    """``run.write_checkpoint``, abandoned when a stop request has waited longer than STOP_CHECKPOINT_BUDGET_S (so
+    that SIGTERM stops a large run within 2 s): then the previous checkpoint file, or None."""
+    overdue = getattr(stop, "overdue", None)  # a StopRequest's; other stop objects never abandon a checkpoint
+    abandon = None if overdue is None else (lambda: overdue(STOP_CHECKPOINT_BUDGET_S))
+    try:
+        return run.write_checkpoint(frame, substep, abandon=abandon)
+    except CheckpointAbandoned:
+        return run.ck_path if run.ck_path.is_file() else None
 
 
 def run_scene(
@@ -211,6 +237,7 @@ def run_scene(
     of :meth:`pdsim.Scene.run`."""
     options = _check_options(scene, out, frames, dt, dt_factor, check_interval, checkpoint_interval_s, color_attribute)
     out = options.out
+    remove_stale_temporaries(out)  # what a killed run on this output left (at most one checkpoint's .tmp)
     names = collider_names(scene.colliders)
     wall0 = time.perf_counter()
     preflight(scene, device=device, out=out, dt=options.dt, frames=options.frames)  # before anything is allocated
@@ -258,7 +285,7 @@ def run_scene(
         raise ParameterError(
             "resume", out, f"a cache holding the run the checkpoint belongs to, at its frame {start} ({exc})"
         ) from None
-    with run.cache as cache:
+    with write_errors(run.cache), run.cache as cache:
         run.writer = ViewWriter(
             cache,
             color_attribute=color_attribute,
@@ -302,6 +329,45 @@ def run_scene(
         first_frame=start + 1 if resume else 0,
         checks=sum(w.checks for w in watchdogs if w is not None),
     )
+
+
+@contextlib.contextmanager
+def write_errors(cache):
+    """Turns an OSError of a write during a run (disk full, a folder turned read-only: a frame layer, the top-level
+    layer, a checkpoint) into a one-line OutputWriteError naming the path, the error, the free space [B] of its file
+    system and the finished frames the cache keeps."""
+    try:
+        yield
+    except OSError as exc:
+        raise write_failure(exc, cache) from None
+
+
+def write_failure(exc: OSError, cache) -> OutputWriteError:
+    """The OutputWriteError of ``exc`` (see :func:`write_errors`)."""
+    path = os.fspath(exc.filename) if exc.filename is not None else str(cache.top_level_path)
+    folder = os.path.dirname(os.path.abspath(path))
+    while folder and not os.path.isdir(folder):
+        folder = os.path.dirname(folder)
+    try:
+        free = f"{format_bytes(memory.free_disk_space(folder))} free on {folder}"
+    except OSError:
+        free = f"free space of {folder} unknown"
+    what = exc.strerror or str(exc)
+    kept = frames_note(cache.top_level_path, _last_frame_on_disk(cache))
+    return OutputWriteError(f"could not write {path}: {what} ({free}); {kept}")
+
+
+def _last_frame_on_disk(cache) -> int:
+    """The last frame the cache's top-level layer on disk names for this run (-1: none), read from the file: after a
+    failed write it may be behind the last finished frame."""
+    top = cache.top_level_path
+    try:
+        info = pdsim_info(top) if top.is_file() else {}
+    except ValueError:
+        info = {}
+    if info.get("run") != cache.run_id:
+        return -1
+    return int(cache.start_frame) + int(info.get("framesWritten", 0)) - 1
 
 
 # -- stepping -----------------------------------------------------------------------------------------------------

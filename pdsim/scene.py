@@ -4,6 +4,7 @@ are built. Running a scene is pdsim.run's: ``Scene.run`` hands the scene to :fun
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 import os
 
@@ -18,7 +19,7 @@ from .geometry import SolidShape
 from .kinematics import scene_origin
 from .materials import Material
 from .peridynamics import PeridynamicBody
-from .preflight import check_prim_names, preflight
+from .preflight import check_particle_request, check_prim_names, preflight
 from .run import RunReport, run_scene
 from .solver import SolverContext, solver_for
 
@@ -88,6 +89,10 @@ class Scene:
             raise ParameterError("gravity", gravity, "3 finite numbers [m/s^2]")
         self.gravity = tuple(float(x) for x in g)
         self.time_step_safety = check_range("time_step_safety", time_step_safety, 0.0, 1.0, hi_open=False)
+        if not isinstance(name, str) or not name.strip() or "/" in name or os.sep in name:
+            raise ParameterError(
+                "name", name, "a non-empty scene name without '/' (it labels the cache and names <name>.usdc)"
+            )
         self.name = name
         self.bodies: list = []
         self.ground: GroundPlane | None = None
@@ -106,7 +111,18 @@ class Scene:
         return body
 
     def add_peridynamic_body(self, shape: SolidShape, material: Material, spacing: float, **kwargs) -> PeridynamicBody:
-        """Fills ``shape`` with particles of ``spacing`` [m] and adds it (keyword options: see PeridynamicBody)."""
+        """Fills ``shape`` with particles of ``spacing`` [m] and adds it (keyword options: see PeridynamicBody). A
+        spacing whose particles could not fit in memory is refused before any sampling (estimated from the shape's
+        bounding box and volume)."""
+        if isinstance(shape, SolidShape):
+            defaults = inspect.signature(PeridynamicBody).parameters
+            check_particle_request(
+                shape,
+                spacing,
+                kwargs.get("horizon_factor", defaults["horizon_factor"].default),
+                bool(kwargs.get("partial_volumes", defaults["partial_volumes"].default)),
+                kwargs.get("name") if isinstance(kwargs.get("name"), str) else None,
+            )
         return self.add_body(PeridynamicBody(shape, material, spacing, **kwargs))
 
     def add_fem_body(self, shape, material: Material, **kwargs):
@@ -131,7 +147,12 @@ class Scene:
     def add_collider(self, collider):
         """Adds a static MeshCollider or a kinematic projectile (SphereProjectile, BoxProjectile, MeshProjectile)."""
         if not isinstance(collider, Collider):
-            raise ParameterError("collider", collider, "a pdsim collider (MeshCollider, SphereProjectile, ...)")
+            raise ParameterError(
+                "collider",
+                type(collider).__name__,
+                "a pdsim collider: MeshCollider(shape) for a static shape, SphereProjectile, BoxProjectile or "
+                "MeshProjectile(shape) for a moving one",
+            )
         check_prim_names(self.bodies, [*self.colliders, collider], self.ground)
         self.colliders.append(collider)
         return collider
@@ -239,7 +260,11 @@ class Scene:
         every frame; None: never), and when ``stop`` is requested, the run writes ``<stem>.checkpoint.npz`` beside
         ``out``; ``resume=True`` continues from it, bit for bit as an uninterrupted run on the CPU, in the same cache
         ``out`` (the frames the interrupted run wrote after its checkpoint are replaced). A finished run removes its
-        checkpoint.
+        checkpoint; a run removes the temporary files a killed run left beside ``out``.
+
+        A write that fails during the run (disk full, the folder turned read-only) raises
+        pdsim.errors.OutputWriteError naming the file, the error and the free space; the cache keeps every finished
+        frame.
 
         Args:
             out: output path.
@@ -261,7 +286,9 @@ class Scene:
             check_interval: steps between watchdog checks, integer >= 1 (default 16; also at every frame end).
             stop: a pdsim.checkpoint.StopRequest (or anything with ``requested`` and ``signal``), polled at every step
                 and frame end; once requested the run stops at the next step boundary, writes a checkpoint (unless
-                checkpoints are off) and raises pdsim.checkpoint.RunInterrupted (a KeyboardInterrupt).
+                checkpoints are off; a checkpoint write still going 0.8 s after the request is abandoned and the
+                previous checkpoint kept, so that a StopRequest stops a large run within 2 s) and raises
+                pdsim.checkpoint.RunInterrupted (a KeyboardInterrupt).
             on_frame: callable(frame, solvers) run after each frame is written (diagnostics such as energy audits;
                 each solver's ``watchdog.last`` holds its frame-end check).
         """

@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import hashlib
 import importlib.util
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -31,8 +33,11 @@ import warp as wp
 
 import pdsim
 import pdsim.fem.mesh
+import pdsim.checkpoint
 import pdsim.memory
+import pdsim.output.usd_stream
 import pdsim.preflight
+from pdsim.lattice import Lattice, LatticeBody
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "errors.md"
@@ -110,6 +115,8 @@ class Case:
     fragments: tuple
     act: Callable
     cli: bool = False
+    exit_code: int = 1  # the command line's exit status (2: an exception of the scene script)
+    keeps_frames: bool = False  # a failure during the run: the cache of the finished frames stays at ws.out
     needs_ftetwild: bool = False
     skip_with_cuda: bool = False
     notes: list = field(default_factory=list)
@@ -138,11 +145,11 @@ def _beam(scene, name="beam", center=(0.15, 0.0, 0.5), spacing=0.05):
     return scene.add_peridynamic_body(pdsim.box((0.3, 0.1, 0.1), center=center), _material(), spacing, name=name)
 
 
-def _run(scene, ws: Workspace, out=None, *, dt=None, frames=None):
+def _run(scene, ws: Workspace, out=None, *, dt=None, frames=None, **kwargs):
     """What Scene.run does with the pre-flight: the checks, then the run (CPU, quiet)."""
     out = ws.out if out is None else out
     pdsim.preflight.preflight(scene, device="cpu", out=out, dt=dt, frames=frames)
-    scene.run(out, device="cpu", dt=dt, frames=frames, progress=False)
+    scene.run(out, device="cpu", dt=dt, frames=frames, progress=False, **kwargs)
 
 
 @contextlib.contextmanager
@@ -153,6 +160,16 @@ def _patched(module, name, value):
         yield
     finally:
         setattr(module, name, old)
+
+
+@contextlib.contextmanager
+def _free_memory(host_bytes: float):
+    """``host_bytes`` of free host memory and no CUDA device, for messages that do not depend on the machine."""
+    with (
+        _patched(pdsim.memory, "free_host_memory", lambda: host_bytes),
+        _patched(pdsim.preflight, "_free_cuda_memory", list),
+    ):
+        yield
 
 
 def _box_mesh_text(extents=(0.3, 0.2, 0.1), *, open_faces=0, scale=1.0) -> str:
@@ -198,6 +215,18 @@ def _(ws):
       "no such file")  # fmt: skip
 def _(ws):
     pdsim.load_mesh(ws.root / "missing.obj")
+
+
+@case("stl_corrupt", A_MESH, "an STL file of garbage bytes", "an ASCII or binary STL", pdsim.GeometryError,
+      "not a readable STL file", "84 + 50 x N bytes")  # fmt: skip
+def _(ws):
+    pdsim.load_mesh(ws.input("part.stl", b"solid x\n\x00\xff\xfe garbage \x80\x81" * 10))
+
+
+@case("stl_holds_obj", A_MESH, "an OBJ file named .stl", "an STL, or the file renamed to .obj", pdsim.GeometryError,
+      "holds OBJ text", "rename it to .obj")  # fmt: skip
+def _(ws):
+    pdsim.load_mesh(ws.input("part.stl", _box_mesh_text()))
 
 
 @case("mesh_scale_zero", A_MESH, "load_mesh(scale=0)", "a scale > 0", pdsim.ParameterError, "scale=0", "(0, inf)")
@@ -388,6 +417,19 @@ def _(ws):
 A_SCENE = "scene"
 
 
+@case("scene_name_empty", A_SCENE, 'Scene(name="")', "a non-empty scene name without '/'", pdsim.ParameterError,
+      "name=''", "non-empty scene name")  # fmt: skip
+def _(ws):
+    pdsim.Scene(name="")
+
+
+@case("collider_not_collider", A_SCENE, "scene.add_collider(pdsim.box(...)) (a shape, not a collider)",
+      "MeshCollider(shape), SphereProjectile, BoxProjectile, MeshProjectile(shape)", pdsim.ParameterError,
+      "collider='SolidShape'", "MeshCollider(shape)")  # fmt: skip
+def _(ws):
+    _scene().add_collider(pdsim.box((1.0, 1.0, 1.0)))
+
+
 @case("frames_zero", A_SCENE, "Scene(frames=0)", "an integer >= 1", pdsim.ParameterError, "frames=0",
       "an integer >= 1")  # fmt: skip
 def _(ws):
@@ -566,6 +608,7 @@ def _(ws):
 
 # -- runs and output --------------------------------------------------------------------------------------------
 A_RUN = "runs and output"
+A_WRITE = "failures during a run (the finished frames stay)"
 
 
 @case("out_suffix", A_RUN, "an output path ending in .abc", ".usdc, .usda or .usd", pdsim.ParameterError,
@@ -629,10 +672,10 @@ def _(ws):
 
 
 @case("memory", A_RUN, "a spacing and horizon whose bonds need about 18 GB (8 GB free)",
-      "a scene that fits the free memory", pdsim.ParameterError, "spacing=0.01", "GB of free host memory",
+      "a scene that fits the free memory", pdsim.ParameterError, "spacing=0.01", "the most free memory here is 8 GB",
       "spacing >=")  # fmt: skip
 def _(ws):
-    with _patched(pdsim.memory, "free_host_memory", lambda: 8.0e9):
+    with _free_memory(8.0e9):
         scene = pdsim.Scene(fps=24.0, frames=2)
         scene.add_peridynamic_body(pdsim.box((0.46, 0.46, 0.46)), _material(), 0.01, horizon_factor=8.0, name="block")
         _run(scene, ws)
@@ -645,6 +688,97 @@ def _(ws):
     scene.add_peridynamic_body(pdsim.box((0.2, 0.2, 0.2)), _material(), spacing=0.02, name="block")
     with _patched(pdsim.memory, "free_disk_space", lambda folder: 1.0e6):
         _run(scene, ws)
+
+
+@case("spacing_150_million", A_RUN, "a spacing asking for 150 million particles (100 GB free)",
+      "a spacing whose body fits in the free memory (refused before any sampling, in under 5 s)",
+      pdsim.ParameterError, "about 1.51e+08 particles", "spacing >=")  # fmt: skip
+def _(ws):
+    with _free_memory(100.0e9):
+        _scene().add_peridynamic_body(pdsim.box((1.0, 1.5, 1.0)), _material(), (1.5 / 150.0e6) ** (1 / 3), name="b")
+
+
+@contextlib.contextmanager
+def _failing_disk(fails, err=errno.ENOSPC):
+    """The cache's layer exports raise OSError(err) for the targets ``fails`` accepts; from then on (or once the
+    yielded state's "failed" is set) the disk has 0 B free (before: 1 TB, so that the pre-flight passes)."""
+    state = {"failed": False}
+    real = pdsim.output.usd_stream.export_layer
+
+    def export(layer, target):
+        if fails(Path(target)):
+            state["failed"] = True
+            raise OSError(err, os.strerror(err), str(target))
+        real(layer, target)
+
+    def free(folder):
+        return 0.0 if state["failed"] else 1.0e12
+
+    with _patched(pdsim.output.usd_stream, "export_layer", export), _patched(pdsim.memory, "free_disk_space", free):
+        yield state
+
+
+@case("write_disk_full_frame", A_WRITE, "the disk fills up while frame 2's layer is written",
+      "a disk with room for the cache; the frames finished before stay", pdsim.errors.OutputWriteError,
+      "frame.000002.usdc", "No space left on device", "0 B free", "holds frames 0..1", keeps_frames=True)  # fmt: skip
+def _(ws):
+    with _failing_disk(lambda t: t.name.startswith("frame.000002")):
+        _run(_tiny_frames(3), ws)
+
+
+@case("write_disk_full_top", A_WRITE, "the disk fills up while the top-level layer is written (frame 2)",
+      "a disk with room for the cache; the frames finished before stay", pdsim.errors.OutputWriteError,
+      "out.usdc: No space left on device", "holds frames 0..1", keeps_frames=True)  # fmt: skip
+def _(ws):
+    count = []
+
+    def top(t):
+        count.append(t.name == ws.out.name)
+        return sum(count) > 2 and t.name == ws.out.name
+
+    with _failing_disk(top):
+        _run(_tiny_frames(3), ws)
+
+
+@case("write_disk_full_checkpoint", A_WRITE, "the disk fills up while a checkpoint is written",
+      "a disk with room for the checkpoint; the frames finished before stay", pdsim.errors.OutputWriteError,
+      ".out.checkpoint.npz.tmp", "No space left on device", "holds frames 0..1", keeps_frames=True)  # fmt: skip
+def _(ws):
+    with _failing_disk(lambda t: False) as disk:
+
+        def write_chunk(self, chunk):  # a write to a full disk: OSError(ENOSPC) without a file name
+            disk["failed"] = True
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+        with _patched(pdsim.checkpoint._ChunkedFile, "write_chunk", write_chunk):
+            _run(_tiny_frames(3), ws, checkpoint_interval_s=0.0)
+
+
+@case("write_read_only", A_WRITE, "the output folder turned read-only during the run (frame 2)",
+      "a folder that stays writable; the frames finished before stay", pdsim.errors.OutputWriteError,
+      "frame.000002.usdc", "Read-only file system", "holds frames 0..1", keeps_frames=True)  # fmt: skip
+def _(ws):
+    with _failing_disk(lambda t: t.name.startswith("frame.000002"), err=errno.EROFS):
+        _run(_tiny_frames(3), ws)
+
+
+@case("lattice_leader_nan", A_WRITE, "lattice leaders moving 1e38 m per step (NaN displacements on the device)",
+      "leader velocities in metres per step", pdsim.InstabilityError, "the leaders added with velocity (1e+38, 0, 0)",
+      "metres per step", "holds frames 0..0", keeps_frames=True)  # fmt: skip
+def _(ws):
+    body = LatticeBody.block(Lattice.square(1.0), (8, 6), name="block")
+    x = body.rest_positions[: body.body_count, 0]
+    body.clamp(x < x.min() + 0.5)
+    body.add_leaders(x > x.max() - 0.5, velocity=(1.0e38, 0.0, 0.0))
+    scene = pdsim.Scene(frames=1)
+    scene.add_body(body)
+    _run(scene, ws)
+
+
+def _tiny_frames(frames: int) -> pdsim.Scene:
+    scene = pdsim.Scene(fps=100.0, frames=frames)
+    _beam(scene)
+    return scene
 
 
 def _tiny() -> pdsim.Scene:
@@ -787,6 +921,55 @@ def _(ws):
     return _cli_run(ws, _script(ws), "--out", "/proc/out.usdc")
 
 
+@case("cli_out_empty", A_CLI, 'pdsim run --out ""', "a path ending in .usdc, .usda or .usd", pdsim.ParameterError,
+      "out=''", ".usdc", cli=True)  # fmt: skip
+def _(ws):
+    ws.earlier_cache("tiny.usdc")
+    return _cli_run(ws, _script(ws), "--out", "")
+
+
+# -- the user's scene script (exit status 2) ----------------------------------------------------------------------
+A_SCRIPT = "exceptions of the scene script (exit status 2)"
+
+
+@case("script_syntax_error", A_SCRIPT, "a scene script with a syntax error", "a script Python can read",
+      SyntaxError, "scene.py, line 4", "SyntaxError", cli=True, exit_code=2)  # fmt: skip
+def _(ws):
+    return _cli_run(ws, ws.input("scene.py", "import pdsim\n\n\ndef build_scene(:\n    pass\n"), "--out", ws.out)
+
+
+@case("script_exception", A_SCRIPT, "build_scene raising (an index out of range)", "a build_scene that returns",
+      IndexError, "scene.py, line 11", "IndexError: list index out of range", cli=True, exit_code=2)  # fmt: skip
+def _(ws):
+    ws.earlier_cache()
+    return _cli_run(ws, _script(ws, "scene.bodies[5]\n"), "--out", ws.out)
+
+
+@case("script_missing_import", A_SCRIPT, "a scene script importing a module that is not installed",
+      "modules that import", ModuleNotFoundError, "scene.py, line 2", "No module named 'no_such_module'", cli=True,
+      exit_code=2)  # fmt: skip
+def _(ws):
+    return _cli_run(ws, ws.input("scene.py", "import pdsim\nimport no_such_module\n"), "--out", ws.out)
+
+
+@case("script_region_function", A_SCRIPT, "a region function (lambda) raising when pdsim calls it",
+      "a function of points [n, 3] returning a mask [n]", IndexError, "scene.py, line 11", "index 7 is out of bounds",
+      cli=True, exit_code=2)  # fmt: skip
+def _(ws):
+    return _cli_run(ws, _script(ws, "beam.fix(lambda x: x[:, 7] < 0.05)\n"), "--out", ws.out)
+
+
+@case("script_run_script", A_SCRIPT, "a script run on its own (run_script) whose build_scene raises",
+      "a build_scene that returns", ZeroDivisionError, "own.py, line 5", "ZeroDivisionError: division by zero",
+      cli=True, exit_code=2)  # fmt: skip
+def _(ws):
+    text = "from pdsim.cli import run_script\n\n\ndef build_scene():\n    return 1 / 0\n\n\nrun_script(build_scene)\n"
+    return subprocess.run(
+        [sys.executable, str(ws.input("own.py", text)), "--out", str(ws.out), "--quiet", "--device", "cpu"],
+        check=False, capture_output=True, text=True, timeout=300, cwd=ws.root,
+    )  # fmt: skip
+
+
 # ---------------------------------------------------------------------------------------------------------- running
 def _stderr_lines(stderr: str) -> list[str]:
     """stderr lines of pdsim, without the line Warp's native library prints itself when it finds no CUDA driver."""
@@ -802,12 +985,18 @@ def capture(c: Case, root: Path) -> str:
         proc = c.act(ws)
         if proc.returncode == 0:
             raise NoError(f"{c.id}: pdsim exited 0")
-        assert proc.returncode == 1, (c.id, proc.returncode, proc.stderr)
-        assert "Traceback" not in proc.stdout + proc.stderr, proc.stderr
+        assert proc.returncode == c.exit_code, (c.id, proc.returncode, proc.stderr)
+        assert "Traceback (most recent call last)" not in proc.stdout + proc.stderr, proc.stderr
         lines = _stderr_lines(proc.stderr)
-        assert len(lines) == 1, (c.id, proc.stderr)
-        assert lines[0].startswith("pdsim: error: "), lines[0]
-        message = lines[0][len("pdsim: error: ") :]
+        if c.exit_code == 2:  # the scene script's exception: its line, then only the script's own frames
+            assert lines[0].startswith("pdsim: error in scene script "), lines[0]
+            message = lines[0][len("pdsim: ") :]
+            frames = [ln for ln in lines[1:] if ln.lstrip().startswith("File ")]
+            assert all(str(root) in ln for ln in frames), (c.id, proc.stderr)
+        else:
+            assert len(lines) == 1, (c.id, proc.stderr)
+            assert lines[0].startswith("pdsim: error: "), lines[0]
+            message = lines[0][len("pdsim: error: ") :]
     else:
         try:
             c.act(ws)
@@ -820,8 +1009,11 @@ def capture(c: Case, root: Path) -> str:
     for frag in c.fragments:
         assert frag in message, f"{c.id}: {frag!r} not in {message!r}"
     left = ws.leftovers()
+    if c.keeps_frames:  # the cache of the finished frames stays; nothing else does
+        assert ws.out.is_file(), f"{c.id}: the finished frames were not kept"
+        left = [p for p in left if not (p == ws.out.name or p.startswith(f"{ws.out.stem}.frames"))]
     assert not left, f"{c.id}: the failed run left {left}"
-    return message.replace(str(root), "<tmp>")
+    return re.sub(r"run-\d{8}-\d{6}-\d+(-\d+)?", "<run>", message.replace(str(root), "<tmp>"))
 
 
 def skip_reason(c: Case) -> str | None:
@@ -839,6 +1031,21 @@ HEADER = """# Bad inputs and their messages
 Every mistake below stops pdsim before it simulates anything, with one line that names what is wrong and what is
 allowed (the command line prints it as `pdsim: error: <message>` and exits with status 1, without a traceback).
 Nothing is half-written: a run that fails leaves no cache and keeps an earlier cache at the same path as it was.
+
+Three kinds of failure come later, and keep what was done:
+
+- an exception raised by the user's own scene script (a syntax error, an exception in `build_scene`, a missing
+  import, an exception in a region function): `pdsim run` and a script run with `run_script` print
+  `pdsim: error in scene script <file>, line <n>: <exception>` and then only the script's own frames of the
+  traceback, and exit with status 2;
+- a write that fails during a run (disk full on a frame layer, on the top-level layer or on a checkpoint; the folder
+  turned read-only): one line naming the path, the error and the free space, exit status 1, and the cache keeps every
+  finished frame (the message says which);
+- a divergence (exit status 3), whose line names the likely cause; the cache keeps every finished frame.
+
+SIGTERM and Ctrl-C stop a run within 2 s, even while it writes a checkpoint (the write is abandoned, its temporary
+file removed, the previous checkpoint kept); the next run on the same output removes the temporary files a killed
+run left. `tests/test_stop_checkpoint.py` shows both.
 
 The cases are in `tools/errors_catalogue.py`; `tests/test_errors_catalogue.py` runs each one and checks its message
 against this page, and `python tools/errors_catalogue.py` rewrites the page. `<tmp>` stands for the folder of the

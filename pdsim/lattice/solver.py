@@ -470,9 +470,10 @@ class SolverLattice(Solver):
             size = float(np.linalg.norm(ext)) + r.body.spacing
             if bad or umax > 1.0e3 * size:
                 what = "non-finite displacements" if bad else f"a displacement of {umax:.3g} m"
+                cause = _leader_cause(r.body.leader_paths, int(r.step_count), 1.0e3 * size)
                 raise InstabilityError(
-                    f"lattice body '{r.body.name}' diverged at step {r.step_count}: {what}; lower the rule's k or "
-                    "relaxation"
+                    f"lattice body '{r.body.name}' diverged at step {r.step_count}: {what}; "
+                    + (cause or "lower the rule's k or relaxation")
                 )
 
     def checkpoint(self) -> dict:
@@ -672,3 +673,27 @@ def _bounds_centre(bodies) -> np.ndarray:
     lo = np.min([b.rest_positions.min(axis=0) for b in bodies], axis=0)
     hi = np.max([b.rest_positions.max(axis=0) for b in bodies], axis=0)
     return 0.5 * (lo + hi)
+
+
+def _leader_cause(paths, step: int, limit: float) -> str | None:
+    """The likely cause of a diverged lattice body when it is a leader path: the first path whose displacement at
+    ``step`` (float64 on the host) is not finite in float32, the precision of the device, or exceeds ``limit`` [m];
+    None when every path stays within it (then the rule diverged)."""
+    for p in paths:
+        if step >= p.steps[-1]:
+            u = p.displacements[-1] + p.velocity_after * float(step - p.steps[-1])
+        else:
+            u = np.array([np.interp(step, p.steps, p.displacements[:, a]) for a in range(3)])
+        size = float(np.max(np.abs(u)))
+        if not size < np.finfo(np.float32).max or size > limit:
+            how = (
+                f"velocity ({', '.join(f'{c:.3g}' for c in p.velocity_after)}) m/step"
+                if len(p.steps) == 1
+                else f"a path of {len(p.steps)} keyframes"
+            )
+            beyond = "the float32 range" if not size < np.finfo(np.float32).max else f"{limit:.3g} m"
+            return (
+                f"the leaders added with {how} move {size:.3g} m by step {step}, beyond "
+                f"{beyond}; give add_leaders' velocity in metres per step and path displacements in metres"
+            )
+    return None

@@ -5,6 +5,7 @@ atomic export of a layer."""
 from __future__ import annotations
 
 import contextlib
+import errno
 import math
 import os
 from pathlib import Path
@@ -119,13 +120,26 @@ def export_layer(layer, target: Path) -> None:
     picks the same format), then ``os.replace``."""
     tmp = target.with_name(f".{target.name}.tmp{target.suffix}")
     try:
-        if not layer.Export(str(tmp)):
-            raise OSError(f"USD could not export a layer to {str(tmp)!r}")
+        try:
+            exported = layer.Export(str(tmp))
+        except Tf.ErrorException as exc:  # a failed write (disk full, read-only folder): an OSError naming the file
+            raise _write_error(str(exc), target) from None
+        if not exported:
+            raise _write_error("", target)
         os.replace(tmp, target)
     except BaseException:
         with contextlib.suppress(OSError):
             os.remove(tmp)
         raise
+
+
+def _write_error(text: str, target: Path) -> OSError:
+    """The OSError of a layer export that failed with USD's error ``text``: its errno when the text names one (disk
+    full, read-only file system, permission denied), else EIO."""
+    for code in (errno.ENOSPC, errno.EROFS, errno.EACCES, errno.EDQUOT):
+        if os.strerror(code) in text:
+            return OSError(code, os.strerror(code), str(target))
+    return OSError(errno.EIO, "USD could not export the layer", str(target))
 
 
 def identifier(name: str) -> str:
