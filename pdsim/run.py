@@ -63,6 +63,9 @@ class _Options:
     checkpoint_interval_s: float | None
 
 
+CACHE_LAYOUTS = ("file", "clips")
+
+
 def _check_options(scene, out, frames, dt, dt_factor, check_interval, checkpoint_interval_s, color_attribute):
     out = os.fspath(out)
     if os.path.splitext(out)[1].lower() not in (".usdc", ".usda", ".usd"):
@@ -206,9 +209,11 @@ def run_scene(
     check_interval=16,
     stop=None,
     on_frame=None,
+    layout="file",
 ) -> RunReport:
     """Simulates ``scene`` and writes its USD cache to ``out``; the arguments and what the run guarantees are those
     of :meth:`pdsim.Scene.run`."""
+    pack = cache_layout(layout)
     options = _check_options(scene, out, frames, dt, dt_factor, check_interval, checkpoint_interval_s, color_attribute)
     out = options.out
     names = collider_names(scene.colliders)
@@ -244,6 +249,7 @@ def run_scene(
             metadata=metadata,
             append_frame=start if resume else None,
             append_run=cache_run,
+            pack=pack,
         )
     except (ValueError, FileNotFoundError) as exc:
         if not resume:
@@ -295,6 +301,19 @@ def run_scene(
         first_frame=start + 1 if resume else 0,
         checks=sum(w.checks for w in watchdogs if w is not None),
     )
+
+
+def cache_layout(layout) -> bool:
+    """Whether a run of cache ``layout`` packs its cache into one file at the end: ``"file"`` (one self-contained
+    file, the default) packs, ``"clips"`` (the top-level layer plus its run folder, docs/cache_format.md) does not;
+    ParameterError for anything else."""
+    if layout not in CACHE_LAYOUTS:
+        raise ParameterError(
+            "layout",
+            layout,
+            "'file' (one self-contained file, default) or 'clips' (a top-level layer and its frames folder)",
+        )
+    return layout == "file"
 
 
 # -- stepping -----------------------------------------------------------------------------------------------------
