@@ -8,7 +8,7 @@ import os
 from pathlib import Path
 
 import numpy as np
-from pxr import Sdf, Usd, UsdGeom
+from pxr import Sdf, Tf, Usd, UsdGeom
 
 from ..errors import GeometryError, PdsimError
 
@@ -75,7 +75,7 @@ def check_cache_files(path: str | os.PathLike) -> None:
     path = Path(path)
     try:
         info = pdsim_info(path)
-    except ValueError:
+    except (ValueError, Tf.ErrorException):
         return  # not a layer: the caller's own open reports it
     frames = info.get("frames")
     if not frames:
