@@ -130,10 +130,15 @@ def _command(source: Path, target: Path) -> str:
     return f"pdsim pack {source}" + ("" if target == source else f" {target}")
 
 
+def _free_bytes(folder: Path) -> int:
+    """Free bytes on the file system of ``folder``."""
+    return shutil.disk_usage(folder).free
+
+
 def _check_space(source: Path, target: Path) -> None:
     """CacheError when the folder of ``target`` has less free space than the packed cache of ``source`` needs."""
     need = packed_size_estimate(source) + _SPARE_BYTES
-    free = shutil.disk_usage(target.parent).free
+    free = _free_bytes(target.parent)
     if free < need:
         raise CacheError(
             f"cannot pack {str(source)!r} into one file: about {need / 1e6:.1f} MB needed, {free / 1e6:.1f} MB free "
@@ -200,12 +205,16 @@ def pack_cache(
         _save(layer, tmp)
         del layer
         os.replace(tmp, target)
+        opened = Sdf.Layer.Find(str(target))
+        if opened is not None:  # this process has the old file open (a stage held elsewhere): show it the new one
+            with contextlib.suppress(Exception):
+                opened.Reload(force=True)
     except CacheError:
         _remove(tmp)
         raise
     except Exception as exc:  # noqa: BLE001 (pxr raises Tf errors; OSError for a full disk)
         _remove(tmp)
-        free = shutil.disk_usage(target.parent).free
+        free = _free_bytes(target.parent)
         reason = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
         raise CacheError(
             f"cannot pack {str(source)!r} into {str(target)!r}: {reason} ({free / 1e6:.1f} MB free); the clip cache "
