@@ -223,3 +223,30 @@ def test_exact_placement_far_from_the_origin(tmp_path):
     translate = np.asarray(surface.GetAttribute("xformOp:translate").Get(t), dtype=np.float64)
     assert abs(translate[0] - 1.0e6) < 1.0 and np.abs(local).max() < 1.0  # small float32 offsets from a double origin
     assert np.allclose(world_points(surface, t).mean(axis=0), x1.mean(axis=0), atol=0.02)
+
+
+def test_pack_errors_are_one_line(tmp_path, capsys):
+    """`pdsim pack` on a missing file, a file that is not USD and a cache that is already one file: exit status 1 and
+    one line naming the file and what is wrong; nothing is written."""
+    from pdsim.output.usd import UsdCache
+
+    packed = tmp_path / "packed.usdc"
+    with UsdCache(packed, fps=24.0, pack=True) as cache:
+        handle = cache.add_points("p", widths=np.full(4, 0.1), origin=(1.0e6, 0.0, 0.0))
+        for f in range(3):
+            cache.write_points(handle, f, np.full((4, 3), 1.0e6 + 0.001 * f))
+            cache.end_frame(f)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["packed.usdc"]
+    garbage = tmp_path / "garbage.usdc"
+    garbage.write_text("not usd")
+    cases = {
+        tmp_path / "none.usdc": "no cache at",
+        garbage: "is not a USD layer",
+        packed: "already one self-contained file",
+    }
+    for path, message in cases.items():
+        capsys.readouterr()
+        assert cli.main(["pack", str(path)]) == 1
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and message in err and path.name in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["garbage.usdc", "packed.usdc"]

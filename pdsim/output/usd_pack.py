@@ -20,7 +20,7 @@ import os
 import shutil
 from pathlib import Path
 
-from pxr import Sdf
+from pxr import Sdf, Tf
 
 from .usd_files import CacheError, check_cache_files, pdsim_info
 
@@ -170,7 +170,10 @@ def pack_cache(
     target = source if out is None else Path(out)
     if not source.is_file():
         raise CacheError(f"no cache at {str(source)!r}")
-    info = pdsim_info(source)
+    try:
+        info = pdsim_info(source)
+    except (ValueError, Tf.ErrorException):
+        raise CacheError(f"{str(source)!r} is not a USD layer (a pdsim cache: .usdc, .usda or .usd)") from None
     if not info.get("frames"):
         raise CacheError(f"{str(source)!r} is already one self-contained file (no clip folder to pack)")
     check_cache_files(source)
