@@ -162,7 +162,8 @@ def test_clip_cache_without_its_folder_is_refused(tmp_path, capsys):
     assert not (tmp_path / "b" / "x.png").exists()
     assert len(err.splitlines()) == 1 and "shot.frames/" + run_dirs[0].name in err and "copy" in err, err
 
-    # `pdsim pack CACHE` packs in place and removes the folder
+    # `pdsim pack CACHE` packs in place and removes the folder (and the temporary file of a killed packing)
+    (tmp_path / "a" / ".shot.usdc.pack-1.tmp.usdc").write_bytes(b"partial")
     assert cli.main(["pack", str(out)]) == 0
     assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["shot.usdc"]
     stage = Usd.Stage.Open(str(out))

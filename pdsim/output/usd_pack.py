@@ -10,7 +10,8 @@ file and keeps the saved ones on disk (read back lazily), so the peak memory doe
 The packed layer plays as the clip cache does at every frame: an attribute a clip does not sample takes its
 manifest's default at that clip's frame (an empty array, the empty extent), as USD resolves value clips. It is written
 to a temporary name beside ``out`` and renamed over it only when complete; the free space is checked first, and any
-failure removes the temporary file and leaves ``out`` and the clip cache as they were.
+failure removes the temporary file and leaves ``out`` and the clip cache as they were. The temporary file of a packing
+that was killed is removed by the next packing to the same ``out``.
 """
 
 from __future__ import annotations
@@ -181,6 +182,8 @@ def pack_cache(
     _check_space(source, target)
     run_dir = (source.parent / str(info["frames"])).resolve()
 
+    for stale in target.parent.glob(f".{target.name}.pack-*.tmp*"):  # left by a packing that was killed
+        _remove(stale)
     tmp = target.with_name(f".{target.name}.pack-{os.getpid()}.tmp{target.suffix}")
     top = Sdf.Layer.OpenAsAnonymous(str(source))
     try:
