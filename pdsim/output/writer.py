@@ -3,7 +3,10 @@
 The first views of a name declare its prim: ``UsdGeom.Points`` at ``/World/<body>`` for a PointsView, a
 ``UsdGeom.Mesh`` at ``/World/<name>`` for a MeshView (or, with ``fragments_as_prims``, an Xform ``/World/<name>`` with
 one Mesh ``fragment_<id>`` per fragment), and a Mesh with a transform at ``/World/colliders/<name>`` (``/World/ground``
-for the ground) for a RigidView. docs/cache_format.md describes every prim and attribute.
+for the ground) for a RigidView. Points and mesh prims get a static double-precision ``xformOp:translate`` at the
+rest centre of their first view (:func:`rest_centre`) and store their float32 points relative to it, so positions keep
+float32's precision around the body wherever it is; rigid bodies store their mesh in the body frame with a double
+translate. docs/cache_format.md describes every prim and attribute.
 
 Normals are computed here from each frame's points and faces (vectorised numpy): faces are grouped around each vertex
 into smooth fans, split at edges whose dihedral angle exceeds ``sharp_angle`` (30 degrees by default), so a box keeps
