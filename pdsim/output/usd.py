@@ -39,9 +39,13 @@ and prims (:meth:`UsdCache.existing` gives their handles), drops what was writte
 layer atomically at once, then deleting the later frame files) and writes on as a new run would, so the finished
 cache plays as an uninterrupted run's.
 
+Packing: ``UsdCache(path, ..., pack=True)`` (the runs' default layout) packs the finished run into one self-contained
+file at ``path`` when it closes successfully (``usd_pack``: clip by clip, to a temporary name renamed over ``path``)
+and removes the run folder; a failed packing leaves ``path`` and the clip cache as they were.
+
 Modules: this one holds :class:`UsdCache` (prim declarations and the per-frame samples); ``usd_layout`` the prim
 handles and definitions, ``usd_stream`` the files on disk (:class:`FrameStream`), ``usd_values`` the checked arrays and
-USD values, ``usd_files`` the reading and packing of finished caches.
+USD values, ``usd_files`` the reading of finished caches, ``usd_pack`` their packing into one file.
 """
 
 from __future__ import annotations
