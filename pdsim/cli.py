@@ -30,6 +30,7 @@ from .default_scene import build_scene as build_default_scene
 from .device import resolve_device
 from .errors import InstabilityError, ParameterError, PdsimError
 from .explain import explain_scene
+from .output.usd_pack import pack_cache
 from .preview import write_preview
 from .scene import Scene
 from .scene_script import EXIT_SCRIPT_ERROR, load_scene_script, script_error_message
@@ -47,6 +48,7 @@ def _parser(prog: str = "pdsim", *, with_scene: bool = True) -> argparse.Argumen
     _add_run_options(r)
     _add_preview_parser(sub)
     _add_wedge_parser(sub)
+    _add_pack_parser(sub)
     b = sub.add_parser(
         "bench",
         help="measurements: 'pdsim bench accuracy [options]' runs the run-time-vs-error map (tools/accuracy_map.py)",
@@ -55,6 +57,23 @@ def _parser(prog: str = "pdsim", *, with_scene: bool = True) -> argparse.Argumen
     b.add_argument("what", nargs="?", help="accuracy")
     b.add_argument("options", nargs=argparse.REMAINDER, help="options of the benchmark ('--help' lists them)")
     return p
+
+
+def _add_pack_parser(sub) -> None:
+    k = sub.add_parser(
+        "pack",
+        help="pack a clip-layout cache (a .usdc and its .frames/ folder) into one self-contained file",
+        description="Packs the clip-layout cache CACHE (written with --layout clips, or left by an interrupted run) "
+        "into one file that opens alone with every frame. Without OUT, CACHE is replaced and its run folder removed.",
+    )
+    k.add_argument("cache", help="the top-level layer of the clip-layout cache (.usdc, .usda, .usd)")
+    k.add_argument("out", nargs="?", help="the packed file to write (default: replace CACHE)")
+
+
+def _pack(args) -> int:
+    out = pack_cache(args.cache, args.out)
+    print(f"pdsim: packed {args.cache} into {out}")
+    return 0
 
 
 def _add_wedge_parser(sub) -> None:
@@ -184,6 +203,13 @@ def _add_run_options(r: argparse.ArgumentParser):
     )
     r.add_argument("--out", help="output cache (.usdc, .usda or .usd); default: <scene name>.usdc")
     r.add_argument("--frames", help="number of frames after the rest pose (integer >= 1)")
+    r.add_argument(
+        "--layout",
+        choices=["file", "clips"],
+        default="file",
+        help="'file' (default): one self-contained cache file, packed at the end of the run; 'clips': the cache "
+        "file plus its <stem>.frames/ folder (for caches too big to pack; docs/cache_format.md)",
+    )
     r.add_argument("--device", choices=["cpu", "cuda"], help="Warp device (default: cuda when present, else cpu)")
     r.add_argument("--dt", help="time step in seconds (> 0; default: automatic stable step)")
     r.add_argument(
@@ -241,6 +267,8 @@ def _run_settings(args) -> dict:
         settings["check_interval"] = steps
     if args.resume:
         settings["resume"] = True
+    if args.layout != "file":
+        settings["layout"] = args.layout
     return settings
 
 
@@ -399,7 +427,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``pdsim`` command."""
     parser = _parser()
     args = parser.parse_args(_attach_negative_values(sys.argv[1:] if argv is None else list(argv)))
-    if args.command not in ("run", "preview", "wedge", "bench"):
+    if args.command not in ("run", "preview", "wedge", "bench", "pack"):
         parser.print_help()
         return 2
     try:
@@ -409,6 +437,8 @@ def main(argv: list[str] | None = None) -> int:
             return _wedge(args)
         if args.command == "bench":
             return _bench(args)
+        if args.command == "pack":
+            return _pack(args)
         build = load_scene_script(args.scene) if args.scene else build_default_scene
         return _execute(build, args)
     except PdsimError as exc:

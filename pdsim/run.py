@@ -74,6 +74,9 @@ class _Options:
     checkpoint_interval_s: float | None
 
 
+CACHE_LAYOUTS = ("file", "clips")
+
+
 def _check_options(scene, out, frames, dt, dt_factor, check_interval, checkpoint_interval_s, color_attribute):
     out = os.fspath(out)
     if os.path.splitext(out)[1].lower() not in (".usdc", ".usda", ".usd"):
@@ -232,9 +235,11 @@ def run_scene(
     check_interval=16,
     stop=None,
     on_frame=None,
+    layout="file",
 ) -> RunReport:
     """Simulates ``scene`` and writes its USD cache to ``out``; the arguments and what the run guarantees are those
     of :meth:`pdsim.Scene.run`."""
+    pack = cache_layout(layout)
     options = _check_options(scene, out, frames, dt, dt_factor, check_interval, checkpoint_interval_s, color_attribute)
     out = options.out
     remove_stale_temporaries(out)  # what a killed run on this output left (at most one checkpoint's .tmp)
@@ -278,6 +283,7 @@ def run_scene(
             metadata=metadata,
             append_frame=start if resume else None,
             append_run=cache_run,
+            pack=pack,
         )
     except (ValueError, FileNotFoundError) as exc:
         if not resume:
@@ -368,6 +374,19 @@ def _last_frame_on_disk(cache) -> int:
     if info.get("run") != cache.run_id:
         return -1
     return int(cache.start_frame) + int(info.get("framesWritten", 0)) - 1
+
+
+def cache_layout(layout) -> bool:
+    """Whether a run of cache ``layout`` packs its cache into one file at the end: ``"file"`` (one self-contained
+    file, the default) packs, ``"clips"`` (the top-level layer plus its run folder, docs/cache_format.md) does not;
+    ParameterError for anything else."""
+    if layout not in CACHE_LAYOUTS:
+        raise ParameterError(
+            "layout",
+            layout,
+            "'file' (one self-contained file, default) or 'clips' (a top-level layer and its frames folder)",
+        )
+    return layout == "file"
 
 
 # -- stepping -----------------------------------------------------------------------------------------------------

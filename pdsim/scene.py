@@ -239,6 +239,7 @@ class Scene:
         check_interval: int = 16,
         stop=None,
         on_frame=None,
+        layout: str = "file",
     ) -> RunReport:
         """Simulates the scene and writes a USD animation cache to ``out`` (.usdc, .usda or .usd) and the folder of its
         frame layers ``<stem>.frames/`` beside it (docs/cache_format.md).
@@ -291,6 +292,9 @@ class Scene:
                 pdsim.checkpoint.RunInterrupted (a KeyboardInterrupt).
             on_frame: callable(frame, solvers) run after each frame is written (diagnostics such as energy audits;
                 each solver's ``watchdog.last`` holds its frame-end check).
+            layout: ``"file"`` (default): the frames stream into ``<stem>.frames/`` while running and are packed into
+                the one self-contained file ``out`` when the run finishes; ``"clips"``: ``out`` stays a top-level
+                layer that refers to that folder (for caches too big to pack; docs/cache_format.md).
         """
         return run_scene(
             self,
@@ -309,4 +313,5 @@ class Scene:
             check_interval=check_interval,
             stop=stop,
             on_frame=on_frame,
+            layout=layout,
         )

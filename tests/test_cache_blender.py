@@ -2,24 +2,27 @@
 ``bpy.ops.wm.usd_import`` and renders a fracturing frame with Cycles and motion blur.
 
 Needs ``pip install -e ".[blender]"`` (bpy: about 370 MB to download, 820 MB installed, and it pins numpy 1.26), so it
-is not in the ``test`` extra; without bpy every test here is skipped. Blender runs in subprocesses: bpy ships its own
-USD libraries, which are kept out of the process that has usd-core's pxr loaded.
+is not in the ``test`` extra; Blender may also live in a venv of its own, named by ``PDSIM_BLENDER_PYTHON`` (or at
+/work/bpyvenv/bin/python); without any interpreter that has bpy every test here is skipped. Blender runs in
+subprocesses: bpy ships its own USD libraries, which are kept out of the process that has usd-core's pxr loaded.
 """
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import subprocess
-import sys
 import textwrap
 
 import pytest
+from test_cache_pack import _blender_python
 from test_cache_schema import _collider_scene, _fem_scene, _lattice_scene, _pd_scene
 
+BLENDER_PYTHON = _blender_python()  # this interpreter, $PDSIM_BLENDER_PYTHON or /work/bpyvenv/bin/python, with bpy
+
 pytestmark = pytest.mark.skipif(
-    importlib.util.find_spec("bpy") is None,
-    reason='bpy (Blender as a Python module) is not installed: pip install -e ".[blender]"',
+    BLENDER_PYTHON is None,
+    reason='bpy (Blender as a Python module) is not installed: pip install -e ".[blender]", or set '
+    "PDSIM_BLENDER_PYTHON to an interpreter that has it",
 )
 
 FRAMES = 4
@@ -84,7 +87,7 @@ RENDER = textwrap.dedent(
 
 def _blender(script: str, *args, timeout=300) -> str:
     proc = subprocess.run(
-        [sys.executable, "-c", script, *map(str, args)],
+        [BLENDER_PYTHON, "-c", script, *map(str, args)],
         capture_output=True,
         text=True,
         timeout=timeout,

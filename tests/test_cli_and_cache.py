@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import pdsim
-from pdsim.output.usd_files import usd_problems
+from pdsim.output.usd_files import usd_problems, world_points
 
 FPS = 100.0
 
@@ -85,9 +85,10 @@ def _points(stage, name):
 
 
 def _all_positions(points):
-    """{frame: positions [n, 3]} over every time sample of the points attribute."""
+    """{frame: world positions [n, 3]} over every time sample of the points attribute (through the prim's transform:
+    the cache stores points relative to a double-precision translate)."""
     attr = points.GetPointsAttr()
-    return {int(t): np.asarray(attr.Get(t), dtype=np.float64) for t in attr.GetTimeSamples()}
+    return {int(t): world_points(points.GetPrim(), t) for t in attr.GetTimeSamples()}
 
 
 # ------------------------------------------------------------------------------------------------------------- CLI

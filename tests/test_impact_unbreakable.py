@@ -16,6 +16,7 @@ import pytest
 
 import pdsim
 from pdsim.errors import InstabilityError
+from pdsim.output.usd_files import world_points
 
 SHIFT = np.array([10.0, 5.0, 2.0])  # a set position in metres, away from the origin
 SPEED = 200.0
@@ -41,7 +42,7 @@ def _read(path, name, frame):
     # velocities are stored per second of playback: a frame plays 1 / timeCodesPerSecond s and simulates 1 ms
     velocity = np.asarray(points.GetVelocitiesAttr().Get(frame), dtype=np.float64)
     velocity *= (1.0 / stage.GetTimeCodesPerSecond()) / 1.0e-3
-    return np.asarray(points.GetPointsAttr().Get(frame), dtype=np.float64), velocity
+    return world_points(points.GetPrim(), frame), velocity  # through the prim's double translate
 
 
 @pytest.mark.parametrize("youngs_modulus", [2.0e11, 1.0e7])

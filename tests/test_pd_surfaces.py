@@ -8,6 +8,7 @@ import pytest
 import pdsim
 from pdsim.fragment_labels import FragmentTracker, fragment_labels
 from pdsim.fragment_surfaces import FragmentSurfaces
+from pdsim.output.usd_files import world_points
 
 MATERIAL = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.25)
 
@@ -226,7 +227,7 @@ def test_usd_cache_topology_only_where_fragments_change(tmp_path):
     assert mesh.GetPointsAttr().GetTimeSamples() == [float(f) for f in range(6)]
     solid = trimesh.Trimesh(shape.vertices, shape.faces, process=False)
     for frame in range(6):
-        pts = np.asarray(mesh.GetPointsAttr().Get(frame), dtype=np.float64)
+        pts = world_points(mesh.GetPrim(), frame)
         faces = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(frame)).reshape(-1, 3)
         fragment = np.asarray(primvars.GetPrimvar("fragment").GetAttr().Get(frame))
         assert len(fragment) == len(faces)
@@ -330,10 +331,10 @@ def test_scene_cache_surfaces_closed_and_topology_only_when_fragments_change(tmp
     assert len(np.unique(labels[-1])) >= 2
     for f in range(9):
         faces = np.array(mesh.GetFaceVertexIndicesAttr().Get(f)).reshape(-1, 3)
-        verts = np.array(mesh.GetPointsAttr().Get(f), dtype=np.float64)
+        verts = world_points(mesh.GetPrim(), f)
         shell = trimesh.Trimesh(verts, faces, process=False)
         assert shell.is_watertight and shell.is_winding_consistent
-    rest = np.array(mesh.GetPointsAttr().Get(0), dtype=np.float64)
+    rest = world_points(mesh.GetPrim(), 0)
     box = trimesh.creation.box(extents=(0.2, 0.05, 0.05))
     assert np.abs(trimesh.proximity.signed_distance(box, rest)).max() < h
 

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import pdsim
+from pdsim.output.usd_files import world_points
 
 BACKGROUND = np.array([round(255 * c) for c in (0.95, 0.96, 0.97)])
 
@@ -95,12 +96,12 @@ def _frame_box(path, frame):
         if UsdGeom.Imageable(prim).ComputeVisibility(frame) == UsdGeom.Tokens.invisible:
             continue
         if prim.IsA(UsdGeom.Mesh):
-            p = np.asarray(UsdGeom.Mesh(prim).GetPointsAttr().Get(frame), dtype=np.float64)
+            p = world_points(prim, frame)
             r = 0.0
         elif prim.IsA(UsdGeom.Points):
             if prim.GetPath().AppendPath("../" + prim.GetName() + "_surface") in names:
                 continue
-            p = np.asarray(UsdGeom.Points(prim).GetPointsAttr().Get(frame), dtype=np.float64)
+            p = world_points(prim, frame)
             r = 0.5 * float(np.max(UsdGeom.Points(prim).GetWidthsAttr().Get(frame)))
         else:
             continue
@@ -116,7 +117,7 @@ def _points(path, frame):
 
     stage = Usd.Stage.Open(path)
     (points,) = [UsdGeom.Points(p) for p in stage.Traverse() if p.IsA(UsdGeom.Points)]
-    return np.asarray(points.GetPointsAttr().Get(frame), np.float64), 0.5 * float(points.GetWidthsAttr().Get(frame)[0])
+    return world_points(points.GetPrim(), frame), 0.5 * float(points.GetWidthsAttr().Get(frame)[0])
 
 
 def _object_mask(image):

@@ -21,6 +21,7 @@ import warp as wp
 from pxr import Usd, UsdGeom
 
 from pdsim.errors import ParameterError, PdsimError
+from pdsim.output.usd_files import world_points
 
 __all__ = [
     "LatticeCacheBody",
@@ -74,8 +75,7 @@ def read_lattice_cache(path: str | os.PathLike) -> list[LatticeCacheBody]:
         api = UsdGeom.PrimvarsAPI(prim)
         if not api.HasPrimvar("pe1"):
             continue
-        points = UsdGeom.Points(prim).GetPointsAttr()
-        pos = np.stack([np.asarray(points.Get(float(f)), dtype=np.float64) for f in frames])
+        pos = np.stack([world_points(prim, float(f)) for f in frames])  # through the prim's double translate
         pv = {}
         for p in api.GetPrimvars():
             vals = [p.Get(float(f)) for f in frames]

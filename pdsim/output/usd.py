@@ -39,9 +39,13 @@ and prims (:meth:`UsdCache.existing` gives their handles), drops what was writte
 layer atomically at once, then deleting the later frame files) and writes on as a new run would, so the finished
 cache plays as an uninterrupted run's.
 
+Packing: ``UsdCache(path, ..., pack=True)`` (the runs' default layout) packs the finished run into one self-contained
+file at ``path`` when it closes successfully (``usd_pack``: clip by clip, to a temporary name renamed over ``path``)
+and removes the run folder; a failed packing leaves ``path`` and the clip cache as they were.
+
 Modules: this one holds :class:`UsdCache` (prim declarations and the per-frame samples); ``usd_layout`` the prim
 handles and definitions, ``usd_stream`` the files on disk (:class:`FrameStream`), ``usd_values`` the checked arrays and
-USD values, ``usd_files`` the reading and packing of finished caches.
+USD values, ``usd_files`` the reading of finished caches, ``usd_pack`` their packing into one file.
 """
 
 from __future__ import annotations
@@ -62,6 +66,7 @@ from .usd_layout import (
     define_face_subset,
     define_material,
     define_mesh,
+    define_origin,
     define_points,
     define_world,
     reopened_handles,
@@ -83,6 +88,17 @@ if TYPE_CHECKING:
     from typing import Self
 
 __all__ = ["UsdCache"]
+
+
+def _relative(positions, origin):
+    """``positions`` [stage units] relative to ``origin`` (float64 [3]) in float64, or as given when it is None."""
+    if origin is None:
+        return positions
+    a = np.asarray(positions)
+    real = np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)
+    if a.ndim != 2 or a.shape[1] != 3 or not real:
+        return positions  # the shape and dtype checks of the samples name what is wrong
+    return a.astype(np.float64) - origin
 
 
 class UsdCache:
@@ -123,6 +139,9 @@ class UsdCache:
         append_run: With ``append_frame``: the run id (``customLayerData pdsim:run``) the reopened cache must hold;
             the top-level layer is the one of ``partial_path`` and ``path`` that holds it. None: ``partial_path`` when
             it exists, else ``path``.
+        pack: On success, pack the run into one self-contained file at ``path`` (pdsim.output.usd_pack.pack_cache:
+            value clips baked into time samples, the run folder removed); the frames stream into the run folder while
+            running either way. False (default): ``path`` stays the top-level layer of the clip layout.
     """
 
     def __init__(
@@ -137,6 +156,7 @@ class UsdCache:
         metadata: dict | None = None,
         append_frame: int | None = None,
         append_run: str | None = None,
+        pack: bool = False,
     ):
         self.path = check_cache_settings(path, fps, start_frame, up_axis, meters_per_unit, save_interval_s)
         self.fps = float(fps)
@@ -144,7 +164,11 @@ class UsdCache:
         self.save_interval_s = float(save_interval_s)
         self.metadata = dict(metadata or {})
         self._stream = FrameStream(
-            self.path, start_frame=self.start_frame, save_interval_s=self.save_interval_s, metadata=self.metadata
+            self.path,
+            start_frame=self.start_frame,
+            save_interval_s=self.save_interval_s,
+            metadata=self.metadata,
+            pack=bool(pack),
         )
         self.frames_dir = self._stream.frames_dir
         self.partial_path = self._stream.partial_path
@@ -281,6 +305,7 @@ class UsdCache:
         widths: np.ndarray,
         primvars: dict[str, str] | None = None,
         parent: XformHandle | None = None,
+        origin=None,
     ) -> PointsHandle:
         """Define a ``UsdGeom.Points`` prim at ``/World/<name>``.
 
@@ -291,6 +316,9 @@ class UsdCache:
                 [point_count]), ``"vector3f"`` or ``"color3f"`` (shape [point_count, 3]); vertex interpolation.
                 ``displayColor`` (kind color3f) is the USD display colour.
             parent: Group to define the prim under (default ``/World``).
+            origin: The prim's static double-precision ``xformOp:translate`` [stage units] (3 numbers);
+                :meth:`write_points` then stores ``positions - origin`` as float32. None: no transform, world
+                positions stored as float32.
 
         Returns:
             Handle for :meth:`write_points`.
@@ -304,7 +332,10 @@ class UsdCache:
 
         path = self._define_path(name, parent)
         define_points(self._stage, path, w, primvars, self._types)
-        return PointsHandle(path=path, point_count=int(w.shape[0]), primvar_kinds=primvars, _cache=self, _widths=w)
+        o = None if origin is None else define_origin(self._stage, path, origin)
+        return PointsHandle(
+            path=path, point_count=int(w.shape[0]), primvar_kinds=primvars, _cache=self, _widths=w, origin=o
+        )
 
     def write_points(
         self,
@@ -320,7 +351,8 @@ class UsdCache:
         Args:
             handle: From :meth:`add_points` of this cache.
             frame: Frame number (time code); must be after the last finished frame.
-            positions: Point positions [stage units], shape [point_count, 3]; stored as float32.
+            positions: Point positions [stage units], shape [point_count, 3]; stored as float32 (relative to the
+                handle's ``origin`` when it has one: pass float64 world positions to keep their precision).
             velocities: Point velocities [stage units/s], shape [point_count, 3].
             primvars: ``{name: values}`` for primvars declared in :meth:`add_points`; shape [point_count] for
                 ``"float"``/``"int"``, [point_count, 3] for ``"vector3f"``/``"color3f"``. Primvars left out get no
@@ -332,7 +364,7 @@ class UsdCache:
         """
         self._check_handle(handle, PointsHandle)
         layer = self._frame_layer(frame).samples
-        samples = points_samples(handle, positions, velocities, primvars)
+        samples = points_samples(handle, _relative(positions, handle.origin), velocities, primvars)
         for attr, kind, value in samples:
             self._sample(layer, "default", handle.path, attr, kind, value)
 
@@ -347,6 +379,7 @@ class UsdCache:
         parent: XformHandle | None = None,
         animated_transform: bool = False,
         topology_set: str | None = None,
+        origin=None,
     ) -> MeshHandle:
         """Define a triangle ``UsdGeom.Mesh`` (``subdivisionScheme = none``) at ``/World/<name>``.
 
@@ -365,6 +398,9 @@ class UsdCache:
             topology_set: Name of the value-clip set holding the mesh's topology; meshes that share one (the fragment
                 prims of a surface) must be written with faces on the same frames. Default: a set of its own,
                 ``topology_<prim path under /World>``.
+            origin: A static double-precision ``xformOp:translate`` [stage units] (3 numbers) the vertices of
+                :meth:`write_mesh` are stored relative to (float32 ``points - origin``); not with
+                ``animated_transform``.
 
         Returns:
             Handle for :meth:`write_mesh`.
@@ -378,6 +414,8 @@ class UsdCache:
             raise ValueError(f"primvars {sorted(set(fkinds) & set(vkinds))} declared both per face and per vertex")
         if normals not in (None, "faceVarying", "vertex"):
             raise ValueError(f"normals={normals!r} must be 'faceVarying', 'vertex' or None")
+        if animated_transform and origin is not None:
+            raise ValueError("origin is a static transform: not with animated_transform")
         path = self._define_path(name, parent)
         self._names[path] = set()
         mesh = define_mesh(self._stage, path, fkinds, vkinds, normals, self._types)
@@ -389,6 +427,7 @@ class UsdCache:
         if animated_transform:
             mesh.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble)
             mesh.AddOrientOp(UsdGeom.XformOp.PrecisionFloat)
+        o = None if origin is None else define_origin(self._stage, path, origin)
         if topology_set is None:
             topology_set = default_topology_set(path)
         elif not (isinstance(topology_set, str) and topology_set.startswith("topology_")):
@@ -403,6 +442,7 @@ class UsdCache:
             subsets=subsets,
             _cache=self,
             _transform=animated_transform,
+            origin=o,
         )
 
     def write_mesh(
@@ -428,7 +468,8 @@ class UsdCache:
         Args:
             handle: From :meth:`add_mesh` of this cache.
             frame: Frame number (time code); must be after the last finished frame.
-            points: Vertex positions [stage units], shape [vertex_count, 3].
+            points: Vertex positions [stage units], shape [vertex_count, 3]; stored as float32 (relative to the
+                handle's ``origin`` when it has one).
             faces: Triangles as vertex indices, int shape [triangle_count, 3], values in [0, vertex_count).
             velocities: Vertex velocities [stage units/s], shape [vertex_count, 3].
             normals: Unit normals, shape [3 x triangle_count, 3] (faceVarying: one per face corner, in the order of
@@ -445,7 +486,7 @@ class UsdCache:
         self._check_handle(handle, MeshHandle)
         pending = self._frame_layer(frame)
         samples, topology, nv, nf = mesh_samples(
-            handle, points, faces, velocities, normals, face_primvars, vertex_primvars
+            handle, _relative(points, handle.origin), faces, velocities, normals, face_primvars, vertex_primvars
         )
         if topology is not None:
             topology += subset_samples(handle, subsets, nf)

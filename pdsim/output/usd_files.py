@@ -1,5 +1,6 @@
-"""Reading and packing USD files: the pdsim metadata, run id and files of a cache, flattening a cache into one
-layer, the USD tet-mesh input reader, and the errors of every ``pxr.UsdValidation`` validator on a stage."""
+"""Reading USD files: the pdsim metadata, run id and files of a cache, the check that a clip cache's run folder is
+there (:func:`check_cache_files`, called by every pdsim reader), world-space points of a prim, flattening a cache into
+one layer, the USD tet-mesh input reader, and the errors of every ``pxr.UsdValidation`` validator on a stage."""
 
 from __future__ import annotations
 
@@ -7,9 +8,9 @@ import os
 from pathlib import Path
 
 import numpy as np
-from pxr import Sdf, Usd, UsdGeom
+from pxr import Sdf, Tf, Usd, UsdGeom
 
-from ..errors import GeometryError
+from ..errors import GeometryError, PdsimError
 
 try:
     from pxr import UsdValidation
@@ -19,7 +20,22 @@ except ImportError as error:  # usd-core older than 24.11: usd_problems raises R
 else:
     _USD_VALIDATION_MISSING = None
 
-__all__ = ["cache_files", "cache_run", "flatten_cache", "pdsim_info", "read_tet_mesh", "usd_problems"]
+__all__ = [
+    "CacheError",
+    "cache_files",
+    "cache_run",
+    "check_cache_files",
+    "flatten_cache",
+    "pdsim_info",
+    "read_tet_mesh",
+    "usd_problems",
+    "world_points",
+]
+
+
+class CacheError(PdsimError, OSError):
+    """A cache that cannot be read or packed: its run folder is missing, or the disk has no room to pack it. The
+    message is one line naming the files and what to do."""
 
 
 def pdsim_info(path: Path) -> dict:
@@ -46,14 +62,48 @@ def cache_files(path: str | os.PathLike) -> list[Path]:
     info = dict(layer.customLayerData.get("pdsim", {}))
     files = [path]
     if info.get("frames"):
+        check_cache_files(path)
         run_dir = (path.parent / info["frames"]).resolve()
         files += sorted(p for p in run_dir.iterdir() if p.is_file() and not p.name.startswith("."))
     return files
 
 
+def check_cache_files(path: str | os.PathLike) -> None:
+    """CacheError unless every file the cache at ``path`` refers to is there: a clip-layout cache
+    (``customLayerData pdsim:frames``) needs its run folder and manifest beside it; a packed cache (one file) and USD
+    files that are not pdsim caches pass. Without this check a stage whose clips are missing opens with no points."""
+    path = Path(path)
+    try:
+        info = pdsim_info(path)
+    except (ValueError, Tf.ErrorException):
+        return  # not a layer: the caller's own open reports it
+    frames = info.get("frames")
+    if not frames:
+        return
+    run_dir = (path.parent / str(frames)).resolve()
+    if not any((run_dir / f"manifest{suffix}").is_file() for suffix in (".usdc", ".usda")):
+        folder = Path(str(frames).removeprefix("./"))
+        raise CacheError(
+            f"{str(path)!r} is a clip-layout cache whose frames are in the folder {str(folder)!r} beside it, which is "
+            f"missing: copy that folder next to {path.name} (or pack the cache into one file with "
+            f"'pdsim pack {path.name}' where both are)"
+        )
+
+
+def world_points(prim, time) -> np.ndarray:
+    """The ``points`` of a PointBased prim at ``time`` in world space [stage units], float64 [n, 3]: the stored
+    float32 points through the prim's local-to-world transform in double precision (pdsim writes each body's points
+    relative to a double ``xformOp:translate``)."""
+    pts = np.asarray(UsdGeom.PointBased(prim).GetPointsAttr().Get(time) or [], dtype=np.float64).reshape(-1, 3)
+    xf = np.asarray(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time), dtype=np.float64)
+    return pts @ xf[:3, :3] + xf[3, :3]  # USD matrices act on row vectors
+
+
 def flatten_cache(path: str | os.PathLike, out: str | os.PathLike) -> None:
     """Write the cache at ``path`` as one self-contained layer at ``out`` (value clips baked into time samples). The
-    whole animation is held in memory while flattening: meant for small caches and for sending a cache as one file."""
+    whole animation is held in memory while flattening (pdsim.output.usd_pack.pack_cache packs a cache clip by clip
+    instead)."""
+    check_cache_files(path)
     stage = Usd.Stage.Open(os.fspath(path))
     layer = stage.Flatten()
     layer.customLayerData = {}

@@ -28,6 +28,8 @@ class PointsHandle:
         path: Prim path, e.g. ``/World/particles``.
         point_count: Number of points (fixed for the whole cache).
         primvar_kinds: Declared primvars, ``{name: kind}`` with kind in ``{"float", "int", "vector3f", "color3f"}``.
+        origin: The prim's static ``xformOp:translate`` [stage units] (float64 [3]) the points are written relative
+            to, or None (points in world space).
     """
 
     path: str
@@ -35,6 +37,7 @@ class PointsHandle:
     primvar_kinds: dict[str, str]
     _cache: object = field(repr=False)  # the UsdCache that made it
     _widths: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, np.float32))
+    origin: np.ndarray | None = None
 
 
 @dataclass(eq=False)
@@ -48,6 +51,8 @@ class MeshHandle:
         vertex_primvar_kinds: Per-vertex primvars ``{name: kind}``.
         normals: Interpolation of the ``normals`` attribute (``"faceVarying"``, ``"vertex"``) or None (no normals).
         subsets: Names of the face subsets (``UsdGeom.Subset`` children, family ``materialBind``).
+        origin: The prim's static ``xformOp:translate`` [stage units] (float64 [3]) the vertices are written relative
+            to, or None.
     """
 
     path: str
@@ -61,6 +66,27 @@ class MeshHandle:
     _has_topology: bool = field(default=False, repr=False)
     _face_count: int = field(default=0, repr=False)
     _transform: bool = field(default=False, repr=False)  # xformOps declared (animated transform)
+    origin: np.ndarray | None = None
+
+
+def define_origin(stage: Usd.Stage, path: str, origin) -> np.ndarray:
+    """Give the prim at ``path`` a static double-precision ``xformOp:translate`` of ``origin`` [stage units] (3 finite
+    numbers); returns it as float64 [3]. Points written relative to it keep float32's relative precision around the
+    body instead of around the world origin (a body at 1e6 m keeps sub-millimetre positions)."""
+    o = np.asarray(origin, dtype=np.float64)
+    if o.shape != (3,) or not np.isfinite(o).all():
+        raise ValueError(f"origin={origin!r} must be 3 finite numbers")
+    op = UsdGeom.Xformable(stage.GetPrimAtPath(path)).AddTranslateOp(UsdGeom.XformOp.PrecisionDouble)
+    op.Set(Gf.Vec3d(*o.tolist()))
+    return o
+
+
+def _static_origin(spec) -> np.ndarray | None:
+    """The static ``xformOp:translate`` of a prim spec without an animated pose (no ``xformOp:orient``), or None."""
+    if spec is None or "xformOp:translate" not in spec.attributes or "xformOp:orient" in spec.attributes:
+        return None
+    value = spec.attributes["xformOp:translate"].default
+    return None if value is None else np.array(value, dtype=np.float64)
 
 
 def default_topology_set(path: str) -> str:
@@ -182,6 +208,7 @@ def reopened_handles(cache, stream, frame: int) -> dict:
                 primvar_kinds=primvars(prim, UsdGeom.Tokens.vertex),
                 _cache=cache,
                 _widths=w,
+                origin=_static_origin(cache._layer.GetPrimAtPath(path)),
             )
         elif prim.IsA(UsdGeom.Mesh):
             mesh = UsdGeom.Mesh(prim)
@@ -193,7 +220,8 @@ def reopened_handles(cache, stream, frame: int) -> dict:
                 normals=str(mesh.GetNormalsInterpolation()) if "normals" in spec.attributes else None,
                 subsets=tuple(c.GetName() for c in prim.GetChildren() if c.IsA(UsdGeom.Subset)),
                 _cache=cache,
-                _transform="xformOp:translate" in spec.attributes,
+                _transform="xformOp:orient" in spec.attributes,
+                origin=_static_origin(spec),
             )
             clip_set = mesh_set.get(path)
             if clip_set is not None:

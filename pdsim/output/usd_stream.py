@@ -18,6 +18,7 @@ import numpy as np
 from pxr import Gf, Sdf, Vt
 
 from .usd_files import cache_run, pdsim_info
+from .usd_pack import pack_cache
 from .usd_values import SUFFIXES, export_layer, extent
 
 CACHE_FORMAT_VERSION = 2  # customLayerData pdsim:cacheFormat (1: the single-layer caches without value clips)
@@ -73,8 +74,9 @@ class FrameStream:
     :meth:`start` begins a new run, :meth:`reopen` takes over the run of an existing cache.
     """
 
-    def __init__(self, path: Path, *, start_frame: int, save_interval_s: float, metadata: dict):
+    def __init__(self, path: Path, *, start_frame: int, save_interval_s: float, metadata: dict, pack: bool = False):
         self.path = path
+        self.pack = pack  # on success, pack the run into one file at ``path`` and remove the run folder
         self.start_frame = start_frame
         self.save_interval_s = save_interval_s
         self.metadata = metadata
@@ -333,12 +335,29 @@ class FrameStream:
         if self.top_written != self.last_finished:
             self.write_top(layer)
         if success:
+            if self.pack:
+                self._pack()
+                return
             if self.staged:
                 os.replace(self.partial_path, self.path)
                 self.top_path = self.path
             elif self.partial_path.is_file():  # a failed run's leftover, superseded by this one
                 self.partial_path.unlink()
             self._remove_unreferenced_runs()
+
+    def _pack(self) -> None:
+        """Pack the finished run into one file at ``path`` (pdsim.output.usd_pack: a temporary file renamed over
+        ``path``), then remove the partial top-level layer, the run folder and the runs no layer refers to. A failed
+        pack (CacheError) leaves ``path`` and this run's clip cache as they were."""
+        pack_cache(self.top_path, self.path)
+        if self.partial_path.is_file():  # this run's staged layer, or a failed run's leftover superseded by it
+            self.partial_path.unlink()
+        self.top_path = self.path
+        shutil.rmtree(self.run_dir, ignore_errors=True)
+        if self.frames_dir.is_dir():
+            self._remove_unreferenced_runs()
+            with contextlib.suppress(OSError):
+                self.frames_dir.rmdir()  # only when empty
 
     def _remove_unreferenced_runs(self) -> None:
         """Remove the run folders under the frames folder that no top-level layer beside ``path`` names."""

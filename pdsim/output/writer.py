@@ -3,7 +3,10 @@
 The first views of a name declare its prim: ``UsdGeom.Points`` at ``/World/<body>`` for a PointsView, a
 ``UsdGeom.Mesh`` at ``/World/<name>`` for a MeshView (or, with ``fragments_as_prims``, an Xform ``/World/<name>`` with
 one Mesh ``fragment_<id>`` per fragment), and a Mesh with a transform at ``/World/colliders/<name>`` (``/World/ground``
-for the ground) for a RigidView. docs/cache_format.md describes every prim and attribute.
+for the ground) for a RigidView. Points and mesh prims get a static double-precision ``xformOp:translate`` at the
+rest centre of their first view (:func:`rest_centre`) and store their float32 points relative to it, so positions keep
+float32's precision around the body wherever it is; rigid bodies store their mesh in the body frame with a double
+translate. docs/cache_format.md describes every prim and attribute.
 
 Normals are computed here from each frame's points and faces (vectorised numpy): faces are grouped around each vertex
 into smooth fans, split at edges whose dihedral angle exceeds ``sharp_angle`` (30 degrees by default), so a box keeps
@@ -249,6 +252,15 @@ def _crack_subsets(crack) -> dict:
     return {"surface": np.flatnonzero(~c), "crack": np.flatnonzero(c)}
 
 
+def rest_centre(points) -> np.ndarray:
+    """The centre of the bounding box of ``points`` [m] (float64 [3]; zeros for no points): the origin of the
+    double-precision transform a body's prims are written relative to."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(p) == 0 or not np.isfinite(p).all():
+        return np.zeros(3)
+    return 0.5 * (p.min(axis=0) + p.max(axis=0))
+
+
 def _typed(kind: str, values) -> np.ndarray:
     return np.asarray(values, dtype=np.int32 if kind == "int" else np.float32)
 
@@ -267,6 +279,7 @@ class _MeshEntry:
         self.pieces = {}  # per fragment id: (face rows, vertex ids, local faces)
         self.topology = None  # (faces, face attributes, vertex count) of the last topology written
         self.restored = False  # restored from a checkpoint: the next frame compares its topology with ``topology``
+        self.origin = None  # the rest centre [m] its prims are written relative to (float64 [3])
 
     def same_topology(self, view: MeshView, faces: np.ndarray) -> bool:
         """Whether ``view`` has the topology last written (faces, vertex count and face attributes)."""
@@ -355,6 +368,7 @@ class ViewWriter:
                 "fragments": [[int(fid), h.path] for fid, h in e.fragments.items()],
                 "visible": sorted(int(f) for f in e.visible),
                 "sampled": sorted(int(f) for f in e.sampled),
+                "origin": np.asarray(e.origin, dtype=np.float64),
             }
         return {
             "points": [[name, h.path] for name, h in self._points.items()],
@@ -382,6 +396,7 @@ class ViewWriter:
             entry.fragments = {int(fid): cache.existing(path) for fid, path in m["fragments"]}
             entry.visible = {int(f) for f in m["visible"]}
             entry.sampled = {int(f) for f in m["sampled"]}
+            entry.origin = np.asarray(m["origin"], dtype=np.float64)
             if entry.split:
                 entry.pieces = self._split(attributes["fragment"], int(m["vertex_count"]), entry.shading.faces)
             self._meshes[str(m["name"])] = entry
@@ -401,7 +416,9 @@ class ViewWriter:
             if color is not None and color in view.attributes:
                 kinds["displayColor"] = "color3f"
             widths = np.broadcast_to(np.asarray(view.widths, dtype=np.float32), (len(view.positions),))
-            handle = self.cache.add_points(view.name, widths=np.ascontiguousarray(widths), primvars=kinds)
+            handle = self.cache.add_points(
+                view.name, widths=np.ascontiguousarray(widths), primvars=kinds, origin=rest_centre(view.positions)
+            )
             self._points[view.name] = handle
         values = {k: _typed(handle.primvar_kinds[k], a) for k, a in view.attributes.items()}
         if "displayColor" in handle.primvar_kinds:
@@ -409,7 +426,7 @@ class ViewWriter:
         self.cache.write_points(
             handle,
             frame,
-            np.asarray(view.positions, dtype=np.float32),
+            np.asarray(view.positions, dtype=np.float64),
             velocities=self._velocities(view.velocities),
             primvars=values,
         )
@@ -433,6 +450,7 @@ class ViewWriter:
         fractures = "crack" in view.face_attributes or "fragment" in view.face_attributes
         created = entry is None
         if entry is None:
+            origin = rest_centre(view.points)
             if self.fragments_as_prims and "fragment" in view.face_attributes:
                 entry = _MeshEntry(self.cache.add_xform(view.name), fractures, split=True)
             else:
@@ -445,11 +463,13 @@ class ViewWriter:
                     vertex_primvars=vertex,
                     normals=shading.interpolation,
                     subsets=_SUBSETS if "crack" in view.face_attributes else (),
+                    origin=origin,
                 )
                 entry = _MeshEntry(handle, fractures, split=False)
                 entry.shading = shading
                 self._bind_subsets(handle)
             entry.first_frame = frame
+            entry.origin = origin
             self._meshes[view.name] = entry
         if entry.restored:  # topology versions do not survive a restart: compare the topology itself
             changed = not entry.same_topology(view, faces)
@@ -554,6 +574,7 @@ class ViewWriter:
                     subsets=_SUBSETS if "crack" in view.face_attributes else (),
                     parent=entry.handle,
                     topology_set="topology_" + entry.handle.path[len("/World/") :].replace("/", "_"),
+                    origin=entry.origin,
                 )
                 entry.fragments[fid] = handle
                 self._bind_subsets(handle)

@@ -13,6 +13,7 @@ from pxr import Sdf, Tf, Usd, UsdGeom
 from scipy.spatial import cKDTree
 
 from ..errors import ParameterError
+from ..output.usd_files import check_cache_files
 from .camera import horizontal_axes
 from .colors import CRACK, NEUTRAL, Coloring, linear
 from .options import POINTS_MODES
@@ -115,6 +116,8 @@ class StageReader:
         if not isinstance(path, str | os.PathLike) or not os.path.isfile(path):
             raise ParameterError("cache", os.fspath(path) if isinstance(path, os.PathLike) else path, readable)
         path = os.fspath(path)
+        if Sdf.FileFormat.FindByExtension(os.path.splitext(path)[1].lstrip(".").lower() or "x"):
+            check_cache_files(path)  # a clip-layout cache without its frames folder would open with no points
         try:
             if not Sdf.FileFormat.FindByExtension(os.path.splitext(path)[1].lstrip(".").lower() or "x"):
                 raise ParameterError("cache", path, readable)
