@@ -504,18 +504,22 @@ def _collider_inside(c, device: str):
     return None
 
 
-def _check_disk(out: str, frames: int, report: PreflightReport) -> None:
+def _check_disk(out: str, frames: int, report: PreflightReport, pack: bool) -> None:
+    """The estimated cache against the free space of its folder; a packed cache needs its frames folder and the packed
+    file at once at the end of the run, so twice the estimate."""
     folder = os.path.dirname(os.path.abspath(out))
     need = float((frames + 1) * report.points * CACHE_BYTES_PER_POINT_FRAME)
     free = memory.free_disk_space(folder)
     report.cache_bytes, report.free_disk_bytes = need, free
-    if need > free:
+    peak = 2.0 * need if pack else need
+    if peak > free:
+        how = " (twice, while the frames are packed into one file; --layout clips needs it once)" if pack else ""
         raise ParameterError(
             "out",
             out,
             f"a folder with room for the cache: {frames} frames of {report.points:,} points need about "
-            f"{format_bytes(need)}, and {folder} has {format_bytes(free)} free; free some space, write elsewhere or "
-            "run fewer frames",
+            f"{format_bytes(need)}{how}, and {folder} has {format_bytes(free)} free; free some space, write elsewhere "
+            "or run fewer frames",
         )
     if need > 0.5 * free:
         msg = (
@@ -535,6 +539,7 @@ def preflight(
     dt: float | None = None,
     frames: int | None = None,
     dt_factor: float = 1.0,
+    pack: bool = True,
 ):
     """Checks that ``scene`` can run before anything is allocated or simulated; returns a :class:`PreflightReport`.
 
@@ -545,6 +550,7 @@ def preflight(
         dt: the user's time step [s], or None for the automatic step.
         frames: frames to run (the scene's when None).
         dt_factor: multiplier of the automatic step (Scene.run's ``dt_factor``), > 0; ignored with ``dt``.
+        pack: whether the run packs its cache into one file at its end (the disk then needs twice the cache).
 
     Raises:
         ParameterError: a setting out of range (frames, dt, out, a spacing or edge length whose scene does not fit
@@ -577,7 +583,7 @@ def preflight(
     _check_ground(scene)
     _check_overlaps(scene, str(device))
     if out is not None:
-        _check_disk(out, frame_count, report)
+        _check_disk(out, frame_count, report, pack)
     report.seconds = time.perf_counter() - t0
     return report
 

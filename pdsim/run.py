@@ -245,7 +245,7 @@ def run_scene(
     remove_stale_temporaries(out)  # what a killed run on this output left (at most one checkpoint's .tmp)
     names = collider_names(scene.colliders)
     wall0 = time.perf_counter()
-    preflight(scene, device=device, out=out, dt=options.dt, frames=options.frames)  # before anything is allocated
+    preflight(scene, device=device, out=out, dt=options.dt, frames=options.frames, pack=pack)  # before any allocation
     solvers = scene.build_solvers(device=device, check=False)
     stable_dt = min(s.stable_time_step() for s in solvers)
     travel = projectile_step_limit(scene, options.frames)

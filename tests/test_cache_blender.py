@@ -2,9 +2,8 @@
 ``bpy.ops.wm.usd_import`` and renders a fracturing frame with Cycles and motion blur.
 
 Needs ``pip install -e ".[blender]"`` (bpy: about 370 MB to download, 820 MB installed, and it pins numpy 1.26), so it
-is not in the ``test`` extra; Blender may also live in a venv of its own, named by ``PDSIM_BLENDER_PYTHON`` (or at
-/work/bpyvenv/bin/python); without any interpreter that has bpy every test here is skipped. Blender runs in
-subprocesses: bpy ships its own USD libraries, which are kept out of the process that has usd-core's pxr loaded.
+is not in the ``test`` extra; Blender may also live in a venv of its own, named by ``PDSIM_BLENDER_PYTHON``; without
+any interpreter that has bpy every test here is skipped. Blender runs in subprocesses: bpy ships its own USD libraries, which are kept out of the process that has usd-core's pxr loaded.
 """
 
 from __future__ import annotations
@@ -17,7 +16,7 @@ import pytest
 from test_cache_pack import _blender_python
 from test_cache_schema import _collider_scene, _fem_scene, _lattice_scene, _pd_scene
 
-BLENDER_PYTHON = _blender_python()  # this interpreter, $PDSIM_BLENDER_PYTHON or /work/bpyvenv/bin/python, with bpy
+BLENDER_PYTHON = _blender_python()  # $PDSIM_BLENDER_PYTHON or this interpreter, with bpy
 
 pytestmark = pytest.mark.skipif(
     BLENDER_PYTHON is None,

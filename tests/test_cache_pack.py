@@ -2,9 +2,8 @@
 the refusal of a clip cache whose folder is missing, and exact placement far from the origin.
 
 - The default scene's `.usdc`, copied alone to another folder, opens through `pxr` with every frame and every body's
-  points, imports through `bpy` (Blender as a Python module, in its own interpreter: `PDSIM_BLENDER_PYTHON`, else
-  `/work/bpyvenv/bin/python`, else this one; skipped when none has bpy) with every frame, and `pdsim preview` renders
-  it.
+  points, imports through `bpy` (Blender as a Python module, in the interpreter `PDSIM_BLENDER_PYTHON` names, else
+  this one; skipped when none has bpy) with every frame, and `pdsim preview` renders it.
 - A clip-layout cache with its folder removed makes `pdsim preview` exit non-zero with a one-line message naming the
   folder to copy; `pdsim pack` packs a clip cache into a file that plays every attribute as the clip cache does.
 - Packing refuses cleanly (one line) when the disk has too little room, and the earlier cache stays byte for byte.
@@ -44,13 +43,12 @@ def _default_cache(folder: Path, *extra: str) -> Path:
 
 
 def _blender_python() -> str | None:
-    """An interpreter with bpy: $PDSIM_BLENDER_PYTHON, /work/bpyvenv/bin/python, or this one; None when none."""
-    candidates = [os.environ.get("PDSIM_BLENDER_PYTHON"), "/work/bpyvenv/bin/python"]
-    for exe in candidates:
-        if exe and os.access(exe, os.X_OK):
-            probe = subprocess.run([exe, "-c", "import bpy"], check=False, capture_output=True, timeout=120)
-            if probe.returncode == 0:
-                return exe
+    """An interpreter with bpy: $PDSIM_BLENDER_PYTHON (Blender in a venv of its own), or this one; None when none."""
+    exe = os.environ.get("PDSIM_BLENDER_PYTHON")
+    if exe and os.access(exe, os.X_OK):
+        probe = subprocess.run([exe, "-c", "import bpy"], check=False, capture_output=True, timeout=120)
+        if probe.returncode == 0:
+            return exe
     return sys.executable if importlib.util.find_spec("bpy") is not None else None
 
 
