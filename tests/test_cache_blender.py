@@ -3,7 +3,8 @@
 
 Needs ``pip install -e ".[blender]"`` (bpy: about 370 MB to download, 820 MB installed, and it pins numpy 1.26), so it
 is not in the ``test`` extra; Blender may also live in a venv of its own, named by ``PDSIM_BLENDER_PYTHON``; without
-any interpreter that has bpy every test here is skipped. Blender runs in subprocesses: bpy ships its own USD libraries, which are kept out of the process that has usd-core's pxr loaded.
+any interpreter that has bpy every test here is skipped. Blender runs in subprocesses: bpy ships its own USD
+libraries, which are kept out of the process that has usd-core's pxr loaded.
 """
 
 from __future__ import annotations
