@@ -36,6 +36,7 @@ import pdsim.fem.mesh
 import pdsim.checkpoint
 import pdsim.memory
 import pdsim.output.usd_stream
+from pdsim.output.usd_files import CacheError
 import pdsim.preflight
 from pdsim.lattice import Lattice, LatticeBody
 
@@ -617,6 +618,12 @@ def _(ws):
     _run(_tiny(), ws, ws.root / "cache.abc")
 
 
+@case("run_layout", A_RUN, "Scene.run(out, layout='zip')", "'file' (one self-contained file) or 'clips'",
+      pdsim.ParameterError, "layout='zip'", "'file'", "'clips'")  # fmt: skip
+def _(ws):
+    _run(_tiny(), ws, ws.out, layout="zip")
+
+
 @case("out_folder_missing", A_RUN, "an output folder that does not exist", "a path in an existing folder",
       pdsim.ParameterError, "no_such_dir", "existing folder")  # fmt: skip
 def _(ws):
@@ -883,6 +890,18 @@ def _(ws):
       pdsim.ParameterError, "a file path, not a folder", cli=True)  # fmt: skip
 def _(ws):
     return _cli_run(ws, _script(ws), "--out", ws.folder("cache.usdc"))
+
+
+@case("cli_preview_clip_cache_alone", A_CLI, "pdsim preview of a clip-layout cache copied without its .frames folder",
+      "the cache with its frames folder beside it, or a packed cache", CacheError, "clip-layout cache", "missing",
+      "pdsim pack", cli=True)  # fmt: skip
+def _(ws):
+    made = ws.folder("made") / "shot.usdc"  # a clip-layout cache and its frames folder
+    done = _cli_run(ws, _script(ws), "--out", made, "--frames", 1, "--layout", "clips")
+    assert done.returncode == 0, done.stderr
+    alone = ws.folder("sent") / "shot.usdc"  # the top-level layer alone, as a file sent to a farm
+    alone.write_bytes(made.read_bytes())
+    return _cli(ws, "preview", alone, "--out", ws.folder("stills") / "still.png")
 
 
 @case("cli_overlap", A_CLI, "a scene script whose bodies overlap", "bodies that touch at most", pdsim.GeometryError,
