@@ -36,7 +36,7 @@ from .checks import check_frames, check_range, check_time_step, format_bytes
 from .colliders import collider_names
 from .contact import MethodContact
 from .divergence import attach_watchdogs, schedule_watchdogs
-from .errors import InstabilityError, OutputWriteError, ParameterError
+from .errors import InstabilityError, OutputWriteError, ParameterError, PdsimError
 from .output.usd import UsdCache
 from .output.usd_files import pdsim_info
 from .output.writer import ViewWriter
@@ -344,6 +344,8 @@ def write_errors(cache):
     system and the finished frames the cache keeps."""
     try:
         yield
+    except PdsimError:
+        raise  # already one line naming what to do (a cache that cannot be packed: pdsim.output.usd_files.CacheError)
     except OSError as exc:
         raise write_failure(exc, cache) from None
 
