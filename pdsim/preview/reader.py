@@ -104,6 +104,16 @@ class FrameGeometry:
     colors: list = field(default_factory=list)  # linear float32 [s, 3] per points prim
 
 
+def _under_instancer(prim) -> bool:
+    """Whether ``prim`` lies under a ``UsdGeom.PointInstancer`` (a prototype, not drawn where it stands)."""
+    parent = prim.GetParent()
+    while parent and not parent.IsPseudoRoot():
+        if parent.IsA(UsdGeom.PointInstancer):
+            return True
+        parent = parent.GetParent()
+    return False
+
+
 class StageReader:
     """A USD stage opened for rendering: its renderable prims, up axis and frames."""
 
@@ -133,7 +143,11 @@ class StageReader:
         self.meshes, self.points = [], []
         for prim in stage.Traverse():
             if prim.IsA(UsdGeom.Mesh) or prim.IsA(UsdGeom.Points):
-                if UsdGeom.Imageable(prim).ComputePurpose() in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy):
+                if _under_instancer(prim):  # a point instancer's prototype (debris) is drawn only as instances
+                    continue
+                purpose = UsdGeom.Imageable(prim).ComputePurpose()
+                # particles written as guides (a body's points under its surface) stay drawable (--points all)
+                if purpose == UsdGeom.Tokens.proxy or (purpose == UsdGeom.Tokens.guide and prim.IsA(UsdGeom.Mesh)):
                     continue
                 (self.meshes if prim.IsA(UsdGeom.Mesh) else self.points).append(prim)
         # a body's Points prim <name> is covered by its surface mesh <name>_surface when there is one
