@@ -1,5 +1,6 @@
 """A real consumer of the caches: Blender (the ``bpy`` module) imports a small cache of each method with
-``bpy.ops.wm.usd_import`` and renders a fracturing frame with Cycles and motion blur.
+``bpy.ops.wm.usd_import``, renders a fracturing frame with Cycles and motion blur, and renders a gallery scene's
+fracturing frame with the crack material on the crack faces and no particle spheres.
 
 Needs ``pip install -e ".[blender]"`` (bpy: about 370 MB to download, 820 MB installed, and it pins numpy 1.26), so it
 is not in the ``test`` extra; Blender may also live in a venv of its own, named by ``PDSIM_BLENDER_PYTHON``; without
@@ -35,7 +36,7 @@ IMPORT = textwrap.dedent(
     result = {}
     for path in sys.argv[1:]:
         bpy.ops.wm.read_factory_settings(use_empty=True)
-        assert bpy.ops.wm.usd_import(filepath=path) == {"FINISHED"}
+        assert bpy.ops.wm.usd_import(filepath=path, import_guide=True) == {"FINISHED"}  # the particles are guides
         scene = bpy.context.scene
         info = {"range": [scene.frame_start, scene.frame_end], "fps": scene.render.fps / scene.render.fps_base}
         objects = {}
@@ -194,10 +195,11 @@ def _without_velocities(write):
 
 
 def test_blender_gets_crack_faces_per_frame(blender_caches):
-    """The crack hooks reach Blender: the surface and crack placeholder materials become the surface's material slots,
-    and the per-face ``crack`` attribute (domain FACE, updated every frame by the mesh cache) marks as many faces on
-    the last frame as the cache's crack subset holds, for an Attribute node to switch to the crack material. (Blender
-    5.0 reads the material indices of time-sampled GeomSubsets once, at import: on frame 0 there is no crack yet.)"""
+    """The crack material reaches Blender's playback with no node work: the surface's material slots are pdsim_outer
+    and pdsim_crack in that order, and on every frame (frame_set, then the evaluated mesh) the faces' material
+    indices are the cache's material_index: as many faces with index 1 as the cache's crack subset holds at that
+    frame, none at frame 0 and some at the last (so they change during playback); the per-face ``crack`` attribute
+    (domain FACE) agrees."""
     from pxr import Usd, UsdGeom
 
     script = textwrap.dedent(
@@ -208,23 +210,167 @@ def test_blender_gets_crack_faces_per_frame(blender_caches):
         bpy.ops.wm.read_factory_settings(use_empty=True)
         bpy.ops.wm.usd_import(filepath=sys.argv[1])
         scene = bpy.context.scene
-        scene.frame_set(scene.frame_end)
         ob = bpy.data.objects["block_surface"]
-        mesh = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
-        crack = mesh.attributes["crack"]
-        values = [v.value for v in crack.data]
-        slots = sorted(slot.material.name for slot in ob.material_slots if slot.material)
-        print("CRACK " + json.dumps({"domain": crack.domain, "sum": int(sum(values)), "faces": len(mesh.polygons),
-                                     "slots": slots}))
+        frames = []
+        for frame in range(scene.frame_start, scene.frame_end + 1):
+            scene.frame_set(frame)
+            mesh = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+            index = [p.material_index for p in mesh.polygons]
+            crack = [v.value for v in mesh.attributes["crack"].data]
+            frames.append({"faces": len(index), "index": sum(index), "crack": sum(crack),
+                           "domain": mesh.attributes["crack"].domain})
+        slots = [slot.material.name if slot.material else None for slot in ob.material_slots]
+        print("CRACK " + json.dumps({"frames": frames, "slots": slots}))
         """
     )
     path = blender_caches["pd"]
     out = _blender(script, path)
     info = json.loads(next(ln for ln in out.splitlines() if ln.startswith("CRACK "))[len("CRACK ") :])
+    assert info["slots"] == ["pdsim_outer", "pdsim_crack"]
     stage = Usd.Stage.Open(str(path))
-    end = stage.GetEndTimeCode()
-    crack = UsdGeom.Subset(stage.GetPrimAtPath("/World/block_surface/crack")).GetIndicesAttr().Get(end)
-    faces = len(stage.GetPrimAtPath("/World/block_surface").GetAttribute("faceVertexCounts").Get(end))
-    assert info["domain"] == "FACE" and info["faces"] == faces
-    assert info["sum"] == len(crack) > 0
-    assert info["slots"] == ["crack", "surface"]
+    subset = UsdGeom.Subset(stage.GetPrimAtPath("/World/block_surface/crack")).GetIndicesAttr()
+    counts = stage.GetPrimAtPath("/World/block_surface").GetAttribute("faceVertexCounts")
+    for frame, got in enumerate(info["frames"]):
+        assert got["domain"] == "FACE" and got["faces"] == len(counts.Get(frame)), frame
+        assert got["index"] == got["crack"] == len(subset.Get(frame)), frame
+    assert info["frames"][0]["index"] == 0 < info["frames"][-1]["index"]
+
+
+RENDER_CRACKS = textwrap.dedent(
+    """
+    import json, sys
+    import bpy
+    from mathutils import Vector
+
+    path, out = sys.argv[1], sys.argv[2]
+    lo, hi = Vector(json.loads(sys.argv[3])), Vector(json.loads(sys.argv[4]))
+    info = {"renders": {}}
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    assert bpy.ops.wm.usd_import(filepath=path) == {"FINISHED"}
+    scene = bpy.context.scene
+    info["objects"] = {ob.name: ob.type for ob in scene.objects}
+    ob = bpy.data.objects["tile_surface"]
+    info["slots"] = [slot.material.name if slot.material else None for slot in ob.material_slots]
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = 4
+    scene.render.resolution_x, scene.render.resolution_y = 96, 72
+    scene.render.film_transparent = True
+    centre, size = (lo + hi) / 2, (hi - lo).length
+    camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
+    camera.data.type = "ORTHO"
+    camera.data.ortho_scale = 1.1 * size
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    camera.location = centre + Vector((0.6, -0.8, 1.0)).normalized() * 2.0 * size
+    camera.rotation_euler = (centre - camera.location).to_track_quat("-Z", "Y").to_euler()
+    sun = bpy.data.objects.new("sun", bpy.data.lights.new("sun", "SUN"))
+    sun.data.energy = 4.0
+    sun.rotation_euler = camera.rotation_euler
+    scene.collection.objects.link(sun)
+    bpy.data.objects["ground"].hide_render = True  # every opaque pixel is then the tile's (or a point's)
+    for frame in (0, scene.frame_end):
+        scene.frame_set(frame)
+        scene.render.filepath = f"{out}.{frame}.png"
+        bpy.ops.render.render(write_still=True)
+        info["renders"][frame] = scene.render.filepath
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.wm.usd_import(filepath=path, import_guide=True)
+    scene = bpy.context.scene
+    info["with_guides"] = {ob.name: ob.type for ob in scene.objects}
+    # docs/cache_format.md, "Crack events": dust on the events with Geometry Nodes
+    events = bpy.data.objects["tile_crack_events"]
+    events.hide_render = True  # markers only (an empty point cloud must not reach Cycles)
+    bpy.data.objects["tile"].hide_render = True  # the particles, imported with the guides
+    dust = bpy.data.objects.new("dust", bpy.data.meshes.new("dust"))
+    scene.collection.objects.link(dust)
+    tree = bpy.data.node_groups.new("dust", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    source = tree.nodes.new("GeometryNodeObjectInfo")
+    source.inputs["Object"].default_value = events
+    source.transform_space = "RELATIVE"
+    grain = tree.nodes.new("GeometryNodeMeshIcoSphere")
+    grain.inputs["Radius"].default_value = 0.002
+    scatter = tree.nodes.new("GeometryNodeInstanceOnPoints")
+    output = tree.nodes.new("NodeGroupOutput")
+    tree.links.new(source.outputs["Geometry"], scatter.inputs["Points"])
+    tree.links.new(grain.outputs["Mesh"], scatter.inputs["Instance"])
+    tree.links.new(scatter.outputs["Instances"], output.inputs[0])
+    dust.modifiers.new("dust", "NODES").node_group = tree
+    info["dust"] = {}
+    for frame in (0, scene.frame_end):
+        scene.frame_set(frame)
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        grains = [i for i in depsgraph.object_instances if i.is_instance and i.parent and i.parent.name == "dust"]
+        cloud = events.evaluated_get(depsgraph).data
+        radius = [r.value for r in cloud.attributes["radius"].data] if "radius" in cloud.attributes else []
+        info["dust"][frame] = {"grains": len(grains), "events": len(cloud.points), "radius": max(radius, default=0)}
+    scene.render.engine = "CYCLES"
+    scene.cycles.samples = 1
+    scene.render.resolution_x, scene.render.resolution_y = 16, 16
+    scene.camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
+    scene.collection.objects.link(scene.camera)
+    scene.frame_set(0)  # no event yet: renders (an empty point cloud of events would crash Cycles 5.0.1)
+    scene.render.filepath = f"{out}.dust.png"
+    bpy.ops.render.render(write_still=True)
+    print("RENDER " + json.dumps(info))
+    """
+)
+
+
+def _pixel_classes(png) -> dict:
+    """Counts of the opaque pixels of a render: crack colour (saturated, red the largest and blue the smallest
+    channel: the orange of pdsim_crack lit white), grey (saturation under 0.12: pdsim_outer) and the rest (edges
+    blending the two)."""
+    import numpy as np
+    from PIL import Image
+
+    px = np.asarray(Image.open(png).convert("RGBA"), dtype=np.float64).reshape(-1, 4) / 255.0
+    opaque = px[:, 3] > 0.5
+    rgb = px[:, :3]
+    hi, lo = rgb.max(axis=1), rgb.min(axis=1)
+    saturation = (hi - lo) / np.maximum(hi, 1e-6)
+    crack = opaque & (saturation > 0.35) & (rgb[:, 0] == hi) & (rgb[:, 2] == lo)
+    grey = opaque & (saturation < 0.12)
+    return {"opaque": int(opaque.sum()), "crack": int(crack.sum()), "grey": int(grey.sum())}
+
+
+def test_gallery_fracture_renders_with_the_crack_material(tmp_path):
+    """The gallery's tile drop (scenes/drop_shatter.py at its preview spacing, 2 cm, frames 0..5 of 24, with crack
+    events) imported with bpy.ops.wm.usd_import and rendered with Cycles (CPU, 96 x 72, 4 samples, the ground hidden,
+    orthographic camera on the tile's bounds at frame 5): at frame 5, where the tile has cracked, pixels of the crack
+    colour (> 20) on the crack faces and the grey outer material on most of the tile (> 50 % of the opaque pixels);
+    at frame 0 (no crack yet) no pixel of the crack colour, so the classification does not mistake the outer
+    material for it. No point spheres: the particle prim /World/tile and the crack events are guides that Blender
+    leaves out (they are there, as point clouds, when guides are imported). Imported with the guides, the crack
+    events drive the Geometry Nodes dust of docs/cache_format.md: one grain per event at frames 0 and 5, the events'
+    radius 0, and frame 0, without events, renders."""
+    import importlib.util
+    import os
+
+    from pxr import Usd, UsdGeom
+
+    scenes = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
+    spec = importlib.util.spec_from_file_location("gallery_drop_shatter", os.path.join(scenes, "drop_shatter.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    path = tmp_path / "drop_shatter.usdc"
+    module.build_scene(**module.PREVIEW).run(path, frames=5, device="cpu", progress=False, crack_events=True)
+    stage = Usd.Stage.Open(str(path))
+    assert UsdGeom.Imageable(stage.GetPrimAtPath("/World/tile")).ComputePurpose() == UsdGeom.Tokens.guide
+    box = UsdGeom.BBoxCache(5, [UsdGeom.Tokens.default_]).ComputeWorldBound(stage.GetPrimAtPath("/World/tile_surface"))
+    lo, hi = box.ComputeAlignedRange().GetMin(), box.ComputeAlignedRange().GetMax()
+    out = _blender(RENDER_CRACKS, path, tmp_path / "render", json.dumps(list(lo)), json.dumps(list(hi)), timeout=600)
+    info = json.loads(next(ln for ln in out.splitlines() if ln.startswith("RENDER "))[len("RENDER ") :])
+    assert info["slots"] == ["pdsim_outer", "pdsim_crack"]
+    assert not {"tile", "tile_crack_events"} & set(info["objects"])
+    assert info["with_guides"].get("tile") == info["with_guides"].get("tile_crack_events") == "POINTCLOUD"
+    events = UsdGeom.Points(stage.GetPrimAtPath("/World/tile_crack_events")).GetPointsAttr()
+    for frame in (0, 5):
+        dust = info["dust"][str(frame)]
+        assert dust["grains"] == dust["events"] == len(events.Get(frame)), (frame, dust)
+        assert dust["radius"] == 0.0
+    assert info["dust"]["5"]["grains"] > 0
+    before, after = (_pixel_classes(info["renders"][str(f)]) for f in (0, 5))
+    assert before["crack"] == 0 and before["grey"] > 0.9 * before["opaque"], before
+    assert after["crack"] > 20 and after["grey"] > 0.5 * after["opaque"], after

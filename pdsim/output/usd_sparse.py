@@ -5,6 +5,7 @@ point instancer of debris (docs/cache_format.md). :class:`SparsePrims` is a part
 from __future__ import annotations
 
 import numpy as np
+from pxr import UsdGeom
 
 from .usd_layout import InstancerHandle, SparsePointsHandle, define_instancer, define_origin, define_sparse_points
 from .usd_values import check_primvar_kinds, instancer_samples, sparse_points_samples
@@ -18,15 +19,22 @@ def _relative(positions, origin):
 class SparsePrims:
     """UsdCache's prims of a per-frame count (see the module docstring)."""
 
-    def add_sparse_points(self, name: str, *, primvars: dict[str, str] | None = None, origin=None):
+    def add_sparse_points(
+        self, name: str, *, primvars: dict[str, str] | None = None, origin=None, purpose: str | None = None
+    ):
         """Define a ``UsdGeom.Points`` prim at ``/World/<name>`` whose point count changes from frame to frame (crack
         events): points, widths, normals and the vertex primvars ``{name: kind}`` are time-sampled by
-        :meth:`write_sparse_points`. ``origin``: its static double-precision ``xformOp:translate`` [stage units]."""
+        :meth:`write_sparse_points`. ``origin``: its static double-precision ``xformOp:translate`` [stage units];
+        ``purpose``: ``"guide"`` (left out of renders), ``"render"``, ``"proxy"`` or None (``default``)."""
         self._check_open()
         primvars = dict(primvars or {})
         check_primvar_kinds(primvars, "primvar")
+        if purpose not in (None, "guide", "render", "proxy"):
+            raise ValueError(f"purpose={purpose!r} must be 'guide', 'render', 'proxy' or None")
         path = self._define_path(name)
         define_sparse_points(self._stage, path, primvars, self._types)
+        if purpose is not None:
+            UsdGeom.Imageable(self._stage.GetPrimAtPath(path)).CreatePurposeAttr(purpose)
         o = None if origin is None else define_origin(self._stage, path, origin)
         return SparsePointsHandle(path=path, primvar_kinds=primvars, _cache=self, origin=o)
 

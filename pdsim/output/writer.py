@@ -509,12 +509,14 @@ class ViewWriter:
         return out
 
     def _write_events(self, frame: int, view: EventsView) -> None:
-        """The crack events of a body at ``frame`` as the points of ``/World/<body>_crack_events`` (zero widths:
-        markers, not geometry), with their normals and ``primvars:energy`` [J]."""
+        """The crack events of a body at ``frame`` as the points of ``/World/<body>_crack_events``, with their normals
+        and ``primvars:energy`` [J]: markers that drive effects, not geometry, so a guide of zero widths (renderers
+        leave guides out; Blender 5.0.1's Cycles crashes rendering an empty point cloud, and the events are empty on
+        most frames)."""
         handle = self._events.get(view.name)
         if handle is None:
             handle = self.cache.add_sparse_points(
-                f"{view.name}_crack_events", primvars={"energy": "float"}, origin=view.origin
+                f"{view.name}_crack_events", primvars={"energy": "float"}, origin=view.origin, purpose="guide"
             )
             self._events[view.name] = handle
         self.cache.write_sparse_points(
