@@ -297,3 +297,24 @@ def test_crack_events_in_the_cache(tmp_path):
         _fem_scene().run(tmp_path / "fem.usdc", device="cpu", progress=False, crack_events=True)
     with pytest.raises(ParameterError, match="debris_particles"):
         _pulled_bar().run(tmp_path / "bad.usdc", device="cpu", progress=False, debris_particles=-1)
+
+
+def test_run_command_options(tmp_path, capsys):
+    """`pdsim run --render-points --debris 8 --crack-events` reaches Scene.run: on the default scene's cache the
+    particles are not guides, the crack events prim is there; `--debris -1` exits with one line naming the
+    setting."""
+    from pxr import UsdGeom
+
+    from pdsim import cli
+
+    out = tmp_path / "options.usdc"
+    args = ["run", "--frames", "1", "--out", str(out), "--device", "cpu", "--quiet"]
+    assert cli.main([*args, "--render-points", "--debris", "8", "--crack-events"]) == 0
+    stage = _stage(out)
+    points = [p for p in stage.Traverse() if p.IsA(UsdGeom.Points) and not p.GetName().endswith("_crack_events")]
+    assert points and all(UsdGeom.Imageable(p).ComputePurpose() == UsdGeom.Tokens.default_ for p in points)
+    assert any(p.GetName().endswith("_crack_events") for p in stage.Traverse())
+    capsys.readouterr()
+    assert cli.main([*args, "--debris", "-1"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "debris_particles" in err[0], err
