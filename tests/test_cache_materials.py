@@ -178,22 +178,22 @@ def test_debris_as_point_instancer(tmp_path):
         assert UsdGeom.Imageable(stage.GetPrimAtPath(f"/World/{name}")).ComputePurpose() == UsdGeom.Tokens.default_
 
 
-def _pulled_bar(shift=(0.0, 0.0, 0.0)):
-    """A 12 x 4 x 4 particle bar (h = 1 cm, no compressive bonus) whose end layers are pulled apart along x at 1 m/s
-    each: it breaks across the middle."""
+def _pulled_bar(shift=(0.0, 0.0, 0.0), bars=1):
+    """``bars`` 12 x 4 x 4 particle bars (h = 1 cm, no compressive bonus; "bar", then "bar_1" 0.1 m further in y, a
+    weaker one: critical stretch 0.004) whose end layers are pulled apart along x at 1 m/s each: each breaks across
+    the middle."""
     scene = pdsim.Scene(fps=24, frames=6, frame_time=2.0e-4, gravity=(0.0, 0.0, 0.0), name="pull")
-    material = pdsim.Material(density=1000.0, youngs_modulus=1.0e7, poisson_ratio=0.25, critical_stretch=0.005)
-    o = np.asarray(shift, dtype=np.float64)
-    body = scene.add_peridynamic_body(pdsim.box((0.12, 0.04, 0.04), center=tuple(o)), material, 0.01, name="bar")
-    body.set_velocity(
-        pdsim.BoxRegion(lo=o + np.array((-1, -1, -1)), hi=o + np.array((-0.045, 1, 1))),
-        (-1.0, 0, 0),
-        axes="x",
-        name="l",
-    )
-    body.set_velocity(
-        pdsim.BoxRegion(lo=o + np.array((0.045, -1, -1)), hi=o + np.array((1, 1, 1))), (1.0, 0, 0), axes="x", name="r"
-    )
+    for i in range(bars):
+        material = pdsim.Material(
+            density=1000.0, youngs_modulus=1.0e7, poisson_ratio=0.25, critical_stretch=0.005 - 0.001 * i
+        )
+        o = np.asarray(shift, dtype=np.float64) + np.array((0.0, 0.1 * i, 0.0))
+        name = "bar" if i == 0 else f"bar_{i}"
+        body = scene.add_peridynamic_body(pdsim.box((0.12, 0.04, 0.04), center=tuple(o)), material, 0.01, name=name)
+        left = pdsim.BoxRegion(lo=o + np.array((-1, -0.05, -1)), hi=o + np.array((-0.045, 0.05, 1)))
+        right = pdsim.BoxRegion(lo=o + np.array((0.045, -0.05, -1)), hi=o + np.array((1, 0.05, 1)))
+        body.set_velocity(left, (-1.0, 0, 0), axes="x", name="l")
+        body.set_velocity(right, (1.0, 0, 0), axes="x", name="r")
     return scene
 
 
@@ -265,33 +265,43 @@ def test_crack_events_of_a_pulled_bar():
 
 
 def test_crack_events_in_the_cache(tmp_path):
-    """Scene.run(crack_events=True) writes /World/bar_crack_events: one point per bond broken in each frame (the
-    sum over frames equals the bonds the run broke), zero widths, unit normals and primvars:energy > 0, time-sampled
-    at every frame (empty at frame 0); it passes the USD validators. Methods without crack events refuse the option
+    """Scene.run(crack_events=True) with two bars writes /World/bar_crack_events and /World/bar_1_crack_events: one
+    point per bond broken in each frame (the sum over frames equals the bonds the run broke in that body), zero
+    widths, unit normals and primvars:energy > 0, time-sampled at every frame (empty at frame 0); it passes the USD
+    validators. Methods without crack events refuse the option
     before the run (FeatureNotAvailableError naming the body), and a negative debris_particles is a ParameterError."""
     from pxr import UsdGeom
 
     path = tmp_path / "events.usdc"
     kept = {}
-    scene = _pulled_bar()
+    scene = _pulled_bar(bars=2)
     scene.run(path, device="cpu", progress=False, crack_events=True, on_frame=lambda f, s: kept.update(s=s[0]))
     assert usd_problems(path) == []
     stage = _stage(path)
-    points = UsdGeom.Points(stage.GetPrimAtPath("/World/bar_crack_events"))
-    energy = UsdGeom.PrimvarsAPI(points).GetPrimvar("energy")
-    assert points.GetPointsAttr().GetTimeSamples() == [float(f) for f in range(7)]
-    total = 0
-    for frame in range(7):
-        n = len(points.GetPointsAttr().Get(frame))
-        total += n
-        assert len(points.GetWidthsAttr().Get(frame)) == n and not np.any(points.GetWidthsAttr().Get(frame))
-        if n:
-            np.testing.assert_allclose(np.linalg.norm(np.asarray(points.GetNormalsAttr().Get(frame)), axis=1), 1, 1e-5)
-            assert np.all(np.asarray(energy.Get(frame)) > 0)
-    assert len(points.GetPointsAttr().Get(0)) == 0
     solver = kept["s"]
-    k = np.repeat(np.arange(solver.model.particle_count), np.diff(solver.model.family_offsets.numpy()))
-    assert total == int((~solver.bond_alive() & (k < solver.model.family_neighbors.numpy())).sum()) > 0
+    m = solver.model
+    k = np.repeat(np.arange(m.particle_count), np.diff(m.family_offsets.numpy()))
+    broken = ~solver.bond_alive() & (k < m.family_neighbors.numpy())
+    totals = []
+    for i, name in enumerate(("bar", "bar_1")):
+        points = UsdGeom.Points(stage.GetPrimAtPath(f"/World/{name}_crack_events"))
+        assert UsdGeom.Imageable(points).ComputePurpose() == UsdGeom.Tokens.guide
+        energy = UsdGeom.PrimvarsAPI(points).GetPrimvar("energy")
+        assert points.GetPointsAttr().GetTimeSamples() == [float(f) for f in range(7)]
+        total = 0
+        for frame in range(7):
+            n = len(points.GetPointsAttr().Get(frame))
+            total += n
+            assert len(points.GetWidthsAttr().Get(frame)) == n and not np.any(points.GetWidthsAttr().Get(frame))
+            if n:
+                normals = np.asarray(points.GetNormalsAttr().Get(frame))
+                np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1, 1e-5)
+                assert np.all(np.asarray(energy.Get(frame)) > 0)
+        assert len(points.GetPointsAttr().Get(0)) == 0
+        rows = solver.body_slice(i)
+        totals.append(total)
+        assert total == int(broken[(k >= rows.start) & (k < rows.stop)].sum()) > 0, name
+    assert totals[0] != totals[1]  # the bodies' events are not swapped or mixed
 
     with pytest.raises(FeatureNotAvailableError, match="'bar'"):
         _fem_scene().run(tmp_path / "fem.usdc", device="cpu", progress=False, crack_events=True)

@@ -14,6 +14,11 @@ from ..kernels.peridynamics import events as kev
 from ..output.views import EventsView
 
 
+def _entry(array, i: int) -> int:
+    """One entry of a Warp int array, read without copying the rest."""
+    return int(array[i : i + 1].numpy()[0])
+
+
 class CrackEvents:
     """Collects the crack events of ``solver`` (a SolverPeridynamics) frame by frame: :meth:`collect` returns the
     bonds broken since the previous call (since the solver's current state for the first one)."""
@@ -61,8 +66,10 @@ class CrackEvents:
             n, m.family_offsets, m.family_neighbors, s.state.bond_alive, self.before, self.flags, device
         )
         kev.event_rows(self.flags, self.rows)
-        rows = self.rows.numpy()
-        total = int(rows[-1] + self.flags.numpy()[-1]) if m.bond_count else 0
+        nb = m.bond_count
+        total = _entry(self.rows, nb - 1) + _entry(self.flags, nb - 1) if nb else 0
+        # each body's first row: the row of its first bond (bodies own contiguous bond ranges)
+        starts = [total if q >= nb else _entry(self.rows, q) for q in self._body_bond_start.tolist()]
         positions = wp.zeros(max(total, 1), dtype=wp.vec3, device=device)
         normals = wp.zeros(max(total, 1), dtype=wp.vec3, device=device)
         energies = wp.zeros(max(total, 1), dtype=float, device=device)
@@ -90,8 +97,6 @@ class CrackEvents:
         x = positions.numpy()[:total].astype(np.float64) + s.origin
         nrm = normals.numpy()[:total]
         w = energies.numpy()[:total].astype(np.float64)
-        starts = np.append(rows, total)[np.minimum(self._body_bond_start, len(rows))]
-        starts[-1] = total
         for i, b in enumerate(s.bodies):
             lo, hi = int(starts[i]), int(starts[i + 1])
             views.append(EventsView(b.name, x[lo:hi], nrm[lo:hi], w[lo:hi], s.origin))
