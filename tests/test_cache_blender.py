@@ -10,9 +10,11 @@ libraries, which are kept out of the process that has usd-core's pxr loaded.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
 import textwrap
+from pathlib import Path
 
 import pytest
 from test_cache_pack import _blender_python
@@ -27,6 +29,7 @@ pytestmark = pytest.mark.skipif(
 )
 
 FRAMES = 4
+ROOT = Path(__file__).resolve().parents[1]
 
 IMPORT = textwrap.dedent(
     """
@@ -236,103 +239,11 @@ def test_blender_gets_crack_faces_per_frame(blender_caches):
     assert info["frames"][0]["index"] == 0 < info["frames"][-1]["index"]
 
 
-RENDER_CRACKS = textwrap.dedent(
-    """
-    import json, sys
-    import bpy
-    from mathutils import Vector
-
-    path, out = sys.argv[1], sys.argv[2]
-    lo, hi = Vector(json.loads(sys.argv[3])), Vector(json.loads(sys.argv[4]))
-    info = {"renders": {}}
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    assert bpy.ops.wm.usd_import(filepath=path) == {"FINISHED"}
-    scene = bpy.context.scene
-    info["objects"] = {ob.name: ob.type for ob in scene.objects}
-    ob = bpy.data.objects["tile_surface"]
-    info["slots"] = [slot.material.name if slot.material else None for slot in ob.material_slots]
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = 4
-    scene.render.resolution_x, scene.render.resolution_y = 96, 72
-    scene.render.film_transparent = True
-    centre, size = (lo + hi) / 2, (hi - lo).length
-    camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
-    camera.data.type = "ORTHO"
-    camera.data.ortho_scale = 1.1 * size
-    scene.collection.objects.link(camera)
-    scene.camera = camera
-    camera.location = centre + Vector((0.6, -0.8, 1.0)).normalized() * 2.0 * size
-    camera.rotation_euler = (centre - camera.location).to_track_quat("-Z", "Y").to_euler()
-    sun = bpy.data.objects.new("sun", bpy.data.lights.new("sun", "SUN"))
-    sun.data.energy = 4.0
-    sun.rotation_euler = camera.rotation_euler
-    scene.collection.objects.link(sun)
-    bpy.data.objects["ground"].hide_render = True  # every opaque pixel is then the tile's (or a point's)
-    for frame in (0, scene.frame_end):
-        scene.frame_set(frame)
-        scene.render.filepath = f"{out}.{frame}.png"
-        bpy.ops.render.render(write_still=True)
-        info["renders"][frame] = scene.render.filepath
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    bpy.ops.wm.usd_import(filepath=path, import_guide=True)
-    scene = bpy.context.scene
-    info["with_guides"] = {ob.name: ob.type for ob in scene.objects}
-    # docs/cache_format.md, "Crack events": dust on the events with Geometry Nodes
-    events = bpy.data.objects["tile_crack_events"]
-    events.hide_render = True  # markers only (an empty point cloud must not reach Cycles)
-    bpy.data.objects["tile"].hide_render = True  # the particles, imported with the guides
-    dust = bpy.data.objects.new("dust", bpy.data.meshes.new("dust"))
-    scene.collection.objects.link(dust)
-    tree = bpy.data.node_groups.new("dust", "GeometryNodeTree")
-    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-    source = tree.nodes.new("GeometryNodeObjectInfo")
-    source.inputs["Object"].default_value = events
-    source.transform_space = "RELATIVE"
-    grain = tree.nodes.new("GeometryNodeMeshIcoSphere")
-    grain.inputs["Radius"].default_value = 0.002
-    scatter = tree.nodes.new("GeometryNodeInstanceOnPoints")
-    output = tree.nodes.new("NodeGroupOutput")
-    tree.links.new(source.outputs["Geometry"], scatter.inputs["Points"])
-    tree.links.new(grain.outputs["Mesh"], scatter.inputs["Instance"])
-    tree.links.new(scatter.outputs["Instances"], output.inputs[0])
-    dust.modifiers.new("dust", "NODES").node_group = tree
-    info["dust"] = {}
-    for frame in (0, scene.frame_end):
-        scene.frame_set(frame)
-        depsgraph = bpy.context.evaluated_depsgraph_get()
-        grains = [i for i in depsgraph.object_instances if i.is_instance and i.parent and i.parent.name == "dust"]
-        cloud = events.evaluated_get(depsgraph).data
-        radius = [r.value for r in cloud.attributes["radius"].data] if "radius" in cloud.attributes else []
-        info["dust"][frame] = {"grains": len(grains), "events": len(cloud.points), "radius": max(radius, default=0)}
-    scene.render.engine = "CYCLES"
-    scene.cycles.samples = 1
-    scene.render.resolution_x, scene.render.resolution_y = 16, 16
-    scene.camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
-    scene.collection.objects.link(scene.camera)
-    scene.frame_set(0)  # no event yet: renders (an empty point cloud of events would crash Cycles 5.0.1)
-    scene.render.filepath = f"{out}.dust.png"
-    bpy.ops.render.render(write_still=True)
-    print("RENDER " + json.dumps(info))
-    """
-)
-
-
-def _pixel_classes(png) -> dict:
-    """Counts of the opaque pixels of a render: crack colour (saturated, red the largest and blue the smallest
-    channel: the orange of pdsim_crack lit white), grey (saturation under 0.12: pdsim_outer) and the rest (edges
-    blending the two)."""
-    import numpy as np
-    from PIL import Image
-
-    px = np.asarray(Image.open(png).convert("RGBA"), dtype=np.float64).reshape(-1, 4) / 255.0
-    opaque = px[:, 3] > 0.5
-    rgb = px[:, :3]
-    hi, lo = rgb.max(axis=1), rgb.min(axis=1)
-    saturation = (hi - lo) / np.maximum(hi, 1e-6)
-    crack = opaque & (saturation > 0.35) & (rgb[:, 0] == hi) & (rgb[:, 2] == lo)
-    grey = opaque & (saturation < 0.12)
-    return {"opaque": int(opaque.sum()), "crack": int(crack.sum()), "grey": int(grey.sum())}
+def _tool():
+    spec = importlib.util.spec_from_file_location("blender_cracks", ROOT / "tools" / "blender_cracks.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def test_gallery_fracture_renders_with_the_crack_material(tmp_path):
@@ -345,23 +256,13 @@ def test_gallery_fracture_renders_with_the_crack_material(tmp_path):
     leaves out (they are there, as point clouds, when guides are imported). Imported with the guides, the crack
     events drive the Geometry Nodes dust of docs/cache_format.md: one grain per event at frames 0 and 5, the events'
     radius 0, and frame 0, without events, renders."""
-    import importlib.util
-    import os
-
     from pxr import Usd, UsdGeom
 
-    scenes = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes")
-    spec = importlib.util.spec_from_file_location("gallery_drop_shatter", os.path.join(scenes, "drop_shatter.py"))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    path = tmp_path / "drop_shatter.usdc"
-    module.build_scene(**module.PREVIEW).run(path, frames=5, device="cpu", progress=False, crack_events=True)
+    tool = _tool()  # tools/blender_cracks.py: the same at a larger size for docs/blender_cracks.png
+    path, lo, hi = tool.tile_cache(tmp_path)
     stage = Usd.Stage.Open(str(path))
     assert UsdGeom.Imageable(stage.GetPrimAtPath("/World/tile")).ComputePurpose() == UsdGeom.Tokens.guide
-    box = UsdGeom.BBoxCache(5, [UsdGeom.Tokens.default_]).ComputeWorldBound(stage.GetPrimAtPath("/World/tile_surface"))
-    lo, hi = box.ComputeAlignedRange().GetMin(), box.ComputeAlignedRange().GetMax()
-    out = _blender(RENDER_CRACKS, path, tmp_path / "render", json.dumps(list(lo)), json.dumps(list(hi)), timeout=600)
-    info = json.loads(next(ln for ln in out.splitlines() if ln.startswith("RENDER "))[len("RENDER ") :])
+    info = tool.render(BLENDER_PYTHON, path, tmp_path / "render", lo, hi, size=(96, 72), samples=4)
     assert info["slots"] == ["pdsim_outer", "pdsim_crack"]
     assert not {"tile", "tile_crack_events"} & set(info["objects"])
     assert info["with_guides"].get("tile") == info["with_guides"].get("tile_crack_events") == "POINTCLOUD"
@@ -371,6 +272,6 @@ def test_gallery_fracture_renders_with_the_crack_material(tmp_path):
         assert dust["grains"] == dust["events"] == len(events.Get(frame)), (frame, dust)
         assert dust["radius"] == 0.0
     assert info["dust"]["5"]["grains"] > 0
-    before, after = (_pixel_classes(info["renders"][str(f)]) for f in (0, 5))
+    before, after = (tool.pixel_classes(info["renders"][str(f)]) for f in (0, 5))
     assert before["crack"] == 0 and before["grey"] > 0.9 * before["opaque"], before
     assert after["crack"] > 20 and after["grey"] > 0.5 * after["opaque"], after
