@@ -82,7 +82,8 @@ class EventsView:
     name: the body's name (the prim is ``/World/<name>_crack_events``). positions: world positions of the broken bonds'
     midpoints at the frame's end [m], float64 [m, 3]. normals: unit directions of the bonds when they broke (the normal
     of the crack face they open), float [m, 3]. energies: elastic energy each bond held when it broke, released by
-    the break [J], float [m]. origin: the body's rest centre [m] (float64 [3]), the prim's static translate."""
+    the break [J], float [m]. origin: a point near the body [m] (float64 [3]; the solver's frame origin), the prim's
+    static translate the positions are stored relative to."""
 
     name: str
     positions: np.ndarray

@@ -6,7 +6,11 @@ one Mesh ``fragment_<id>`` per fragment), and a Mesh with a transform at ``/Worl
 for the ground) for a RigidView. Points and mesh prims get a static double-precision ``xformOp:translate`` at the
 rest centre of their first view (:func:`rest_centre`) and store their float32 points relative to it, so positions keep
 float32's precision around the body wherever it is; rigid bodies store their mesh in the body frame with a double
-translate. docs/cache_format.md describes every prim and attribute.
+translate. A surface with a ``crack`` face attribute gets the face subsets ``outer`` and ``crack`` (a partition of its
+faces) bound to the materials ``pdsim_outer`` and ``pdsim_crack``, and the per-face ``material_index`` (0, 1). An
+EventsView becomes the guide Points ``/World/<body>_crack_events``; with ``debris_particles`` the small fragments
+become the instances of ``/World/<body>_debris`` (pdsim/output/debris.py). docs/cache_format.md describes every prim
+and attribute.
 
 Normals are computed here from each frame's points and faces (vectorised numpy): faces are grouped around each vertex
 into smooth fans, split at edges whose dihedral angle exceeds ``sharp_angle`` (30 degrees by default), so a box keeps
