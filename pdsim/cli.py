@@ -235,6 +235,24 @@ def _add_run_options(r: argparse.ArgumentParser):
         metavar="STEPS",
         help="steps between the watchdog's divergence checks (default 16; also at every frame end)",
     )
+    r.add_argument(
+        "--render-points",
+        action="store_true",
+        help="write the particles of bodies that have a surface as renderable points (default: guides, which "
+        "renderers and Blender's importer leave out; pdsim preview --points all draws them either way)",
+    )
+    r.add_argument(
+        "--debris",
+        metavar="N",
+        help="write fragments of fewer than N particles as instances of the point instancer /World/<body>_debris "
+        "instead of as surface meshes (default 0: none; docs/cache_format.md)",
+    )
+    r.add_argument(
+        "--crack-events",
+        action="store_true",
+        help="write the bonds broken in each frame as the points /World/<body>_crack_events (midpoint, energy, "
+        "normal; peridynamic bodies)",
+    )
     r.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -269,6 +287,12 @@ def _run_settings(args) -> dict:
         settings["resume"] = True
     if args.layout != "file":
         settings["layout"] = args.layout
+    if args.render_points:
+        settings["render_points"] = True
+    if args.debris is not None:
+        settings["debris_particles"] = _number("debris", args.debris, int, "an integer >= 0 (particles)")
+    if args.crack_events:
+        settings["crack_events"] = True
     return settings
 
 

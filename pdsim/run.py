@@ -36,7 +36,7 @@ from .checks import check_frames, check_range, check_time_step, format_bytes
 from .colliders import collider_names
 from .contact import MethodContact
 from .divergence import attach_watchdogs, schedule_watchdogs
-from .errors import InstabilityError, OutputWriteError, ParameterError, PdsimError
+from .errors import FeatureNotAvailableError, InstabilityError, OutputWriteError, ParameterError, PdsimError
 from .output.usd import UsdCache
 from .output.usd_files import pdsim_info
 from .output.writer import ViewWriter
@@ -72,6 +72,7 @@ class _Options:
     dt_factor: float
     check_interval: int
     checkpoint_interval_s: float | None
+    crack_events: bool = False
 
 
 CACHE_LAYOUTS = ("file", "clips")
@@ -98,6 +99,22 @@ def _check_options(scene, out, frames, dt, dt_factor, check_interval, checkpoint
     if color_attribute is not None and not isinstance(color_attribute, str):
         raise ParameterError("color_attribute", color_attribute, "an attribute name such as 'damage', or None")
     return _Options(out, frame_count, dt, dt_factor, int(check_interval), checkpoint_interval_s)
+
+
+def crack_event_sources(solvers) -> list:
+    """The crack-event collectors of ``solvers`` (``Scene.run(crack_events=True)``); FeatureNotAvailableError naming
+    the bodies of a method that gives none."""
+    sources = []
+    for s in solvers:
+        source = s.crack_events()
+        if source is None:
+            names = ", ".join(repr(b.name) for b in s.bodies)
+            raise FeatureNotAvailableError(
+                f"crack_events=True: the {s.method} bodies {names} give no crack events (only peridynamic bodies "
+                "record the bonds that break); run without crack_events, or make those bodies peridynamic"
+            )
+        sources.append(source)
+    return sources
 
 
 def rest_bounds(scene) -> tuple[np.ndarray, np.ndarray]:
@@ -132,10 +149,12 @@ class _FrameRun:
         self.ck_path = checkpoint_path(options.out)
         self.cache = self.writer = None
         self.frame = 0  # the frame being simulated
+        self.events = crack_event_sources(solvers) if options.crack_events else []
 
     def write_frame(self, frame: int) -> None:
         t = frame * self.scene.frame_time
         views = [v for s in self.solvers for v in s.views()]
+        views += [v for e in self.events for v in e.collect()]
         for collider, name in self.rigid:
             view = collider.view(t, bounds=self.bounds)
             if name is not None:
@@ -166,6 +185,8 @@ class _FrameRun:
             "watchdogs": {str(i): ({} if w is None else w.checkpoint()) for i, w in enumerate(self.watchdogs)},
             "colliders": _collider_states(self.scene.colliders),
         }
+        if self.events:
+            state["events"] = {str(i): e.checkpoint() for i, e in enumerate(self.events)}
         return save_checkpoint(self.ck_path, state, abandon=abandon)
 
 
@@ -230,6 +251,9 @@ def run_scene(
     color_attribute=None,
     color_range=None,
     fragments_as_prims=False,
+    render_points=False,
+    debris_particles=0,
+    crack_events=False,
     resume=False,
     checkpoint_interval_s=60.0,
     check_interval=16,
@@ -241,6 +265,9 @@ def run_scene(
     of :meth:`pdsim.Scene.run`."""
     pack = cache_layout(layout)
     options = _check_options(scene, out, frames, dt, dt_factor, check_interval, checkpoint_interval_s, color_attribute)
+    if isinstance(debris_particles, bool) or int(debris_particles) != debris_particles or debris_particles < 0:
+        raise ParameterError("debris_particles", debris_particles, "an integer >= 0 (0: no debris)")
+    options.crack_events = bool(crack_events)
     out = options.out
     remove_stale_temporaries(out)  # what a killed run on this output left (at most one checkpoint's .tmp)
     names = collider_names(scene.colliders)
@@ -273,6 +300,10 @@ def run_scene(
                 w.restore(state["watchdogs"][str(i)])
     run = _FrameRun(scene, solvers, watchdogs, steps, options, bounds, names, fingerprint)
     run.frame = start
+    if resume:
+        for i, e in enumerate(run.events):  # the breaks of the frame a stop interrupted count with that frame
+            if str(i) in state.get("events", {}):
+                e.restore(state["events"][str(i)])
     metadata = {"frameTime": scene.frame_time, "timeScale": scene.frame_time * scene.fps, "scene": str(scene.name)}
     try:
         run.cache = UsdCache(
@@ -298,6 +329,8 @@ def run_scene(
             color_range=color_range,
             fragments_as_prims=fragments_as_prims,
             velocity_scale=scene.frame_time * scene.fps,  # velocities per played second (USD's time codes per second)
+            render_points=render_points,
+            debris_particles=debris_particles,
         )
         if resume:
             run.writer.restore(state["writer"])

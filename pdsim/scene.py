@@ -234,6 +234,9 @@ class Scene:
         color_attribute: str | None = None,
         color_range=None,
         fragments_as_prims: bool = False,
+        render_points: bool = False,
+        debris_particles: int = 0,
+        crack_events: bool = False,
         resume: bool = False,
         checkpoint_interval_s: float | None = 60.0,
         check_interval: int = 16,
@@ -281,6 +284,14 @@ class Scene:
             color_range: (lo, hi) of real values mapped onto the colour ramp; default (0, 1).
             fragments_as_prims: write each fragment of a fracturing surface as its own Mesh
                 ``/World/<surface>/fragment_<id>`` (invisible before it appears).
+            render_points: False (default): a body's particles are written with ``purpose = guide`` where the body
+                has a surface (renderers and Blender's importer leave them out, ``pdsim preview --points all`` draws
+                them); True: they render too.
+            debris_particles: fragments of fewer particles than this are written as instances of the point instancer
+                ``/World/<body>_debris`` (position, velocity, orientation, size) instead of as faces of the surface;
+                0 (default): none, every fragment stays in the surface (docs/cache_format.md, "Debris").
+            crack_events: write the bonds that broke in each frame as the points ``/World/<body>_crack_events``
+                (midpoint, released energy [J], crack-face normal; peridynamic bodies; docs/cache_format.md).
             resume: continue from ``<stem>.checkpoint.npz`` and append to the cache it was written with (ParameterError
                 when there is none, it belongs to another scene, or that cache is gone).
             checkpoint_interval_s: wall time between checkpoints [s], >= 0, or None for none (default 60 s).
@@ -308,6 +319,9 @@ class Scene:
             color_attribute=color_attribute,
             color_range=color_range,
             fragments_as_prims=fragments_as_prims,
+            render_points=render_points,
+            debris_particles=debris_particles,
+            crack_events=crack_events,
             resume=resume,
             checkpoint_interval_s=checkpoint_interval_s,
             check_interval=check_interval,

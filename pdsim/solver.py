@@ -129,6 +129,11 @@ class Solver(ABC):
         """{(body name, condition name): force [N], float64 [3]} the boundary conditions exert now."""
         return {}
 
+    def crack_events(self):
+        """An object whose ``collect()`` returns, per frame, an EventsView per body of the bonds broken since the last
+        call (``Scene.run(crack_events=True)``), or None where the method does not give crack events."""
+        return None
+
     # -- checkpoints ----------------------------------------------------------------------------------------------
     def checkpoint(self) -> dict:
         """Everything a run needs to continue from the current state exactly as if it had not stopped: a nested dict

@@ -1,5 +1,6 @@
 """A real consumer of the caches: Blender (the ``bpy`` module) imports a small cache of each method with
-``bpy.ops.wm.usd_import`` and renders a fracturing frame with Cycles and motion blur.
+``bpy.ops.wm.usd_import``, renders a fracturing frame with Cycles and motion blur, and renders a gallery scene's
+fracturing frame with the crack material on the crack faces and no particle spheres.
 
 Needs ``pip install -e ".[blender]"`` (bpy: about 370 MB to download, 820 MB installed, and it pins numpy 1.26), so it
 is not in the ``test`` extra; Blender may also live in a venv of its own, named by ``PDSIM_BLENDER_PYTHON``; without
@@ -9,9 +10,11 @@ libraries, which are kept out of the process that has usd-core's pxr loaded.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
 import textwrap
+from pathlib import Path
 
 import pytest
 from test_cache_pack import _blender_python
@@ -26,6 +29,7 @@ pytestmark = pytest.mark.skipif(
 )
 
 FRAMES = 4
+ROOT = Path(__file__).resolve().parents[1]
 
 IMPORT = textwrap.dedent(
     """
@@ -35,7 +39,7 @@ IMPORT = textwrap.dedent(
     result = {}
     for path in sys.argv[1:]:
         bpy.ops.wm.read_factory_settings(use_empty=True)
-        assert bpy.ops.wm.usd_import(filepath=path) == {"FINISHED"}
+        assert bpy.ops.wm.usd_import(filepath=path, import_guide=True) == {"FINISHED"}  # the particles are guides
         scene = bpy.context.scene
         info = {"range": [scene.frame_start, scene.frame_end], "fps": scene.render.fps / scene.render.fps_base}
         objects = {}
@@ -194,10 +198,11 @@ def _without_velocities(write):
 
 
 def test_blender_gets_crack_faces_per_frame(blender_caches):
-    """The crack hooks reach Blender: the surface and crack placeholder materials become the surface's material slots,
-    and the per-face ``crack`` attribute (domain FACE, updated every frame by the mesh cache) marks as many faces on
-    the last frame as the cache's crack subset holds, for an Attribute node to switch to the crack material. (Blender
-    5.0 reads the material indices of time-sampled GeomSubsets once, at import: on frame 0 there is no crack yet.)"""
+    """The crack material reaches Blender's playback with no node work: the surface's material slots are pdsim_outer
+    and pdsim_crack in that order, and on every frame (frame_set, then the evaluated mesh) the faces' material
+    indices are the cache's material_index: as many faces with index 1 as the cache's crack subset holds at that
+    frame, none at frame 0 and some at the last (so they change during playback); the per-face ``crack`` attribute
+    (domain FACE) agrees."""
     from pxr import Usd, UsdGeom
 
     script = textwrap.dedent(
@@ -208,23 +213,65 @@ def test_blender_gets_crack_faces_per_frame(blender_caches):
         bpy.ops.wm.read_factory_settings(use_empty=True)
         bpy.ops.wm.usd_import(filepath=sys.argv[1])
         scene = bpy.context.scene
-        scene.frame_set(scene.frame_end)
         ob = bpy.data.objects["block_surface"]
-        mesh = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
-        crack = mesh.attributes["crack"]
-        values = [v.value for v in crack.data]
-        slots = sorted(slot.material.name for slot in ob.material_slots if slot.material)
-        print("CRACK " + json.dumps({"domain": crack.domain, "sum": int(sum(values)), "faces": len(mesh.polygons),
-                                     "slots": slots}))
+        frames = []
+        for frame in range(scene.frame_start, scene.frame_end + 1):
+            scene.frame_set(frame)
+            mesh = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+            index = [p.material_index for p in mesh.polygons]
+            crack = [v.value for v in mesh.attributes["crack"].data]
+            frames.append({"faces": len(index), "index": sum(index), "crack": sum(crack),
+                           "domain": mesh.attributes["crack"].domain})
+        slots = [slot.material.name if slot.material else None for slot in ob.material_slots]
+        print("CRACK " + json.dumps({"frames": frames, "slots": slots}))
         """
     )
     path = blender_caches["pd"]
     out = _blender(script, path)
     info = json.loads(next(ln for ln in out.splitlines() if ln.startswith("CRACK "))[len("CRACK ") :])
+    assert info["slots"] == ["pdsim_outer", "pdsim_crack"]
     stage = Usd.Stage.Open(str(path))
-    end = stage.GetEndTimeCode()
-    crack = UsdGeom.Subset(stage.GetPrimAtPath("/World/block_surface/crack")).GetIndicesAttr().Get(end)
-    faces = len(stage.GetPrimAtPath("/World/block_surface").GetAttribute("faceVertexCounts").Get(end))
-    assert info["domain"] == "FACE" and info["faces"] == faces
-    assert info["sum"] == len(crack) > 0
-    assert info["slots"] == ["crack", "surface"]
+    subset = UsdGeom.Subset(stage.GetPrimAtPath("/World/block_surface/crack")).GetIndicesAttr()
+    counts = stage.GetPrimAtPath("/World/block_surface").GetAttribute("faceVertexCounts")
+    for frame, got in enumerate(info["frames"]):
+        assert got["domain"] == "FACE" and got["faces"] == len(counts.Get(frame)), frame
+        assert got["index"] == got["crack"] == len(subset.Get(frame)), frame
+    assert info["frames"][0]["index"] == 0 < info["frames"][-1]["index"]
+
+
+def _tool():
+    spec = importlib.util.spec_from_file_location("blender_cracks", ROOT / "tools" / "blender_cracks.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_gallery_fracture_renders_with_the_crack_material(tmp_path):
+    """The gallery's tile drop (scenes/drop_shatter.py at its preview spacing, 2 cm, frames 0..5 of 24, with crack
+    events) imported with bpy.ops.wm.usd_import and rendered with Cycles (CPU, 96 x 72, 4 samples, the ground hidden,
+    orthographic camera on the tile's bounds at frame 5): at frame 5, where the tile has cracked, pixels of the crack
+    colour (> 20) on the crack faces and the grey outer material on most of the tile (> 50 % of the opaque pixels);
+    at frame 0 (no crack yet) no pixel of the crack colour, so the classification does not mistake the outer
+    material for it. No point spheres: the particle prim /World/tile and the crack events are guides that Blender
+    leaves out (they are there, as point clouds, when guides are imported). Imported with the guides, the crack
+    events drive the Geometry Nodes dust of docs/cache_format.md: one grain per event at frames 0 and 5, the events'
+    radius 0, and frame 0, without events, renders."""
+    from pxr import Usd, UsdGeom
+
+    tool = _tool()  # tools/blender_cracks.py: the same at a larger size for docs/blender_cracks.png
+    path, lo, hi = tool.tile_cache(tmp_path)
+    stage = Usd.Stage.Open(str(path))
+    assert UsdGeom.Imageable(stage.GetPrimAtPath("/World/tile")).ComputePurpose() == UsdGeom.Tokens.guide
+    info = tool.render(BLENDER_PYTHON, path, tmp_path / "render", lo, hi, size=(96, 72), samples=4)
+    assert info["slots"] == ["pdsim_outer", "pdsim_crack"]
+    assert not {"tile", "tile_crack_events"} & set(info["objects"])
+    assert info["with_guides"].get("tile") == info["with_guides"].get("tile_crack_events") == "POINTCLOUD"
+    events = UsdGeom.Points(stage.GetPrimAtPath("/World/tile_crack_events")).GetPointsAttr()
+    for frame in (0, 5):
+        dust = info["dust"][str(frame)]
+        assert dust["grains"] == dust["events"] == len(events.Get(frame)), (frame, dust)
+        assert dust["radius"] == 0.0
+    assert info["dust"]["5"]["grains"] > 0
+    before, after = (tool.pixel_classes(info["renders"][str(f)]) for f in (0, 5))
+    assert before["crack"] == 0 and before["grey"] > 0.9 * before["opaque"], before
+    assert after["crack"] > 20 and after["grey"] > 0.5 * after["opaque"], after

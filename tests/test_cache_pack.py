@@ -58,7 +58,7 @@ BLENDER_IMPORT = textwrap.dedent(
     import bpy
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    assert bpy.ops.wm.usd_import(filepath=sys.argv[1]) == {"FINISHED"}
+    assert bpy.ops.wm.usd_import(filepath=sys.argv[1], import_guide=True) == {"FINISHED"}  # the points are guides
     scene = bpy.context.scene
     counts = {}
     for frame in range(scene.frame_start, scene.frame_end + 1):

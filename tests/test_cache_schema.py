@@ -98,8 +98,8 @@ def test_one_schema_for_every_method(caches):
     /World/<body> with points, velocities, widths, extent and primvars of the shared attribute names only (vertex
     interpolation, the shared kinds), and for the methods with surfaces (peridynamics, FEM) a UsdGeom.Mesh
     /World/<body>_surface with the same attribute names (faceVarying normals, velocities, uniform fragment and crack
-    primvars) and the GeomSubsets surface and crack of family materialBind, bound to the placeholder materials
-    /World/Looks/surface and /World/Looks/crack. Every cache passes UsdValidation."""
+    primvars, the uniform material_index) and the GeomSubsets outer and crack of family materialBind, bound to the
+    materials /World/Looks/pdsim_outer and /World/Looks/pdsim_crack. Every cache passes UsdValidation."""
     from pxr import UsdGeom, UsdShade
 
     kinds = {"float": "float[]", "int": "int[]", "vector3f": "vector3f[]"}
@@ -122,13 +122,13 @@ def test_one_schema_for_every_method(caches):
             expected.update(
                 {
                     f"/World/{body}_surface": "Mesh",
-                    f"/World/{body}_surface/surface": "GeomSubset",
+                    f"/World/{body}_surface/outer": "GeomSubset",
                     f"/World/{body}_surface/crack": "GeomSubset",
                     "/World/Looks": "Scope",
-                    "/World/Looks/surface": "Material",
-                    "/World/Looks/surface/PreviewSurface": "Shader",
-                    "/World/Looks/crack": "Material",
-                    "/World/Looks/crack/PreviewSurface": "Shader",
+                    "/World/Looks/pdsim_outer": "Material",
+                    "/World/Looks/pdsim_outer/PreviewSurface": "Shader",
+                    "/World/Looks/pdsim_crack": "Material",
+                    "/World/Looks/pdsim_crack/PreviewSurface": "Shader",
                 }
             )
         assert layout == expected, method
@@ -149,14 +149,14 @@ def test_one_schema_for_every_method(caches):
         mesh_attribute_sets.append(mnames - {"subsetFamily:materialBind:familyType"})
         assert mesh.GetNormalsInterpolation() == "faceVarying"
         assert mesh.GetSubdivisionSchemeAttr().Get() == "none"
-        for pv in ("fragment", "crack"):
+        for pv in ("fragment", "crack", "material_index"):
             assert UsdGeom.PrimvarsAPI(mesh).GetPrimvar(pv).GetInterpolation() == "uniform"
-        for name in ("surface", "crack"):
+        for name in ("outer", "crack"):
             subset = UsdGeom.Subset(stage.GetPrimAtPath(f"/World/{body}_surface/{name}"))
             assert subset.GetFamilyNameAttr().Get() == "materialBind"
             assert subset.GetElementTypeAttr().Get() == "face"
             bound = UsdShade.MaterialBindingAPI(subset.GetPrim()).ComputeBoundMaterial()[0]
-            assert bound.GetPath() == f"/World/Looks/{name}"
+            assert bound.GetPath() == f"/World/Looks/pdsim_{name}"
     assert mesh_attribute_sets[0] == mesh_attribute_sets[1]
 
 

@@ -109,7 +109,7 @@ def test_guide_python_blocks_run(tmp_path, monkeypatch):
 
 
 # Appended to the guide's Blender block: renders the last frame (the ball is through the pane, which has crack faces)
-# from above and reports the crack faces Blender reads on that frame and whose slots the guide's material took.
+# from above and reports the crack faces Blender reads on that frame and the surface's material slots.
 BLENDER_CHECK = """
 import json, math, os, mathutils, numpy
 scene.frame_set(scene.frame_end)
@@ -154,9 +154,10 @@ def _orange_pixels(path) -> int:
 
 def test_guide_blender_block(tmp_path, monkeypatch):
     """The guide's Blender block imports the guide's first cache in Blender (bpy, in a subprocess: bpy ships its own
-    USD libraries) and prints the frame range 0..1 and 24 fps. Its crack material works on a frame with cracks: the
-    pane's surface has crack faces on the last frame (the per-face ``crack`` attribute, read on that frame), its slots
-    hold the guide's material only, and a small Cycles render of the pane shows orange pixels."""
+    USD libraries) and prints the frame range 0..1 and 24 fps. The crack material works on a frame with cracks with
+    no node work: the pane's surface has crack faces on the last frame (the per-face ``crack`` attribute, read on that
+    frame), its slots hold the cache's materials pdsim_outer and pdsim_crack, and a small Cycles render of the pane
+    shows orange pixels."""
     if importlib.util.find_spec("bpy") is None:
         pytest.skip('bpy (Blender as a Python module) is not installed: pip install -e ".[blender]"')
     blocks = _python_blocks()
@@ -177,7 +178,7 @@ def test_guide_blender_block(tmp_path, monkeypatch):
     assert re.search(rf"^0 {FRAMES} 24\b", proc.stdout, re.MULTILINE), proc.stdout[-2000:]
     check = json.loads(next(ln for ln in proc.stdout.splitlines() if ln.startswith("CHECK "))[len("CHECK ") :])
     assert check["domain"] == "FACE" and check["crack_faces"] > 0, check
-    assert check["slots"] == ["surface_and_crack"], check
+    assert check["slots"] == ["pdsim_crack", "pdsim_outer"], check
     assert _orange_pixels(tmp_path / "crack.png") > 0
 
 

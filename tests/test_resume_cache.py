@@ -4,7 +4,7 @@ An interrupted run plus its resume leave one cache `out` that a renderer reads e
 uninterrupted run: every attribute of every prim (points, velocities, normals, topology, primvars, extents, reactions,
 transforms, visibility, `pdsim:time`) equal bit for bit at every time code 0..N, the same time samples (topology only
 where it changed), the same prims, and no USD validation error. Covered: peridynamics with fracture, contact, grips and
-fragment surfaces (also as one prim per fragment), a scene 200 m away from the origin with default settings, the FEM
+fragment surfaces (also as one prim per fragment; also with crack events and debris instances), a scene 200 m away from the origin with default settings, the FEM
 splitting its mesh, a resume from a checkpoint older than the last written frame (the later frames and the fragment
 prims they defined are replaced), a resumed run stopped again and resumed once more, and a run that replaces an
 earlier cache (the resumed frames stay in `<stem>.partial<suffix>` until the run succeeds). Each resumed run packs
@@ -179,9 +179,10 @@ def _interrupt(build, out, frame, polls=1, **kw) -> RunInterrupted:
     [
         (_pd_bar, 4, 8, {}),
         (_pd_bar, 2, 8, {"fragments_as_prims": True, "color_attribute": "damage"}),
+        (_pd_bar, 2, 8, {"crack_events": True, "debris_particles": 20}),
         (_fem_bar, 3, 8, {}),
     ],
-    ids=["peridynamics", "peridynamics-fragment-prims", "fem"],
+    ids=["peridynamics", "peridynamics-fragment-prims", "peridynamics-events-debris", "fem"],
 )
 def test_resumed_cache_plays_as_the_uninterrupted_one(tmp_path, build, stop_frame, frames, options):
     """Stopped inside a frame (at a step boundary, two stop polls after a frame end), then resumed: `out` alone holds

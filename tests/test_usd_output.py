@@ -463,7 +463,7 @@ def test_normals_follow_deformation_with_fixed_fans():
 
 def test_writer_mesh_normals_velocities_subsets_and_colors(tmp_path):
     """A fracturing surface (crack and fragment face attributes) through the ViewWriter: faceVarying normals on every
-    frame (one per face corner), velocities on every frame, the materialBind subsets "surface" and "crack" (indices
+    frame (one per face corner), velocities on every frame, the materialBind subsets "outer" and "crack" (indices
     written with the topology, family type nonOverlapping), and with color_attribute="damage" a per-vertex
     displayColor from the damage vertex attribute and a per-point one on the points."""
     from pxr import UsdGeom
@@ -505,14 +505,14 @@ def test_writer_mesh_normals_velocities_subsets_and_colors(tmp_path):
         assert len(m.GetVelocitiesAttr().Get(frame)) == len(m.GetPointsAttr().Get(frame))
     assert m.GetFaceVertexIndicesAttr().GetTimeSamples() == [0.0, 2.0]
     subsets = {s.GetPrim().GetName(): s for s in UsdGeom.Subset.GetAllGeomSubsets(m)}
-    assert set(subsets) == {"surface", "crack"}
+    assert set(subsets) == {"outer", "crack"}
     crack = subsets["crack"]
     assert crack.GetFamilyNameAttr().Get() == "materialBind"
     assert crack.GetElementTypeAttr().Get() == UsdGeom.Tokens.face
     assert crack.GetIndicesAttr().GetTimeSamples() == [0.0, 2.0]
     assert list(crack.GetIndicesAttr().Get(1)) == []
     assert list(crack.GetIndicesAttr().Get(3)) == list(range(12, 24))
-    assert list(subsets["surface"].GetIndicesAttr().Get(3)) == list(range(12))
+    assert list(subsets["outer"].GetIndicesAttr().Get(3)) == list(range(12))
     assert UsdGeom.Subset.GetFamilyType(m, "materialBind") == UsdGeom.Tokens.nonOverlapping
     color = UsdGeom.PrimvarsAPI(m).GetPrimvar("displayColor")
     assert color.GetInterpolation() == UsdGeom.Tokens.vertex

@@ -649,6 +649,21 @@ def _(ws):
     _run(_tiny(), ws)
 
 
+@case("debris_negative", A_RUN, "Scene.run(out, debris_particles=-1)", "an integer >= 0 (0: no debris)",
+      pdsim.ParameterError, "debris_particles=-1", ">= 0")  # fmt: skip
+def _(ws):
+    _run(_tiny(), ws, debris_particles=-1)
+
+
+@case("crack_events_fem", A_RUN, "Scene.run(out, crack_events=True) with an FEM body",
+      "peridynamic bodies only, or crack_events=False", pdsim.FeatureNotAvailableError, "crack_events=True", "'bar'",
+      "peridynamic")  # fmt: skip
+def _(ws):
+    scene = _scene(gravity=(0.0, 0.0, 0.0))
+    scene.add_fem_body(pdsim.box_tet_mesh((0.1, 0.1, 0.1), (1, 1, 1), center=(0.0, 0.0, 0.5)), _material(), name="bar")
+    _run(scene, ws, crack_events=True)
+
+
 @case("run_frames_zero", A_RUN, "scene.run(frames=0)", "an integer >= 1", pdsim.ParameterError, "frames=0")
 def _(ws):
     ws.earlier_cache()

@@ -71,6 +71,7 @@ from .usd_layout import (
     define_world,
     reopened_handles,
 )
+from .usd_sparse import SparsePrims
 from .usd_stream import FrameLayer, FrameStream, PendingFrame
 from .usd_values import (
     check_array,
@@ -101,7 +102,7 @@ def _relative(positions, origin):
     return a.astype(np.float64) - origin
 
 
-class UsdCache:
+class UsdCache(SparsePrims):
     """Writes a USD animation cache (``.usdc``/``.usda``/``.usd``) frame by frame, streaming and crash-safe.
 
     Typical use::
@@ -306,6 +307,7 @@ class UsdCache:
         primvars: dict[str, str] | None = None,
         parent: XformHandle | None = None,
         origin=None,
+        purpose: str | None = None,
     ) -> PointsHandle:
         """Define a ``UsdGeom.Points`` prim at ``/World/<name>``.
 
@@ -319,6 +321,8 @@ class UsdCache:
             origin: The prim's static double-precision ``xformOp:translate`` [stage units] (3 numbers);
                 :meth:`write_points` then stores ``positions - origin`` as float32. None: no transform, world
                 positions stored as float32.
+            purpose: ``"guide"`` (drawn by viewers that show guides, left out of renders and of Blender's import
+                unless asked), ``"render"``, ``"proxy"``, or None (``default``: always drawn).
 
         Returns:
             Handle for :meth:`write_points`.
@@ -331,7 +335,11 @@ class UsdCache:
         check_primvar_kinds(primvars, "primvar")
 
         path = self._define_path(name, parent)
+        if purpose not in (None, "guide", "render", "proxy"):
+            raise ValueError(f"purpose={purpose!r} must be 'guide', 'render', 'proxy' or None")
         define_points(self._stage, path, w, primvars, self._types)
+        if purpose is not None:
+            UsdGeom.Imageable(self._stage.GetPrimAtPath(path)).CreatePurposeAttr(purpose)
         o = None if origin is None else define_origin(self._stage, path, origin)
         return PointsHandle(
             path=path, point_count=int(w.shape[0]), primvar_kinds=primvars, _cache=self, _widths=w, origin=o

@@ -69,6 +69,71 @@ class MeshHandle:
     origin: np.ndarray | None = None
 
 
+@dataclass(eq=False)
+class SparsePointsHandle:
+    """A ``UsdGeom.Points`` prim whose point count changes from frame to frame (crack events); returned by
+    :meth:`UsdCache.add_sparse_points`. ``primvar_kinds``: its vertex primvars ``{name: kind}``; ``origin``: its
+    static ``xformOp:translate`` [stage units] (float64 [3])."""
+
+    path: str
+    primvar_kinds: dict[str, str]
+    _cache: object = field(repr=False)
+    origin: np.ndarray | None = None
+
+
+@dataclass(eq=False)
+class InstancerHandle:
+    """A ``UsdGeom.PointInstancer`` with one prototype (debris); returned by :meth:`UsdCache.add_instancer`.
+    ``origin``: its static ``xformOp:translate`` [stage units] (float64 [3])."""
+
+    path: str
+    _cache: object = field(repr=False)
+    origin: np.ndarray | None = None
+
+
+def define_sparse_points(stage: Usd.Stage, path: str, primvars: dict, types: dict) -> None:
+    """A ``UsdGeom.Points`` prim at ``path`` whose points, widths, normals and vertex primvars ``{name: kind}`` are all
+    time-sampled (their count changes from frame to frame)."""
+    points = UsdGeom.Points.Define(stage, path)
+    for create in (points.CreatePointsAttr, points.CreateExtentAttr, points.CreateWidthsAttr, points.CreateNormalsAttr):
+        create()
+    points.SetWidthsInterpolation(UsdGeom.Tokens.vertex)
+    points.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+    api = UsdGeom.PrimvarsAPI(points)
+    for pv_name, kind in primvars.items():
+        api.CreatePrimvar(pv_name, types[kind], UsdGeom.Tokens.vertex)
+
+
+def define_instancer(stage: Usd.Stage, path: str, prototype_points: np.ndarray, prototype_faces: np.ndarray):
+    """A ``UsdGeom.PointInstancer`` at ``path`` with the one prototype ``<path>/prototypes/chunk`` (a static triangle
+    mesh of ``prototype_points`` [stage units], float [v, 3], and ``prototype_faces``, int [f, 3]); its per-instance
+    attributes (positions, velocities, orientations, scales, protoIndices, ids) are declared for time samples.
+    Returns the prototype's path."""
+    instancer = UsdGeom.PointInstancer.Define(stage, path)
+    for create in (
+        instancer.CreatePositionsAttr,
+        instancer.CreateVelocitiesAttr,
+        instancer.CreateOrientationsAttr,
+        instancer.CreateScalesAttr,
+        instancer.CreateProtoIndicesAttr,
+        instancer.CreateIdsAttr,
+        instancer.CreateExtentAttr,
+    ):
+        create()
+    UsdGeom.Scope.Define(stage, f"{path}/prototypes")
+    proto = f"{path}/prototypes/chunk"
+    mesh = UsdGeom.Mesh.Define(stage, proto)
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    pts = np.ascontiguousarray(prototype_points, dtype=np.float32)
+    faces = np.ascontiguousarray(prototype_faces, dtype=np.int32)
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(faces), 3, np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(faces.reshape(-1)))
+    mesh.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*pts.min(axis=0).tolist()), Gf.Vec3f(*pts.max(axis=0).tolist())]))
+    instancer.CreatePrototypesRel().SetTargets([Sdf.Path(proto)])
+    return proto
+
+
 def define_origin(stage: Usd.Stage, path: str, origin) -> np.ndarray:
     """Give the prim at ``path`` a static double-precision ``xformOp:translate`` of ``origin`` [stage units] (3 finite
     numbers); returns it as float64 [3]. Points written relative to it keep float32's relative precision around the
@@ -87,6 +152,11 @@ def _static_origin(spec) -> np.ndarray | None:
         return None
     value = spec.attributes["xformOp:translate"].default
     return None if value is None else np.array(value, dtype=np.float64)
+
+
+def _sampled_widths(spec) -> bool:
+    """Whether the Points prim spec has no default ``widths`` (they are time-sampled: a SparsePointsHandle's)."""
+    return spec is None or "widths" not in spec.attributes or spec.attributes["widths"].default is None
 
 
 def default_topology_set(path: str) -> str:
@@ -200,7 +270,17 @@ def reopened_handles(cache, stream, frame: int) -> dict:
 
     for prim in cache._stage.Traverse():
         path = str(prim.GetPath())
-        if prim.IsA(UsdGeom.Points):
+        spec = cache._layer.GetPrimAtPath(path)
+        if prim.IsA(UsdGeom.PointInstancer):
+            handles[path] = InstancerHandle(path=path, _cache=cache, origin=_static_origin(spec))
+        elif prim.IsA(UsdGeom.Points) and _sampled_widths(spec):
+            handles[path] = SparsePointsHandle(
+                path=path,
+                primvar_kinds=primvars(prim, UsdGeom.Tokens.vertex),
+                _cache=cache,
+                origin=_static_origin(spec),
+            )
+        elif prim.IsA(UsdGeom.Points):
             w = np.asarray(UsdGeom.Points(prim).GetWidthsAttr().Get() or [], dtype=np.float32)
             handles[path] = PointsHandle(
                 path=path,

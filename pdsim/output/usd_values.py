@@ -55,6 +55,9 @@ def type_names() -> dict:
         "double": t.Double,
         "quatf": t.Quatf,
         "token": t.Token,
+        "quath": t.QuathArray,
+        "int64": t.Int64Array,
+        "float3": t.Float3Array,
     }
 
 
@@ -240,6 +243,51 @@ def mesh_samples(handle, points, faces, velocities, normals, face_primvars, vert
     lo, hi = (x.min(axis=0), x.max(axis=0)) if nv else (np.zeros(3), np.zeros(3))
     samples.append(("extent", "extent", extent(lo, hi)))
     return samples, topology, nv, nf
+
+
+def sparse_points_samples(handle, positions, widths, normals, primvars) -> list:
+    """Checked samples ``[(attribute, kind, Vt value)]`` of a Points prim whose count changes per frame (a
+    SparsePointsHandle's): points, widths, normals, every declared primvar and the extent of the points."""
+    x = check_array("positions", positions, shape=(-1, 3), shape_text="[n, 3]")
+    n = len(x)
+    w = check_array("widths", widths, shape=(n,), shape_text=f"[n] = [{n}]")
+    nrm = check_array("normals", normals, shape=(n, 3), shape_text=f"[n, 3] = [{n}, 3]")
+    values = dict(primvars or {})
+    if set(values) != set(handle.primvar_kinds):
+        raise ValueError(f"primvars {sorted(values)} must be the declared ones {sorted(handle.primvar_kinds)}")
+    samples = [("points", "points", vt_array("points", x)), ("widths", "float", vt_array("float", w))]
+    samples.append(("normals", "normals", vt_array("normals", nrm)))
+    for pv_name, kind in handle.primvar_kinds.items():
+        a = primvar_array(f"primvar {pv_name!r}", kind, values[pv_name], n, "n")
+        samples.append((f"primvars:{pv_name}", kind, vt_array(kind, a)))
+    lo, hi = (x.min(axis=0), x.max(axis=0)) if n else (np.zeros(3), np.zeros(3))
+    samples.append(("extent", "extent", extent(lo, hi)))
+    return samples
+
+
+def instancer_samples(positions, velocities, orientations, scales, ids) -> list:
+    """Checked samples ``[(attribute, kind, Vt value)]`` of a PointInstancer with one prototype: positions,
+    velocities, orientations (quaternions (x, y, z, w) [n, 4], as half-precision quath), uniform scales [n] (as
+    float3), protoIndices (all 0), ids (int64) and the extent of the instances' spheres of diameter ``scales``."""
+    x = check_array("positions", positions, shape=(-1, 3), shape_text="[n, 3]")
+    n = len(x)
+    v = check_array("velocities", velocities, shape=(n, 3), shape_text=f"[n, 3] = [{n}, 3]")
+    q = check_array("orientations", orientations, shape=(n, 4), shape_text=f"[n, 4] = [{n}, 4]")
+    sc = check_array("scales", scales, shape=(n,), shape_text=f"[n] = [{n}]")
+    i = np.asarray(ids, dtype=np.int64).reshape(-1)
+    if i.shape != (n,):
+        raise ValueError(f"ids has shape {list(i.shape)}; expected [n] = [{n}]")
+    r = 0.5 * sc[:, None]
+    lo, hi = ((x - r).min(axis=0), (x + r).max(axis=0)) if n else (np.zeros(3), np.zeros(3))
+    return [
+        ("positions", "points", vt_array("points", x)),
+        ("velocities", "vector3f", vt_array("vector3f", v)),
+        ("orientations", "quath", Vt.QuathArray.FromNumpy(np.ascontiguousarray(q, dtype=np.float16))),  # x, y, z, w
+        ("scales", "float3", Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(np.repeat(sc[:, None], 3, axis=1)))),
+        ("protoIndices", "int", Vt.IntArray.FromNumpy(np.zeros(n, np.int32))),
+        ("ids", "int64", Vt.Int64Array.FromNumpy(i)),
+        ("extent", "extent", extent(lo, hi)),
+    ]
 
 
 def subset_samples(handle, subsets: dict | None, nf: int) -> list:

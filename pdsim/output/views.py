@@ -76,6 +76,23 @@ class MeshView:
 
 
 @dataclass
+class EventsView:
+    """The crack events of one body in one frame: one row per bond (or link) that broke during the frame.
+
+    name: the body's name (the prim is ``/World/<name>_crack_events``). positions: world positions of the broken bonds'
+    midpoints at the frame's end [m], float64 [m, 3]. normals: unit directions of the bonds when they broke (the normal
+    of the crack face they open), float [m, 3]. energies: elastic energy each bond held when it broke, released by
+    the break [J], float [m]. origin: a point near the body [m] (float64 [3]; the solver's frame origin), the prim's
+    static translate the positions are stored relative to."""
+
+    name: str
+    positions: np.ndarray
+    normals: np.ndarray
+    energies: np.ndarray
+    origin: np.ndarray
+
+
+@dataclass
 class RigidView:
     """A rigid body of the scene (ground plane, static mesh collider, projectile) at one frame.
 
@@ -95,4 +112,4 @@ class RigidView:
     group: str | None = "colliders"
 
 
-__all__ = ["ATTRIBUTES", "MeshView", "PointsView", "RigidView", "attribute_kind"]
+__all__ = ["ATTRIBUTES", "EventsView", "MeshView", "PointsView", "RigidView", "attribute_kind"]

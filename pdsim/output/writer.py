@@ -6,7 +6,11 @@ one Mesh ``fragment_<id>`` per fragment), and a Mesh with a transform at ``/Worl
 for the ground) for a RigidView. Points and mesh prims get a static double-precision ``xformOp:translate`` at the
 rest centre of their first view (:func:`rest_centre`) and store their float32 points relative to it, so positions keep
 float32's precision around the body wherever it is; rigid bodies store their mesh in the body frame with a double
-translate. docs/cache_format.md describes every prim and attribute.
+translate. A surface with a ``crack`` face attribute gets the face subsets ``outer`` and ``crack`` (a partition of its
+faces) bound to the materials ``pdsim_outer`` and ``pdsim_crack``, and the per-face ``material_index`` (0, 1). An
+EventsView becomes the guide Points ``/World/<body>_crack_events``; with ``debris_particles`` the small fragments
+become the instances of ``/World/<body>_debris`` (pdsim/output/debris.py). docs/cache_format.md describes every prim
+and attribute.
 
 Normals are computed here from each frame's points and faces (vectorised numpy): faces are grouped around each vertex
 into smooth fans, split at edges whose dihedral angle exceeds ``sharp_angle`` (30 degrees by default), so a box keeps
@@ -23,7 +27,8 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .views import MeshView, PointsView, RigidView, attribute_kind
+from .debris import chunk_prototype, small_fragments, without_fragments
+from .views import EventsView, MeshView, PointsView, RigidView, attribute_kind
 
 SHARP_ANGLE_DEG = 30.0
 
@@ -240,16 +245,25 @@ def _kind_of(name: str, values) -> str:
         return "int" if (np.issubdtype(a.dtype, np.integer) or a.dtype == np.bool_) else "float"
 
 
-# the materialBind face subsets of a surface with a crack attribute: the input surface and the faces made by fracture,
-# bound to the placeholder materials /World/Looks/<name> of these colours (linear RGB)
-_SUBSETS = ("surface", "crack")
-_SUBSET_COLORS = {"surface": (0.55, 0.55, 0.55), "crack": (0.8, 0.3, 0.12)}
+# the materialBind face subsets of a surface with a crack attribute, a partition of its faces: the input surface
+# ("outer", material index 0) and the faces made by fracture ("crack", 1), bound to the materials
+# /World/Looks/<material> of these diffuse colours (linear RGB; distinct hues, so that a render shows which is which)
+_SUBSETS = ("outer", "crack")
+_SUBSET_MATERIALS = {"outer": ("pdsim_outer", (0.45, 0.47, 0.5)), "crack": ("pdsim_crack", (0.85, 0.22, 0.03))}
+MATERIAL_INDEX = "material_index"  # per-face primvar: the index of the face's subset in _SUBSETS (0 outer, 1 crack)
 
 
 def _crack_subsets(crack) -> dict:
-    """Face indices of the subsets ``surface`` (crack == 0) and ``crack`` (crack != 0)."""
+    """Face indices of the subsets ``outer`` (crack == 0) and ``crack`` (crack != 0): every face in exactly one."""
     c = np.asarray(crack) != 0
-    return {"surface": np.flatnonzero(~c), "crack": np.flatnonzero(c)}
+    return {"outer": np.flatnonzero(~c), "crack": np.flatnonzero(c)}
+
+
+def material_index(crack) -> np.ndarray:
+    """The per-face material index (int32 [f]: 0 on the input surface, 1 on faces made by fracture) of the per-face
+    ``crack`` attribute: Blender reads it into its faces' material index on every frame, and the mesh's material slots
+    are ``pdsim_outer``, ``pdsim_crack`` in that order."""
+    return (np.asarray(crack) != 0).astype(np.int32)
 
 
 def rest_centre(points) -> np.ndarray:
@@ -308,6 +322,13 @@ class ViewWriter:
             seconds per played second (frame_time x fps); 1 (default) when a frame lasts 1/fps simulated seconds.
             Renderers extrapolate positions by velocities x (time codes / timeCodesPerSecond) for motion blur, so
             slow-motion caches need the scaled velocities.
+        render_points: False (default): the Points prim of a body that has a surface or render mesh in the views is
+            written with ``purpose = guide`` (renderers and Blender's importer leave it out; ``pdsim preview`` still
+            draws it); True: ``purpose`` is left at ``default``, so the particles render too. A body without a mesh
+            (the lattice) always renders its points.
+        debris_particles: fragments of fewer points than this (a PointsView's ``fragment`` attribute) whose body has a
+            ``<body>_surface`` mesh are taken out of that mesh and written as instances of the point instancer
+            ``/World/<body>_debris`` (pdsim/output/debris.py); 0 (default): none.
     """
 
     def __init__(
@@ -319,12 +340,20 @@ class ViewWriter:
         fragments_as_prims: bool = False,
         sharp_angle: float = SHARP_ANGLE_DEG,
         velocity_scale: float = 1.0,
+        render_points: bool = False,
+        debris_particles: int = 0,
     ):
         if not (math.isfinite(sharp_angle) and 0.0 <= sharp_angle <= 180.0):
             raise ValueError(f"sharp_angle={sharp_angle!r} must be in [0, 180] degrees")
         if not (math.isfinite(velocity_scale) and velocity_scale > 0.0):
             raise ValueError(f"velocity_scale={velocity_scale!r} must be a finite number > 0")
         self.velocity_scale = float(velocity_scale)
+        self.render_points = bool(render_points)
+        if isinstance(debris_particles, bool) or int(debris_particles) != debris_particles or debris_particles < 0:
+            raise ValueError(f"debris_particles={debris_particles!r} must be an integer >= 0 (0: no debris)")
+        self.debris_particles = int(debris_particles)
+        self._debris = {}  # body name -> InstancerHandle
+        self._events = {}  # body name -> SparsePointsHandle
         self.cache = cache
         self.colors = _Colors(color_attribute, color_range)
         self.fragments_as_prims = bool(fragments_as_prims)
@@ -336,9 +365,15 @@ class ViewWriter:
 
     def write(self, frame: int, views) -> None:
         """Writes the views of ``frame`` (the caller finishes the frame with ``cache.end_frame``)."""
+        meshes = {view.name for view in views if isinstance(view, MeshView)}
+        if self.debris_particles > 0:
+            views = self._split_debris(frame, views, meshes)
         for view in views:
             if isinstance(view, PointsView):
-                self._write_points(frame, view)
+                covered = f"{view.name}_surface" in meshes or f"{view.name}_render" in meshes
+                self._write_points(frame, view, guide=covered and not self.render_points)
+            elif isinstance(view, EventsView):
+                self._write_events(frame, view)
             elif isinstance(view, MeshView):
                 self._write_mesh(frame, view)
             elif isinstance(view, RigidView):
@@ -371,6 +406,8 @@ class ViewWriter:
                 "origin": np.asarray(e.origin, dtype=np.float64),
             }
         return {
+            "debris": [[name, h.path] for name, h in self._debris.items()],
+            "events": [[name, h.path] for name, h in self._events.items()],
             "points": [[name, h.path] for name, h in self._points.items()],
             "meshes": meshes,
             "rigid": [[group, name, h.path] for (group, name), h in self._rigid.items()],
@@ -383,6 +420,8 @@ class ViewWriter:
         topology samples only where the topology changes, the same smooth groups)."""
         cache = self.cache
         self._points = {str(name): cache.existing(path) for name, path in state["points"]}
+        self._debris = {str(name): cache.existing(path) for name, path in state.get("debris", [])}
+        self._events = {str(name): cache.existing(path) for name, path in state.get("events", [])}
         self._groups = {str(group): cache.existing(path) for group, path in state["groups"]}
         self._rigid = {(group, str(name)): cache.existing(path) for group, name, path in state["rigid"]}
         self._meshes = {}
@@ -408,7 +447,7 @@ class ViewWriter:
         return np.asarray(velocities, dtype=np.float64) * self.velocity_scale
 
     # -- points -------------------------------------------------------------------------------------------------
-    def _write_points(self, frame: int, view: PointsView) -> None:
+    def _write_points(self, frame: int, view: PointsView, guide: bool = False) -> None:
         handle = self._points.get(view.name)
         color = self.colors.attribute
         if handle is None:
@@ -417,7 +456,11 @@ class ViewWriter:
                 kinds["displayColor"] = "color3f"
             widths = np.broadcast_to(np.asarray(view.widths, dtype=np.float32), (len(view.positions),))
             handle = self.cache.add_points(
-                view.name, widths=np.ascontiguousarray(widths), primvars=kinds, origin=rest_centre(view.positions)
+                view.name,
+                widths=np.ascontiguousarray(widths),
+                primvars=kinds,
+                origin=rest_centre(view.positions),
+                purpose="guide" if guide else None,
             )
             self._points[view.name] = handle
         values = {k: _typed(handle.primvar_kinds[k], a) for k, a in view.attributes.items()}
@@ -433,9 +476,67 @@ class ViewWriter:
         for name, force in view.reactions.items():
             self.cache.write_vector(handle, frame, f"reaction:{name}", force)
 
+    # -- debris and crack events --------------------------------------------------------------------------------
+    def _split_debris(self, frame: int, views, meshes: set) -> list:
+        """The views with the fragments of fewer than ``debris_particles`` points taken out of their body's surface;
+        writes those fragments as the instances of ``/World/<body>_debris`` (empty on frames without any)."""
+        removed = {}
+        for view in views:
+            if not isinstance(view, PointsView) or f"{view.name}_surface" not in meshes:
+                continue
+            debris = small_fragments(view, self.debris_particles)
+            if debris is None:
+                continue
+            handle = self._debris.get(view.name)
+            if handle is None:
+                points, faces = chunk_prototype()
+                material = self.cache.add_material(*_SUBSET_MATERIALS["crack"])
+                handle = self.cache.add_instancer(
+                    f"{view.name}_debris", points, faces, material=material, origin=rest_centre(view.positions)
+                )
+                self._debris[view.name] = handle
+            self.cache.write_instancer(
+                handle,
+                frame,
+                debris.positions,
+                velocities=self._velocities(debris.velocities),
+                orientations=debris.orientations,
+                scales=debris.sizes,
+                ids=debris.ids,
+            )
+            removed[f"{view.name}_surface"] = debris.ids
+        out = []
+        for view in views:
+            ids = removed.get(view.name) if isinstance(view, MeshView) else None
+            kept = ids is None or "fragment" not in view.face_attributes
+            out.append(view if kept else without_fragments(view, ids))
+        return out
+
+    def _write_events(self, frame: int, view: EventsView) -> None:
+        """The crack events of a body at ``frame`` as the points of ``/World/<body>_crack_events``, with their normals
+        and ``primvars:energy`` [J]: markers that drive effects, not geometry, so a guide of zero widths (renderers
+        leave guides out; Blender 5.0.1's Cycles crashes rendering an empty point cloud, and the events are empty on
+        most frames)."""
+        handle = self._events.get(view.name)
+        if handle is None:
+            handle = self.cache.add_sparse_points(
+                f"{view.name}_crack_events", primvars={"energy": "float"}, origin=view.origin, purpose="guide"
+            )
+            self._events[view.name] = handle
+        self.cache.write_sparse_points(
+            handle,
+            frame,
+            np.asarray(view.positions, dtype=np.float64),
+            widths=np.zeros(len(view.positions), np.float32),
+            normals=view.normals,
+            primvars={"energy": view.energies},
+        )
+
     # -- meshes -------------------------------------------------------------------------------------------------
     def _mesh_kinds(self, view: MeshView):
         face = {k: _kind_of(k, a) for k, a in view.face_attributes.items()}
+        if "crack" in face:
+            face[MATERIAL_INDEX] = "int"
         vertex = {k: _kind_of(k, a) for k, a in view.vertex_attributes.items()}
         color = self.colors.attribute
         if color is not None and color in face:
@@ -490,9 +591,9 @@ class ViewWriter:
         entry.version = view.topology_version
 
     def _bind_subsets(self, handle) -> None:
-        """Bind the placeholder materials to the mesh's subsets (surface and crack)."""
+        """Bind the materials ``pdsim_outer`` and ``pdsim_crack`` to the mesh's subsets ``outer`` and ``crack``."""
         for name in handle.subsets:
-            material = self.cache.add_material(name, _SUBSET_COLORS[name])
+            material = self.cache.add_material(*_SUBSET_MATERIALS[name])
             self.cache.bind_material(f"{handle.path}/{name}", material)
 
     def _color_values(self, view: MeshView, rows=None, verts=None) -> tuple[dict, dict]:
@@ -517,6 +618,8 @@ class ViewWriter:
         if changed:
             face = {k: _typed(handle.face_primvar_kinds[k], a) for k, a in view.face_attributes.items()}
             face.update(face_color)
+            if MATERIAL_INDEX in handle.face_primvar_kinds:
+                face[MATERIAL_INDEX] = material_index(view.face_attributes["crack"])
             kwargs["face_primvars"] = face
             if handle.subsets:
                 kwargs["subsets"] = _crack_subsets(view.face_attributes["crack"])
@@ -591,6 +694,8 @@ class ViewWriter:
             if changed:
                 face = {k: _typed(face_kinds[k], np.asarray(a)[rows]) for k, a in view.face_attributes.items()}
                 face.update(face_color)
+                if MATERIAL_INDEX in face_kinds:
+                    face[MATERIAL_INDEX] = material_index(np.asarray(view.face_attributes["crack"])[rows])
                 kwargs["face_primvars"] = face
                 if handle.subsets:
                     kwargs["subsets"] = _crack_subsets(np.asarray(view.face_attributes["crack"])[rows])

@@ -47,6 +47,7 @@ from ..kinematics import PointKinematics
 from ..output.views import PointsView
 from ..solver import PointSolver, SolverContext, array_state, assign_state, register_solver
 from .body import PeridynamicBody
+from .events import CrackEvents
 from .model import PeridynamicState, build_model
 from .ranges import ParticleRanges, resolve_threads
 
@@ -422,6 +423,10 @@ class SolverPeridynamics(PointSolver):
             n = self.model.particle_count
             self._contact_points = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=self.device)
         return self._contact_points, self.model.radius
+
+    def crack_events(self) -> CrackEvents:
+        """The crack events of this solver's bodies (pdsim/peridynamics/events.py), counted from now."""
+        return CrackEvents(self)
 
     def fragment_ids(self) -> np.ndarray:
         """Fragment id per particle (connected components of live bonds, numbered per body by the body-local index

@@ -104,6 +104,16 @@ class FrameGeometry:
     colors: list = field(default_factory=list)  # linear float32 [s, 3] per points prim
 
 
+def _under_instancer(prim) -> bool:
+    """Whether ``prim`` lies under a ``UsdGeom.PointInstancer`` (a prototype, not drawn where it stands)."""
+    parent = prim.GetParent()
+    while parent and not parent.IsPseudoRoot():
+        if parent.IsA(UsdGeom.PointInstancer):
+            return True
+        parent = parent.GetParent()
+    return False
+
+
 class StageReader:
     """A USD stage opened for rendering: its renderable prims, up axis and frames."""
 
@@ -131,9 +141,13 @@ class StageReader:
         self.ground_prims = set()
         self.up = np.array([0.0, 1.0, 0.0]) if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y else np.eye(3)[2]
         self.meshes, self.points = [], []
+        guides = []
         for prim in stage.Traverse():
             if prim.IsA(UsdGeom.Mesh) or prim.IsA(UsdGeom.Points):
+                if _under_instancer(prim):  # a point instancer's prototype (debris) is drawn only as instances
+                    continue
                 if UsdGeom.Imageable(prim).ComputePurpose() in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy):
+                    guides.append(prim)  # a body's particles under its surface stay drawable (below)
                     continue
                 (self.meshes if prim.IsA(UsdGeom.Mesh) else self.points).append(prim)
         # a body's Points prim <name> is covered by its surface mesh <name>_surface when there is one
@@ -144,6 +158,9 @@ class StageReader:
         for root, body in self._roots.values():
             if body is not None:
                 self.surface_of.setdefault(body.GetPath(), set()).add(root)
+        # the particles pdsim writes as guides (Scene.run(render_points=False)) are drawn as before (--points all):
+        # guide Points prims that are a surface's body; other guides (crack events) are not drawn
+        self.points += [p for p in guides if p.IsA(UsdGeom.Points) and p.GetPath() in self.surface_of]
         if not self.meshes and not self.points:
             raise ParameterError("cache", path, "a USD stage with at least one UsdGeom.Mesh or UsdGeom.Points prim")
         if stage.HasAuthoredTimeCodeRange():
