@@ -86,12 +86,15 @@ class RigidMotion:
     replays with the new poses).
 
     pose: body frame to world; linear_velocity [m/s] of the frame origin; angular_velocity [rad/s] (world axes);
-    band: detection depth below a mesh surface [m] (meshes only)."""
+    band: detection depth below a mesh surface [m] (meshes only); inv_mass [1/kg] and inv_inertia [1/(kg m^2)] (world
+    axes, about the frame origin): a dynamic rigid body's (pdsim/rigid.py), zero for a kinematic collider."""
 
     pose: wp.transform
     linear_velocity: wp.vec3
     angular_velocity: wp.vec3
     band: float
+    inv_mass: float
+    inv_inertia: wp.mat33
 
 
 @wp.kernel
@@ -129,21 +132,39 @@ def push_point(
     velocities: wp.array(dtype=wp.vec3),
     mass: wp.array(dtype=float),
     reaction: wp.array(dtype=wp.vec3d),
+    phase: int,
 ):
     """The response of point i at x [m] (rest + displacement), signed distance sdf [m] and outward normal n from the
     surface of a rigid collider moving with ``motion`` (collider_response), written to its displacement and velocity.
-    A dynamic collider (non-empty ``mass``: point masses [kg]) takes the opposite impulse: reaction[0] -= m dv [N s]
-    and reaction[1] -= (x_new - c) x m dv + (x_new - x) x m v_old [N m s], c the pose's translation (the body's
-    centre of mass): the second term is the moment of the point's momentum moved by the projection, so that the pair
-    conserves angular momentum exactly as it conserves momentum."""
+
+    A dynamic collider (non-empty ``mass``: point masses [kg]) is met in two launches. Phase 0 only adds
+    m k to reaction[2][0], k = 1/M + (a x n) . I^-1 (a x n) the body's inverse effective mass at the point (a = x - c,
+    c the pose's translation, the body's centre of mass): the mass the body meets this step. Phase 1 scales the
+    point's velocity change by 1 / (1 + sum m k), the perfectly inelastic impulse between the body and the points it
+    touches together (without it, a light body meeting more mass than its own in one step would rebound with energy
+    it never had), and the body takes the opposite impulse: reaction[0] -= m dv [N s] and reaction[1] -=
+    (x_new - c) x m dv + (x_new - x) x m v_old [N m s] (the second term: the moment of the point's momentum moved by
+    the projection, so that the pair conserves angular momentum as it conserves momentum). A kinematic collider
+    (empty ``mass``) runs phase 1 alone, unscaled."""
+    dynamic = mass.shape[0] > 0
+    centre = wp.transform_get_translation(motion.pose)
+    if phase == 0:
+        if dynamic:
+            an = wp.cross(x - centre, n)
+            k = motion.inv_mass + wp.dot(an, motion.inv_inertia * an)
+            wp.atomic_add(reaction, 2, wp.vec3d(wp.float64(mass[i] * k), wp.float64(0.0), wp.float64(0.0)))
+        return
     v_old = velocities[i]
     vs = rigid_point_velocity(x, motion)
     x_new, v_new = collider_response(x, v_old, sdf, n, r, vs, friction)
+    if dynamic:
+        share = wp.float32(wp.float64(1.0) / (wp.float64(1.0) + reaction[2][0]))
+        v_new = v_old + share * (v_new - v_old)
     displacements[i] = displacements[i] + (x_new - x)
     velocities[i] = v_new
-    if mass.shape[0] > 0:
+    if dynamic:
         dp = mass[i] * (v_new - v_old)
-        arm = x_new - wp.transform_get_translation(motion.pose)
+        arm = x_new - centre
         dpd = to_vec3d(dp)
         armd = to_vec3d(arm)
         wp.atomic_sub(reaction, 0, dpd)
@@ -219,6 +240,7 @@ def collide_sphere(
     friction: float,
     mass: wp.array(dtype=float),
     reaction: wp.array(dtype=wp.vec3d),
+    phase: int,
 ):
     """Sphere of radius sphere_radius [m] centred at the pose's translation: sdf = |x - c| - R."""
     i = wp.tid()
@@ -235,7 +257,7 @@ def collide_sphere(
         n = wp.vec3(0.0, 0.0, 1.0)
         if dist > 0.0:
             n = d / dist
-        push_point(i, x, sdf, n, r, motion, friction, displacements, velocities, mass, reaction)
+        push_point(i, x, sdf, n, r, motion, friction, displacements, velocities, mass, reaction, phase)
 
 
 # Warp kernels cannot take a function argument (the signed distance of the shape): collide_box and collide_mesh
@@ -252,6 +274,7 @@ def collide_box(
     friction: float,
     mass: wp.array(dtype=float),
     reaction: wp.array(dtype=wp.vec3d),
+    phase: int,
 ):
     """Oriented box with half edge lengths half_extents [m] in the frame of pose (box_contact_point)."""
     i = wp.tid()
@@ -266,7 +289,7 @@ def collide_box(
     if touch == 0:
         return
     n = wp.transform_vector(pose, n_local)
-    push_point(i, x, sdf, n, r, motion, friction, displacements, velocities, mass, reaction)
+    push_point(i, x, sdf, n, r, motion, friction, displacements, velocities, mass, reaction, phase)
 
 
 # Like collide_box, this repeats collide_sphere's parameters and point prologue (a Warp kernel takes no function).
@@ -282,6 +305,7 @@ def collide_mesh(
     friction: float,
     mass: wp.array(dtype=float),
     reaction: wp.array(dtype=wp.vec3d),
+    phase: int,
 ):
     """Closed triangle mesh (vertices in the frame of pose). A particle is found when its centre lies within
     radius + band [m] of the surface; the sign (inside/outside) comes from the angle-weighted pseudo-normal, so a
@@ -298,7 +322,7 @@ def collide_mesh(
     if touch == 0:
         return
     n = wp.transform_vector(pose, n_local)
-    push_point(i, x, sdf, n, r, motion, friction, displacements, velocities, mass, reaction)
+    push_point(i, x, sdf, n, r, motion, friction, displacements, velocities, mass, reaction, phase)
 
 
 # -- launches (pdsim/colliders.py) ------------------------------------------------------------------------------------

@@ -14,9 +14,11 @@ Contact of a body with the ground, static meshes and other bodies goes through s
 frame points with a radius: a sphere is one sample at its centre with its radius; boxes and meshes are points on
 their surface with radius 0) tested against the other's shape query (plane, ``box_contact_point``,
 ``mesh_contact_point``, sphere). The response is the colliders' law applied to a body: the deepest penetration is
-removed by moving the body (bodies: shared by their inverse masses) and, at every sample in contact, sequential
-impulses remove the approaching normal velocity of the contact point (inelastic) and reduce its tangential velocity
-by Coulomb friction (at most ``friction`` times the normal impulse).
+removed by moving the body (bodies: shared by their inverse masses) and one impulse at the mean contact point of the
+penetrating samples (along their mean normal) removes the approaching normal velocity of that point (inelastic) and
+reduces its tangential velocity by Coulomb friction (at most ``friction`` times the normal impulse). One impulse
+at the mean point, not one per sample in turn, keeps a face lying on a face from twisting by the order of the
+samples.
 """
 
 import warp as wp
@@ -90,6 +92,13 @@ def motion_of(s: RigidState, shape: RigidShape):
     m.linear_velocity = to_vec3(s.velocity)
     m.angular_velocity = to_vec3(w)
     m.band = shape.band
+    m.inv_mass = wp.float32(shape.inv_mass)
+    inv_i = world_inverse_inertia(q, shape.inv_inertia)
+    m.inv_inertia = wp.mat33(
+        wp.float32(inv_i[0, 0]), wp.float32(inv_i[0, 1]), wp.float32(inv_i[0, 2]),
+        wp.float32(inv_i[1, 0]), wp.float32(inv_i[1, 1]), wp.float32(inv_i[1, 2]),
+        wp.float32(inv_i[2, 0]), wp.float32(inv_i[2, 1]), wp.float32(inv_i[2, 2]),
+    )
     return m
 
 
@@ -103,7 +112,8 @@ def rigid_drift(
     motion: wp.array(dtype=RigidMotion),
 ):
     """First half kick (gravity [m/s^2]) and drift over ``dt`` [s]: the position by the velocity, the orientation by
-    the angular velocity at the start of the drift; then the step's motion and a zeroed reaction."""
+    the angular velocity at the start of the drift; then the step's motion and a zeroed reaction (impulse, angular
+    impulse, effective mass met: kernels/colliders.py push_point)."""
     s = state[0]
     half = wp.float64(0.5) * dt
     s.velocity = s.velocity + half * gravity
@@ -114,6 +124,7 @@ def rigid_drift(
     motion[0] = motion_of(s, shape)
     reaction[0] = wp.vec3d(wp.float64(0.0))
     reaction[1] = wp.vec3d(wp.float64(0.0))
+    reaction[2] = wp.vec3d(wp.float64(0.0))
 
 
 @wp.kernel
@@ -170,6 +181,17 @@ def contact_impulse(
     return p
 
 
+@wp.func
+def body_impulse(s: RigidState, shape: RigidShape, p: wp.vec3d, arm: wp.vec3d):
+    """State s with the impulse p [N s] applied at ``arm`` [m] from its centre of mass."""
+    out = RigidState()
+    out.position = s.position
+    out.orientation = s.orientation
+    out.velocity = s.velocity + shape.inv_mass * p
+    out.angular_momentum = s.angular_momentum + wp.cross(arm, p)
+    return out
+
+
 @wp.kernel
 def rigid_plane_contact(
     state: wp.array(dtype=RigidState),
@@ -180,28 +202,28 @@ def rigid_plane_contact(
     offset: wp.float64,
     friction: wp.float64,
 ):
-    """A body against the static plane n . x = offset (local frame): the deepest sample is moved onto the plane, then
-    sequential impulses at every sample that penetrated (contact_impulse, the plane static)."""
+    """A body against the static plane n . x = offset (local frame): one impulse (contact_impulse, the plane static)
+    at the mean of the penetrating samples' contact points, then the deepest sample is moved onto the plane."""
     s = state[0]
     r = wp.quat_to_matrix(s.orientation)
     deepest = wp.float64(0.0)
-    for k in range(samples.shape[0]):
-        x = s.position + r * to_vec3d(samples[k])
-        deepest = wp.max(deepest, wp.float64(sample_radius[k]) + offset - wp.dot(normal, x))
-    if deepest <= wp.float64(0.0):
-        return
-    inv_i = world_inverse_inertia(s.orientation, shape.inv_inertia)
-    zero = wp.mat33d()
+    arm_sum = wp.vec3d(wp.float64(0.0))
+    count = wp.float64(0.0)
     for k in range(samples.shape[0]):
         rk = wp.float64(sample_radius[k])
-        arm = r * to_vec3d(samples[k]) - rk * normal
-        if rk + offset - wp.dot(normal, s.position + r * to_vec3d(samples[k])) > wp.float64(0.0):
-            w = inv_i * s.angular_momentum
-            p = contact_impulse(
-                s.velocity + wp.cross(w, arm), normal, arm, arm, shape.inv_mass, inv_i, zero, friction
-            )
-            s.velocity = s.velocity + shape.inv_mass * p
-            s.angular_momentum = s.angular_momentum + wp.cross(arm, p)
+        arm = r * to_vec3d(samples[k])
+        depth = rk + offset - wp.dot(normal, s.position + arm)
+        if depth > wp.float64(0.0):
+            deepest = wp.max(deepest, depth)
+            arm_sum = arm_sum + arm - rk * normal
+            count = count + wp.float64(1.0)
+    if count == wp.float64(0.0):
+        return
+    arm = arm_sum / count
+    inv_i = world_inverse_inertia(s.orientation, shape.inv_inertia)
+    w = inv_i * s.angular_momentum
+    p = contact_impulse(s.velocity + wp.cross(w, arm), normal, arm, arm, shape.inv_mass, inv_i, wp.mat33d(), friction)
+    s = body_impulse(s, shape, p, arm)
     s.position = s.position + deepest * normal
     state[0] = s
 
@@ -236,16 +258,18 @@ def rigid_mesh_contact(
     other_motion: wp.array(dtype=RigidMotion),
     friction: wp.float64,
 ):
-    """A body against a static shape (a mesh collider) at the pose other_motion[0]: the deepest penetrating sample is
-    moved out along its normal, then sequential impulses at every penetrating sample."""
+    """A body against a static shape (a mesh collider) at the pose other_motion[0]: one impulse at the mean contact
+    point of the penetrating samples along their mean normal, then the deepest sample is moved out along its
+    normal."""
     s = state[0]
     pose = other_motion[0].pose
     inv_pose = wp.transform_inverse(pose)
     r = wp.quat_to_matrix(s.orientation)
     deepest = wp.float64(0.0)
     push = wp.vec3d(wp.float64(0.0))
-    inv_i = world_inverse_inertia(s.orientation, shape.inv_inertia)
-    zero = wp.mat33d()
+    arm_sum = wp.vec3d(wp.float64(0.0))
+    n_sum = wp.vec3d(wp.float64(0.0))
+    count = wp.float64(0.0)
     for k in range(samples.shape[0]):
         rk = sample_radius[k]
         arm0 = r * to_vec3d(samples[k])
@@ -257,11 +281,17 @@ def rigid_mesh_contact(
             if depth > deepest:
                 deepest = depth
                 push = depth * n
-            arm = arm0 - wp.float64(rk) * n
-            w = inv_i * s.angular_momentum
-            p = contact_impulse(s.velocity + wp.cross(w, arm), n, arm, arm, shape.inv_mass, inv_i, zero, friction)
-            s.velocity = s.velocity + shape.inv_mass * p
-            s.angular_momentum = s.angular_momentum + wp.cross(arm, p)
+            arm_sum = arm_sum + arm0 - wp.float64(rk) * n
+            n_sum = n_sum + n
+            count = count + wp.float64(1.0)
+    if count == wp.float64(0.0) or wp.length(n_sum) == wp.float64(0.0):
+        return
+    inv_i = world_inverse_inertia(s.orientation, shape.inv_inertia)
+    n = wp.normalize(n_sum)
+    arm = arm_sum / count
+    w = inv_i * s.angular_momentum
+    p = contact_impulse(s.velocity + wp.cross(w, arm), n, arm, arm, shape.inv_mass, inv_i, wp.mat33d(), friction)
+    s = body_impulse(s, shape, p, arm)
     s.position = s.position + push
     state[0] = s
 
@@ -278,33 +308,30 @@ def rigid_pair_contact(
     radius_b: wp.array(dtype=float),
     friction: wp.float64,
 ):
-    """Two bodies: a's samples against b's shape, then b's against a's. Each penetrating sample gets an impulse
-    (contact_impulse, equal and opposite on the two bodies); the deepest penetration of each pass is removed by
-    moving the bodies apart in proportion to their inverse masses."""
+    """Two bodies: a's samples against b's shape, then b's against a's. Each pass gives one impulse, equal and
+    opposite on the two bodies (contact_impulse), at the mean contact point of the penetrating samples along their
+    mean normal, and removes the deepest penetration by moving the bodies apart in proportion to their inverse
+    masses."""
     for side in range(2):
         sa = state_a[0]
         sb = state_b[0]
         ha = shape_a
         hb = shape_b
+        count = samples_a.shape[0]
         if side == 1:
             sa = state_b[0]
             sb = state_a[0]
             ha = shape_b
             hb = shape_a
+            count = samples_b.shape[0]
         ra = wp.quat_to_matrix(sa.orientation)
         qb = sb.orientation
-        pose_b = wp.transform(
-            to_vec3(sb.position), wp.quat(wp.float32(qb[0]), wp.float32(qb[1]), wp.float32(qb[2]), wp.float32(qb[3]))
-        )
-        inv_b = wp.transform_inverse(pose_b)
-        inv_ia = world_inverse_inertia(sa.orientation, ha.inv_inertia)
-        inv_ib = world_inverse_inertia(sb.orientation, hb.inv_inertia)
-        inv_mass = ha.inv_mass + hb.inv_mass
+        rot_b = wp.quat(wp.float32(qb[0]), wp.float32(qb[1]), wp.float32(qb[2]), wp.float32(qb[3]))
         deepest = wp.float64(0.0)
         push = wp.vec3d(wp.float64(0.0))
-        count = samples_a.shape[0]
-        if side == 1:
-            count = samples_b.shape[0]
+        arm_sum = wp.vec3d(wp.float64(0.0))
+        n_sum = wp.vec3d(wp.float64(0.0))
+        hits = wp.float64(0.0)
         for k in range(count):
             pk = wp.vec3(0.0)
             rk = float(0.0)
@@ -315,27 +342,31 @@ def rigid_pair_contact(
                 pk = samples_b[k]
                 rk = radius_b[k]
             arm0 = ra * to_vec3d(pk)
-            # relative to b's centre in float64 first: the float32 pose then only carries the bodies' extent
+            # relative to b's centre in float64 first: float32 then only carries the bodies' extent
             x = to_vec3(sa.position - sb.position + arm0)
-            p_local = wp.quat_rotate_inv(wp.transform_get_rotation(pose_b), x)
-            touch, sdf, n_local = shape_contact_point(hb, p_local, rk)
+            touch, sdf, n_local = shape_contact_point(hb, wp.quat_rotate_inv(rot_b, x), rk)
             if touch == 1:
-                n = to_vec3d(wp.transform_vector(pose_b, n_local))
+                n = to_vec3d(wp.quat_rotate(rot_b, n_local))
                 depth = wp.float64(rk - sdf)
                 if depth > deepest:
                     deepest = depth
                     push = depth * n
-                arm_a = arm0 - wp.float64(rk) * n
-                arm_b = sa.position + arm_a - sb.position
-                v_rel = (sa.velocity + wp.cross(inv_ia * sa.angular_momentum, arm_a)) - (
-                    sb.velocity + wp.cross(inv_ib * sb.angular_momentum, arm_b)
-                )
-                p = contact_impulse(v_rel, n, arm_a, arm_b, inv_mass, inv_ia, inv_ib, friction)
-                sa.velocity = sa.velocity + ha.inv_mass * p
-                sa.angular_momentum = sa.angular_momentum + wp.cross(arm_a, p)
-                sb.velocity = sb.velocity - hb.inv_mass * p
-                sb.angular_momentum = sb.angular_momentum - wp.cross(arm_b, p)
-        if deepest > wp.float64(0.0):
+                arm_sum = arm_sum + arm0 - wp.float64(rk) * n
+                n_sum = n_sum + n
+                hits = hits + wp.float64(1.0)
+        if hits > wp.float64(0.0) and wp.length(n_sum) > wp.float64(0.0):
+            n = wp.normalize(n_sum)
+            arm_a = arm_sum / hits
+            arm_b = sa.position + arm_a - sb.position
+            inv_ia = world_inverse_inertia(sa.orientation, ha.inv_inertia)
+            inv_ib = world_inverse_inertia(sb.orientation, hb.inv_inertia)
+            inv_mass = ha.inv_mass + hb.inv_mass
+            v_rel = (sa.velocity + wp.cross(inv_ia * sa.angular_momentum, arm_a)) - (
+                sb.velocity + wp.cross(inv_ib * sb.angular_momentum, arm_b)
+            )
+            p = contact_impulse(v_rel, n, arm_a, arm_b, inv_mass, inv_ia, inv_ib, friction)
+            sa = body_impulse(sa, ha, p, arm_a)
+            sb = body_impulse(sb, hb, -p, arm_b)
             sa.position = sa.position + (ha.inv_mass / inv_mass) * push
             sb.position = sb.position - (hb.inv_mass / inv_mass) * push
         if side == 0:

@@ -27,13 +27,13 @@ _EMPTY: dict = {}  # device name -> (empty point masses, empty reaction): a kine
 
 
 def kinematic(device) -> dict:
-    """The collision kernels' ``mass`` and ``reaction`` arguments of a kinematic collider (empty arrays: the kernels
-    accumulate no reaction)."""
+    """The collision kernels' ``mass``, ``reaction`` and ``phase`` arguments of a kinematic collider (empty arrays,
+    the response phase: the kernels take no reaction)."""
     key = str(device)
     if key not in _EMPTY:
         _EMPTY[key] = (wp.zeros(0, dtype=float, device=device), wp.zeros(0, dtype=wp.vec3d, device=device))
     mass, reaction = _EMPTY[key]
-    return {"mass": mass, "reaction": reaction}
+    return {"mass": mass, "reaction": reaction, "phase": 1}
 
 
 class Collider:

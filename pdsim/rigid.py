@@ -179,7 +179,7 @@ class RigidBody(Collider):
         state.velocity = wp.vec3d(*self.velocity)
         state.angular_momentum = wp.vec3d(*(self._world_inertia(self.orientation) @ self.angular_velocity))
         self.state = wp.array([state], dtype=kr.RigidState, device=d)
-        self.reaction = wp.zeros(2, dtype=wp.vec3d, device=d)
+        self.reaction = wp.zeros(3, dtype=wp.vec3d, device=d)  # impulse, angular impulse, effective mass met
         self.motion = wp.zeros(1, dtype=kc.RigidMotion, device=d)
         self.samples_array = wp.array(self.samples.astype(np.float32), dtype=wp.vec3, device=d)
         self.radius_array = wp.array(self.sample_radius.astype(np.float32), dtype=float, device=d)
@@ -229,12 +229,13 @@ class RigidBody(Collider):
             "reaction": self.reaction,
             "device": self.device,
         }
-        if self.kind == kr.SHAPE_SPHERE:
-            kc.push_out_of_sphere(**arguments, sphere_radius=float(self.size[0]))
-        elif self.kind == kr.SHAPE_BOX:
-            kc.push_out_of_box(**arguments, half_extents=self.size)
-        else:
-            kc.push_out_of_mesh(**arguments, mesh=self.mesh_data.mesh.id)
+        for phase in (0, 1):  # the mass the body meets, then the response (kernels/colliders.py push_point)
+            if self.kind == kr.SHAPE_SPHERE:
+                kc.push_out_of_sphere(**arguments, phase=phase, sphere_radius=float(self.size[0]))
+            elif self.kind == kr.SHAPE_BOX:
+                kc.push_out_of_box(**arguments, phase=phase, half_extents=self.size)
+            else:
+                kc.push_out_of_mesh(**arguments, phase=phase, mesh=self.mesh_data.mesh.id)
 
     # -- the host's view --------------------------------------------------------------------------------------------
     def state_values(self) -> dict:
