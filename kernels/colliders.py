@@ -87,7 +87,8 @@ class RigidMotion:
 
     pose: body frame to world; linear_velocity [m/s] of the frame origin; angular_velocity [rad/s] (world axes);
     band: detection depth below a mesh surface [m] (meshes only); inv_mass [1/kg] and inv_inertia [1/(kg m^2)] (world
-    axes, about the frame origin): a dynamic rigid body's (pdsim/rigid.py), zero for a kinematic collider."""
+    axes, about the frame origin) and step [s], the length of the step: a dynamic rigid body's (pdsim/rigid.py), zero
+    for a kinematic collider."""
 
     pose: wp.transform
     linear_velocity: wp.vec3
@@ -95,6 +96,7 @@ class RigidMotion:
     band: float
     inv_mass: float
     inv_inertia: wp.mat33
+    step: float
 
 
 @wp.kernel
@@ -160,6 +162,9 @@ def push_point(
     if dynamic:
         share = wp.float32(wp.float64(1.0) / (wp.float64(1.0) + reaction[2][0]))
         v_new = v_old + share * (v_new - v_old)
+        # the position follows the velocity change over the step (as if the impulse came before the drift), at most
+        # out of the body: a full projection would compress the point's neighbours without the body doing the work
+        x_new = x + wp.min(wp.max(wp.dot(v_new - v_old, n) * motion.step, 0.0), r - sdf) * n
     displacements[i] = displacements[i] + (x_new - x)
     velocities[i] = v_new
     if dynamic:

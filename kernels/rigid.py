@@ -121,7 +121,9 @@ def rigid_drift(
     s.orientation = wp.normalize(rotation_quat(w * dt) * s.orientation)
     s.position = s.position + dt * s.velocity
     state[0] = s
-    motion[0] = motion_of(s, shape)
+    m = motion_of(s, shape)
+    m.step = wp.float32(dt)
+    motion[0] = m
     reaction[0] = wp.vec3d(wp.float64(0.0))
     reaction[1] = wp.vec3d(wp.float64(0.0))
     reaction[2] = wp.vec3d(wp.float64(0.0))
