@@ -95,9 +95,15 @@ def motion_of(s: RigidState, shape: RigidShape):
     m.inv_mass = wp.float32(shape.inv_mass)
     inv_i = world_inverse_inertia(q, shape.inv_inertia)
     m.inv_inertia = wp.mat33(
-        wp.float32(inv_i[0, 0]), wp.float32(inv_i[0, 1]), wp.float32(inv_i[0, 2]),
-        wp.float32(inv_i[1, 0]), wp.float32(inv_i[1, 1]), wp.float32(inv_i[1, 2]),
-        wp.float32(inv_i[2, 0]), wp.float32(inv_i[2, 1]), wp.float32(inv_i[2, 2]),
+        wp.float32(inv_i[0, 0]),
+        wp.float32(inv_i[0, 1]),
+        wp.float32(inv_i[0, 2]),
+        wp.float32(inv_i[1, 0]),
+        wp.float32(inv_i[1, 1]),
+        wp.float32(inv_i[1, 2]),
+        wp.float32(inv_i[2, 0]),
+        wp.float32(inv_i[2, 1]),
+        wp.float32(inv_i[2, 2]),
     )
     return m
 
@@ -169,7 +175,9 @@ def contact_impulse(
     vn = wp.dot(v_rel, n)
     if vn >= wp.float64(0.0):
         return wp.vec3d(wp.float64(0.0))
-    kn = inv_mass + wp.dot(n, wp.cross(inv_ia * wp.cross(arm_a, n), arm_a) + wp.cross(inv_ib * wp.cross(arm_b, n), arm_b))
+    kn = inv_mass + wp.dot(
+        n, wp.cross(inv_ia * wp.cross(arm_a, n), arm_a) + wp.cross(inv_ib * wp.cross(arm_b, n), arm_b)
+    )
     jn = -vn / kn
     p = jn * n
     vt = v_rel - vn * n

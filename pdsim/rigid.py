@@ -25,7 +25,16 @@ import trimesh
 import warp as wp
 
 from .checks import check_range
-from .colliders import Collider, MeshCollider, RigidProjectile, _check_name, _mesh_arrays, _quat, _rotate
+from .colliders import (
+    Collider,
+    MeshCollider,
+    RigidProjectile,
+    _check_name,
+    _mesh_arrays,
+    _MeshData,
+    _quat,
+    _rotate,
+)
 from .colliders import _vec3 as _vector
 from .errors import FeatureNotAvailableError, ParameterError
 from .kernels import colliders as kc
@@ -184,7 +193,7 @@ class RigidBody(Collider):
         self.samples_array = wp.array(self.samples.astype(np.float32), dtype=wp.vec3, device=d)
         self.radius_array = wp.array(self.sample_radius.astype(np.float32), dtype=float, device=d)
         if self.kind == kr.SHAPE_MESH:
-            self.mesh_data = _MeshBuffers(self.body_vertices, self.body_faces, d)
+            self.mesh_data = _MeshData(np.asarray(self.body_vertices), np.asarray(self.body_faces), d)
         shape = kr.RigidShape()
         shape.kind = int(self.kind)
         shape.size = wp.vec3(*self.size)
@@ -214,7 +223,9 @@ class RigidBody(Collider):
         """The body's collision kernel on a solver's points (kernels/colliders.py), with the opposite impulses
         accumulated into ``reaction``: the solver must pass its point masses [kg]."""
         if self.system is None:
-            raise ParameterError("rigid body", self.name, "a body added with Scene.add_rigid_body (set up by the scene)")
+            raise ParameterError(
+                "rigid body", self.name, "a body added with Scene.add_rigid_body (set up by the scene)"
+            )
         if mass is None:
             raise ParameterError("mass", None, "the solver's point masses [kg] (a rigid body takes the reaction)")
         arguments = {
@@ -259,9 +270,10 @@ class RigidBody(Collider):
     def angular_momentum(self, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
         """(x - origin) x M v + L [kg m^2/s]."""
         s = self.state_values()
-        return np.cross(s["position"] - np.asarray(origin, dtype=np.float64), self.mass * s["velocity"]) + s[
-            "angular_momentum"
-        ]
+        return (
+            np.cross(s["position"] - np.asarray(origin, dtype=np.float64), self.mass * s["velocity"])
+            + s["angular_momentum"]
+        )
 
     def kinetic_energy(self) -> float:
         """1/2 M v^2 + 1/2 omega . L [J]."""
@@ -304,15 +316,6 @@ class RigidBody(Collider):
     def restore(self, state: dict) -> None:
         self.state.assign(np.asarray(state["rigid_state"]))
         self.write_motion()
-
-
-class _MeshBuffers:
-    """A wp.Mesh of a body-frame surface with its arrays kept alive."""
-
-    def __init__(self, vertices, faces, device):
-        self.points = wp.array(np.asarray(vertices, dtype=np.float32), dtype=wp.vec3, device=device)
-        self.indices = wp.array(np.asarray(faces, dtype=np.int32).ravel(), dtype=wp.int32, device=device)
-        self.mesh = wp.Mesh(points=self.points, indices=self.indices)
 
 
 class RigidBodies:
@@ -377,7 +380,9 @@ class RigidBodies:
         """Second half kick with the points' reaction, then contact with the ground, static meshes and each other."""
         d = self.device
         for b in self.bodies:
-            kr.kick(state=b.state, shape=b.shape, gravity=self._gravity, dt=wp.float64(dt), reaction=b.reaction, device=d)
+            kr.kick(
+                state=b.state, shape=b.shape, gravity=self._gravity, dt=wp.float64(dt), reaction=b.reaction, device=d
+            )
         for b in self.bodies:
             if self.ground is not None:
                 n = np.asarray(self.ground.normal, dtype=np.float64)

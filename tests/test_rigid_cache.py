@@ -25,16 +25,21 @@ def _scene():
     material = pdsim.Material(density=2400.0, youngs_modulus=3.0e7, poisson_ratio=0.2, name="elastic")
     scene.add_peridynamic_body(pdsim.box((0.1, 0.1, 0.1)), material, 0.025, name="block")
     scene.add_rigid_body(
-        SphereShape(0.02), density=7850.0, position=(-0.12, 0.0, 0.0), velocity=(V0, 0.0, 0.0),
-        angular_velocity=(0.0, 0.0, 3.0), name="ball",
+        SphereShape(0.02),
+        density=7850.0,
+        position=(-0.12, 0.0, 0.0),
+        velocity=(V0, 0.0, 0.0),
+        angular_velocity=(0.0, 0.0, 3.0),
+        name="ball",
     )
     return scene
 
 
 def test_a_rigid_body_is_written_as_a_transform_with_its_velocities(tmp_path):
     """/World/colliders/ball: the rest mesh once, xformOp:translate and orient every frame (the ball moves by its
-    velocity, 2 cm per frame before it touches the block, and a new pose every frame), pdsim:velocity [m/s per played second: x frame_time x fps]
-    and pdsim:angularVelocity [degrees per played second] every frame, the last one slowed by the block."""
+    velocity, 2 cm per frame before it touches the block, and a new pose every frame), pdsim:velocity [m/s per
+    played second: x frame_time x fps] and pdsim:angularVelocity [degrees per played second] every frame, the last
+    one slowed by the block."""
     from pxr import Usd, UsdGeom
 
     out = tmp_path / "rigid.usdc"
@@ -79,8 +84,11 @@ def test_a_run_with_a_rigid_body_resumes_bit_for_bit(tmp_path):
         _scene().run(part, progress=False, checkpoint_interval_s=0.0, stop=stop, on_frame=on_frame, layout="clips")
     _scene().run(part, progress=False, resume=True, checkpoint_interval_s=0.0, layout="clips")
     a, b = Usd.Stage.Open(str(whole)), Usd.Stage.Open(str(part))
-    for path, attr in (("/World/colliders/ball", "xformOp:translate"), ("/World/colliders/ball", "xformOp:orient"),
-                       ("/World/block", "points")):
+    for path, attr in (
+        ("/World/colliders/ball", "xformOp:translate"),
+        ("/World/colliders/ball", "xformOp:orient"),
+        ("/World/block", "points"),
+    ):
         va = np.asarray(a.GetPrimAtPath(path).GetAttribute(attr).Get(FRAMES))
         vb = np.asarray(b.GetPrimAtPath(path).GetAttribute(attr).Get(FRAMES))
         assert np.array_equal(va, vb), (path, attr)
@@ -107,7 +115,9 @@ IMPORT = textwrap.dedent(
 )
 
 
-@pytest.mark.skipif(BLENDER is None, reason="bpy is not installed (or PDSIM_BLENDER_PYTHON names no interpreter with it)")
+@pytest.mark.skipif(
+    BLENDER is None, reason="bpy is not installed (or PDSIM_BLENDER_PYTHON names no interpreter with it)"
+)
 def test_blender_imports_the_rigid_ball_moving_over_every_frame(tmp_path):
     """bpy's USD import: frames 0..4, the ball object at the cache's translation on every frame (1e-5 m)."""
     from pxr import Usd

@@ -524,7 +524,8 @@ def _(ws):
 
 
 @case("rigid_body_inside", A_SCENE, "a rigid body (Scene.add_rigid_body) that starts inside a body",
-      "a rigid body outside the body", pdsim.GeometryError, "rigid body 'ball'", "starts inside body 'plate'")  # fmt: skip
+      "a rigid body outside the body", pdsim.GeometryError, "rigid body 'ball'",
+      "starts inside body 'plate'")  # fmt: skip
 def _(ws):
     scene = _scene()
     scene.add_peridynamic_body(pdsim.box((0.2, 0.2, 0.05)), _material(), spacing=0.01, name="plate")
