@@ -93,8 +93,8 @@ class RigidBody(Collider):
         orientation: rotation at time 0, unit quaternion (x, y, z, w), of the analytic shape's axes or of the mesh as
             given.
         velocity: of the centre of mass [m/s]; angular_velocity [rad/s] (world axes), at time 0.
-        friction: Coulomb coefficient of its contacts (points, ground, meshes, bodies; the larger of the two sides'
-            between bodies), >= 0.
+        friction: Coulomb coefficient of its contacts, >= 0 (with points: this one; with the ground, a static mesh or
+            another body: the larger of the two sides' coefficients).
         band: detection depth below a mesh's surface [m] (> 0; meshes only), default a tenth of its bounding radius.
         name: prim name in the cache (``/World/colliders/<name>``); None: ``RigidBody_<index>`` in the scene.
 

@@ -276,6 +276,22 @@ def test_a_rigid_box_and_a_rigid_mesh_hitting_a_free_block_conserve_momentum(sha
     assert body.state_values()["velocity"][0] < 7.5
 
 
+def test_a_mesh_body_rests_on_the_ground_and_a_ball_rests_on_it():
+    """A closed mesh body (a 10 cm box given as triangles: its vertices are its samples) dropped onto the ground, and
+    a ball dropped onto it (the ball's centre sample against the mesh's query): after 0.8 s the mesh's centre is at
+    half its height and the ball's one radius above its top, within 1 mm, both at rest (< 0.05 m/s)."""
+    g = 9.81
+    ground = pdsim.GroundPlane(normal=(0.0, 0.0, 1.0), offset=0.0)
+    crate = RigidBody(pdsim.box((0.1, 0.1, 0.1), center=(0.0, 0.0, 0.08)), density=500.0)
+    ball = RigidBody(SphereShape(0.02), density=STEEL, position=(0.01, 0.0, 0.2))
+    system = _alone([crate, ball], gravity=(0.0, 0.0, -g), ground=ground)
+    system.simulate(1.0e-3, 800)
+    assert crate.state_values()["position"][2] == pytest.approx(0.05, abs=1e-3)
+    assert ball.state_values()["position"][2] == pytest.approx(0.12, abs=1e-3)
+    for body in (crate, ball):
+        assert np.linalg.norm(body.state_values()["velocity"]) < 0.05
+
+
 def test_a_ball_rests_on_a_static_mesh_collider():
     """A steel ball dropped 5 cm onto a static box mesh (MeshCollider) comes to rest on its top face: centre one
     radius above it within 1 mm, speed below 0.05 m/s after 0.5 s."""
