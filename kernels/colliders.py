@@ -4,7 +4,8 @@ Points are at rest + displacement in the solver's local frame (kernels/integrati
 frame too. Colliders push a penetrating free point (a sphere of its collision radius) back to the surface along the
 outward normal, remove its approaching normal velocity relative to the collider's surface velocity and reduce the
 relative tangential velocity by Coulomb friction (the convention of ``collide_ground_plane``). A kinematic collider is
-not pushed back; the push moves the point's displacement.
+not pushed back; the push moves the point's displacement. A dynamic rigid body (pdsim/rigid.py) uses the same
+kernels with the points' masses and takes the opposite impulses (``push_point``).
 """
 
 import warp as wp
@@ -144,10 +145,11 @@ def push_point(
     c the pose's translation, the body's centre of mass): the mass the body meets this step. Phase 1 scales the
     point's velocity change by 1 / (1 + sum m k), the perfectly inelastic impulse between the body and the points it
     touches together (without it, a light body meeting more mass than its own in one step would rebound with energy
-    it never had), and the body takes the opposite impulse: reaction[0] -= m dv [N s] and reaction[1] -=
-    (x_new - c) x m dv + (x_new - x) x m v_old [N m s] (the second term: the moment of the point's momentum moved by
-    the projection, so that the pair conserves angular momentum as it conserves momentum). A kinematic collider
-    (empty ``mass``) runs phase 1 alone, unscaled."""
+    it never had); the point moves along n by its normal velocity change times the step (motion.step [s]), at most
+    out of the body, instead of a full projection; and the body takes the opposite impulse: reaction[0] -= m dv [N s]
+    and reaction[1] -= (x_new - c) x m dv + (x_new - x) x m v_old [N m s] (the second term: the moment of the point's
+    momentum moved with it, so that the pair conserves angular momentum as it conserves momentum). A kinematic
+    collider (empty ``mass``) runs phase 1 alone, as before: unscaled, with the full projection."""
     dynamic = mass.shape[0] > 0
     centre = wp.transform_get_translation(motion.pose)
     if phase == 0:
