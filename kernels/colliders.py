@@ -149,7 +149,7 @@ def push_point(
     out of the body, instead of a full projection; and the body takes the opposite impulse: reaction[0] -= m dv [N s]
     and reaction[1] -= (x_new - c) x m dv + (x_new - x) x m v_old [N m s] (the second term: the moment of the point's
     momentum moved with it, so that the pair conserves angular momentum as it conserves momentum). A kinematic
-    collider (empty ``mass``) runs phase 1 alone, as before: unscaled, with the full projection."""
+    collider (empty ``mass``) runs phase 1 alone: unscaled, with the full projection."""
     dynamic = mass.shape[0] > 0
     centre = wp.transform_get_translation(motion.pose)
     if phase == 0:
