@@ -163,8 +163,8 @@ def test_a_rigid_ball_hitting_a_free_block_conserves_momentum_anywhere(method):
     of their initial values (measured: 1e-7 and 1e-4); the ball's loss of momentum equals the block's gain within
     0.5 % of the initial momentum, and the ball loses at least a third of its speed (with a kinematic ball,
     pdsim.SphereProjectile, the block gains momentum from nowhere: the same check fails by 100 %). The kinetic energy
-    falls (inelastic contact; measured 0.78 of the initial, where a full projection of the points out of the ball gave
-    1.12). Run with the scene at the origin and 1 km from it: the ball's final velocity agrees within 1e-4 m/s."""
+    falls (inelastic contact; 0.78 of the initial in docs/rigid_impacts.md; a full projection of the points out of
+    the ball, the kinematic colliders' law, gains energy here and fails it). Run with the scene at the origin and 1 km from it: the ball's final velocity agrees within 1e-4 m/s."""
     finals = []
     for shift in ((0.0, 0.0, 0.0), (1000.0, 0.0, 0.0)):
         scene, ball, solvers, point = _impact(method, shift)
@@ -191,7 +191,7 @@ def test_a_ball_cannot_throw_a_heavy_breakable_body_faster_than_momentum_and_ene
     centre of mass cannot take more than a perfectly elastic collision gives, 2 m_b v0 / (m_b + M) = 0.59 m/s
     (horizontally), and no fragment of mass m can carry more kinetic energy than the ball brought plus the work
     gravity can do on it over the block's height H: v <= sqrt((m_b v0^2 + 2 m g H) / m). A kinematic ball
-    (pdsim.SphereProjectile, the former behaviour) fails the first bound."""
+    (pdsim.SphereProjectile, infinite mass) fails the first bound."""
     m_ball, v0, g = 0.2, 15.0, 9.81
     radius = (m_ball / (STEEL * 4.0 / 3.0 * math.pi)) ** (1.0 / 3.0)
     material = pdsim.presets.concrete()
