@@ -13,6 +13,10 @@ import warp as wp
 from .integration import PARTICLE_FREE
 from .launch import launch
 
+# share of a point's remaining penetration of a dynamic rigid body removed per step beyond what its velocity change
+# moves it (push_point): without it a body resting on points sinks at a steady rate
+PUSH_OUT_RATE = wp.constant(0.1)
+
 
 @wp.kernel
 def collide_ground_plane(
@@ -145,11 +149,13 @@ def push_point(
     c the pose's translation, the body's centre of mass): the mass the body meets this step. Phase 1 scales the
     point's velocity change by 1 / (1 + sum m k), the perfectly inelastic impulse between the body and the points it
     touches together (without it, a light body meeting more mass than its own in one step would rebound with energy
-    it never had); the point moves along n by its normal velocity change times the step (motion.step [s]), at most
-    out of the body, instead of a full projection; and the body takes the opposite impulse: reaction[0] -= m dv [N s]
-    and reaction[1] -= (x_new - c) x m dv + (x_new - x) x m v_old [N m s] (the second term: the moment of the point's
-    momentum moved with it, so that the pair conserves angular momentum as it conserves momentum). A kinematic
-    collider (empty ``mass``) runs phase 1 alone: unscaled, with the full projection."""
+    it never had); the point moves along n by its normal velocity change times the step (motion.step [s]), or by
+    PUSH_OUT_RATE of its penetration if that is more, at most out of the body, instead of a full projection (which
+    would compress its neighbours without the body paying for it: the pair would gain energy); and the body takes
+    the opposite impulse: reaction[0] -= m dv [N s] and reaction[1] -= (x_new - c) x m dv + (x_new - x) x m v_old
+    [N m s] (the second term: the moment of the point's momentum moved with it, so that the pair conserves angular
+    momentum as it conserves momentum). A kinematic collider (empty ``mass``) runs phase 1 alone: unscaled, with the
+    full projection."""
     dynamic = mass.shape[0] > 0
     centre = wp.transform_get_translation(motion.pose)
     if phase == 0:
@@ -165,8 +171,8 @@ def push_point(
         share = wp.float32(wp.float64(1.0) / (wp.float64(1.0) + reaction[2][0]))
         v_new = v_old + share * (v_new - v_old)
         # the position follows the velocity change over the step (as if the impulse came before the drift), at most
-        # out of the body: a full projection would compress the point's neighbours without the body doing the work
-        x_new = x + wp.min(wp.max(wp.dot(v_new - v_old, n) * motion.step, 0.0), r - sdf) * n
+        # out of the body
+        x_new = x + wp.min(wp.max(wp.dot(v_new - v_old, n) * motion.step, PUSH_OUT_RATE * (r - sdf)), r - sdf) * n
     displacements[i] = displacements[i] + (x_new - x)
     velocities[i] = v_new
     if dynamic:
