@@ -250,6 +250,20 @@ def test_rigid_bodies_refuse_what_they_cannot_honour():
         lattice.build_solvers(device="cpu")
 
 
+def test_a_rigid_impact_is_bit_identical_on_one_and_three_threads(monkeypatch):
+    """The sphere's impact on the peridynamic block with the bond passes on 1 and 3 CPU threads (PDSIM_THREADS): the
+    block's velocities and the ball's state are equal bit for bit (the collision kernels' atomics run in one launch)."""
+    results = []
+    for threads in ("1", "3"):
+        monkeypatch.setenv("PDSIM_THREADS", threads)
+        scene, ball, solvers, _ = _impact("pd", (0.0, 0.0, 0.0))
+        assert solvers[0].threads == int(threads)
+        dt = 0.7 * solvers[0].stable_time_step()
+        advance_frame(solvers, dt, 60, method_contact(scene, solvers))
+        results.append((solvers[0].velocities().tobytes(), ball.state.numpy().tobytes()))
+    assert results[0] == results[1]
+
+
 @pytest.mark.parametrize("shape", ["box", "mesh"])
 def test_a_rigid_box_and_a_rigid_mesh_hitting_a_free_block_conserve_momentum(shape):
     """The box (analytic) and a closed mesh (an icosphere through the mesh query) into the free peridynamic block of
