@@ -4,13 +4,18 @@ Points are at rest + displacement in the solver's local frame (kernels/integrati
 frame too. Colliders push a penetrating free point (a sphere of its collision radius) back to the surface along the
 outward normal, remove its approaching normal velocity relative to the collider's surface velocity and reduce the
 relative tangential velocity by Coulomb friction (the convention of ``collide_ground_plane``). A kinematic collider is
-not pushed back; the push moves the point's displacement.
+not pushed back; the push moves the point's displacement. A dynamic rigid body (pdsim/rigid.py) uses the same
+kernels with the points' masses and takes the opposite impulses (``push_point``).
 """
 
 import warp as wp
 
 from .integration import PARTICLE_FREE
 from .launch import launch
+
+# share of a point's remaining penetration of a dynamic rigid body removed per step beyond what its velocity change
+# moves it (push_point): without it a body resting on points sinks at a steady rate
+PUSH_OUT_RATE = wp.constant(0.1)
 
 
 @wp.kernel
@@ -86,12 +91,17 @@ class RigidMotion:
     replays with the new poses).
 
     pose: body frame to world; linear_velocity [m/s] of the frame origin; angular_velocity [rad/s] (world axes);
-    band: detection depth below a mesh surface [m] (meshes only)."""
+    band: detection depth below a mesh surface [m] (meshes only); inv_mass [1/kg] and inv_inertia [1/(kg m^2)] (world
+    axes, about the frame origin) and step [s], the length of the step: a dynamic rigid body's (pdsim/rigid.py), zero
+    for a kinematic collider."""
 
     pose: wp.transform
     linear_velocity: wp.vec3
     angular_velocity: wp.vec3
     band: float
+    inv_mass: float
+    inv_inertia: wp.mat33
+    step: float
 
 
 @wp.kernel
@@ -111,6 +121,12 @@ def rigid_point_velocity(x: wp.vec3, motion: RigidMotion):
 
 
 @wp.func
+def to_vec3d(v: wp.vec3):
+    """v in float64."""
+    return wp.vec3d(wp.float64(v[0]), wp.float64(v[1]), wp.float64(v[2]))
+
+
+@wp.func
 def push_point(
     i: int,
     x: wp.vec3,
@@ -121,13 +137,53 @@ def push_point(
     friction: float,
     displacements: wp.array(dtype=wp.vec3),
     velocities: wp.array(dtype=wp.vec3),
+    mass: wp.array(dtype=float),
+    reaction: wp.array(dtype=wp.vec3d),
+    phase: int,
 ):
     """The response of point i at x [m] (rest + displacement), signed distance sdf [m] and outward normal n from the
-    surface of a rigid collider moving with ``motion`` (collider_response), written to its displacement and velocity."""
+    surface of a rigid collider moving with ``motion`` (collider_response), written to its displacement and velocity.
+
+    A dynamic collider (non-empty ``mass``: point masses [kg]) is met in two launches. Phase 0 only adds
+    m k to reaction[2][0], k = 1/M + (a x n) . I^-1 (a x n) the body's inverse effective mass at the point (a = x - c,
+    c the pose's translation, the body's centre of mass): the mass the body meets this step. Phase 1 scales the
+    point's velocity change by 1 / (1 + sum m k), the perfectly inelastic impulse between the body and the points it
+    touches together (without it, a light body meeting more mass than its own in one step would rebound with energy
+    it never had); the point moves along n by its normal velocity change times the step (motion.step [s]), or by
+    PUSH_OUT_RATE of its penetration if that is more, at most out of the body, instead of a full projection (which
+    would compress its neighbours without the body paying for it: the pair would gain energy); and the body takes
+    the opposite impulse: reaction[0] -= m dv [N s] and reaction[1] -= (x_new - c) x m dv + (x_new - x) x m v_old
+    [N m s] (the second term: the moment of the point's momentum moved with it, so that the pair conserves angular
+    momentum as it conserves momentum). A kinematic collider (empty ``mass``) runs phase 1 alone: unscaled, with the
+    full projection."""
+    dynamic = mass.shape[0] > 0
+    centre = wp.transform_get_translation(motion.pose)
+    if phase == 0:
+        if dynamic:
+            an = wp.cross(x - centre, n)
+            k = motion.inv_mass + wp.dot(an, motion.inv_inertia * an)
+            wp.atomic_add(reaction, 2, wp.vec3d(wp.float64(mass[i] * k), wp.float64(0.0), wp.float64(0.0)))
+        return
+    v_old = velocities[i]
     vs = rigid_point_velocity(x, motion)
-    x_new, v_new = collider_response(x, velocities[i], sdf, n, r, vs, friction)
+    x_new, v_new = collider_response(x, v_old, sdf, n, r, vs, friction)
+    if dynamic:
+        share = wp.float32(wp.float64(1.0) / (wp.float64(1.0) + reaction[2][0]))
+        v_new = v_old + share * (v_new - v_old)
+        # the position follows the velocity change over the step (as if the impulse came before the drift), at most
+        # out of the body
+        x_new = x + wp.min(wp.max(wp.dot(v_new - v_old, n) * motion.step, PUSH_OUT_RATE * (r - sdf)), r - sdf) * n
     displacements[i] = displacements[i] + (x_new - x)
     velocities[i] = v_new
+    if dynamic:
+        dp = mass[i] * (v_new - v_old)
+        arm = x_new - centre
+        dpd = to_vec3d(dp)
+        armd = to_vec3d(arm)
+        wp.atomic_sub(reaction, 0, dpd)
+        moved = (x_new - x) * mass[i]
+        moment = wp.cross(armd, dpd) + to_vec3d(wp.cross(moved, v_old))
+        wp.atomic_sub(reaction, 1, moment)
 
 
 @wp.func
@@ -152,6 +208,39 @@ def mesh_contact_point(mesh: wp.uint64, p: wp.vec3, r: float, max_dist: float):
     return 1, sdf, n, hit.face, hit.u, hit.v
 
 
+@wp.func
+def box_contact_point(p: wp.vec3, half_extents: wp.vec3, r: float):
+    """Contact of a sphere of radius r [m] centred at p (box frame) with the box of half edge lengths half_extents [m]
+    centred at the frame's origin: (touch, sdf, n). touch is 1 when the exact signed distance sdf [m] < r, else 0 and
+    the rest is not to be used; n is the outward unit normal (inside: the face of least penetration)."""
+    q = wp.vec3(wp.abs(p[0]) - half_extents[0], wp.abs(p[1]) - half_extents[1], wp.abs(p[2]) - half_extents[2])
+    qmax = wp.max(q[0], wp.max(q[1], q[2]))
+    if qmax >= r:
+        return 0, qmax, wp.vec3(0.0)
+    sdf = float(0.0)
+    n_local = wp.vec3(0.0)
+    if qmax > 0.0:
+        c = wp.vec3(
+            wp.clamp(p[0], -half_extents[0], half_extents[0]),
+            wp.clamp(p[1], -half_extents[1], half_extents[1]),
+            wp.clamp(p[2], -half_extents[2], half_extents[2]),
+        )
+        d = p - c
+        sdf = wp.length(d)
+        if sdf >= r:
+            return 0, sdf, wp.vec3(0.0)
+        n_local = d / sdf
+    else:
+        sdf = qmax
+        if q[0] == qmax:
+            n_local = wp.vec3(wp.sign(p[0]), 0.0, 0.0)
+        elif q[1] == qmax:
+            n_local = wp.vec3(0.0, wp.sign(p[1]), 0.0)
+        else:
+            n_local = wp.vec3(0.0, 0.0, wp.sign(p[2]))
+    return 1, sdf, n_local
+
+
 @wp.kernel
 def collide_sphere(
     rest: wp.array(dtype=wp.vec3),
@@ -162,6 +251,9 @@ def collide_sphere(
     body: wp.array(dtype=RigidMotion),
     sphere_radius: float,
     friction: float,
+    mass: wp.array(dtype=float),
+    reaction: wp.array(dtype=wp.vec3d),
+    phase: int,
 ):
     """Sphere of radius sphere_radius [m] centred at the pose's translation: sdf = |x - c| - R."""
     i = wp.tid()
@@ -178,7 +270,7 @@ def collide_sphere(
         n = wp.vec3(0.0, 0.0, 1.0)
         if dist > 0.0:
             n = d / dist
-        push_point(i, x, sdf, n, r, motion, friction, displacements, velocities)
+        push_point(i, x, sdf, n, r, motion, friction, displacements, velocities, mass, reaction, phase)
 
 
 # Warp kernels cannot take a function argument (the signed distance of the shape): collide_box and collide_mesh
@@ -193,9 +285,11 @@ def collide_box(
     body: wp.array(dtype=RigidMotion),
     half_extents: wp.vec3,
     friction: float,
+    mass: wp.array(dtype=float),
+    reaction: wp.array(dtype=wp.vec3d),
+    phase: int,
 ):
-    """Oriented box with half edge lengths half_extents [m] in the frame of pose (exact signed distance; inside, the
-    normal is the face of least penetration)."""
+    """Oriented box with half edge lengths half_extents [m] in the frame of pose (box_contact_point)."""
     i = wp.tid()
     if kind[i] != PARTICLE_FREE:
         return
@@ -204,33 +298,11 @@ def collide_box(
     x = rest[i] + displacements[i]
     r = radius[i]
     p = wp.transform_point(wp.transform_inverse(pose), x)
-    q = wp.vec3(wp.abs(p[0]) - half_extents[0], wp.abs(p[1]) - half_extents[1], wp.abs(p[2]) - half_extents[2])
-    qmax = wp.max(q[0], wp.max(q[1], q[2]))
-    if qmax >= r:
+    touch, sdf, n_local = box_contact_point(p, half_extents, r)
+    if touch == 0:
         return
-    sdf = float(0.0)
-    n_local = wp.vec3(0.0)
-    if qmax > 0.0:
-        c = wp.vec3(
-            wp.clamp(p[0], -half_extents[0], half_extents[0]),
-            wp.clamp(p[1], -half_extents[1], half_extents[1]),
-            wp.clamp(p[2], -half_extents[2], half_extents[2]),
-        )
-        d = p - c
-        sdf = wp.length(d)
-        if sdf >= r:
-            return
-        n_local = d / sdf
-    else:
-        sdf = qmax
-        if q[0] == qmax:
-            n_local = wp.vec3(wp.sign(p[0]), 0.0, 0.0)
-        elif q[1] == qmax:
-            n_local = wp.vec3(0.0, wp.sign(p[1]), 0.0)
-        else:
-            n_local = wp.vec3(0.0, 0.0, wp.sign(p[2]))
     n = wp.transform_vector(pose, n_local)
-    push_point(i, x, sdf, n, r, motion, friction, displacements, velocities)
+    push_point(i, x, sdf, n, r, motion, friction, displacements, velocities, mass, reaction, phase)
 
 
 # Like collide_box, this repeats collide_sphere's parameters and point prologue (a Warp kernel takes no function).
@@ -244,6 +316,9 @@ def collide_mesh(
     mesh: wp.uint64,
     body: wp.array(dtype=RigidMotion),
     friction: float,
+    mass: wp.array(dtype=float),
+    reaction: wp.array(dtype=wp.vec3d),
+    phase: int,
 ):
     """Closed triangle mesh (vertices in the frame of pose). A particle is found when its centre lies within
     radius + band [m] of the surface; the sign (inside/outside) comes from the angle-weighted pseudo-normal, so a
@@ -260,7 +335,7 @@ def collide_mesh(
     if touch == 0:
         return
     n = wp.transform_vector(pose, n_local)
-    push_point(i, x, sdf, n, r, motion, friction, displacements, velocities)
+    push_point(i, x, sdf, n, r, motion, friction, displacements, velocities, mass, reaction, phase)
 
 
 # -- launches (pdsim/colliders.py) ------------------------------------------------------------------------------------

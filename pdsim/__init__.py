@@ -40,6 +40,7 @@ from .loads import TimeCurve
 from .materials import Anisotropy, Material
 from .peridynamics import PeridynamicBody, SolverPeridynamics
 from .regions import BoxRegion, HalfSpace, SphereRegion
+from .rigid import BoxShape, RigidBody, SphereShape
 from .scene import RunReport, Scene
 from .solver import Solver, SolverContext
 
@@ -48,6 +49,7 @@ __all__ = [
     "BoundaryCondition",
     "BoxProjectile",
     "BoxRegion",
+    "BoxShape",
     "FeatureNotAvailableError",
     "FemBody",
     "FemPlasticity",
@@ -72,6 +74,7 @@ __all__ = [
     "PdsimError",
     "PeridynamicBody",
     "PointKind",
+    "RigidBody",
     "RunReport",
     "Scene",
     "SolidShape",
@@ -82,6 +85,7 @@ __all__ = [
     "SolverPeridynamics",
     "SphereProjectile",
     "SphereRegion",
+    "SphereShape",
     "TetMesh",
     "TimeCurve",
     "__version__",

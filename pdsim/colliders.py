@@ -23,6 +23,19 @@ def _points(rest, displacements, velocities, radius, kind) -> dict:
     return {"rest": rest, "displacements": displacements, "velocities": velocities, "kind": kind, "radius": radius}
 
 
+_EMPTY: dict = {}  # device name -> (empty point masses, empty reaction): a kinematic collider takes no reaction
+
+
+def kinematic(device) -> dict:
+    """The collision kernels' ``mass``, ``reaction`` and ``phase`` arguments of a kinematic collider (empty arrays,
+    the response phase: the kernels take no reaction)."""
+    key = str(device)
+    if key not in _EMPTY:
+        _EMPTY[key] = (wp.zeros(0, dtype=float, device=device), wp.zeros(0, dtype=wp.vec3d, device=device))
+    mass, reaction = _EMPTY[key]
+    return {"mass": mass, "reaction": reaction, "phase": 1}
+
+
 class Collider:
     """A collider pushes penetrating free points out of its volume (see kernels/colliders.py).
 
@@ -319,6 +332,7 @@ class MeshCollider(Collider):
             body=motion.array,
             friction=self.friction,
             device=self.device,
+            **kinematic(self.device),
         )
 
 
@@ -459,6 +473,7 @@ class RigidProjectile(Collider):
         self._push(
             _points(rest, displacements, velocities, radius, kind)
             | {"body": self._motion.array, "friction": self.friction, "device": self.device}
+            | kinematic(self.device)
         )
 
     def _band(self, radius) -> float:

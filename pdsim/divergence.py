@@ -46,7 +46,9 @@ def attach_watchdogs(scene, solvers, *, dt, stable_dt, bounds) -> list:
     """A pdsim.watchdog.Watchdog on every solver with mass (None for the others), with the scene's energy
     tolerance, projectile speeds and cause finder."""
     speeds = scene_speeds(scene, bounds)
-    projectiles = [c for c in scene.colliders if hasattr(c, "pose") and callable(getattr(c, "pose", None))]
+    projectiles = [
+        c for c in scene.colliders if callable(getattr(c, "pose", None)) or callable(getattr(c, "speed_bound", None))
+    ]
     surface = surface_speed(projectiles) if projectiles else None
     automatic = scene.time_step_safety * stable_dt
     context = {
@@ -213,6 +215,9 @@ def surface_speed(projectiles):
             return 0.0
         best = 0.0
         for c in projectiles:
+            if callable(getattr(c, "speed_bound", None)):  # a dynamic rigid body (pdsim/rigid.py)
+                best = max(best, float(c.speed_bound(t)))
+                continue
             p0, q0 = c.pose(t - dt)
             p1, q1 = c.pose(t)
             w = rotation_between(q0, q1) / dt

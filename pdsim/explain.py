@@ -25,6 +25,7 @@ import warp as wp
 from .bodies import PointBody
 from .divergence import attach_watchdogs, schedule_watchdogs
 from .errors import ParameterError
+from .rigid import rigid_bodies_of
 from .run import method_contact, rest_bounds, speed_limit
 from .scene_script import load_scene_script
 from .solver import PointSolver
@@ -230,10 +231,14 @@ def _one_step(rec, labels, solvers, coupling, step_dt) -> None:
         if not isinstance(s, PointSolver):
             rec.owner = lab
             s.step()  # a lattice step (a frame is steps_per_frame of them)
-    if len(coupled) == 1 and coupling is None:
+    rigid = rigid_bodies_of([s for _, s in coupled])
+    if len(coupled) == 1 and coupling is None and rigid is None:
         rec.owner = coupled[0][0]
         coupled[0][1].step(step_dt)
     elif coupled:  # the phases of Scene.advance_frame, one step
+        if rigid is not None:
+            rec.owner = "rigid_bodies"
+            rigid.begin_step(step_dt)
         for lab, s in coupled:
             rec.owner = lab
             s.begin_step(step_dt)
@@ -246,6 +251,9 @@ def _one_step(rec, labels, solvers, coupling, step_dt) -> None:
         for lab, s in coupled:
             rec.owner = lab
             s.end_step(step_dt)
+        if rigid is not None:
+            rec.owner = "rigid_bodies"
+            rigid.end_step(step_dt)
 
 
 def scene_plan(
@@ -261,7 +269,7 @@ def scene_plan(
     (per solver: ``method``, ``class``, ``summary``, ``features``, ``bodies``, ``step_kernels`` (list of (name, dim)
     in launch order), ``step_operations`` (every recorded entry: kernels and hash-grid builds, copies, refits),
     ``check_kernels`` (the watchdog check every ``check_interval`` steps), ``per_frame_kernels`` (the frame-end
-    check), ``state``), and ``method_contact_kernels``.
+    check), ``state``), ``method_contact_kernels`` and ``rigid_body_kernels``.
 
     The solvers are built and watched as Scene.run builds and watches them; one step is taken untimed (work the
     watchdog defers to the next step shows from the second step on), then one step is recorded."""
@@ -351,6 +359,7 @@ def scene_plan(
         "build_seconds": build_seconds,
         "solvers": out_solvers,
         "method_contact_kernels": rec.kernels("method_contact"),
+        "rigid_body_kernels": rec.kernels("rigid_bodies"),
     }
 
 
@@ -474,6 +483,10 @@ def format_plan(plan: dict) -> str:
         lines.append("")
         lines.append("contact between methods, each step:")
         lines += [f"  {_short_kernel(k)} dim {_dim_text(d)}" for k, d in plan["method_contact_kernels"]]
+    if plan["rigid_body_kernels"]:
+        lines.append("")
+        lines.append("dynamic rigid bodies, each step (their contact with the points is in the solvers' steps):")
+        lines += [f"  {_short_kernel(k)} dim {_dim_text(d)}" for k, d in plan["rigid_body_kernels"]]
     return "\n".join(lines)
 
 

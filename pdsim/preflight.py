@@ -41,6 +41,8 @@ import warp as wp
 from . import memory
 from .checks import check_frames, check_range, check_time_step, format_bytes, unit_hint
 from .colliders import BoxProjectile, MeshCollider, MeshProjectile, SphereProjectile, _rotate, collider_names
+from .kernels.rigid import SHAPE_BOX, SHAPE_SPHERE
+from .rigid import RigidBody
 from .device import default_device
 from .errors import GeometryError, ParameterError
 from .fem.mesh import quality_problem
@@ -474,7 +476,7 @@ def _check_overlaps(scene, device: str) -> None:
         for a, (pts, vols, _) in solids:
             inside = test(pts)
             if inside.any():
-                kind = "projectile" if hasattr(c, "pose") else "collider"
+                kind = "projectile" if hasattr(c, "pose") else "rigid body" if isinstance(c, RigidBody) else "collider"
                 raise GeometryError(
                     f"{kind} '{label}' starts inside body '{a.name}': {int(inside.sum())} {_points_word(a)} of "
                     f"'{a.name}' ({float(vols[inside].sum()):.3g} m^3) lie inside it at t = 0; start it outside the "
@@ -500,6 +502,16 @@ def _collider_inside(c, device: str):
         return lambda x: _inside_shape(shape, x, device)
     if isinstance(c, MeshCollider):
         shape = SolidShape(vertices=c.vertices, faces=np.asarray(c.faces, dtype=np.int32), name="mesh")
+        return lambda x: _inside_shape(shape, x, device)
+    if isinstance(c, RigidBody):  # its shape at its initial pose
+        p, q = c.position, c.orientation
+        q_inv = np.asarray(q, dtype=np.float64) * np.array([-1.0, -1.0, -1.0, 1.0])
+        if c.kind == SHAPE_SPHERE:
+            return lambda x: np.einsum("ij,ij->i", x - p, x - p) < float(c.size[0]) ** 2
+        if c.kind == SHAPE_BOX:
+            return lambda x: np.all(np.abs(_rotate(q_inv, x - p)) < c.size, axis=1)
+        v = _rotate(np.asarray(q), c.body_vertices) + p
+        shape = SolidShape(vertices=v, faces=np.asarray(c.body_faces, dtype=np.int32), name="mesh")
         return lambda x: _inside_shape(shape, x, device)
     return None
 

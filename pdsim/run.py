@@ -41,6 +41,7 @@ from .output.usd import UsdCache
 from .output.usd_files import pdsim_info
 from .output.writer import ViewWriter
 from .preflight import preflight
+from .rigid import rigid_bodies_of
 from .solver import PointSolver
 from .timestep import frame_steps, projectile_step_limit
 
@@ -494,12 +495,15 @@ def advance_frame(solvers, dt: float, substeps: int, coupling=None, graphs=None)
         return
     for s in coupled:
         s.begin_frame(dt, substeps)
+    rigid = rigid_bodies_of(coupled)  # dynamic rigid bodies (pdsim/rigid.py): they step around the solvers' steps
 
     def run_steps():
-        if len(coupled) == 1 and coupling is None:
+        if len(coupled) == 1 and coupling is None and rigid is None:
             coupled[0].simulate(dt, substeps)
             return
         for _ in range(substeps):
+            if rigid is not None:
+                rigid.begin_step(dt)
             for s in coupled:
                 s.begin_step(dt)
             for s in coupled:
@@ -508,6 +512,8 @@ def advance_frame(solvers, dt: float, substeps: int, coupling=None, graphs=None)
                 coupling.apply(dt)
             for s in coupled:
                 s.end_step(dt)
+            if rigid is not None:
+                rigid.end_step(dt)
 
     if graphs is None:
         run_steps()
@@ -584,6 +590,9 @@ def _collider_states(colliders) -> dict:
     step is taken from it)."""
     out = {}
     for i, c in enumerate(colliders):
+        if getattr(c, "system", None) is not None:  # a dynamic rigid body (pdsim/rigid.py): its device state
+            out[str(i)] = c.checkpoint()
+            continue
         last = getattr(c, "_last", None)
         if last is not None:
             out[str(i)] = {"time": float(last[0]), "position": np.asarray(last[1]), "rotation": np.asarray(last[2])}
@@ -593,7 +602,9 @@ def _collider_states(colliders) -> dict:
 def _restore_colliders(colliders, states: dict) -> None:
     for i, c in enumerate(colliders):
         st = states.get(str(i))
-        if st is not None and hasattr(c, "_last"):
+        if st is not None and "rigid_state" in st:
+            c.restore(st)
+        elif st is not None and hasattr(c, "_last"):
             c._last = (float(st["time"]), np.asarray(st["position"]), np.asarray(st["rotation"]))
 
 

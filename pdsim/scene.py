@@ -20,6 +20,7 @@ from .kinematics import scene_origin
 from .materials import Material
 from .peridynamics import PeridynamicBody
 from .preflight import check_particle_request, check_prim_names, preflight
+from .rigid import RigidBody, build_rigid_bodies
 from .run import RunReport, run_scene
 from .solver import SolverContext, solver_for
 
@@ -157,6 +158,41 @@ class Scene:
         self.colliders.append(collider)
         return collider
 
+    def add_rigid_body(
+        self,
+        shape,
+        *,
+        density=None,
+        mass=None,
+        position=None,
+        orientation=(0.0, 0.0, 0.0, 1.0),
+        velocity=(0.0, 0.0, 0.0),
+        angular_velocity=(0.0, 0.0, 0.0),
+        friction: float = 0.5,
+        band: float | None = None,
+        name: str | None = None,
+    ) -> RigidBody:
+        """A dynamic rigid body (pdsim.rigid.RigidBody): ``shape`` a pdsim.rigid.SphereShape(radius),
+        BoxShape(size) or a closed mesh (SolidShape, ``load_mesh``); ``density`` [kg/m^3] or ``mass`` [kg]; its
+        centre of mass ``position`` [m], ``orientation`` (x, y, z, w), ``velocity`` [m/s] and ``angular_velocity``
+        [rad/s] at time 0; Coulomb ``friction``. It falls under the scene's gravity and is in two-way contact with
+        peridynamic and FEM bodies, the ground, static mesh colliders and the other rigid bodies; written to the cache
+        as ``/World/colliders/<name>`` (a transform over its rest mesh, with its velocity and angular velocity)."""
+        body = RigidBody(
+            shape,
+            density=density,
+            mass=mass,
+            position=position,
+            orientation=orientation,
+            velocity=velocity,
+            angular_velocity=angular_velocity,
+            friction=friction,
+            band=band,
+            name=name,
+        )
+        body.gravity = np.asarray(self.gravity, dtype=np.float64)
+        return self.add_collider(body)
+
     def _contact_setting(self, bodies):
         """Automatic contact for the bodies of one method with mass: on with several bodies or a breakable one."""
         if self.contact is not None:
@@ -206,6 +242,7 @@ class Scene:
         for b in self.bodies:
             groups.setdefault(solver_for(b), []).append(b)
         ctx = self.context(device=device)
+        self.rigid_bodies = build_rigid_bodies(self, ctx.origin, ctx.device)  # before the solvers bind them
         contexts = {}
         for cls, bodies in groups.items():
             # automatic contact is decided per method (None: automatic, resolved on that method's bodies)

@@ -119,7 +119,10 @@ def finest_spacing(bodies) -> float:
 def projectile_speed(projectile, duration: float) -> float:
     """The largest speed [m/s] of a projectile's surface over [0, ``duration``] s: its origin's speed plus its spin
     times its bounding radius. Ballistic motion: at the ends of the interval (the speed of a constant acceleration is
-    largest there); a path: finite differences over max(256, 1 per 0.1 ms) samples."""
+    largest there); a path: finite differences over max(256, 1 per 0.1 ms) samples. A dynamic rigid body
+    (pdsim/rigid.py): its ``speed_bound``."""
+    if callable(getattr(projectile, "speed_bound", None)):
+        return float(projectile.speed_bound(duration))
     radius = float(projectile._bounding_radius())
     if projectile.path is None:
         ends = [projectile.velocity, projectile.velocity + projectile.gravity * duration]
@@ -139,7 +142,9 @@ def projectile_speed(projectile, duration: float) -> float:
 def projectile_step_limit(scene, frames: int) -> float:
     """The largest step [s] at which no projectile's surface travels more than PROJECTILE_TRAVEL spacings of the
     scene's finest body in one step over the ``frames`` frames; inf without projectiles or moving ones."""
-    projectiles = [c for c in scene.colliders if isinstance(c, RigidProjectile)]
+    projectiles = [
+        c for c in scene.colliders if isinstance(c, RigidProjectile) or callable(getattr(c, "speed_bound", None))
+    ]
     h = finest_spacing(scene.bodies)
     if not projectiles or not math.isfinite(h):
         return math.inf

@@ -523,6 +523,34 @@ def _(ws):
     scene.build_solvers(device="cpu")
 
 
+@case("rigid_body_inside", A_SCENE, "a rigid body (Scene.add_rigid_body) that starts inside a body",
+      "a rigid body outside the body", pdsim.GeometryError, "rigid body 'ball'",
+      "starts inside body 'plate'")  # fmt: skip
+def _(ws):
+    scene = _scene()
+    scene.add_peridynamic_body(pdsim.box((0.2, 0.2, 0.05)), _material(), spacing=0.01, name="plate")
+    scene.add_rigid_body(pdsim.SphereShape(0.03), density=7850.0, position=(0.0, 0.0, 0.02), name="ball")
+    scene.build_solvers(device="cpu")
+
+
+@case("rigid_body_mass_and_density", A_SCENE, "Scene.add_rigid_body(..., density=..., mass=...) (both given)",
+      "exactly one of density [kg/m^3] and mass [kg]", pdsim.ParameterError, "density=7850",
+      "exactly one of density")  # fmt: skip
+def _(ws):
+    _scene().add_rigid_body(pdsim.SphereShape(0.03), density=7850.0, mass=1.0)
+
+
+@case("rigid_body_with_projectile", A_SCENE, "a rigid body and a kinematic projectile in one scene (they do not "
+      "collide with each other)", "rigid bodies only (Scene.add_rigid_body), or no rigid body",
+      pdsim.FeatureNotAvailableError, "kinematic projectiles", "Scene.add_rigid_body")  # fmt: skip
+def _(ws):
+    scene = _scene()
+    scene.add_peridynamic_body(pdsim.box((0.2, 0.2, 0.05)), _material(), spacing=0.05, name="plate")
+    scene.add_rigid_body(pdsim.SphereShape(0.03), density=7850.0, position=(0.0, 0.0, 0.2), name="ball")
+    scene.add_collider(pdsim.SphereProjectile(0.03, center=(0.0, 0.0, -0.2), name="bullet"))
+    scene.build_solvers(device="cpu")
+
+
 @case("ground_above", A_SCENE, "a ground plane above the bodies (was reported as 'time step too large')",
       "a ground plane at or below the bodies", pdsim.GeometryError, "starts below the ground plane",
       "height 0.5 m")  # fmt: skip

@@ -389,6 +389,8 @@ class SolverLattice(Solver):
             asked["ground_plane"] = "the scene's ground plane (Scene.add_ground_plane)"
         if context.colliders:
             asked["colliders"] = "the scene's colliders (Scene.add_collider)"
+            if any(getattr(c, "mass", None) is not None for c in context.colliders):  # a two-way contact has no force
+                asked["colliders"] = "the scene's rigid bodies (Scene.add_rigid_body: no force to exchange)"
         if context.contact:
             asked["contact"] = "the scene's particle contact (Scene.enable_contact)"
         explicit = not getattr(context, "gravity_is_default", True)

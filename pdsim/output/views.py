@@ -101,7 +101,9 @@ class RigidView:
     orientation: rotation of the body frame, unit quaternion (x, y, z, w), float64 [4]; a world point is
     ``translation + rotate(orientation, point)``. static: True when the pose never changes (written once).
     group: the prim under ``/World`` that holds the body (``"colliders"``), or None for ``/World`` itself (the
-    ground). The geometry (points, faces) must be the same on every frame."""
+    ground). The geometry (points, faces) must be the same on every frame. velocity [m/s] of the body frame's origin
+    and angular_velocity [rad/s] (world axes), float64 [3] each: a dynamic rigid body's (written as
+    ``pdsim:velocity`` and ``pdsim:angularVelocity``), None for the others."""
 
     name: str
     points: np.ndarray
@@ -110,6 +112,8 @@ class RigidView:
     orientation: np.ndarray
     static: bool = False
     group: str | None = "colliders"
+    velocity: np.ndarray | None = None
+    angular_velocity: np.ndarray | None = None
 
 
 __all__ = ["ATTRIBUTES", "EventsView", "MeshView", "PointsView", "RigidView", "attribute_kind"]

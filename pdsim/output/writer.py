@@ -742,6 +742,10 @@ class ViewWriter:
                 self.cache.write_transform(handle, None, view.translation, view.orientation)
         if not view.static:
             self.cache.write_transform(handle, frame, view.translation, view.orientation)
+        if view.velocity is not None:  # per played second, as the points' velocities; degrees as USD's rotations
+            self.cache.write_vector(handle, frame, "velocity", np.asarray(view.velocity) * self.velocity_scale)
+            omega = np.degrees(np.asarray(view.angular_velocity, dtype=np.float64)) * self.velocity_scale
+            self.cache.write_vector(handle, frame, "angularVelocity", omega)
 
 
 __all__ = ["SHARP_ANGLE_DEG", "ViewWriter", "category_colors", "color_ramp", "corner_normals", "smoothing_groups"]
