@@ -52,22 +52,26 @@ def test_phases_add_up_and_are_written(tmp_path, capsys):
 
 
 def test_time_lands_in_its_phase(tmp_path, monkeypatch):
-    """DELAY added to every render-surface view, then to every watchdog check, raises that phase by at least DELAY
-    per call and leaves the simulate phase as it was (within DELAY per frame: the runs' own spread)."""
+    """DELAY added to every render-surface view, then to every watchdog check: that phase holds at least DELAY per
+    call, and the other phases stay as they were (within half the added time: the runs' own spread)."""
     base = _run(tmp_path, "base").profile["seconds"]
 
     view = FragmentSurfaces.view
+    views = []
 
     def slow_view(self, *args, **kwargs):
+        views.append(1)
         time.sleep(DELAY)
         return view(self, *args, **kwargs)
 
     monkeypatch.setattr(FragmentSurfaces, "view", slow_view)
     slow = _run(tmp_path, "surfaces").profile["seconds"]
     monkeypatch.setattr(FragmentSurfaces, "view", view)
-    assert slow["surfaces"] - base["surfaces"] >= (FRAMES + 1) * DELAY  # frame 0 and each frame
-    assert abs(slow["simulate"] - base["simulate"]) < FRAMES * DELAY
-    assert abs(slow["write"] - base["write"]) < FRAMES * DELAY
+    added = len(views) * DELAY
+    assert len(views) == FRAMES + 1  # frame 0 and each frame
+    assert slow["surfaces"] >= added
+    for k in ("simulate", "write", "checks"):
+        assert abs(slow[k] - base[k]) < 0.5 * added, k
 
     check = Watchdog._check
     calls = []
@@ -79,9 +83,11 @@ def test_time_lands_in_its_phase(tmp_path, monkeypatch):
 
     monkeypatch.setattr(Watchdog, "_check", slow_check)
     slow = _run(tmp_path, "checks").profile["seconds"]
+    added = len(calls) * DELAY
     assert len(calls) >= FRAMES
-    assert slow["checks"] - base["checks"] >= len(calls) * DELAY
-    assert abs(slow["simulate"] - base["simulate"]) < FRAMES * DELAY
+    assert slow["checks"] >= added
+    for k in ("simulate", "write", "surfaces"):
+        assert abs(slow[k] - base[k]) < 0.5 * added, k
 
 
 def test_timing_a_phase_costs_microseconds():
