@@ -14,6 +14,7 @@ c_p at horizon factors 1.5 / 3.015 / 6 (about 0.3 m h / c_p); fill_solid 60 to 6
 
     python tools/preflight_calibration.py --cost [--write]   # the cost estimates' constants (pdsim/cost.py)
     python tools/preflight_calibration.py --compare [SCENE ...]   # the estimates against gallery runs
+    python tools/preflight_calibration.py --table   # the calibration as a markdown table
 
 ``--cost`` runs small blocks of each method (peridynamics elastic, with fracture, with plasticity; explicit FEM
 elastic and with fracture; a lattice) for a few frames each with the run's profile (pdsim/profile.py), three times
@@ -370,6 +371,37 @@ def compare(names) -> None:
     print(f"load average at the end: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
+def calibration_table(d: dict) -> str:
+    """The calibration ``d`` (pdsim/cost_calibration.json) as a markdown table (docs/benchmarks.md)."""
+    s, f, c, b = d["step_seconds"], d["frame_seconds"], d["cache_bytes"], d["build_seconds"]
+    p, cp = f["point"], c["point"]
+    rows = [
+        ("step, per step (peridynamics / FEM / lattice)",
+         f"{s['pd_step'] * 1e6:.0f} / {s['fem_step'] * 1e6:.0f} / {s['lattice_step'] * 1e6:.0f} us"),
+        ("step, per estimated bond visit: elastic / fracture / plasticity",
+         f"{s['pd_bond_elastic'] * 1e9:.1f} / {s['pd_bond_fracture'] * 1e9:.1f} / {s['pd_bond_plastic'] * 1e9:.1f} ns"),
+        ("step, per particle (peridynamics)", f"{s['pd_particle'] * 1e9:.1f} ns"),
+        ("step, per element: elastic / fracture (explicit FEM)",
+         f"{s['fem_element_elastic'] * 1e9:.0f} / {s['fem_element_fracture'] * 1e9:.0f} ns"),
+        ("step, per FEM vertex", f"{s['fem_vertex'] * 1e9:.1f} ns"),
+        ("lattice step, per point / per link", f"{s['lattice_point'] * 1e9:.1f} / {s['lattice_link'] * 1e9:.1f} ns"),
+        ("frame outside the steps: constant", f"{f['constant'] * 1e3:.1f} ms"),
+        ("frame outside the steps, per point: peridynamics / FEM / lattice",
+         f"{p['peridynamics'] * 1e6:.2f} / {p['fem'] * 1e6:.2f} / {p['lattice'] * 1e6:.2f} us"),
+        ("frame outside the steps, per surface vertex", f"{f['surface_vertex'] * 1e6:.1f} us"),
+        ("build: constant / per estimated bond / per element",
+         f"{b['constant'] * 1e3:.0f} ms / {b['bond'] * 1e9:.0f} ns / {b['element'] * 1e6:.1f} us"),
+        ("cache per frame, per point: peridynamics / FEM / lattice",
+         f"{cp['peridynamics']:.1f} / {cp['fem']:.1f} / {cp['lattice']:.1f} B"),
+        ("cache per frame, per surface vertex", f"{c['surface_vertex']:.0f} B"),
+        ("host memory per surface vertex (building the surfaces)", f"{d['memory_bytes']['surface_vertex']:.0f} B"),
+    ]  # fmt: skip
+    load = ", ".join(str(x) for x in d["load_average"])
+    head = [f"Calibration of {d['date']} ({d['machine']}; load average {load} at its end), `{d['command']}`:", "",
+            "| constant | value |", "|---|---|"]  # fmt: skip
+    return "\n".join(head + [f"| {a} | {v} |" for a, v in rows])
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cost", action="store_true", help="measure the cost estimates' constants (pdsim/cost.py)")
@@ -377,7 +409,11 @@ def main(argv=None) -> None:
     parser.add_argument("--compare", nargs="*", metavar="SCENE",
                         help=f"estimates against runs of gallery scenes at their preview settings (default: "
                         f"{' '.join(COMPARE_SCENES)})")  # fmt: skip
+    parser.add_argument("--table", action="store_true", help="print pdsim/cost_calibration.json as a markdown table")
     args = parser.parse_args(argv)
+    if args.table:
+        print(calibration_table(pdsim.cost.CALIBRATION))
+        return
     if args.compare is not None:
         compare(args.compare or COMPARE_SCENES)
         return
