@@ -62,10 +62,10 @@ class Allocated(Exception):
 
 
 def test_a_million_particles_are_estimated_before_allocation(tmp_path, capsys, monkeypatch):
-    """A 1 m cube of a soft breakable material at 1 cm spacing (10^6 particles, about 1.8e8 bonds), 48 frames, on a machine with
-    64 GB free: the run prints its estimate (points, time, memory over 10 GB, cache) and warns that it may take more
+    """A 1 m cube of a soft breakable material at 1 cm spacing (10^6 particles, about 1.8e8 bonds), 48 frames, on a
+    machine with 64 GB free: the run prints its estimate (points, time, memory, cache) and warns that it may take more
     than an hour, naming the spacing, the frames and a GPU, all before the solvers are built; the process's peak
-    memory grows by less than 1 GB (the particles' host arrays), a tenth of the estimate."""
+    memory grows by less than 1 GB (the particles' host arrays) against an estimate of over 10 GB."""
     monkeypatch.setattr(memory, "free_host_memory", lambda: 64.0e9)
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024.0
     scene = pdsim.Scene(frames=48, name="million")
@@ -87,6 +87,7 @@ def test_a_million_particles_are_estimated_before_allocation(tmp_path, capsys, m
     assert "spacing" in message and "frames" in message and "GPU" in message
     rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024.0
     assert rss1 - rss0 < 1.0e9
+    assert "peak memory 13" in printed  # 1e6 x 400 B + 1.8e8 bonds x 70 B + the surfaces' 74k vertices
 
 
 def test_cuda_estimates_say_they_are_the_cpus():
@@ -107,3 +108,22 @@ def test_cuda_estimates_say_they_are_the_cpus():
     assert cuda["calibrated"] is False and cuda["seconds_per_frame"] == report.estimate["seconds_per_frame"]
     report.estimate = cuda
     assert "none for cuda:0 yet" in format_estimate(report, 4)
+
+
+def test_refusals_count_the_render_surfaces(tmp_path, monkeypatch):
+    """The memory and disk checks use the estimate with the render surfaces: free memory between the solver's need
+    and the solver's plus the surfaces' is refused, and so is free disk below twice the estimated cache."""
+    scene = pdsim.Scene(frames=8)
+    material = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)
+    scene.add_peridynamic_body(pdsim.box((0.2, 0.2, 0.2)), material, spacing=0.02, horizon_factor=1.5)
+    out = tmp_path / "c.usdc"
+    report = pdsim.preflight.preflight(scene, device="cpu", out=out)
+    surfaces = report.estimate["surface_bytes"]
+    assert 0.0 < surfaces < report.host_bytes
+    monkeypatch.setattr(memory, "free_host_memory", lambda: report.host_bytes - 0.5 * surfaces)
+    with pytest.raises(pdsim.ParameterError, match="free host memory"):
+        pdsim.preflight.preflight(scene, device="cpu", out=out)
+    monkeypatch.setattr(memory, "free_host_memory", lambda: 2.0 * report.host_bytes)
+    monkeypatch.setattr(memory, "free_disk_space", lambda folder: 1.9 * report.estimate["cache_bytes"])
+    with pytest.raises(pdsim.ParameterError, match="render surfaces need about"):
+        pdsim.preflight.preflight(scene, device="cpu", out=out)
