@@ -129,3 +129,16 @@ def test_cli_profile(tmp_path, capsys):
     assert "pdsim: estimate:" in printed and "pdsim: profile:" in printed
     saved = json.loads((tmp_path / "c.report.json").read_text())
     assert saved["profile"]["seconds"]["build"] >= 0.3
+
+
+def test_worker_time_is_kept_apart():
+    """Time a worker thread reports (add_worker) is listed on its own and leaves the phases and their shares alone."""
+    prof = RunProfile()
+    with prof.phase("surfaces"):  # the main thread waiting for the worker
+        time.sleep(0.01)
+    prof.add_worker("surfaces", 5.0)
+    prof.finish(1)
+    d = prof.as_dict()
+    assert d["worker_seconds"] == {"surfaces": 5.0}
+    assert 0.01 <= d["seconds"]["surfaces"] < 1.0 and sum(d["share"].values()) == pytest.approx(1.0)
+    assert "on a worker thread" in prof.table()
