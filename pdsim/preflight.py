@@ -364,7 +364,7 @@ def _memory_estimate(scene, device: str, report: PreflightReport, surface_bytes:
         report.free_device_bytes = memory.free_device_memory(device)
     else:
         per_body = [p + s for p, s in zip(per_body, surface_bytes)]
-        total = report.host_bytes = float(sum(per_body))
+        report.host_bytes = float(sum(per_body))
     report.free_host_bytes = memory.free_host_memory()
     return per_body
 
@@ -553,12 +553,13 @@ def _warn_time(scene, report: PreflightReport, frames: int) -> None:
         return
     big = max(scene.bodies, key=lambda b: _body_counts(b)[0])
     field_name, value = _knob(big)
+    power = 3 if _method(big) == "lattice" else 4  # points, and steps per frame but for the lattice's fixed count
     gpu = "" if str(e["device"]).startswith("cuda") else ", or a GPU (--device cuda)"
     basis = "" if e["calibrated"] else " from the CPU's calibration (none for CUDA yet)"
     msg = (
         f"this run may take about {format_seconds(total)}{basis}: {frames} frames of about "
         f"{format_seconds(e['seconds_per_frame'])} ({report.points:,} points, {report.substeps} steps per frame); a "
-        f"larger {field_name} than {value:.3g} m for '{big.name}' (time grows about as 1/{field_name}^4), fewer "
+        f"larger {field_name} than {value:.3g} m for '{big.name}' (time grows about as 1/{field_name}^{power}), fewer "
         f"frames{gpu} make it shorter"
     )
     report.warnings.append(msg)
