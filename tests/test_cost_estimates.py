@@ -10,6 +10,7 @@ import os
 import resource
 import sys
 
+import numpy as np
 import pytest
 
 import pdsim
@@ -127,3 +128,18 @@ def test_refusals_count_the_render_surfaces(tmp_path, monkeypatch):
     monkeypatch.setattr(memory, "free_disk_space", lambda folder: 1.9 * report.estimate["cache_bytes"])
     with pytest.raises(pdsim.ParameterError, match="render surfaces need about"):
         pdsim.preflight.preflight(scene, device="cpu", out=out)
+
+
+def test_calibration_fit_recovers_known_constants():
+    """The calibration's non-negative least squares (tools/preflight_calibration.py) gives back the constants of
+    times made from them (columns of very different sizes, as steps per bond and per particle are), to 1e-6; the
+    stored calibration names every constant pdsim/cost.py reads and renders as a table."""
+    import preflight_calibration as tool
+
+    rng = np.random.default_rng(1)
+    rows = np.column_stack([np.ones(6), rng.uniform(1e5, 1e6, 6), rng.uniform(1e3, 1e4, 6)])
+    truth = np.array([5.0e-4, 1.3e-8, 2.0e-7])
+    fit = tool._nnls(rows, rows @ truth, ["step", "bond", "particle"])
+    np.testing.assert_allclose([fit["step"], fit["bond"], fit["particle"]], truth, rtol=1e-6)
+    table = tool.calibration_table(CALIBRATION)
+    assert CALIBRATION["date"] in table and table.count("\n|") >= 13
