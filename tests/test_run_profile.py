@@ -91,8 +91,8 @@ def test_time_lands_in_its_phase(tmp_path, monkeypatch):
 
 
 def test_timing_a_phase_costs_microseconds():
-    """A phase block plus a move costs under 20 us (measured 4.5 to 6.5 us on the 2-core machine under load); a run times
-    four or five per frame, against frames of tens of milliseconds or more."""
+    """A phase block plus a move costs under 20 us (measured 4.5 to 6.5 us on the 2-core machine under load); a run
+    times four or five per frame, against frames of tens of milliseconds or more."""
     prof = RunProfile()
     n = 20_000
     t0 = time.perf_counter()
