@@ -32,6 +32,7 @@ from .errors import InstabilityError, ParameterError, PdsimError
 from .explain import explain_scene
 from .output.usd_pack import pack_cache
 from .preview import write_preview
+from .profile import RunProfile
 from .scene import Scene
 from .scene_script import EXIT_SCRIPT_ERROR, load_scene_script, script_error_message
 
@@ -253,7 +254,13 @@ def _add_run_options(r: argparse.ArgumentParser):
         help="write the bonds broken in each frame as the points /World/<body>_crack_events (midpoint, energy, "
         "normal; peridynamic bodies)",
     )
-    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--quiet", action="store_true", help="no progress bar and no cost estimate")
+    r.add_argument(
+        "--profile",
+        action="store_true",
+        help="at the end, print the wall time of each phase (build, simulate, surfaces, write, checks, other) and "
+        "write them with the run's figures to <stem>.report.json beside --out",
+    )
 
 
 def _run_settings(args) -> dict:
@@ -355,7 +362,11 @@ def _execute(build_scene, args) -> int:
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING  # no per-module load lines; warnings and errors still show
     settings = _run_settings(args)
+    profile = RunProfile() if getattr(args, "profile", False) else None
     scene = build_scene()
+    if profile is not None:
+        profile.lap("build")  # the scene script's build_scene
+        settings["profile"] = profile
     if not isinstance(scene, Scene):
         raise ParameterError("build_scene()", type(scene).__name__, "a function returning a pdsim.Scene")
     if getattr(args, "explain", False):

@@ -12,14 +12,16 @@ Checks, in order (cheap and fundamental first):
    folder free);
 2. unique USD prim names (``"body 1"`` and ``"body_1"`` are both written as ``/World/body_1``);
 3. counts: points and bonds within int32 indices, peridynamic constants within float32 (a body 1e6x too small);
-4. memory: an estimate (bytes per particle, bond, vertex and element, measured) against the free host memory
-   (psutil, else /proc/meminfo and the cgroup limit) and, on CUDA, the device's free memory;
-5. substeps per frame: a user dt, or the automatic step estimated per body, must give at most
+4. substeps per frame: a user dt, or the automatic step estimated per body, must give at most
    MAX_SUBSTEPS_PER_FRAME substeps;
+5. the cost estimate (pdsim/cost.py: time per frame, total time, the render surfaces' memory, the cache's size),
+   printed when asked (``show``), and a warning naming the knobs when the run would take more than an hour; then
+   memory: the estimate (bytes per particle, bond, vertex and element, measured, plus the render surfaces) against
+   the free host memory (psutil, else /proc/meminfo and the cgroup limit) and, on CUDA, the device's free memory;
 6. FEM element quality of meshes built directly as TetMesh (meshes from pdsim's loaders were checked on load);
 7. bodies starting below the ground plane;
 8. bodies overlapping each other, and colliders (projectiles, static meshes) starting inside a body;
-9. free disk space against an estimate of the cache's size.
+9. free disk space against the estimated cache size (render surfaces included).
 
 Everything is vectorised numpy (or one Warp inside-test launch per pair of bodies whose boxes overlap); nothing is
 written to disk (the writability probe removes its file).
@@ -39,6 +41,7 @@ import numpy as np
 import warp as wp
 
 from . import memory
+from .cost import HOUR, body_counts, estimate_cost, fem_edge_length, format_seconds
 from .checks import check_frames, check_range, check_time_step, format_bytes, unit_hint
 from .colliders import BoxProjectile, MeshCollider, MeshProjectile, SphereProjectile, _rotate, collider_names
 from .kernels.rigid import SHAPE_BOX, SHAPE_SPHERE
@@ -62,7 +65,6 @@ FEM_BYTES_PER_ELEMENT = 450
 LATTICE_BYTES_PER_POINT = 200
 LATTICE_BYTES_PER_LINK = 24
 HOST_BYTES_PER_POINT_ON_DEVICE = 400  # host arrays kept beside a CUDA solver's (rest positions, volumes, masses)
-CACHE_BYTES_PER_POINT_FRAME = 80  # measured 55 to 85 B per point and frame (points, velocities, primvars, surfaces)
 FLOAT32_LIMIT = 1.0e30  # largest peridynamic constant accepted (float32 holds 3.4e38; kernels multiply it further)
 
 
@@ -76,7 +78,8 @@ class PreflightReport:
     unknown). dt_estimate: estimated automatic step [s] (inf without methods with mass), dt: the step the run would
     use (the user's, or the automatic estimate with the scene's safety factor), substeps: per frame. cache_bytes /
     free_disk_bytes: estimated cache size and free space [B] (None without an output path). seconds: wall time of the
-    checks. warnings: what was warned about."""
+    checks. warnings: what was warned about. estimate: what the run will cost (pdsim.cost.estimate_cost: seconds per
+    frame, build and total seconds, render-surface vertices and memory, cache bytes, the calibration)."""
 
     points: int = 0
     bonds: int = 0
@@ -92,6 +95,7 @@ class PreflightReport:
     free_disk_bytes: float | None = None
     seconds: float = 0.0
     warnings: list = field(default_factory=list)
+    estimate: dict = field(default_factory=dict)
 
 
 # ---------------------------------------------------------------------------------------------------------- names
@@ -222,8 +226,7 @@ def _knob(body) -> tuple[str, float]:
     """The setting that sizes a body, as (field, value): a peridynamic or lattice spacing [m], or an FEM mesh's edge
     length [m] (estimated from its volume per element)."""
     if _method(body) == "fem":
-        mesh = body.mesh
-        return "edge_length", float((abs(mesh.volume) / max(mesh.element_count, 1) * 6.0 * math.sqrt(2.0)) ** (1 / 3))
+        return "edge_length", fem_edge_length(body.mesh)
     return "spacing", float(body.spacing)
 
 
@@ -350,17 +353,28 @@ def _check_substeps(scene, dt, report: PreflightReport, frames: int, dt_factor: 
     report.substeps = max(1, math.ceil(substeps - 1.0e-9))
 
 
-def _check_memory(scene, device: str, report: PreflightReport) -> None:
+def _memory_estimate(scene, device: str, report: PreflightReport, surface_bytes: list[float]) -> list[float]:
+    """Fills the report's estimated peak memory and the free memory: the solvers' (on the device on CUDA) and the
+    render surfaces' (``surface_bytes`` per body [B], on the host); returns the estimate per body [B] (the device's
+    on CUDA)."""
     per_body = [_body_bytes(b) for b in scene.bodies]
     total = float(sum(per_body))
     on_cuda = str(device).startswith("cuda")
     if on_cuda:
         report.device_bytes = total
-        report.host_bytes = float(report.points * HOST_BYTES_PER_POINT_ON_DEVICE)
+        report.host_bytes = float(report.points * HOST_BYTES_PER_POINT_ON_DEVICE + sum(surface_bytes))
         report.free_device_bytes = memory.free_device_memory(device)
     else:
-        report.host_bytes = total
+        per_body = [p + s for p, s in zip(per_body, surface_bytes)]
+        report.host_bytes = float(sum(per_body))
     report.free_host_bytes = memory.free_host_memory()
+    return per_body
+
+
+def _check_memory(scene, device: str, report: PreflightReport, per_body: list[float]) -> None:
+    """The estimated peak memory (:func:`_memory_estimate`, ``per_body`` [B]) against the free memory."""
+    total = float(sum(per_body))
+    on_cuda = str(device).startswith("cuda")
     checks = [("host", report.host_bytes, report.free_host_bytes)]
     if on_cuda:
         checks.insert(0, (f"{device} device", report.device_bytes, report.free_device_bytes))
@@ -517,10 +531,10 @@ def _collider_inside(c, device: str):
 
 
 def _check_disk(out: str, frames: int, report: PreflightReport, pack: bool) -> None:
-    """The estimated cache against the free space of its folder; a packed cache needs its frames folder and the packed
-    file at once at the end of the run, so twice the estimate."""
+    """The estimated cache (render surfaces included, pdsim.cost) against the free space of its folder; a packed cache
+    needs its frames folder and the packed file at once at the end of the run, so twice the estimate."""
     folder = os.path.dirname(os.path.abspath(out))
-    need = float((frames + 1) * report.points * CACHE_BYTES_PER_POINT_FRAME)
+    need = float(report.estimate["cache_bytes"])
     free = memory.free_disk_space(folder)
     report.cache_bytes, report.free_disk_bytes = need, free
     peak = 2.0 * need if pack else need
@@ -529,7 +543,8 @@ def _check_disk(out: str, frames: int, report: PreflightReport, pack: bool) -> N
         raise ParameterError(
             "out",
             out,
-            f"a folder with room for the cache: {frames} frames of {report.points:,} points need about "
+            f"a folder with room for the cache: {frames} frames of {report.points:,} points and their render surfaces "
+            "need about "
             f"{format_bytes(need)}{how}, and {folder} has {format_bytes(free)} free; free some space, write elsewhere "
             "or run fewer frames",
         )
@@ -542,6 +557,54 @@ def _check_disk(out: str, frames: int, report: PreflightReport, pack: bool) -> N
         warnings.warn(msg, stacklevel=3)
 
 
+def _warn_time(scene, report: PreflightReport, frames: int) -> None:
+    """A warning naming the knobs when the estimated run time exceeds pdsim.cost.HOUR."""
+    e = report.estimate
+    total = e.get("total_seconds")
+    if total is None or total <= HOUR:
+        return
+    big = max(scene.bodies, key=lambda b: _body_counts(b)[0])
+    field_name, value = _knob(big)
+    power = 3 if _method(big) == "lattice" else 4  # points, and steps per frame but for the lattice's fixed count
+    gpu = "" if str(e["device"]).startswith("cuda") else ", or a GPU (--device cuda)"
+    basis = "" if e["calibrated"] else " from the CPU's calibration (none for CUDA yet)"
+    msg = (
+        f"this run may take about {format_seconds(total)}{basis}: {frames} frames of about "
+        f"{format_seconds(e['seconds_per_frame'])} ({report.points:,} points, {report.substeps} steps per frame); a "
+        f"larger {field_name} than {value:.3g} m for '{big.name}' (time grows about as 1/{field_name}^{power}), fewer "
+        f"frames{gpu} make it shorter"
+    )
+    report.warnings.append(msg)
+    warnings.warn(msg, stacklevel=3)
+
+
+def format_estimate(report: PreflightReport, frames: int) -> str:
+    """The cost estimate as one line of text (see pdsim.cost)."""
+    e = report.estimate
+    cal = e["calibration"]
+    basis = f"{cal['device'].upper()} calibration of {cal['date']}"
+    if not e["calibrated"]:
+        basis = f"the {cal['device'].upper()}'s calibration of {cal['date']}: none for {e['device']} yet"
+    memory_bytes = report.host_bytes + report.device_bytes
+    if e["seconds_per_frame"] is None:
+        time_part = "time unknown (no calibration of the implicit or static FEM step)"
+    else:
+        time_part = (
+            f"{format_seconds(e['seconds_per_frame'])} per frame, {format_seconds(e['total_seconds'])} for {frames} "
+            f"frames"
+        )
+    return (
+        f"pdsim: estimate: {report.points:,} points, {report.substeps} steps per frame: {time_part}; peak memory "
+        f"{format_bytes(memory_bytes)}; cache {format_bytes(e['cache_bytes'])} (render surfaces of about "
+        f"{e['surface_vertices']:,.0f} vertices included) [{basis}]"
+    )
+
+
+def print_estimate(report: PreflightReport, frames: int) -> None:
+    """Prints :func:`format_estimate` to stdout."""
+    print(format_estimate(report, frames), flush=True)
+
+
 # ---------------------------------------------------------------------------------------------------------- entry
 def preflight(
     scene,
@@ -552,6 +615,7 @@ def preflight(
     frames: int | None = None,
     dt_factor: float = 1.0,
     pack: bool = True,
+    show: bool = False,
 ):
     """Checks that ``scene`` can run before anything is allocated or simulated; returns a :class:`PreflightReport`.
 
@@ -563,6 +627,10 @@ def preflight(
         frames: frames to run (the scene's when None).
         dt_factor: multiplier of the automatic step (Scene.run's ``dt_factor``), > 0; ignored with ``dt``.
         pack: whether the run packs its cache into one file at its end (the disk then needs twice the cache).
+        show: print the cost estimate (:func:`print_estimate`) as soon as it is known, before the memory and disk
+            checks.
+
+    Warns (warnings.warn) when the estimated run time exceeds an hour (:func:`_warn_time`).
 
     Raises:
         ParameterError: a setting out of range (frames, dt, out, a spacing or edge length whose scene does not fit
@@ -589,8 +657,15 @@ def preflight(
     _check_counts(scene, report)
     if device is None:
         device = default_device()
-    _check_memory(scene, str(device), report)
     _check_substeps(scene, dt, report, frame_count, check_range("dt_factor", dt_factor, 0.0, None))
+    counts = [body_counts(b, _bonds_per_particle) for b in scene.bodies]
+    report.estimate = estimate_cost(counts, substeps=report.substeps, frames=frame_count, device=str(device))
+    surface_bytes = [estimate_cost([c], substeps=1, frames=0, device=str(device))["surface_bytes"] for c in counts]
+    per_body = _memory_estimate(scene, str(device), report, surface_bytes)
+    if show:
+        print_estimate(report, frame_count)
+    _warn_time(scene, report, frame_count)
+    _check_memory(scene, str(device), report, per_body)
     _check_fem_quality(scene)
     _check_ground(scene)
     _check_overlaps(scene, str(device))

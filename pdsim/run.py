@@ -11,6 +11,7 @@ contact between methods.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -42,6 +43,7 @@ from .output.usd_files import pdsim_info
 from .output.writer import ViewWriter
 from .preflight import preflight
 from .rigid import rigid_bodies_of
+from .profile import RunProfile, report_path, write_report
 from .solver import PointSolver
 from .timestep import frame_steps, projectile_step_limit
 
@@ -61,6 +63,8 @@ class RunReport:
     summary: str = ""  # what the solvers simulated, e.g. "2560 particles, 309440 bonds"
     first_frame: int = 0  # first frame this run wrote (after --resume: the frame after the checkpoint's)
     checks: int = 0  # watchdog checks made
+    profile: dict | None = None  # wall time per phase (pdsim.profile.RunProfile.as_dict)
+    estimate: dict | None = None  # the pre-flight's cost estimates (pdsim.preflight.PreflightReport.estimate)
 
 
 @dataclass
@@ -148,21 +152,24 @@ class _FrameRun:
         if scene.ground is not None:
             self.rigid.append((scene.ground, None))
         self.ck_path = checkpoint_path(options.out)
+        self.profile = RunProfile()
         self.cache = self.writer = None
         self.frame = 0  # the frame being simulated
         self.events = crack_event_sources(solvers) if options.crack_events else []
 
     def write_frame(self, frame: int) -> None:
         t = frame * self.scene.frame_time
-        views = [v for s in self.solvers for v in s.views()]
+        with self.profile.phase("surfaces"):
+            views = [v for s in self.solvers for v in s.views()]
         views += [v for e in self.events for v in e.collect()]
         for collider, name in self.rigid:
             view = collider.view(t, bounds=self.bounds)
             if name is not None:
                 view.name = name
             views.append(view)
-        self.writer.write(frame, views)
-        self.cache.end_frame(frame, time=t)
+        with self.profile.phase("write"):
+            self.writer.write(frame, views)
+            self.cache.end_frame(frame, time=t)
 
     def write_checkpoint(self, frame: int, substep: int, abandon=None):
         """The run's state after ``substep`` steps of frame ``frame + 1`` (frame ``frame`` finished); ``abandon``:
@@ -200,10 +207,12 @@ def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, lim
         for w in run.watchdogs:
             if w is not None:
                 w.frame = frame
+        checked = _check_seconds(run.watchdogs)
         try:
-            advance_checked(
-                run.scene, run.solvers, run.steps.dt, run.steps.substeps, coupling, limit, first=first_substep
-            )
+            with run.profile.phase("simulate"):
+                advance_checked(
+                    run.scene, run.solvers, run.steps.dt, run.steps.substeps, coupling, limit, first=first_substep
+                )
         except RunInterrupted as exc:
             done = getattr(exc, "in_frame", None)
             if done is None:
@@ -211,6 +220,7 @@ def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, lim
             # stopped at a step boundary inside the frame, ``done`` steps into it
             written = _checkpoint(run, frame - 1, first_substep + done, stop)
             raise RunInterrupted(exc.signal, checkpoint=written, last_frame=frame - 1) from None
+        run.profile.move("simulate", "checks", _check_seconds(run.watchdogs) - checked)
         first_substep = 0
         run.write_frame(frame)
         if on_frame is not None:
@@ -219,10 +229,16 @@ def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, lim
         stopping = stop is not None and stop.requested
         due = every is not None and time.monotonic() - last_checkpoint >= every
         if (stopping or due) and frame < frames:
-            written = _checkpoint(run, frame, 0, stop)
+            with run.profile.phase("write"):
+                written = _checkpoint(run, frame, 0, stop)
             last_checkpoint = time.monotonic()
             if stopping or (stop is not None and stop.requested):  # asked during the checkpoint: it is the last
                 raise RunInterrupted(stop.signal, checkpoint=written, last_frame=frame)
+
+
+def _check_seconds(watchdogs) -> float:
+    """Wall time [s] of the watchdogs' checks so far."""
+    return sum(w.seconds for w in watchdogs if w is not None)
 
 
 STOP_CHECKPOINT_BUDGET_S = 0.8  # a checkpoint still being written this long after a stop request is abandoned [s]
@@ -261,9 +277,13 @@ def run_scene(
     stop=None,
     on_frame=None,
     layout="file",
+    profile=False,
 ) -> RunReport:
     """Simulates ``scene`` and writes its USD cache to ``out``; the arguments and what the run guarantees are those
-    of :meth:`pdsim.Scene.run`."""
+    of :meth:`pdsim.Scene.run`. ``profile``: False, True (print the phases' wall time at the end and write the run
+    report ``<stem>.report.json``) or a pdsim.profile.RunProfile started by the caller (as True, and the time
+    before the run it holds counts)."""
+    prof = profile if isinstance(profile, RunProfile) else RunProfile()
     pack = cache_layout(layout)
     options = _check_options(scene, out, frames, dt, dt_factor, check_interval, checkpoint_interval_s, color_attribute)
     if isinstance(debris_particles, bool) or int(debris_particles) != debris_particles or debris_particles < 0:
@@ -273,7 +293,10 @@ def run_scene(
     remove_stale_temporaries(out)  # what a killed run on this output left (at most one checkpoint's .tmp)
     names = collider_names(scene.colliders)
     wall0 = time.perf_counter()
-    preflight(scene, device=device, out=out, dt=options.dt, frames=options.frames, pack=pack)  # before any allocation
+    prof.lap()
+    # before any allocation; prints the cost estimate before its memory and disk checks
+    checked = preflight(scene, device=device, out=out, dt=options.dt, frames=options.frames, pack=pack, show=progress)
+    prof.lap("checks")
     solvers = scene.build_solvers(device=device, check=False)
     stable_dt = min(s.stable_time_step() for s in solvers)
     travel = projectile_step_limit(scene, options.frames)
@@ -300,6 +323,7 @@ def run_scene(
             if w is not None:
                 w.restore(state["watchdogs"][str(i)])
     run = _FrameRun(scene, solvers, watchdogs, steps, options, bounds, names, fingerprint)
+    run.profile = prof
     run.frame = start
     if resume:
         for i, e in enumerate(run.events):  # the breaks of the frame a stop interrupted count with that frame
@@ -336,6 +360,7 @@ def run_scene(
         if resume:
             run.writer.restore(state["writer"])
         coupling = method_contact(scene, solvers)
+        prof.lap("build")
         if not resume:
             run.write_frame(0)
         bar = _progress(options.frames - start, enabled=progress, desc=f"pdsim {scene.name}")
@@ -354,9 +379,12 @@ def run_scene(
         finally:
             bar.close()
         written = cache.frames_written
+        prof.lap()
+    prof.lap("write")  # the cache closed (and packed)
     if run.ck_path.is_file():
         run.ck_path.unlink()
-    return RunReport(
+    prof.finish(run.frame - start)
+    report = RunReport(
         path=out,
         frames_written=written,
         substeps_per_frame=steps.substeps,
@@ -368,7 +396,13 @@ def run_scene(
         summary="; ".join(s.summary() for s in solvers),
         first_frame=start + 1 if resume else 0,
         checks=sum(w.checks for w in watchdogs if w is not None),
+        profile=prof.as_dict(),
+        estimate=dict(checked.estimate),
     )
+    if profile:
+        write_report(report_path(out), dataclasses.asdict(report))
+        print(prof.table())
+    return report
 
 
 @contextlib.contextmanager

@@ -280,6 +280,7 @@ class Scene:
         stop=None,
         on_frame=None,
         layout: str = "file",
+        profile=False,
     ) -> RunReport:
         """Simulates the scene and writes a USD animation cache to ``out`` (.usdc, .usda or .usd) and the folder of its
         frame layers ``<stem>.frames/`` beside it (docs/cache_format.md).
@@ -343,6 +344,11 @@ class Scene:
             layout: ``"file"`` (default): the frames stream into ``<stem>.frames/`` while running and are packed into
                 the one self-contained file ``out`` when the run finishes; ``"clips"``: ``out`` stays a top-level
                 layer that refers to that folder (for caches too big to pack; docs/cache_format.md).
+            profile: True: at the end print the wall time of each phase of the run (build, simulate, surfaces, write,
+                checks, other; pdsim/profile.py) and write the run report ``<stem>.report.json`` beside ``out`` (the
+                RunReport's fields: the phases, the pre-flight's cost estimate, ...); a pdsim.profile.RunProfile
+                started earlier (as True, counting from its start). The returned RunReport holds the phases and the
+                estimate either way.
         """
         return run_scene(
             self,
@@ -365,4 +371,5 @@ class Scene:
             stop=stop,
             on_frame=on_frame,
             layout=layout,
+            profile=profile,
         )

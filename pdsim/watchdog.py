@@ -4,6 +4,7 @@ a solver's points and checks the state every few steps (kernels/watchdog.py hold
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import warp as wp
@@ -126,6 +127,7 @@ class Watchdog:
         self._pending = None  # (dt, kinematics, force array) of the last step whose support work is not yet counted
         self._time = float(getattr(solver, "time", 0.0))
         self.checks = 0
+        self.seconds = 0.0  # wall time of the checks [s] (pdsim/profile.py's "checks")
         self.full_check = True  # the next check includes the strain pass (the scene sets it for frame ends)
         self.last = {}
         # checks inside the step loop (the scene sets these): every ``interval`` steps the solver's check_state runs
@@ -375,6 +377,13 @@ class Watchdog:
     def check(self, speed_limit: float, where: str, hint: str = "") -> dict:
         """Raises InstabilityError (see the class) or returns the check's numbers: energy ``energy`` and its bound
         ``bound`` [J], work put in ``work`` [J], largest speed ``vmax`` [m/s], strain range."""
+        t0 = time.perf_counter()
+        try:
+            return self._check(speed_limit, where, hint)
+        finally:
+            self.seconds += time.perf_counter() - t0
+
+    def _check(self, speed_limit: float, where: str, hint: str) -> dict:
         solver = self.solver
         if solver.kin is not self.kin:
             self.bind(solver.kin)

@@ -1,0 +1,162 @@
+"""What a run will cost, estimated before anything is allocated: time per frame, total time, the render surfaces'
+memory and the cache's size, from counts and a calibration measured on this machine class.
+
+The counts are the pre-flight's (pdsim/preflight.py): per body its points, its bonds (peridynamics: the interior
+count per particle, an upper bound) or links (lattice), its elements (FEM), its steps per frame, and its render
+surface's vertices at rest (the input surface refined to edges of one spacing, as pdsim.fragment_surfaces builds it;
+an FEM body's boundary vertices; lattices write points only). The calibration (``cost_calibration.json`` beside this
+module, written by ``python tools/preflight_calibration.py --cost --write``) holds the machine, date, command and load
+average it was measured with and:
+
+- ``step_seconds``: wall time of one step: a constant per step (the launches) of each method, and per estimated bond
+  visit (elastic, with fracture, with plasticity) and per particle (peridynamics), per element (elastic, with
+  fracture) and per vertex (explicit FEM), per lattice point and per link (lattice);
+- ``frame_seconds``: per frame outside the steps (views, render surfaces, the USD writer): a constant, per point of
+  each method and per surface vertex;
+- ``build_seconds``: building the solvers, per point, per estimated bond and per element, plus a constant;
+- ``cache_bytes``: cache bytes per frame, per point of each method and per surface vertex, plus a constant;
+- ``memory_bytes``: peak host memory per surface vertex (the render surfaces and their views).
+
+Only the CPU backend is calibrated: on CUDA the estimate is the CPU's and says so (``calibrated`` False). The implicit
+and static FEM solves have no step calibration: their time is left out (``seconds_per_frame`` None).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+
+import numpy as np
+
+from .fem.model import _mean_edge_length
+from .fragment_surfaces.booleans import refine_surface
+
+CALIBRATION_FILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "cost_calibration.json")
+HOUR = 3600.0  # a run estimated to take longer than this [s] is warned about
+PD_FEATURES = ("elastic", "fracture", "plastic")  # the peridynamic step's calibrated variants
+FEM_FEATURES = ("elastic", "fracture")  # the explicit FEM step's calibrated variants
+
+with open(CALIBRATION_FILE, encoding="utf-8") as _f:
+    CALIBRATION = json.load(_f)
+
+
+def _method(body) -> str:
+    return getattr(type(body), "method", "")
+
+
+def fem_edge_length(mesh) -> float:
+    """An FEM mesh's edge length [m] estimated from its volume per element (a regular tetrahedron's edge)."""
+    return float((abs(mesh.volume) / max(mesh.element_count, 1) * 6.0 * math.sqrt(2.0)) ** (1.0 / 3.0))
+
+
+def _refined_vertices(shape, spacing: float) -> int:
+    """Vertices of ``shape``'s surface refined to edges of about ``spacing`` [m] (pdsim.fragment_surfaces' input
+    surface: the render surface of an intact body)."""
+    return len(refine_surface(shape.vertices, shape.faces, float(spacing))[0])
+
+
+def surface_vertices(body) -> float:
+    """Vertex count of a body's render surface at rest (the surface a frame without fracture writes): peridynamics:
+    the input shape refined to the spacing; FEM: the input surface refined to the mean edge length (smooth crack
+    surfaces) or the mesh's boundary vertices, plus an embedded render mesh's; 0 for the lattice (points only).
+    Fragments add vertices along their cracks."""
+    method = _method(body)
+    if method == "peridynamics":
+        return float(_refined_vertices(body.shape, body.spacing))
+    if method == "fem":
+        mesh = body.mesh
+        if getattr(body, "surface_shape", None) is not None:
+            n = _refined_vertices(body.surface_shape, _mean_edge_length(mesh.vertices, mesh.tets))
+        else:
+            n = int(np.unique(mesh.boundary_faces()).size)
+        render = getattr(body, "render_mesh", None)
+        if render is not None:
+            n += len(render.vertices)
+        return float(n)
+    return 0.0
+
+
+def body_counts(body, bonds_per_particle) -> dict:
+    """The counts a body's cost is estimated from: method, points, bonds (estimated: points x
+    ``bonds_per_particle(body)``) or links, elements, surface_vertices, steps (lattice steps per frame; None: the
+    scene's substeps), features ("plastic": a peridynamic body with a yield stress; else "fracture" when bonds or
+    elements can break; else "elastic"), calibrated (False: no
+    step calibration for this body, e.g. an implicit FEM body)."""
+    method = _method(body)
+    out = {"method": method, "points": 0, "bonds": 0.0, "elements": 0, "surface_vertices": surface_vertices(body),
+           "steps": None, "features": "elastic", "calibrated": True}  # fmt: skip
+    if method == "peridynamics":
+        n = int(body.particle_count)
+        out.update(points=n, bonds=n * float(bonds_per_particle(body)))
+        if getattr(body.material, "yield_stress", None) is not None:
+            out["features"] = "plastic"
+        elif body.fractures:
+            out["features"] = "fracture"
+    elif method == "fem":
+        out.update(points=int(body.vertex_count), elements=int(body.element_count))
+        if getattr(body, "fractures", False):
+            out["features"] = "fracture"
+        out["calibrated"] = getattr(body, "integrator", "explicit") == "explicit"
+    else:
+        out.update(points=int(getattr(body, "particle_count", 0)), bonds=float(getattr(body, "link_count", 0)))
+        out["steps"] = int(getattr(body, "steps_per_frame", 1))
+    return out
+
+
+def step_seconds(counts: dict, calibration: dict = CALIBRATION) -> float:
+    """Wall time of one step of a body [s] (a lattice step for the lattice)."""
+    c = calibration["step_seconds"]
+    method = counts["method"]
+    if method == "peridynamics":
+        per_bond = c[f"pd_bond_{counts['features']}"]
+        return c["pd_step"] + counts["bonds"] * per_bond + counts["points"] * c["pd_particle"]
+    if method == "fem":
+        per_element = c[f"fem_element_{counts['features']}"]
+        return c["fem_step"] + counts["elements"] * per_element + counts["points"] * c["fem_vertex"]
+    return c["lattice_step"] + counts["points"] * c["lattice_point"] + counts["bonds"] * c["lattice_link"]
+
+
+def estimate_cost(bodies: list[dict], *, substeps: int, frames: int, device: str,
+                  calibration: dict = CALIBRATION) -> dict:  # fmt: skip
+    """The cost of a run of ``frames`` frames of ``substeps`` steps of bodies with counts ``bodies`` (body_counts).
+
+    Returns plain JSON values: seconds_per_frame, build_seconds and total_seconds [s] (None where a body has no step
+    calibration), surface_vertices (at rest), surface_bytes (host memory of the render surfaces [B]), cache_bytes
+    (the cache, frames 0..frames [B]), calibrated (False off the calibration's device: the CPU figures are given),
+    device, and the calibration's machine, date and command."""
+    fs, bs, cb = calibration["frame_seconds"], calibration["build_seconds"], calibration["cache_bytes"]
+    vertices = float(sum(b["surface_vertices"] for b in bodies))
+    step = 0.0
+    timed = all(b["calibrated"] for b in bodies)
+    for b in bodies:
+        step += step_seconds(b, calibration) * (substeps if b["steps"] is None else b["steps"])
+    points = {m: sum(b["points"] for b in bodies if b["method"] == m) for m in ("peridynamics", "fem", "lattice")}
+    per_frame = step + fs["constant"] + vertices * fs["surface_vertex"]
+    per_frame += sum(points[m] * fs["point"][m] for m in points)
+    build = bs["constant"] + sum(points.values()) * bs["point"]
+    build += sum(b["bonds"] for b in bodies) * bs["bond"] + sum(b["elements"] for b in bodies) * bs["element"]
+    cache_frame = cb["frame"] + vertices * cb["surface_vertex"] + sum(points[m] * cb["point"][m] for m in points)
+    on_device = str(device).split(":")[0] == calibration["device"]
+    return {
+        "seconds_per_frame": per_frame if timed else None,
+        "build_seconds": build if timed else None,
+        "total_seconds": build + frames * per_frame if timed else None,
+        "surface_vertices": vertices,
+        "surface_bytes": vertices * calibration["memory_bytes"]["surface_vertex"],
+        "cache_bytes": (frames + 1) * cache_frame,
+        "calibrated": on_device,
+        "device": str(device),
+        "calibration": {k: calibration[k] for k in ("machine", "date", "command", "device")},
+    }
+
+
+def format_seconds(seconds: float) -> str:
+    """A duration for messages: 0.42 s, 37 s, 12 min, 5.3 h."""
+    if seconds < 10.0:
+        return f"{seconds:.2g} s"
+    if seconds < 120.0:
+        return f"{seconds:.0f} s"
+    if seconds < 2.0 * HOUR:
+        return f"{seconds / 60.0:.0f} min"
+    return f"{seconds / HOUR:.1f} h"
