@@ -1,15 +1,15 @@
 """`Scene.run(resume=True)` continues the same cache (docs/cache_format.md, "Resumed runs").
 
 An interrupted run plus its resume leave one cache `out` that a renderer reads exactly as the cache of an
-uninterrupted run: every attribute of every prim (points, velocities, normals, topology, primvars, extents, reactions,
-transforms, visibility, `pdsim:time`) equal bit for bit at every time code 0..N, the same time samples (topology only
-where it changed), the same prims, and no USD validation error. Covered: peridynamics with fracture, contact, grips and
-fragment surfaces (also as one prim per fragment; also with crack events and debris instances), a scene 200 m away
-from the origin with default settings, the FEM splitting its mesh, a resume from a checkpoint older than the last written frame (the later frames and the fragment
-prims they defined are replaced), a resumed run stopped again and resumed once more, and a run that replaces an
-earlier cache (the resumed frames stay in `<stem>.partial<suffix>` until the run succeeds). Each resumed run packs
-the cache into one file at its end, as an uninterrupted run does. Runs on the CPU, where a
-resumed run is bit-identical to an uninterrupted one.
+uninterrupted run: every attribute of every prim (points, velocities, normals, topology, primvars, extents,
+reactions, transforms, visibility, `pdsim:time`) equal bit for bit at every time code 0..N, the same time samples
+(topology only where it changed), the same prims, and no USD validation error. Covered: peridynamics with fracture,
+contact, grips and fragment surfaces (also as one prim per fragment; also with crack events and debris instances), a
+scene 200 m away from the origin with default settings, the FEM splitting its mesh, a resume from a checkpoint older
+than the last written frame (the later frames and the fragment prims they defined are replaced), a resumed run
+stopped again and resumed once more, and a run that replaces an earlier cache (the resumed frames stay in
+`<stem>.partial<suffix>` until the run succeeds). Each resumed run packs the cache into one file at its end, as an
+uninterrupted run does. Runs on the CPU, where a resumed run is bit-identical to an uninterrupted one.
 """
 
 from __future__ import annotations
