@@ -46,8 +46,9 @@ class SolidShape:
 
     @property
     def volume(self) -> float:
-        """Enclosed volume [m^3] (signed-tetrahedron sum; positive for outward-facing triangles)."""
-        v = self.vertices[self.faces]
+        """Enclosed volume [m^3] (signed-tetrahedron sum about the bounding-box centre, so that it keeps its digits
+        far from the origin; positive for outward-facing triangles)."""
+        v = (self.vertices - 0.5 * (self.bounds[0] + self.bounds[1]))[self.faces]
         return float(np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0)
 
 

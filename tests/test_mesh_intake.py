@@ -69,3 +69,71 @@ def test_shared_mesh_loads_fills_and_drops(name):
         if t < contact:
             assert z0 - z == pytest.approx(0.5 * G * t * t, rel=1e-3, abs=1e-9), (frame, z0 - z)
         assert float(points.positions[:, 2].min()) > 0.0
+
+
+def _obj_with_uv_seam(mesh: trimesh.Trimesh) -> str:
+    """OBJ text of ``mesh`` whose faces on the y > 0 side use texture coordinate 2 and the others 1: every vertex on
+    the seam (used by both sides) is written as two vertices by OBJ readers that split by texture coordinate."""
+    lines = [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in mesh.vertices] + ["vt 0 0", "vt 1 1"]
+    side = np.where(mesh.triangles_center[:, 1] > 0.0, 2, 1)
+    lines += [f"f {a + 1}/{s} {b + 1}/{s} {c + 1}/{s}" for (a, b, c), s in zip(mesh.faces, side, strict=True)]
+    return "\n".join(lines) + "\n"
+
+
+def test_uv_seam_split_vertices_weld(tmp_path):
+    """An icosphere (642 vertices) written with a UV seam (trimesh's OBJ reader splits the seam's vertices, and
+    merging them by position and texture coordinate leaves it open) loads: the seam's vertices are welded, the shape
+    has the icosphere's 642 vertices and its volume (1e-12 relative)."""
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.15)
+    path = tmp_path / "seam.obj"
+    path.write_text(_obj_with_uv_seam(sphere))
+    raw = trimesh.load(path, force="mesh", process=True)
+    raw.merge_vertices()  # by position and texture coordinate: the seam stays open
+    assert len(raw.vertices) > len(sphere.vertices) and not raw.is_watertight
+    shape = pdsim.load_mesh(path)
+    assert len(shape.vertices) == len(sphere.vertices)
+    assert shape.volume == pytest.approx(sphere.volume, rel=1e-12)
+    assert f"{len(raw.vertices) - len(sphere.vertices)} coincident vertices welded" in shape.repairs
+
+
+def test_obj_with_quads(tmp_path):
+    """A cube written as 6 quads loads as 12 triangles with volume 1 m^3 (1e-12) and '6 polygons triangulated'."""
+    v = [(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)]
+    quads = [(1, 2, 4, 3), (5, 7, 8, 6), (1, 5, 6, 2), (3, 4, 8, 7), (1, 3, 7, 5), (2, 6, 8, 4)]
+    text = "".join(f"v {x} {y} {z}\n" for x, y, z in v) + "".join(f"f {a} {b} {c} {d}\n" for a, b, c, d in quads)
+    path = tmp_path / "cube.obj"
+    path.write_text(text)
+    shape = pdsim.load_mesh(path)
+    assert shape.faces.shape == (12, 3)
+    assert shape.volume == pytest.approx(1.0, rel=1e-12)
+    assert "6 polygons triangulated" in shape.repairs
+
+
+def test_placement(tmp_path):
+    """A Y-up box of 2 x 4 x 1 file units (x, y up, z) loaded with up_axis='Y', rotation=(0, 0, 90) degrees,
+    fit_size=0.3 m and position=(1000, 5, 0.2) m: extents (0.075, 0.15, 0.3) m (1e-12), the bounding box's bottom
+    centre at the position (1e-9 m, 1 km from the origin); the same rotation as a matrix gives the same vertices;
+    scale=0.01 instead of fit_size gives extents (0.01, 0.02, 0.04) m."""
+    box = trimesh.creation.box(extents=(2.0, 4.0, 1.0))
+    box.apply_translation((3.0, 7.0, -2.0))
+    path = tmp_path / "crate.obj"
+    box.export(path)
+    shape = pdsim.load_mesh(path, up_axis="Y", rotation=(0.0, 0.0, 90.0), fit_size=0.3, position=(1000.0, 5.0, 0.2))
+    np.testing.assert_allclose(shape.extent, [0.075, 0.15, 0.3], rtol=1e-12)
+    lo, hi = shape.bounds
+    np.testing.assert_allclose([*(0.5 * (lo + hi))[:2], lo[2]], [1000.0, 5.0, 0.2], rtol=0.0, atol=1e-9)
+    matrix = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    same = pdsim.load_mesh(path, up_axis="Y", rotation=matrix, fit_size=0.3, position=(1000.0, 5.0, 0.2))
+    np.testing.assert_allclose(same.vertices, shape.vertices, rtol=0.0, atol=1e-9)
+    scaled = pdsim.load_mesh(path, up_axis="Y", rotation=(0.0, 0.0, 90.0), scale=0.01)
+    np.testing.assert_allclose(scaled.extent, [0.01, 0.02, 0.04], rtol=1e-12)
+
+
+def test_repair_far_from_the_origin():
+    """An open box (two triangles of a side missing) capped at the origin and 1 km away: the same volume (1e-9
+    relative) and the same vertices up to the shift (1e-9 m)."""
+    box = trimesh.creation.box(extents=(0.3, 0.2, 0.1))
+    near = pdsim.shape_from_arrays(box.vertices, box.faces[:-2], name="near")
+    far = pdsim.shape_from_arrays(box.vertices + 1000.0, box.faces[:-2], name="far")
+    assert near.volume == pytest.approx(0.006, rel=1e-9) and far.volume == pytest.approx(0.006, rel=1e-9)
+    np.testing.assert_allclose(far.vertices - 1000.0, near.vertices, rtol=0.0, atol=1e-9)
