@@ -87,9 +87,9 @@ def _rotation_matrix(rotation) -> np.ndarray:
         ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
         rz = np.array([[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]])
         return rz @ ry @ rx
-    if a.shape == (3, 3) and np.all(np.isfinite(a)):
-        if np.abs(a @ a.T - np.eye(3)).max() <= 1.0e-6 and np.linalg.det(a) > 0.0:
-            return a
+    orthonormal = a.shape == (3, 3) and np.all(np.isfinite(a)) and np.abs(a @ a.T - np.eye(3)).max() <= 1.0e-6
+    if orthonormal and np.linalg.det(a) > 0.0:
+        return a
     raise ParameterError("rotation", a.tolist(), allowed)
 
 
@@ -211,10 +211,11 @@ TEXT_MESH_SUFFIXES = (".obj", ".off")  # always text: read here, so that their e
 
 def _load_trimesh(path: str, suffix: str):
     """(trimesh.load of a mesh file, polygons of more than 3 corners it triangulated (counted in OBJ and OFF text;
-    -1 for the other formats)). Vertices are not merged here (the repair welds them by position). Text formats (OBJ, OFF) are decoded here: UTF-8, else Latin-1 (every byte
-    sequence is valid Latin-1, and the geometry is ASCII), so a comment with one non-UTF-8 byte (a Latin-1 degree
-    sign or accent from an older exporter) does not send trimesh to its optional charset detector
-    (charset_normalizer, which may not be installed). Other formats go to trimesh as files."""
+    -1 for the other formats)). Vertices are not merged here (the repair welds them by position). Text formats (OBJ,
+    OFF) are decoded here: UTF-8, else Latin-1 (every byte sequence is valid Latin-1, and the geometry is ASCII), so
+    a comment with one non-UTF-8 byte (a Latin-1 degree sign or accent from an older exporter) does not send trimesh
+    to its optional charset detector (charset_normalizer, which may not be installed). Other formats go to trimesh
+    as files."""
     if suffix not in TEXT_MESH_SUFFIXES:
         return trimesh.load(path, force="mesh", process=False), -1
     with open(path, "rb") as f:

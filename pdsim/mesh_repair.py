@@ -5,21 +5,23 @@ The steps, in order (:func:`repair_surface`):
 1. **Weld** vertices closer than 1e-6 of the mesh's largest extent (at least 1e-8 m), by position alone: the copies
    that UV seams and split normals make become one vertex.
 2. **Clean**: triangles with a repeated vertex and repeated triangles (the same three vertices) go.
-3. **Parts**: the triangles fall into parts (sets joined by shared vertices).
-4. **Cap holes**: every boundary loop of a part (a loop of edges used by one triangle) is closed by a fan of
-   triangles from the loop's centroid, wound against the loop, when the fan's area is at most CAP_AREA_LIMIT of
-   the part's own area (a teapot's lid opening: 0.79; a flat sheet: 1).
-5. **Rebuild** a part that cannot be capped (an edge shared by more than two triangles, triangles wound against
-   their neighbours, a boundary vertex on two loops, a hole larger than CAP_AREA_LIMIT, or a cap manifold3d
-   rejects): the part's signed distance
-   (distance to its triangles, with the sign of the generalised winding number, Warp's BVH fast winding number) is
-   sampled on a grid of REBUILD_CELLS cells across its largest extent and its zero level set is extracted with
-   marching cubes (Warp), then simplified within REBUILD_SIMPLIFY cells (manifold3d). The part keeps its shape to
-   about one cell (1/96 of its size), not its triangles.
-6. **Parts of no volume** (flat sheets, stray triangles: volume below 1e-6 of the cube of their largest extent) are
-   dropped. A mesh left with nothing is refused (GeometryError: it encloses no volume).
-7. **Union**: several parts, or any part repaired, are joined with manifold3d's exact union (overlapping parts become
-   one solid; parts wound inside out within an outward mesh are cavities and are subtracted). The result is a closed
+3. **Sheets**: the triangles fall into parts (sets joined by shared vertices) and sheets (sets joined across edges
+   that exactly two triangles share, wound against each other). Each sheet gets its own copies of its vertices, so
+   an edge shared by three or more triangles (an eye touching a head, a fin on a shell) becomes a hole of the sheets
+   that meet there.
+4. **Cap holes**: every boundary loop of a sheet (a loop of edges used by one triangle) is closed by a fan of
+   triangles from the loop's centroid, wound against the loop. A sheet whose cap would be larger than
+   CAP_AREA_LIMIT of its own area is a card, not a solid with a hole (a flat sheet: 1; a teapot's lid opening:
+   0.79), and encloses no volume.
+5. **Rebuild** a part with a sheet that cannot be capped (a boundary vertex on two loops, or a capped sheet that
+   manifold3d rejects): the part's signed distance (distance to its triangles, with the sign of the generalised
+   winding number, Warp's BVH fast winding number) is sampled on a grid of REBUILD_CELLS cells across its largest
+   extent and its zero level set is extracted with marching cubes (Warp), then simplified within REBUILD_SIMPLIFY
+   cells (manifold3d). The part keeps its shape to about one cell (1/96 of its size), not its triangles.
+6. **Pieces of no volume** (cards, stray triangles, closed pieces below NO_VOLUME of the cube of their largest
+   extent) are dropped. A mesh left with nothing is refused (GeometryError: it encloses no volume).
+7. **Union**: the closed pieces are joined with manifold3d's exact union (overlapping pieces become one solid;
+   pieces wound inside out within an outward mesh are cavities and are subtracted). The result is a closed
    2-manifold, as the render surfaces' booleans need.
 
 A mesh that is closed and consistently wound after steps 1-2 is kept as it is (no union, no new vertices).
@@ -61,8 +63,8 @@ class RepairReport:
         parts: parts in the input (sets of triangles joined by shared vertices).
         holes_capped: boundary loops closed by a fan of triangles.
         rebuilt: parts rebuilt from their signed distance (they could not be capped).
-        dropped_parts: parts that enclose no volume, dropped.
-        united: True when the parts were joined with manifold3d's union.
+        dropped_parts: pieces (sheets, rebuilt parts) that enclose no volume, dropped.
+        united: closed pieces (capped sheets, rebuilt parts) joined with manifold3d's union (0: no union).
     """
 
     welded: int = 0
@@ -72,7 +74,7 @@ class RepairReport:
     holes_capped: int = 0
     rebuilt: int = 0
     dropped_parts: int = 0
-    united: bool = False
+    united: int = 0
 
     def line(self, name: str) -> str:
         """One line naming the repairs of mesh ``name``, or '' when there were none."""
@@ -86,12 +88,11 @@ class RepairReport:
         if self.holes_capped:
             done.append(f"{self.holes_capped} holes capped")
         if self.rebuilt:
-            done.append(f"{self.rebuilt} parts rebuilt from their winding number (edges shared by more than two "
-                        "triangles or inconsistent winding)")
+            done.append(f"{self.rebuilt} parts rebuilt from their winding number (they could not be capped)")
         if self.dropped_parts:
-            done.append(f"{self.dropped_parts} parts enclosing no volume dropped")
+            done.append(f"{self.dropped_parts} pieces enclosing no volume dropped")
         if self.united:
-            done.append(f"{self.parts} parts united")
+            done.append(f"{self.united} pieces united")
         return f"pdsim: mesh '{name}': " + ", ".join(done) if done else ""
 
 
@@ -186,9 +187,12 @@ def cap_holes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.n
     loop = _components(n, bnd[:, 0], bnd[:, 1])
     ids, loop_of_vertex = np.unique(loop[on], return_inverse=True)
     count = np.bincount(loop_of_vertex, minlength=len(ids)).astype(np.float64)
-    centroid = np.stack(
-        [np.bincount(loop_of_vertex, weights=vertices[on][:, a], minlength=len(ids)) for a in range(3)], axis=1
-    ) / count[:, None]
+    centroid = (
+        np.stack(
+            [np.bincount(loop_of_vertex, weights=vertices[on][:, a], minlength=len(ids)) for a in range(3)], axis=1
+        )
+        / count[:, None]
+    )
     index = np.full(n, -1, dtype=np.int64)
     index[np.flatnonzero(on)] = loop_of_vertex
     cap = np.stack([bnd[:, 1], bnd[:, 0], n + index[bnd[:, 0]]], axis=1)
@@ -232,7 +236,9 @@ def rebuild_part(vertices: np.ndarray, faces: np.ndarray, device: str = "cpu") -
     if solid is None:
         return v, f
     mesh = solid.simplify(REBUILD_SIMPLIFY * cell).to_mesh64()
-    return np.asarray(mesh.vert_properties, np.float64)[:, :3].copy(), np.asarray(mesh.tri_verts, np.int64).reshape(-1, 3)
+    return np.asarray(mesh.vert_properties, np.float64)[:, :3].copy(), np.asarray(mesh.tri_verts, np.int64).reshape(
+        -1, 3
+    )
 
 
 def _manifold(vertices: np.ndarray, faces: np.ndarray):
@@ -269,57 +275,66 @@ def repair_surface(vertices, faces, source: str, triangulated: int = -1, device:
     n = len(v)
     part = _components(n, np.concatenate([f[:, 0], f[:, 1]]), np.concatenate([f[:, 1], f[:, 2]]))
     parts = int(part.max()) + 1
-    report = dict(welded=welded, dropped_faces=dropped_faces, triangulated=triangulated, parts=parts)
+    report = {"welded": welded, "dropped_faces": dropped_faces, "triangulated": triangulated, "parts": parts}
     if is_closed(f, n):
         if signed_volumes(v, f, np.zeros(len(f), dtype=np.int64), 1)[0] < 0.0:
             f = f[:, ::-1]
         _check_volume(v, f, source)
         return v, f.astype(np.int32), RepairReport(**report)
 
-    # bad parts: edges with more than two triangles or wound the same way twice, or loops that are not simple
-    d, both, same = edge_counts(f, n)
-    bad_edge = (both > 2) | (same > 1)
-    vc, fc, owner, bad_vertex = cap_holes(v, f)
-    bad_part = np.zeros(parts, dtype=bool)
-    bad_part[part[d[bad_edge, 0]]] = True
-    bad_part[part[bad_vertex]] = True
-    part_c = np.concatenate([part, part[owner]])
-    face_part = part_c[fc[:, 0]]
+    # Sheets: triangles joined across edges that exactly two triangles share, wound against each other. Each sheet
+    # gets its own copies of its vertices, so an edge shared by three or more triangles becomes a boundary of the
+    # sheets that meet there (a character's eyes touching its head), to be capped like any hole.
+    sheet = _sheets(f, n)
+    sheets = int(sheet.max()) + 1
+    group_of_sheet = np.zeros(sheets, dtype=np.int64)
+    group_of_sheet[sheet] = part[f[:, 0]]
+    uniq, inv = np.unique(sheet[np.repeat(np.arange(len(f)), 3)] * n + f.ravel(), return_inverse=True)
+    vs, fs, owner_sheet = v[uniq % n], inv.reshape(-1, 3), uniq // n
+    ns = len(vs)
+    d, both, same = edge_counts(fs, ns)
+    vc, fc, owner, bad_vertex = cap_holes(vs, fs)
+    bad = np.zeros(sheets, dtype=bool)  # sheets that cannot be capped
+    bad[owner_sheet[d[(both > 2) | (same > 1), 0]]] = True
+    bad[owner_sheet[bad_vertex]] = True
+    face_sheet = np.concatenate([owner_sheet, owner_sheet[owner]])[fc[:, 0]]
     t = vc[fc]
     area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
-    part_area = np.bincount(face_part[: len(f)], weights=area[: len(f)], minlength=parts)
-    cap_area = np.bincount(fc[len(f) :, 2] - n, weights=area[len(f) :], minlength=len(owner))
-    large = cap_area > CAP_AREA_LIMIT * part_area[part[owner]]
-    bad_part[part[owner[large]]] = True
-    vol = signed_volumes(vc, fc, face_part, parts)
-    if vol[~bad_part].sum() < 0.0:  # the whole mesh is wound inwards
-        fc = fc[:, ::-1]
-        vol = -vol
-    size = _part_sizes(vc, fc, face_part, parts)
-    solids, cavities = [], []
-    rebuilt = np.zeros(parts, dtype=bool)
-    dropped = 0
-    for p in range(parts):  # one manifold3d solid per part (parts are few; the work is in numpy and manifold3d)
-        sel = face_part == p
-        pv, pf = _compact(vc, fc[sel])
-        solid = None if bad_part[p] else _manifold(pv, pf)
-        if solid is None:
-            pv, pf = rebuild_part(*_compact(v, f[part[f[:, 0]] == p]), device=device)
-            solid = _manifold(pv, pf) if len(pf) else None
-            rebuilt[p] = True
-            vol_p = solid.volume() if solid is not None else 0.0
-        else:
-            vol_p = vol[p]
-        if solid is None or abs(vol_p) <= NO_VOLUME * size[p] ** 3:
+    sheet_area = np.bincount(face_sheet[: len(fs)], weights=area[: len(fs)], minlength=sheets)
+    cap_area = np.bincount(fc[len(fs) :, 2] - ns, weights=area[len(fs) :], minlength=len(owner))
+    card = np.zeros(sheets, dtype=bool)  # sheets with a hole as large as themselves: cards, not solids
+    card[owner_sheet[owner[cap_area > CAP_AREA_LIMIT * sheet_area[owner_sheet[owner]]]]] = True
+    vol = signed_volumes(vc, fc, face_sheet, sheets)
+    size = _part_sizes(vc, fc, face_sheet, sheets)
+    solid = [None] * sheets
+    for k in np.flatnonzero(~bad & ~card):  # one manifold3d solid per sheet (sheets are few; the work is in manifold3d)
+        solid[k] = _manifold(*_compact(vc, fc[face_sheet == k]))
+        bad[k] = solid[k] is None
+    rebuild = np.zeros(parts, dtype=bool)  # parts with a sheet that cannot be capped are rebuilt whole
+    rebuild[group_of_sheet[bad]] = True
+    keep = ~rebuild[group_of_sheet]
+    if vol[keep].sum() < 0.0:  # the mesh is wound inwards
+        fc, vol = fc[:, ::-1], -vol
+        solid = [None if m is None else _manifold(*_compact(vc, fc[face_sheet == k])) for k, m in enumerate(solid)]
+    empty = card | (np.abs(vol) <= NO_VOLUME * size**3)
+    solids = [solid[k] for k in np.flatnonzero(keep & ~empty & (vol > 0.0))]
+    cavities = [
+        _manifold(*_compact(vc, fc[face_sheet == k][:, ::-1])) for k in np.flatnonzero(keep & ~empty & (vol < 0.0))
+    ]
+    dropped = int((keep & empty).sum())
+    for g in np.flatnonzero(rebuild):
+        pv, pf = rebuild_part(*_compact(v, f[part[f[:, 0]] == g]), device=device)
+        m = _manifold(pv, pf) if len(pf) else None
+        if m is None or m.volume() <= NO_VOLUME * float(np.ptp(pv, axis=0).max()) ** 3:
             dropped += 1
-            continue
-        (solids if vol_p > 0.0 else cavities).append(solid if vol_p > 0.0 else _manifold(pv, pf[:, ::-1]))
-    holes = int((~rebuilt[part[owner]]).sum())  # the caps of rebuilt parts are gone
+        else:
+            solids.append(m)
     if not solids:
         raise GeometryError(
-            f"{source}: the mesh encloses no volume: its {parts} part(s) are flat or open sheets that their generalised "
-            f"winding number does not fill (volume below {NO_VOLUME:g} of their size cubed), so there is nothing to "
-            "fill; give the surface a thickness (e.g. Blender's Solidify modifier) or close it"
+            f"{source}: the mesh encloses no volume: its {parts} part(s) are flat or open sheets (cards: a hole larger "
+            f"than {CAP_AREA_LIMIT:g} of the sheet's area is not capped, and a closed piece below {NO_VOLUME:g} of "
+            "its size cubed is empty), so there is nothing to fill; give the surface a thickness (e.g. Blender's "
+            "Solidify modifier) or close it"
         )
     result = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add) if len(solids) > 1 else solids[0]
     if cavities:
@@ -327,8 +342,26 @@ def repair_surface(vertices, faces, source: str, triangulated: int = -1, device:
     mesh = result.to_mesh64()
     rv = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3].copy()
     rf = np.asarray(mesh.tri_verts, dtype=np.int64).reshape(-1, 3)
-    report.update(holes_capped=holes, rebuilt=int(rebuilt.sum()), dropped_parts=dropped, united=parts - dropped > 1)
+    capped = keep[owner_sheet[owner]] & ~empty[owner_sheet[owner]]
+    report.update(
+        holes_capped=int(capped.sum()),
+        rebuilt=int(rebuild.sum()),
+        dropped_parts=dropped,
+        united=len(solids) + len(cavities) if len(solids) + len(cavities) > 1 else 0,
+    )
     return rv, rf.astype(np.int32), RepairReport(**report)
+
+
+def _sheets(faces: np.ndarray, n: int) -> np.ndarray:
+    """Sheet of each triangle [f]: triangles are joined across an edge that exactly two triangles share, wound
+    against each other (a consistently oriented 2-manifold piece), int64 [f]."""
+    d, both, same = edge_counts(faces, n)
+    und = np.sort(d, axis=1)
+    key = und[:, 0] * n + und[:, 1]
+    order = np.argsort(key, kind="stable")
+    k = key[order]
+    pair = (k[:-1] == k[1:]) & (both[order[:-1]] == 2) & (same[order[:-1]] == 1)
+    return _components(len(faces), order[:-1][pair] // 3, order[1:][pair] // 3)
 
 
 def _compact(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

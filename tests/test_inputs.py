@@ -151,14 +151,14 @@ def test_load_mesh_bad_placement(tmp_path):
     path = tmp_path / "box.obj"
     _closed_box().export(path)
     for kwargs, fragments in [
-        (dict(scale=0.0), ("scale=0.0", "(0, inf)")),
-        (dict(fit_size=-1.0), ("fit_size=-1.0", "(0, inf)")),
-        (dict(scale=2.0, fit_size=0.3), ("fit_size=0.3", "scale")),
-        (dict(position=(1.0, 2.0)), ("position=(1.0, 2.0)", "3 finite numbers")),
-        (dict(position=(0.0, 0.0, float("nan"))), ("position=", "3 finite numbers")),
-        (dict(rotation=(90.0, 0.0)), ("rotation=", "Euler angles")),
-        (dict(rotation=2.0 * np.eye(3)), ("rotation=", "rotation matrix")),
-        (dict(up_axis="X"), ("up_axis='X'", "'Y' or 'Z'")),
+        ({"scale": 0.0}, ("scale=0.0", "(0, inf)")),
+        ({"fit_size": -1.0}, ("fit_size=-1.0", "(0, inf)")),
+        ({"scale": 2.0, "fit_size": 0.3}, ("fit_size=0.3", "scale")),
+        ({"position": (1.0, 2.0)}, ("position=(1.0, 2.0)", "3 finite numbers")),
+        ({"position": (0.0, 0.0, float("nan"))}, ("position=", "3 finite numbers")),
+        ({"rotation": (90.0, 0.0)}, ("rotation=", "Euler angles")),
+        ({"rotation": 2.0 * np.eye(3)}, ("rotation=", "rotation matrix")),
+        ({"up_axis": "X"}, ("up_axis='X'", "'Y' or 'Z'")),
     ]:
         with pytest.raises(pdsim.ParameterError) as ei:
             pdsim.load_mesh(path, **kwargs)

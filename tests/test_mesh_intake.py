@@ -63,8 +63,10 @@ def test_shared_mesh_loads_fills_and_drops(name):
             surf = trimesh.Trimesh(surface.points, surface.faces, process=False)
             assert surf.is_watertight and surf.is_winding_consistent
             assert len(surface.points) >= len(shape.vertices)
-            print(f"\n{name}: {body.particle_count} particles, N h^3 / V = {count_ratio:.3f}, render surface "
-                  f"{len(surface.points)} vertices (mesh {len(shape.vertices)}), {shape.repairs or 'no repair'}")
+            print(
+                f"\n{name}: {body.particle_count} particles, N h^3 / V = {count_ratio:.3f}, render surface "
+                f"{len(surface.points)} vertices (mesh {len(shape.vertices)}), {shape.repairs or 'no repair'}"
+            )
         t = frame * frame_dt
         if t < contact:
             assert z0 - z == pytest.approx(0.5 * G * t * t, rel=1e-3, abs=1e-9), (frame, z0 - z)

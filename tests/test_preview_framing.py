@@ -2,7 +2,6 @@
 /World/colliders) are left out of the box it fits, unless a camera is given."""
 
 import numpy as np
-import pytest
 
 import pdsim
 from pdsim.preview import render_cache
