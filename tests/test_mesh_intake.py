@@ -34,9 +34,10 @@ def _need_meshes():
 def test_shared_mesh_loads_fills_and_drops(name):
     """``load_mesh(NAME.obj, fit_size=0.3, position=(0, 0, 0.1))``: the shape is closed, 0.3 m across (1e-9) with its
     bottom 0.1 m above the ground; at spacing h = 0.3 m / 16 the particle count equals volume / h^3 within 15 % (the
-    lattice's error at thin features); the render surface of the intact body is closed and keeps at least the
-    repaired mesh's vertices; over 12 frames at 48 fps the centre of mass falls g t^2 / 2 (1e-3 relative) until the
-    ground is within reach (t < sqrt(2 x 0.1 m / g) less one frame), and afterwards stays above the ground."""
+    lattice's error at thin features); the render surface of the intact body is closed and has at least as many
+    vertices as the repaired mesh and as the input (its distinct positions); over 12 frames at 48 fps the centre of
+    mass falls g t^2 / 2 (1e-3 relative) until the ground is within reach (t < sqrt(2 x 0.1 m / g) less one frame),
+    and afterwards stays above the ground."""
     _need_meshes()
     shape = pdsim.load_mesh(MESHES / f"{name}.obj", fit_size=SIZE, position=(0.0, 0.0, DROP))
     assert is_closed(shape.faces.astype(np.int64), len(shape.vertices))
@@ -63,6 +64,9 @@ def test_shared_mesh_loads_fills_and_drops(name):
             surf = trimesh.Trimesh(surface.points, surface.faces, process=False)
             assert surf.is_watertight and surf.is_winding_consistent
             assert len(surface.points) >= len(shape.vertices)
+            raw = trimesh.load(MESHES / f"{name}.obj", force="mesh", process=False)
+            raw.merge_vertices(merge_tex=True, merge_norm=True)
+            assert len(surface.points) >= len(raw.vertices)  # the input's detail: at least its distinct vertices
             print(
                 f"\n{name}: {body.particle_count} particles, N h^3 / V = {count_ratio:.3f}, render surface "
                 f"{len(surface.points)} vertices (mesh {len(shape.vertices)}), {shape.repairs or 'no repair'}"
