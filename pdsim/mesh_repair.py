@@ -24,7 +24,8 @@ The steps, in order (:func:`repair_surface`):
    pieces wound inside out within an outward mesh are cavities and are subtracted). The result is a closed
    2-manifold, as the render surfaces' booleans need.
 
-A mesh that is closed and consistently wound after steps 1-2 is kept as it is (no union, no new vertices).
+A mesh of one part that is closed and consistently wound after steps 1-2 is kept as it is (no union, no new
+vertices).
 """
 
 from __future__ import annotations
@@ -276,7 +277,7 @@ def repair_surface(vertices, faces, source: str, triangulated: int = -1, device:
     part = _components(n, np.concatenate([f[:, 0], f[:, 1]]), np.concatenate([f[:, 1], f[:, 2]]))
     parts = int(part.max()) + 1
     report = {"welded": welded, "dropped_faces": dropped_faces, "triangulated": triangulated, "parts": parts}
-    if is_closed(f, n):
+    if parts == 1 and is_closed(f, n):
         if signed_volumes(v, f, np.zeros(len(f), dtype=np.int64), 1)[0] < 0.0:
             f = f[:, ::-1]
         _check_volume(v, f, source)

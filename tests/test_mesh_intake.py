@@ -143,3 +143,17 @@ def test_repair_far_from_the_origin():
     far = pdsim.shape_from_arrays(box.vertices + 1000.0, box.faces[:-2], name="far")
     assert near.volume == pytest.approx(0.006, rel=1e-9) and far.volume == pytest.approx(0.006, rel=1e-9)
     np.testing.assert_allclose(far.vertices - 1000.0, near.vertices, rtol=0.0, atol=1e-9)
+
+
+def test_glb_of_overlapping_parts(tmp_path):
+    """A GLB scene of two 0.2 m cubes overlapping by half along x (two closed parts) loads as their union: volume
+    0.2 x 0.2 x 0.3 m^3 (1e-6 relative; GLB stores float32), one closed surface, '2 pieces united'."""
+    a = trimesh.creation.box(extents=(0.2, 0.2, 0.2))
+    b = trimesh.creation.box(extents=(0.2, 0.2, 0.2))
+    b.apply_translation((0.1, 0.0, 0.0))
+    path = tmp_path / "parts.glb"
+    trimesh.Scene([a, b]).export(path)
+    shape = pdsim.load_mesh(path)
+    assert shape.volume == pytest.approx(0.2 * 0.2 * 0.3, rel=1e-6)
+    assert is_closed(shape.faces.astype(np.int64), len(shape.vertices))
+    assert "2 pieces united" in shape.repairs
