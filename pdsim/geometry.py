@@ -1,4 +1,5 @@
-"""Solid shapes: closed triangle meshes loaded through trimesh, and primitives (box, sphere, cylinder)."""
+"""Solid shapes: surface meshes loaded through trimesh, repaired and placed in metres, and primitives (box, sphere,
+cylinder)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import trimesh
 
 from .checks import check_range
 from .errors import GeometryError, ParameterError
+from .mesh_repair import count_polygons, repair_surface
 
 MESH_SUFFIXES = (".obj", ".stl", ".ply", ".glb", ".gltf", ".off")
 
@@ -23,11 +25,13 @@ class SolidShape:
         vertices: vertex positions [m], shape [vertex_count, 3], float64.
         faces: triangle vertex indices, shape [face_count, 3], int32, outward-facing (counter-clockwise from outside).
         name: label used for the body in output.
+        repairs: the line saying what loading repaired ('' when nothing was).
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     name: str = "shape"
+    repairs: str = ""
 
     @property
     def bounds(self) -> np.ndarray:
@@ -42,50 +46,98 @@ class SolidShape:
 
     @property
     def volume(self) -> float:
-        """Enclosed volume [m^3] (signed-tetrahedron sum; positive for outward-facing triangles)."""
-        v = self.vertices[self.faces]
+        """Enclosed volume [m^3] (signed-tetrahedron sum about the bounding-box centre, so that it keeps its digits
+        far from the origin; positive for outward-facing triangles)."""
+        v = (self.vertices - 0.5 * (self.bounds[0] + self.bounds[1]))[self.faces]
         return float(np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0)
 
 
-def _shape_from_trimesh(mesh, name: str, source: str) -> SolidShape:
-    """Validates a trimesh.Trimesh as a solid: non-empty, watertight, consistently wound, positive volume."""
+def _shape_from_trimesh(mesh, name: str, source: str, triangulated: int = -1) -> SolidShape:
+    """A :class:`SolidShape` of a trimesh.Trimesh, repaired into a closed solid by
+    :func:`pdsim.mesh_repair.repair_surface` (welding, hole capping, parts); GeometryError when it is empty or
+    encloses no volume."""
     if mesh is None or len(mesh.faces) == 0 or len(mesh.vertices) == 0:
         raise GeometryError(f"{source}: the mesh is empty (no triangles)")
-    size = float(np.max(np.ptp(np.asarray(mesh.vertices, dtype=np.float64), axis=0)))
-    mesh = mesh.copy()
-    mesh.merge_vertices()
-    mesh.update_faces(mesh.nondegenerate_faces())
-    mesh.remove_unreferenced_vertices()
-    if len(mesh.faces) == 0:
-        hint = ""
-        if np.isfinite(size) and size < 1.0e-5:  # vertices closer than trimesh's merge tolerance (1e-8) merge
-            hint = f"; the mesh is {size:.3g} m across: is it in the wrong units? (load_mesh(..., scale=...))"
-        raise GeometryError(f"{source}: the mesh is empty (all triangles are degenerate){hint}")
-    if not mesh.is_watertight:
-        raise GeometryError(
-            f"{source}: the mesh is not watertight (it has open or non-manifold edges), so it bounds no solid; "
-            "close its holes first (e.g. trimesh.repair.fill_holes or a mesh editor)"
-        )
-    if not mesh.is_winding_consistent:
-        raise GeometryError(f"{source}: the mesh's triangles are not consistently oriented")
-    if mesh.volume < 0.0:
-        mesh.invert()
-    if not mesh.volume > 0.0:
-        raise GeometryError(f"{source}: the mesh encloses zero volume")
-    return SolidShape(
-        vertices=np.asarray(mesh.vertices, dtype=np.float64),
-        faces=np.asarray(mesh.faces, dtype=np.int32),
-        name=name,
-    )
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    size = float(np.max(np.ptp(v, axis=0)))
+    try:
+        vertices, faces, report = repair_surface(v, np.asarray(mesh.faces, dtype=np.int64), source, triangulated)
+    except GeometryError as exc:
+        if "empty" in str(exc) and np.isfinite(size) and size < 1.0e-5:  # welded to a point at the 1e-8 m floor
+            raise GeometryError(
+                f"{exc}; the mesh is {size:.3g} m across: is it in the wrong units? (load_mesh(..., scale=...))"
+            ) from None
+        raise
+    return SolidShape(vertices=vertices, faces=faces, name=name, repairs=report.line(name))
 
 
-def load_mesh(path: str | os.PathLike, *, scale: float = 1.0, translate=(0.0, 0.0, 0.0), name: str | None = None):
-    """Loads a closed surface mesh (OBJ, STL, PLY, GLB/glTF, OFF) as a :class:`SolidShape`.
+UP_AXES = ("Y", "Z")
+MIN_MESH_SIZE = 1.0e-7  # a placed mesh smaller than this [m] across is taken for a mesh in the wrong units
+
+
+def _rotation_matrix(rotation) -> np.ndarray:
+    """3x3 rotation of ``rotation``: Euler angles (rx, ry, rz) [degrees] about the world x, then y, then z axis
+    (R = Rz Ry Rx), or a 3x3 rotation matrix (orthonormal to 1e-6, determinant +1)."""
+    a = np.asarray(rotation, dtype=np.float64)
+    allowed = "3 Euler angles in degrees (about x, then y, then z) or a 3x3 rotation matrix"
+    if a.shape == (3,) and np.all(np.isfinite(a)):
+        cx, cy, cz = np.cos(np.radians(a))
+        sx, sy, sz = np.sin(np.radians(a))
+        rx = np.array([[1.0, 0.0, 0.0], [0.0, cx, -sx], [0.0, sx, cx]])
+        ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
+        rz = np.array([[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]])
+        return rz @ ry @ rx
+    orthonormal = a.shape == (3, 3) and np.all(np.isfinite(a)) and np.abs(a @ a.T - np.eye(3)).max() <= 1.0e-6
+    if orthonormal and np.linalg.det(a) > 0.0:
+        return a
+    raise ParameterError("rotation", a.tolist(), allowed)
+
+
+def _up_matrix(up_axis: str, world_up: str) -> np.ndarray:
+    """Rotation taking a file's up axis to the world's: identity, or +-90 degrees about x (Y-up to Z-up:
+    (x, y, z) -> (x, -z, y))."""
+    for field, value in (("up_axis", up_axis), ("world_up", world_up)):
+        if not isinstance(value, str) or value.upper() not in UP_AXES:
+            raise ParameterError(field, value, "'Y' or 'Z'")
+    up_axis, world_up = up_axis.upper(), world_up.upper()
+    if up_axis == world_up:
+        return np.eye(3)
+    y_to_z = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+    return y_to_z if up_axis == "Y" else y_to_z.T
+
+
+def load_mesh(
+    path: str | os.PathLike,
+    *,
+    scale: float | None = None,
+    fit_size: float | None = None,
+    rotation=None,
+    up_axis: str = "Z",
+    world_up: str = "Z",
+    position=None,
+    name: str | None = None,
+) -> SolidShape:
+    """Loads a surface mesh (OBJ, STL, PLY, GLB/glTF, OFF) as a :class:`SolidShape` placed in metres.
+
+    The mesh is repaired as needed (:mod:`pdsim.mesh_repair`: coincident vertices welded by position, holes capped,
+    parts united, parts that cannot be capped rebuilt from their winding number) and one line saying what was
+    repaired is printed (also kept as ``shape.repairs``). Quads and n-gons are triangulated on reading. A mesh is
+    refused (GeometryError naming the file) only when it encloses no volume.
+
+    The placement, in this order:
+        1. ``up_axis`` ('Y' or 'Z', default 'Z'): the file's up axis, turned onto ``world_up`` ('Y' or 'Z', the
+           scene's up axis, default 'Z'): a Y-up file (glTF, most OBJ exports) in a Z-up scene takes
+           (x, y, z) -> (x, -z, y).
+        2. ``rotation``: Euler angles (rx, ry, rz) [degrees] about the world x, then y, then z axis, or a 3x3
+           rotation matrix; about the file's origin.
+        3. ``scale`` [-] (> 0: file units to metres, e.g. 0.01 for centimetres) or ``fit_size`` [m] (> 0: the
+           largest bounding-box extent after steps 1-2 becomes ``fit_size``); at most one of the two. Neither: 1.
+        4. ``position`` [m]: where the centre of the bounding box's bottom face (lowest along ``world_up``) goes, so
+           that ``position=(0, 0, 0)`` stands the object on a ground at height 0, centred over the origin. None:
+           the file's coordinates are kept (after steps 1-3, about the file's origin).
 
     Args:
         path: mesh file; multi-object files (GLB scenes) are merged into one mesh.
-        scale: uniform scale applied to the vertices [-], > 0.
-        translate: offset added after scaling [m].
         name: body label; defaults to the file's stem.
     """
     path = os.fspath(path)
@@ -94,20 +146,42 @@ def load_mesh(path: str | os.PathLike, *, scale: float = 1.0, translate=(0.0, 0.
         raise GeometryError(f"{path}: unknown mesh file type '{suffix}'; supported: {', '.join(MESH_SUFFIXES)}")
     if not os.path.isfile(path):
         raise GeometryError(f"{path}: no such file")
-    scale = check_range("scale", scale, 0.0, None)
-    translate = _vec3("translate", translate)
+    if scale is not None and fit_size is not None:
+        raise ParameterError("fit_size", fit_size, "None when scale is given (scale and fit_size both set the size)")
+    scale = 1.0 if scale is None else check_range("scale", scale, 0.0, None)
+    fit_size = None if fit_size is None else check_range("fit_size", fit_size, 0.0, None)
+    turn = _up_matrix(up_axis, world_up)
+    if rotation is not None:
+        turn = _rotation_matrix(rotation) @ turn
+    position = None if position is None else _vec3("position", position)
     if suffix == ".stl":
         _check_stl(path)
     try:
-        mesh = _load_trimesh(path, suffix)
+        mesh, triangulated = _load_trimesh(path, suffix)
     except Exception as exc:  # noqa: BLE001 (trimesh raises many exception types for unreadable files)
         raise GeometryError(f"{path}: cannot read mesh ({exc})") from None
     if not isinstance(mesh, trimesh.Trimesh):
         raise GeometryError(f"{path}: the file holds no triangle mesh")
-    if len(mesh.faces) > 0:
-        mesh.apply_scale(scale)
-        mesh.apply_translation(translate)
-    return _shape_from_trimesh(mesh, name or os.path.splitext(os.path.basename(path))[0], path)
+    name = name or os.path.splitext(os.path.basename(path))[0]
+    shape = _shape_from_trimesh(mesh, name, path, triangulated)
+    v = shape.vertices @ turn.T
+    if fit_size is not None:
+        scale = fit_size / float(np.ptp(v, axis=0).max())
+    v = v * scale
+    if position is not None:
+        up = np.eye(3)[2 if world_up.upper() == "Z" else 1]
+        lo, hi = v.min(axis=0), v.max(axis=0)
+        bottom = 0.5 * (lo + hi) - ((0.5 * (lo + hi) - lo) @ up) * up
+        v = v + (position - bottom)
+    size = float(np.ptp(v, axis=0).max())
+    if not size >= MIN_MESH_SIZE:
+        raise GeometryError(
+            f"{path}: the placed mesh is {size:.3g} m across (under {MIN_MESH_SIZE:g} m): is it in the wrong units? "
+            "(load_mesh(..., scale=...) turns file units into metres; fit_size=... sets the size in metres)"
+        )
+    if shape.repairs:
+        print(shape.repairs)
+    return SolidShape(vertices=v, faces=shape.faces, name=name, repairs=shape.repairs)
 
 
 def _check_stl(path: str) -> None:
@@ -136,24 +210,29 @@ TEXT_MESH_SUFFIXES = (".obj", ".off")  # always text: read here, so that their e
 
 
 def _load_trimesh(path: str, suffix: str):
-    """trimesh.load of a mesh file. Text formats (OBJ, OFF) are decoded here: UTF-8, else Latin-1 (every byte
-    sequence is valid Latin-1, and the geometry is ASCII), so a comment with one non-UTF-8 byte (a Latin-1 degree
-    sign or accent from an older exporter) does not send trimesh to its optional charset detector
-    (charset_normalizer, which may not be installed). Other formats go to trimesh as files."""
+    """(trimesh.load of a mesh file, polygons of more than 3 corners it triangulated (counted in OBJ and OFF text;
+    -1 for the other formats)). Vertices are not merged here (the repair welds them by position). Text formats (OBJ,
+    OFF) are decoded here: UTF-8, else Latin-1 (every byte sequence is valid Latin-1, and the geometry is ASCII), so
+    a comment with one non-UTF-8 byte (a Latin-1 degree sign or accent from an older exporter) does not send trimesh
+    to its optional charset detector (charset_normalizer, which may not be installed). Other formats go to trimesh
+    as files."""
     if suffix not in TEXT_MESH_SUFFIXES:
-        return trimesh.load(path, force="mesh", process=True)
+        return trimesh.load(path, force="mesh", process=False), -1
     with open(path, "rb") as f:
         data = f.read()
     try:
-        data.decode("utf-8")
+        text = data.decode("utf-8")
     except UnicodeDecodeError:
-        data = data.decode("latin-1").encode("utf-8")
+        text = data.decode("latin-1")
+        data = text.encode("utf-8")
     resolver = trimesh.resolvers.FilePathResolver(path)  # material libraries beside an OBJ still load
-    return trimesh.load(io.BytesIO(data), file_type=suffix[1:], force="mesh", process=True, resolver=resolver)
+    mesh = trimesh.load(io.BytesIO(data), file_type=suffix[1:], force="mesh", process=False, resolver=resolver)
+    return mesh, count_polygons(text)
 
 
 def shape_from_arrays(vertices, faces, *, name: str = "mesh") -> SolidShape:
-    """Builds a :class:`SolidShape` from vertex [n, 3] and triangle [m, 3] arrays (validated like a loaded file)."""
+    """Builds a :class:`SolidShape` from vertex [n, 3] [m] and triangle [m, 3] arrays (repaired like a loaded file;
+    the repair line is kept as ``shape.repairs``, not printed)."""
     try:
         v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
         f_raw = np.asarray(faces, dtype=np.float64).reshape(-1, 3)

@@ -93,17 +93,18 @@ def test_usd_tetmesh_is_loaded_in_world_space(tmp_path):
     np.testing.assert_allclose(loaded.vertices, mesh.vertices + np.array([1.0, 2.0, 3.0]), atol=1e-6)
 
 
-def test_open_surface_is_rejected(tmp_path):
-    """An open surface bounds no solid: building the shape (from arrays or from a file) raises GeometryError."""
+def test_flat_surface_is_rejected(tmp_path):
+    """A flat open sheet (a square of two triangles) encloses no volume: building the shape (from arrays or from a
+    file) raises GeometryError."""
     import trimesh
 
-    box = trimesh.creation.box(extents=(1, 1, 1))
-    faces = box.faces[:-2]  # remove one side
-    with pytest.raises(pdsim.GeometryError, match="watertight"):
-        pdsim.shape_from_arrays(box.vertices, faces)
+    vertices = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]]
+    faces = [[0, 1, 2], [0, 2, 3]]
+    with pytest.raises(pdsim.GeometryError, match="encloses no volume"):
+        pdsim.shape_from_arrays(vertices, faces)
     path = tmp_path / "open.obj"
-    trimesh.Trimesh(box.vertices, faces, process=False).export(path)
-    with pytest.raises(pdsim.GeometryError, match="watertight"):
+    trimesh.Trimesh(vertices, faces, process=False).export(path)
+    with pytest.raises(pdsim.GeometryError, match="encloses no volume"):
         FemBody(pdsim.load_mesh(path), MAT)
 
 

@@ -61,21 +61,23 @@ def _tiny_scene(**kwargs) -> pdsim.Scene:
 
 
 @pytest.mark.parametrize("suffix", [".obj", ".stl"])
-def test_open_mesh_file_is_not_watertight(tmp_path, suffix):
-    """load_mesh of an open box (two triangles missing) raises GeometryError naming the file and 'not watertight'."""
+def test_open_mesh_file_is_capped(tmp_path, suffix):
+    """load_mesh of an open box (two triangles of one side missing) caps the hole: the box's exact volume (1e-6
+    relative; STL stores float32), a closed surface, and the repair line says one hole was capped."""
     path = tmp_path / f"open{suffix}"
     _open_box().export(path)
-    with pytest.raises(pdsim.GeometryError) as ei:
-        pdsim.load_mesh(path)
-    _assert_error(ei, pdsim.GeometryError, str(path), "not watertight")
+    shape = pdsim.load_mesh(path)
+    assert shape.volume == pytest.approx(0.3 * 0.2 * 0.1, rel=1e-6)
+    assert "1 holes capped" in shape.repairs
 
 
-def test_open_mesh_arrays_are_not_watertight():
-    """shape_from_arrays of an open box raises GeometryError naming the shape and 'not watertight'."""
-    m = _open_box()
+def test_flat_sheet_encloses_no_volume():
+    """shape_from_arrays of a flat open sheet (a square of two triangles) raises GeometryError naming the shape and
+    saying it encloses no volume."""
+    v = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]]
     with pytest.raises(pdsim.GeometryError) as ei:
-        pdsim.shape_from_arrays(m.vertices, m.faces, name="lid_missing")
-    _assert_error(ei, pdsim.GeometryError, "lid_missing", "not watertight")
+        pdsim.shape_from_arrays(v, [[0, 1, 2], [0, 2, 3]], name="sheet")
+    _assert_error(ei, pdsim.GeometryError, "sheet", "encloses no volume")
 
 
 @pytest.mark.parametrize(
@@ -142,19 +144,25 @@ def test_missing_file(tmp_path):
     _assert_error(ei, pdsim.GeometryError, str(path), "no such file")
 
 
-def test_load_mesh_bad_scale_and_translate(tmp_path):
-    """load_mesh rejects scale <= 0 and a translate that is not 3 finite numbers with ParameterError."""
+def test_load_mesh_bad_placement(tmp_path):
+    """load_mesh rejects scale <= 0, fit_size <= 0, scale and fit_size together, a position that is not 3 finite
+    numbers, a rotation that is neither 3 angles nor a rotation matrix and an up axis other than 'Y' or 'Z' with
+    ParameterError naming the field."""
     path = tmp_path / "box.obj"
     _closed_box().export(path)
-    with pytest.raises(pdsim.ParameterError) as ei:
-        pdsim.load_mesh(path, scale=0.0)
-    _assert_error(ei, pdsim.ParameterError, "scale=0.0", "(0, inf)")
-    with pytest.raises(pdsim.ParameterError) as ei:
-        pdsim.load_mesh(path, translate=(1.0, 2.0))
-    _assert_error(ei, pdsim.ParameterError, "translate=(1.0, 2.0)", "3 finite numbers")
-    with pytest.raises(pdsim.ParameterError) as ei:
-        pdsim.load_mesh(path, translate=(0.0, 0.0, float("nan")))
-    _assert_error(ei, pdsim.ParameterError, "translate=", "3 finite numbers")
+    for kwargs, fragments in [
+        ({"scale": 0.0}, ("scale=0.0", "(0, inf)")),
+        ({"fit_size": -1.0}, ("fit_size=-1.0", "(0, inf)")),
+        ({"scale": 2.0, "fit_size": 0.3}, ("fit_size=0.3", "scale")),
+        ({"position": (1.0, 2.0)}, ("position=(1.0, 2.0)", "3 finite numbers")),
+        ({"position": (0.0, 0.0, float("nan"))}, ("position=", "3 finite numbers")),
+        ({"rotation": (90.0, 0.0)}, ("rotation=", "Euler angles")),
+        ({"rotation": 2.0 * np.eye(3)}, ("rotation=", "rotation matrix")),
+        ({"up_axis": "X"}, ("up_axis='X'", "'Y' or 'Z'")),
+    ]:
+        with pytest.raises(pdsim.ParameterError) as ei:
+            pdsim.load_mesh(path, **kwargs)
+        _assert_error(ei, pdsim.ParameterError, *fragments)
 
 
 @pytest.mark.parametrize("suffix", [".obj", ".stl", ".ply", ".glb"])

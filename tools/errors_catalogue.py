@@ -195,10 +195,10 @@ def _sliver_mesh():
 A_MESH = "meshes and shapes"
 
 
-@case("open_mesh", A_MESH, "an OBJ with a hole (two triangles missing)", "a closed (watertight) surface",
-      pdsim.GeometryError, "not watertight")  # fmt: skip
+@case("flat_mesh", A_MESH, "an OBJ of a flat open sheet (a square of two triangles)", "a surface enclosing a volume "
+      "(small holes are capped)", pdsim.GeometryError, "encloses no volume")  # fmt: skip
 def _(ws):
-    pdsim.load_mesh(ws.input("open.obj", _box_mesh_text(open_faces=2)))
+    pdsim.load_mesh(ws.input("sheet.obj", "v 0 0 0\nv 0.3 0 0\nv 0.3 0.2 0\nv 0 0.2 0\nf 1 2 3\nf 1 3 4\n"))
 
 
 @case("empty_obj", A_MESH, "an OBJ file without faces", "a file holding triangles", pdsim.GeometryError, "empty")
@@ -235,10 +235,27 @@ def _(ws):
     pdsim.load_mesh(ws.input("box.obj", _box_mesh_text()), scale=0.0)
 
 
-@case("mesh_translate", A_MESH, "load_mesh(translate=(1, 2))", "3 finite numbers [m]", pdsim.ParameterError,
-      "translate=", "3 finite numbers")  # fmt: skip
+@case("mesh_position", A_MESH, "load_mesh(position=(1, 2))", "3 finite numbers [m]", pdsim.ParameterError,
+      "position=", "3 finite numbers")  # fmt: skip
 def _(ws):
-    pdsim.load_mesh(ws.input("box.obj", _box_mesh_text()), translate=(1.0, 2.0))
+    pdsim.load_mesh(ws.input("box.obj", _box_mesh_text()), position=(1.0, 2.0))
+
+
+@case("mesh_fit_and_scale", A_MESH, "load_mesh(scale=2, fit_size=0.3)", "one of scale and fit_size",
+      pdsim.ParameterError, "fit_size=0.3", "scale")  # fmt: skip
+def _(ws):
+    pdsim.load_mesh(ws.input("box.obj", _box_mesh_text()), scale=2.0, fit_size=0.3)
+
+
+@case("mesh_rotation", A_MESH, "load_mesh(rotation=(90, 0))", "3 Euler angles [degrees] or a 3x3 rotation matrix",
+      pdsim.ParameterError, "rotation=", "Euler angles")  # fmt: skip
+def _(ws):
+    pdsim.load_mesh(ws.input("box.obj", _box_mesh_text()), rotation=(90.0, 0.0))
+
+
+@case("mesh_up_axis", A_MESH, "load_mesh(up_axis='X')", "'Y' or 'Z'", pdsim.ParameterError, "up_axis='X'")
+def _(ws):
+    pdsim.load_mesh(ws.input("box.obj", _box_mesh_text()), up_axis="X")
 
 
 @case("face_indices", A_MESH, "shape_from_arrays with a face index past the last vertex",
@@ -258,8 +275,8 @@ def _(ws):
     pdsim.shape_from_arrays(v, box.faces, name="nan_vertex")
 
 
-@case("mesh_scale_1e9", A_MESH, "load_mesh(scale=1e-9): a 0.3 m part shrunk below trimesh's merge tolerance",
-      "a mesh in metres", pdsim.GeometryError, "degenerate", "wrong units")  # fmt: skip
+@case("mesh_scale_1e9", A_MESH, "load_mesh(scale=1e-9): a 0.3 m part shrunk below 0.1 micrometre",
+      "a mesh in metres", pdsim.GeometryError, "across", "wrong units")  # fmt: skip
 def _(ws):
     pdsim.load_mesh(ws.input("box.obj", _box_mesh_text()), scale=1.0e-9)
 

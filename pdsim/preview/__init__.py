@@ -19,7 +19,8 @@ it from the body's Points prim (the value of the nearest point of each vertex), 
 peridynamic body's damage on its surface.
 
 The camera is a pinhole with a 35 degree vertical field of view. By default it looks at the centre of the bounding box
-of all frames' geometry from a three-quarter view (azimuth -60 degrees about the stage's up axis, elevation 25
+of the bodies over all frames (colliders and projectiles, the prims under /World/colliders, left out) from a
+three-quarter view (azimuth -60 degrees about the stage's up axis, elevation 25
 degrees), at the distance that fits that box into the image; see :func:`camera_from_spec` for the other choices.
 
 Modules: ``camera`` (camera and ``--camera`` specs), ``options`` (size and frame selection), ``colors`` (ramp,

@@ -91,6 +91,15 @@ def _primvar(prim, name: str, t):
     return arr, str(pv.GetInterpolation())
 
 
+COLLIDER_GROUP = "colliders"  # the prim under the default prim that holds colliders and projectiles (RigidView.group)
+
+
+def _is_collider(path) -> bool:
+    """True for a prim path under ``/<default prim>/colliders`` (a static collider or a projectile)."""
+    parts = str(path).split("/")
+    return len(parts) > 3 and parts[2] == COLLIDER_GROUP
+
+
 @dataclass
 class FrameGeometry:
     """One frame's renderable geometry, world coordinates [m]."""
@@ -274,8 +283,10 @@ class StageReader:
         return pts, radii
 
     def bounds(self, frames, *, detect_ground: bool = True) -> tuple[np.ndarray, np.ndarray, float | None]:
-        """(lo, hi) [m] of all geometry over ``frames`` (points grown by their radii) and the ground height [m]
-        along the up axis of a ground-like mesh if there is one (else None): a mesh perpendicular to the up axis
+        """(lo, hi) [m] of the bodies over ``frames`` (points grown by their radii; the prims under
+        ``/World/colliders``, the scene's colliders and projectiles, are left out unless there is nothing else) and
+        the ground height [m] along the up axis of a ground-like mesh if there is one (else None): a mesh
+        perpendicular to the up axis
         (thickness below 1e-6 of its width), at least as wide as all other geometry and below its middle
         (pdsim writes the scene's ground plane as such a quad, /World/ground). It is left out of the box and of the
         rendering; the preview's ground plane, at its height, stands for it. ``detect_ground=False`` keeps the
@@ -322,6 +333,8 @@ class StageReader:
                     self.ground_prims.add(key)
                     ground = height
         kept = [b for k, b in boxes.items() if k not in self.ground_prims] or list(boxes.values())
+        bodies = [b for k, b in boxes.items() if k not in self.ground_prims and not _is_collider(k)]
+        kept = bodies or kept
         lo = np.min([b[0] for b in kept], axis=0)
         hi = np.max([b[1] for b in kept], axis=0)
         return lo, hi, ground

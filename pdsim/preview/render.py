@@ -225,7 +225,8 @@ def render_cache(
         categorical: colour ``color`` by a palette (True) or a ramp (False); None: palette for integer primvars.
         points: which ``UsdGeom.Points`` prims are drawn as spheres: "auto" (those without a surface mesh
             ``<name>_surface`` beside them: a lattice's points, not a peridynamic or FEM body's), "all" or "none".
-        fit: the geometry the automatic camera frames: "all" frames of the cache (the same camera for every still
+        fit: the frames whose bodies (not colliders or projectiles) the automatic camera frames: "all" frames of
+            the cache (the same camera for every still
             and animation of the cache), the "selected" frames, or the "first" frame (the rest pose: debris that
             flies far away leaves the picture instead of shrinking it). The ground stays at the lowest point of all
             frames.
