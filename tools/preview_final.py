@@ -226,9 +226,13 @@ halves the width of what a crack frees and the impact's energy, which the spacin
 area in smaller pieces. A horizon that is a material length (delta = 6 cm at both spacings, horizon_factor 6.03 at
 h/2) would keep that width, but it costs 8 times the bonds per particle at h/2 (about 900 instead of 115: 12.6
 million bonds for this sphere), so the final run would cost 128 preview runs instead of 16, and the surface
-correction and the step's stability bound are calibrated for a horizon of about 3 h (docs/accuracy.md); it is not
-done and not measured here. The preview thus predicts where and how much of the body breaks, not yet into how many
-pieces.
+correction and the step's stability bound are calibrated for a horizon of about 3 h (docs/accuracy.md). One run
+measures it (`python tools/preview_final.py --presets glass --cases drop --spacings 0.01 --horizon 0.0603 --json
+docs/data/preview_final_10mm_horizon60mm.json`, 141 s): the glass drop at h/2 with the preview's horizon of 6 cm
+gives n80 = 12, as the preview, but only 1.4 % of the sphere breaks out (against 58.7 % at h), so the horizon alone
+does not make the final break like the preview: with eight times the bonds of the same length the particles of a
+finer family hold on where the preview's break apart. The presets keep the default horizon. The preview thus
+predicts where and about how much of the body breaks, not yet into how many pieces.
 
 Stills: ![glass drop at h and h/2](presets_glass_drop.png) (`python tools/preview_final.py --presets glass --cases
 drop --spacings 0.02 0.01 --stills docs/presets_glass_drop.png`: the particles at 40 ms from the side, the ten
@@ -249,9 +253,10 @@ Glass pane (scenes/glass_pane.py, with its own glass: the real stiffness in slow
 displacement along the ball's flight of the pane between 1 and 2 ball radii from its centre), the broken bonds and
 the largest piece set free. At the shipped 4 mm spacing the first bonds break at 0.55 mm (frame 3 of 48, 0.25 ms);
 the deflection passes the pane's 12 mm thickness at frame 14 (12.9 mm, 1.17 ms) with 12 % of the bonds broken but
-no piece of 8 particles free, and at frame 20 (19.0 mm, 1.67 ms) the largest free piece holds 5 particles
-(docs/data/pane_deflection_4mm.json). So by the freed-piece measure the pane bows more than its thickness before it
-cracks through, where real glass cracks through at a few millimetres. At the preview's 10 mm (`--scene-args
+no piece of 8 particles free (the largest free piece holds 7 particles up to frame 28), and the first piece comes
+free at frame 29 (2.42 ms: 87 particles) at a deflection of 27.7 mm, 2.3 times the thickness, with 23 % of the bonds
+broken (docs/data/pane_deflection_4mm.json). So the pane bows more than its thickness before it cracks through,
+where real glass cracks through at a few millimetres. At the preview's 10 mm (`--scene-args
 '{"spacing": 0.01, "frames": 16}'`, docs/data/pane_deflection_10mm.json) a piece of 10 particles is free at frame 6
 (1.5 ms) at 6.2 mm, half the thickness, but there one particle is as thick as the pane. Why not yet: the scene's glass
 keeps the full compressive bonus capped at 3 s_c, so bonds beside the compressed zone under the ball stretch to 4 s_c
