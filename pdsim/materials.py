@@ -186,8 +186,9 @@ class Material:
         scatter = self.strength_weibull_modulus is not None or self.debris_damping > 0.0
         if self.sampling_jitter is not None and not self.breaks:
             raise ParameterError(
-                "sampling_jitter", self.sampling_jitter, "None for a material that never breaks (give critical_stretch "
-                "or fracture_energy)"
+                "sampling_jitter",
+                self.sampling_jitter,
+                "None for a material that never breaks (give critical_stretch or fracture_energy)",
             )
         if scatter and not self.breaks:
             field_name = "strength_weibull_modulus" if self.strength_weibull_modulus is not None else "debris_damping"

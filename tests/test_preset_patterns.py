@@ -46,7 +46,8 @@ def test_plain_presets_fail_the_shard_figures():
 
 def test_figures_count_dust_big_pieces_and_n80():
     """figures() on hand-made labels: a body of 100 unit-mass particles with a main piece of 50, pieces of 20, 12 and
-    10 and 8 single particles: broken out 50 %, dust 8 / 50, big pieces (> 5 kg) 4, n80 = 3 (20 + 12 + 10 = 42 >= 40)."""
+    10 and 8 single particles: broken out 50 %, dust 8 / 50, big pieces (> 5 kg) 4, n80 = 3 (20 + 12 + 10 = 42 >=
+    40)."""
 
     class Fake:
         def body_slice(self, _):

@@ -142,8 +142,6 @@ def test_field_options_are_validated():
     with pytest.raises(ParameterError, match="sampling_jitter"):
         pdsim.Material(density=1.0, youngs_modulus=1.0, poisson_ratio=0.2, sampling_jitter=0.5)
     with pytest.raises(ParameterError, match="sampling_jitter"):
-        pdsim.Material(
-            density=1.0, youngs_modulus=1.0, poisson_ratio=0.2, critical_stretch=0.01, sampling_jitter=1.5
-        )
+        pdsim.Material(density=1.0, youngs_modulus=1.0, poisson_ratio=0.2, critical_stretch=0.01, sampling_jitter=1.5)
     with pytest.raises(ParameterError, match="material"):
         strength_factors(pdsim.presets.clay(), np.zeros((1, 3)))

@@ -25,7 +25,7 @@ import warp as wp
 from pdsim.timestep import frame_steps, projectile_step_limit
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes"))
-import glass_pane  # noqa: E402 (scenes/glass_pane.py, on the path above)
+import glass_pane
 
 
 PIECE = 8  # particles: a freed fragment this large is a piece, not a chip
@@ -59,8 +59,14 @@ def measure(scene_args: dict, *, stop_after: int = 2) -> dict:
         broken = float(1.0 - solver.bond_alive().sum() / alive0)
         sizes = np.sort(np.unique(solver.fragment_ids(), return_counts=True)[1])[::-1]
         piece = int(sizes[1]) if len(sizes) > 1 else 0
-        row = {"frame": frame, "time_ms": 1.0e3 * frame * scene.frame_time, "deflection_mm": 1.0e3 * deflection,
-               "broken_bonds": broken, "fragments": int(len(sizes)), "largest_piece": piece}
+        row = {
+            "frame": frame,
+            "time_ms": 1.0e3 * frame * scene.frame_time,
+            "deflection_mm": 1.0e3 * deflection,
+            "broken_bonds": broken,
+            "fragments": len(sizes),
+            "largest_piece": piece,
+        }
         rows.append(row)
         print(json.dumps(row), flush=True)
         if broken > 0.0 and "first_break" not in events:
@@ -69,8 +75,15 @@ def measure(scene_args: dict, *, stop_after: int = 2) -> dict:
             events["through"] = row
         if "through" in events and frame >= events["through"]["frame"] + stop_after:
             break
-    return {"rows": rows, "events": events, "particles": len(rest), "substeps": substeps,
-            "wall_s": time.perf_counter() - t0, "scene_args": scene_args, "thickness_mm": 1.0e3 * glass_pane.THICKNESS}
+    return {
+        "rows": rows,
+        "events": events,
+        "particles": len(rest),
+        "substeps": substeps,
+        "wall_s": time.perf_counter() - t0,
+        "scene_args": scene_args,
+        "thickness_mm": 1.0e3 * glass_pane.THICKNESS,
+    }
 
 
 def main(argv=None):

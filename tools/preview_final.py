@@ -56,9 +56,7 @@ CASES = ("drop", "hit")
 CENTRE = np.array([0.0, 0.0, DIAMETER / 2.0 + 0.002])  # the sphere's centre [m], 2 mm above the ground
 
 
-def build_case(
-    case: str, material: pdsim.Material, spacing: float, *, frames=FRAMES, duration=DURATION, horizon=None
-):
+def build_case(case: str, material: pdsim.Material, spacing: float, *, frames=FRAMES, duration=DURATION, horizon=None):
     """The scene of one case: "drop" (the sphere falls onto the ground plane at SPEED, under gravity) or "hit" (the
     sphere resting on the ground, a kinematic ball of BALL_RADIUS coming down onto it at SPEED along BALL_DIRECTION);
     ground and ball with Coulomb friction FRICTION; ``frames`` frames over ``duration`` [s]; ``horizon`` [m]: the
@@ -110,8 +108,8 @@ def figures(solver, body_index: int = 0) -> dict:
     held = np.cumsum(np.sort(mass[out])[::-1])
     n80 = int(np.searchsorted(held, HELD_SHARE * out_mass * (1.0 - 1.0e-12)) + 1) if out_mass > 0 else 0
     return {
-        "particles": int(len(lab)),
-        "fragments": int(len(mass)),
+        "particles": len(lab),
+        "fragments": len(mass),
         "broken_out": out_mass / total,
         "dust": dust / out_mass if out_mass > 0 else 0.0,
         "big": int(np.sum(mass > BIG_SHARE * total)),
@@ -164,7 +162,8 @@ def table(results: list[dict]) -> str:
     if pairs:
         lines += [
             "",
-            "| preset | case | n80 at h / at h/2 (ratio; must be <= 1.5) | broken out at h / at h/2 (change; within +-30 %) |",
+            "| preset | case | n80 at h / at h/2 (ratio; must be <= 1.5) "
+            "| broken out at h / at h/2 (change; within +-30 %) |",
             "|---|---|---|---|",
         ]
         for c, f in pairs:

@@ -180,9 +180,7 @@ def weibull_from_gaussian(g: float, modulus: float):
 
 
 @wp.func
-def strength_field_factor(
-    x: wp.vec3, modes: wp.array(dtype=wp.vec4), first: int, count: int, modulus: float
-):
+def strength_field_factor(x: wp.vec3, modes: wp.array(dtype=wp.vec4), first: int, count: int, modulus: float):
     """The strength factor of a field at the body-local point x [m]: the Gaussian field
     g(x) = sqrt(2 / N) sum_i cos(k_i . x + phi_i) over the modes [first, first + count) (strength_field_modes)
     mapped to the Weibull marginal of shape ``modulus`` and unit median (weibull_from_gaussian)."""
