@@ -7,7 +7,7 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
-from . import presets as presets  # named materials: pdsim.presets.glass(), concrete, wood, clay, steel, aluminium
+from . import presets as presets  # named materials: pdsim.presets.glass(), ceramic, stone, plaster, steel, ...
 from .bodies import BoundaryCondition, PointKind
 from .colliders import BoxProjectile, GroundPlane, MeshCollider, MeshProjectile, SphereProjectile
 from .errors import FeatureNotAvailableError, GeometryError, InstabilityError, ParameterError, PdsimError

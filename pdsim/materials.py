@@ -6,9 +6,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
 
 from .checks import check_range
 from .errors import ParameterError
+from .kernels.peridynamics import bonds as kb
 
 
 @dataclass(frozen=True)
@@ -72,6 +74,13 @@ class Material:
             scatters more (m = 4: 90 % of the factors between 0.52 and 1.44; m = 10: between 0.77 and 1.16). None
             (default): every bond has the nominal strength. Needs a material that breaks.
         strength_seed: seed of the strength scatter, an integer in [0, 2^31 - 1] (default 0).
+        strength_correlation_length: l [m] > 0: the strength scatter becomes a spatial random field of the material
+            instead of one draw per bond: a Gaussian field with correlation exp(-r^2 / (2 l^2)) (64 random Fourier
+            modes drawn from ``strength_seed``, kernels/peridynamics/bonds.py) mapped to the same Weibull marginal,
+            evaluated at each bond's midpoint in the body's rest frame (the particles relative to the centre of the
+            shape's bounding box, turned back by the body's ``material_rotation``). Weak spots then have a material
+            size and sit at the same places in the body at every spacing and wherever the body is placed. None
+            (default): one factor per bond. Needs ``strength_weibull_modulus``.
         debris_damping: rate c [1/s] >= 0 at which particles that lost most of their bonds (damage above
             ``debris_damage``) are pulled towards the mean velocity of the neighbours they are still bonded to, or,
             once loose, of their reference family (the material they broke from): a = c (v_bar - v)
@@ -80,6 +89,9 @@ class Material:
             step must keep c dt < 1. Needs a material that breaks.
         debris_damage: damage threshold in (0, 1) above which ``debris_damping`` acts (default 0.7: a particle on a
             clean crack face has lost about half its bonds and is left alone).
+        sampling_jitter: the particle jitter, in (0, 1] of the spacing, that a peridynamic body of this material
+            takes when its ``sampling`` is not given (pdsim.PeridynamicBody: sampling="jittered" with this jitter);
+            None (default): the lattice. Needs a material that breaks (it keeps cracks off the lattice planes).
 
     Features a material does not use cost nothing: the solver allocates and launches plasticity only for materials
     with a yield stress and fracture only for materials that can break.
@@ -101,6 +113,8 @@ class Material:
     strength_seed: int = 0
     debris_damping: float = 0.0
     debris_damage: float = 0.7
+    strength_correlation_length: float | None = None
+    sampling_jitter: float | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "density", check_range("density", self.density, 0.0, None))
@@ -157,7 +171,25 @@ class Material:
             self, "debris_damping", check_range("debris_damping", self.debris_damping, 0.0, None, lo_open=False)
         )
         object.__setattr__(self, "debris_damage", check_range("debris_damage", self.debris_damage, 0.0, 1.0))
+        if self.strength_correlation_length is not None:
+            if self.strength_weibull_modulus is None:
+                raise ParameterError(
+                    "strength_correlation_length",
+                    self.strength_correlation_length,
+                    "None unless strength_weibull_modulus is set",
+                )
+            ell = check_range("strength_correlation_length", self.strength_correlation_length, 0.0, None)
+            object.__setattr__(self, "strength_correlation_length", ell)
+        if self.sampling_jitter is not None:
+            jitter = check_range("sampling_jitter", self.sampling_jitter, 0.0, 1.0, hi_open=False)
+            object.__setattr__(self, "sampling_jitter", jitter)
         scatter = self.strength_weibull_modulus is not None or self.debris_damping > 0.0
+        if self.sampling_jitter is not None and not self.breaks:
+            raise ParameterError(
+                "sampling_jitter",
+                self.sampling_jitter,
+                "None for a material that never breaks (give critical_stretch or fracture_energy)",
+            )
         if scatter and not self.breaks:
             field_name = "strength_weibull_modulus" if self.strength_weibull_modulus is not None else "debris_damping"
             raise ParameterError(
@@ -225,6 +257,30 @@ class Material:
     def shear_wave_speed(self) -> float:
         """Shear (S) wave speed sqrt(mu / rho) [m/s]."""
         return math.sqrt(self.shear_modulus / self.density)
+
+
+def strength_factors(material: Material, points, *, device="cpu") -> np.ndarray:
+    """The factors [-] by which ``material``'s strength field (``strength_correlation_length``) multiplies the
+    critical stretch of a bond whose midpoint is at each of ``points`` [m], shape [n, 3], given in the body's rest
+    frame (relative to the centre of the shape's bounding box); float64 [n]. The same kernel function sets the bonds'
+    strengths (kernels/peridynamics/bonds.py)."""
+    if material.strength_correlation_length is None:
+        raise ParameterError("material", material.name, "a material with a strength_correlation_length")
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3 or not np.all(np.isfinite(p)):
+        raise ParameterError("points", f"shape {p.shape}", "finite points of shape [n, 3]")
+    modes = kb.strength_field_modes(material.strength_correlation_length, material.strength_seed)
+    out = wp.zeros(max(len(p), 1), dtype=float, device=device)
+    kb.strength_field(
+        len(p),
+        points=wp.array(p.astype(np.float32), dtype=wp.vec3, device=device),
+        modes=wp.array(modes, dtype=wp.vec4, device=device),
+        mode_count=len(modes),
+        modulus=float(material.strength_weibull_modulus),
+        factor=out,
+        device=device,
+    )
+    return out.numpy()[: len(p)].astype(np.float64)
 
 
 # A few presets with round numbers; soft enough that animation time steps stay affordable.

@@ -1,4 +1,4 @@
-"""Named material presets: glass, concrete, wood, clay, steel and aluminium.
+"""Named material presets: glass, porcelain, ceramic, stone, concrete, plaster, wood, clay, steel, aluminium, rubber.
 
 Each preset is a function returning a :class:`pdsim.Material` in SI units. ``real=True`` gives typical measured
 values from the literature (the ranges are in each docstring). The default, ``real=False``, gives the *animation*
@@ -14,6 +14,19 @@ strain through ``yield_stress``), because an impact at speed v strains a body by
 the real breaking strains (1e-4 to 1e-3) would make every touch shatter. Each animation preset says which strains it
 uses and why; the real values are kept for slow-motion shots (``Scene(frame_time=...)`` of microseconds) and
 engineering checks.
+
+Break pattern. The brittle presets (glass, porcelain, ceramic, stone, concrete, plaster) carry, with
+``pattern=True`` (default), the settings that make them break into shards rather than dust at an artist's preview
+spacing and alike at a finer one (docs/fracture.md, "Presets at preview and final spacing"): a strength field with a
+material correlation length (``strength_weibull_modulus``, ``strength_correlation_length``: the weak spots are the
+material's, the same at every spacing), jittered particles (``sampling_jitter`` 0.5: no lattice planes for cracks
+to follow), debris damping (:data:`DEBRIS_DAMPING` per second of the animation values, a fixed rate so that it acts
+alike at every spacing) and the full compressive bonus capped at 3 s_c (:data:`SHARD_BONUS`,
+:data:`SHARD_BONUS_CAP`). ``pattern=False`` gives the plain material (uniform strength, lattice sampling, no debris
+damping, the compressive bonus :data:`COMPRESSIVE_BONUS`), whose breaking strain is exactly the calibrated one. The
+other presets have no pattern settings (wood splits by its grain; clay, steel and aluminium tear by plasticity;
+rubber never breaks), so ``pattern`` changes nothing for them. Contact friction is a setting of the ground, the
+colliders and the scene's contact, not of the material; docs/guide.md suggests values per preset.
 
 Spacing. The particles across the thinnest part of a body set the accuracy of its stiffness (docs/accuracy.md: 10 %
 at about 5 across, 5 % at 10) and its cost. With a real ``fracture_energy`` G the critical stretch, and so the
@@ -38,6 +51,16 @@ STIFFNESS_SCALE = 1.0e-4  # Young's modulus (and stresses) of the animation pres
 # 2 s_c, ten times it at s_c = 0.01 (tests/test_pd_plastic_fracture.py, test_compressive_bonus_in_simple_shear).
 COMPRESSIVE_BONUS = 0.25
 
+# The brittle presets' break pattern (pattern=True; docs/fracture.md, "Presets at preview and final spacing"): the
+# full compressive bonus capped at 1.5 s_c holds the material under a contact together (0.25 turns it to dust, the
+# uncapped bonus keeps a dropped sphere whole, a cap of 3 left half of what a dropped glass sphere shed as dust),
+# debris damping at a fixed rate [1/s] of the animation values, per preset (glass: c dt 0.4 at the 2 cm preview
+# spacing, 0.2 at 1 cm; times the wave-speed ratio 100 for the real values), jitter 0.5.
+SHARD_BONUS = 1.0
+SHARD_BONUS_CAP = 1.5
+DEBRIS_DAMPING = 3000.0  # glass and porcelain; the weaker presets take half (their dust came loose less)
+SAMPLING_JITTER = 0.5
+
 # Typical tensile strengths [Pa] of the real materials (for spacing_for_strength and the guide's table); wood: across
 # the grain (the strength that splitting along the grain needs).
 TENSILE_STRENGTH = {
@@ -47,17 +70,43 @@ TENSILE_STRENGTH = {
 }
 
 
-def _brittle(name, density, youngs_modulus, poisson_ratio, *, fracture_energy, critical_stretch, real) -> Material:
+def _brittle(
+    name,
+    density,
+    youngs_modulus,
+    poisson_ratio,
+    *,
+    fracture_energy,
+    critical_stretch,
+    weibull_modulus,
+    correlation_length,
+    real,
+    pattern,
+    debris_damping=DEBRIS_DAMPING,
+) -> Material:
     """A brittle preset: the real ``youngs_modulus`` [Pa] and ``fracture_energy`` [J/m^2] with ``real``, else the
-    modulus times STIFFNESS_SCALE and a ``critical_stretch`` [-]; both with the COMPRESSIVE_BONUS."""
+    modulus times STIFFNESS_SCALE and a ``critical_stretch`` [-]. With ``pattern`` the break-pattern settings (module
+    docstring): a strength field of Weibull modulus ``weibull_modulus`` and ``correlation_length`` [m], jitter,
+    ``debris_damping`` [1/s] (of the animation values), the capped full bonus; without, the COMPRESSIVE_BONUS alone."""
     strength = {"fracture_energy": fracture_energy} if real else {"critical_stretch": critical_stretch}
+    if pattern:
+        extra = {
+            "compressive_bonus": SHARD_BONUS,
+            "compressive_bonus_cap": SHARD_BONUS_CAP,
+            "strength_weibull_modulus": weibull_modulus,
+            "strength_correlation_length": correlation_length,
+            "debris_damping": debris_damping / math.sqrt(STIFFNESS_SCALE) if real else debris_damping,
+            "sampling_jitter": SAMPLING_JITTER,
+        }
+    else:
+        extra = {"compressive_bonus": COMPRESSIVE_BONUS}
     return Material(
         density=density,
         youngs_modulus=youngs_modulus if real else youngs_modulus * STIFFNESS_SCALE,
         poisson_ratio=poisson_ratio,
-        compressive_bonus=COMPRESSIVE_BONUS,
         name=name,
         **strength,
+        **extra,
     )
 
 
@@ -83,24 +132,113 @@ def _metal(
     )
 
 
-def glass(*, real: bool = False) -> Material:
+def glass(*, real: bool = False, pattern: bool = True) -> Material:
     """Soda-lime (float, window) glass: brittle.
 
     Real values and typical ranges: density 2500 kg/m^3 (2440-2530); E = 70 GPa (68-74); nu = 0.22 (0.21-0.24);
     fracture toughness K_Ic 0.7-0.8 MPa m^0.5, so G = K_Ic^2 / E = 8 J/m^2 (7-10); tensile (bending) strength of
     annealed glass 30-100 MPa, set by surface flaws (Weibull modulus of the strength about 5-10); compressive strength
-    about 1 GPa (compressive_bonus 0.25, :data:`COMPRESSIVE_BONUS`: bonds in a compressed neighbourhood hold longer,
-    and uniaxial compression alone breaks none).
+    about 1 GPa.
 
     Animation values (``real=False``): E = 7 MPa (1e-4 of the real one: 53 m/s wave speed, about 400 steps per frame
     at 24 fps and h = 1 cm); critical_stretch 0.005 instead of G: the real G gives s_c = 5.6e-5 at h = 1 cm, and with a
-    wave speed 100x lower a strain 100x larger keeps an impact's strain over the breaking strain (v / (c s_c)) at its
-    real value. 0.5 % stays invisible before the break.
+    wave speed 100x lower a larger breaking strain keeps an impact's strain over the breaking strain (v / (c s_c))
+    within a factor of about 10 of its real value. 0.5 % stays invisible before the break.
+
+    Break pattern (``pattern=True``, module docstring): strength field of Weibull modulus 6 (real glass: 5-10) and
+    correlation length 5 cm (weak spots a shard apart on a figurine; resolved from a 2 cm spacing); without it the
+    compressive bonus 0.25 (:data:`COMPRESSIVE_BONUS`: uniaxial compression alone breaks no bond).
     """
-    return _brittle("glass", 2500.0, 70.0e9, 0.22, fracture_energy=8.0, critical_stretch=0.005, real=real)
+    return _brittle(
+        "glass",
+        2500.0,
+        70.0e9,
+        0.22,
+        fracture_energy=8.0,
+        critical_stretch=0.005,
+        weibull_modulus=6.0,
+        correlation_length=0.05,
+        real=real,
+        pattern=pattern,
+    )
 
 
-def concrete(*, real: bool = False) -> Material:
+def porcelain(*, real: bool = False, pattern: bool = True) -> Material:
+    """Hard-paste porcelain (vitrified: cups, figurines, tiles): brittle, a little stiffer and lighter than glass.
+
+    Real values and typical ranges: density 2400 kg/m^3 (2300-2500); E = 70 GPa (60-100); nu = 0.22 (0.2-0.25);
+    fracture toughness 1-1.5 MPa m^0.5, G = 20 J/m^2 (15-30); bending strength 40-100 MPa (Weibull modulus 8-15).
+
+    Animation values: E = 7 MPa (1e-4: 54 m/s wave speed); critical_stretch 0.005, as glass (a breaking strain of
+    about 7e-4 in both). Break pattern: Weibull modulus 8, correlation length 5 cm.
+    """
+    return _brittle(
+        "porcelain",
+        2400.0,
+        70.0e9,
+        0.22,
+        fracture_energy=20.0,
+        critical_stretch=0.005,
+        weibull_modulus=8.0,
+        correlation_length=0.05,
+        real=real,
+        pattern=pattern,
+    )
+
+
+def ceramic(*, real: bool = False, pattern: bool = True) -> Material:
+    """Glazed stoneware and earthenware (mugs, plates, pots, vases): brittle, more porous and weaker than porcelain.
+
+    Real values and typical ranges: density 2200 kg/m^3 (1900-2400); E = 40 GPa (20-70); nu = 0.2 (0.17-0.25);
+    fracture toughness about 1 MPa m^0.5, G = 25 J/m^2 (10-40); bending strength 15-50 MPa (Weibull modulus 5-12).
+
+    Animation values: E = 4 MPa (1e-4: 43 m/s wave speed, about 330 steps per frame at 24 fps and h = 1 cm);
+    critical_stretch 0.004 (a real breaking strain of about 7.5e-4: a little weaker than glass). Break
+    pattern: Weibull modulus 5, correlation length 5 cm.
+    """
+    return _brittle(
+        "ceramic",
+        2200.0,
+        40.0e9,
+        0.2,
+        fracture_energy=25.0,
+        critical_stretch=0.004,
+        weibull_modulus=5.0,
+        correlation_length=0.05,
+        real=real,
+        pattern=pattern,
+        debris_damping=0.5 * DEBRIS_DAMPING,
+    )
+
+
+def stone(*, real: bool = False, pattern: bool = True) -> Material:
+    """Natural stone (granite, marble, sandstone; statues, blocks): brittle, strong in compression, weak in tension.
+
+    Real values and typical ranges: density 2650 kg/m^3 (2300-2800); E = 50 GPa (10-70); nu = 0.25 (0.15-0.3);
+    fracture energy 50 J/m^2 (20-150); tensile strength 5-15 MPa (Weibull modulus 5-20); compressive strength
+    100-250 MPa.
+
+    Animation values: E = 5 MPa (1e-4: 43 m/s wave speed, about 330 steps per frame at 24 fps and h = 1 cm);
+    critical_stretch 0.003 (the real breaking strain, about 2e-4, is below glass's; raised 15x rather than glass's 8x
+    it keeps stone the weaker of the two at animation speeds). Break pattern: Weibull modulus 5, correlation length
+    6 cm (grains and veins a little coarser than glass's flaws).
+    """
+    return _brittle(
+        "stone",
+        2650.0,
+        50.0e9,
+        0.25,
+        fracture_energy=50.0,
+        critical_stretch=0.003,
+        weibull_modulus=5.0,
+        correlation_length=0.06,
+        real=real,
+        pattern=pattern,
+        debris_damping=0.5 * DEBRIS_DAMPING,
+    )
+
+
+def concrete(*, real: bool = False, pattern: bool = True) -> Material:
     """Normal-strength concrete (C30/37): brittle in tension, about ten times stronger in compression.
 
     Real values and typical ranges: density 2400 kg/m^3 (2200-2500); E = 30 GPa (25-40); nu = 0.2 (0.15-0.22);
@@ -111,13 +249,51 @@ def concrete(*, real: bool = False) -> Material:
 
     Animation values: E = 3 MPa (1e-4: 35 m/s wave speed, about 270 steps per frame at 24 fps and h = 1 cm);
     critical_stretch 0.002: concrete's real breaking strain f_t / E = 1e-4 is the smallest of the presets and stays
-    below glass's; raised 20x (less than glass's 90x) it keeps concrete the weaker, crumblier of the two brittle
-    presets at animation speeds.
+    below glass's; raised 20x it keeps concrete the weaker, crumblier of the brittle presets at animation speeds.
+    Break pattern: Weibull modulus 8 (real 8-12), correlation length 8 cm (the aggregate and its voids).
     """
-    return _brittle("concrete", 2400.0, 30.0e9, 0.2, fracture_energy=120.0, critical_stretch=0.002, real=real)
+    return _brittle(
+        "concrete",
+        2400.0,
+        30.0e9,
+        0.2,
+        fracture_energy=120.0,
+        critical_stretch=0.002,
+        weibull_modulus=8.0,
+        correlation_length=0.08,
+        real=real,
+        pattern=pattern,
+        debris_damping=0.5 * DEBRIS_DAMPING,
+    )
 
 
-def wood(*, real: bool = False, grain=(1.0, 0.0, 0.0)) -> Material:
+def plaster(*, real: bool = False, pattern: bool = True) -> Material:
+    """Set gypsum plaster (plaster of Paris: casts, mouldings, busts): light, brittle and weak; it breaks into chunks
+    and crumbs.
+
+    Real values and typical ranges: density 1100 kg/m^3 (1000-1400, dry); E = 12 GPa (5-15); nu = 0.2 (0.18-0.3);
+    fracture energy 5 J/m^2 (2-10); tensile strength 1-3 MPa (Weibull modulus 3-8); compressive strength 5-20 MPa.
+
+    Animation values: E = 1.2 MPa (1e-4: 33 m/s wave speed, about 260 steps per frame at 24 fps and h = 1 cm);
+    critical_stretch 0.0025 (the real breaking strain is about 1.7e-4). Break pattern: Weibull modulus 3 (crumbly),
+    correlation length 4 cm.
+    """
+    return _brittle(
+        "plaster",
+        1100.0,
+        12.0e9,
+        0.2,
+        fracture_energy=5.0,
+        critical_stretch=0.0025,
+        weibull_modulus=3.0,
+        correlation_length=0.04,
+        real=real,
+        pattern=pattern,
+        debris_damping=0.5 * DEBRIS_DAMPING,
+    )
+
+
+def wood(*, real: bool = False, grain=(1.0, 0.0, 0.0), pattern: bool = True) -> Material:
     """Softwood (spruce, pine; 12 % moisture): stiff and strong along the grain, weak across it, so it splits along
     the grain.
 
@@ -138,6 +314,7 @@ def wood(*, real: bool = False, grain=(1.0, 0.0, 0.0)) -> Material:
     with the cos^2 law oblique bonds share the reinforcement only in part, and 3 brings the splitting load down to
     about 0.1 of the load that breaks the fibres (tests/test_guide_materials.py; real wood: 3 / 80 = 0.04).
     """
+    del pattern  # wood has no pattern settings: it splits along its grain (the module docstring)
     axis = tuple(check_vec3("grain", grain))
     if real:
         layered = Anisotropy(axis=axis, stiffness_ratio=22.0, strength_ratio=1.2)
@@ -160,7 +337,7 @@ def wood(*, real: bool = False, grain=(1.0, 0.0, 0.0)) -> Material:
     )
 
 
-def clay(*, real: bool = False) -> Material:
+def clay(*, real: bool = False, pattern: bool = True) -> Material:
     """Plastic (modelling or pottery) clay: soft, flows at a low stress, keeps its new shape and tears only after very
     large strains.
 
@@ -172,7 +349,7 @@ def clay(*, real: bool = False) -> Material:
     Clay is soft already (24 m/s wave speed, about 260 steps per frame at 24 fps and h = 1 cm; nu near 0.5 shortens
     the step), so the animation values equal the real ones.
     """
-    del real  # the same values either way (see the docstring)
+    del real, pattern  # the same values either way (see the docstring); no pattern settings (it tears)
     return Material(
         density=1800.0,
         youngs_modulus=1.0e6,
@@ -184,7 +361,7 @@ def clay(*, real: bool = False) -> Material:
     )
 
 
-def steel(*, real: bool = False) -> Material:
+def steel(*, real: bool = False, pattern: bool = True) -> Material:
     """Mild structural steel (S235-S355): ductile.
 
     Real values and typical ranges: density 7850 kg/m^3; E = 210 GPa (200-210); nu = 0.3; yield stress 250 MPa
@@ -196,10 +373,11 @@ def steel(*, real: bool = False) -> Material:
     several percent here, which would flatten a part with the real yield strain; 1 % keeps the spring-back invisible.
     Hardening H = 0.005 E (the real H / E); failure_plastic_strain 0.4 (real).
     """
+    del pattern  # no pattern settings: steel tears by plasticity
     return _metal("steel", 7850.0, 210.0e9, 0.3, (250.0e6, 1.0e9), hardening_ratio=0.005, failure=0.4, real=real)
 
 
-def aluminium(*, real: bool = False) -> Material:
+def aluminium(*, real: bool = False, pattern: bool = True) -> Material:
     """Aluminium alloy 6061-T6: ductile, with less hardening and an earlier tear than mild steel.
 
     Real values and typical ranges: density 2700 kg/m^3; E = 69 GPa (68-71); nu = 0.33; yield stress 275 MPa
@@ -210,24 +388,43 @@ def aluminium(*, real: bool = False) -> Material:
     yield stress 69 kPa (1 % yield strain, for the reason given under :func:`steel`); H = 0.007 E (the real H / E);
     failure_plastic_strain 0.25 (real).
     """
+    del pattern  # no pattern settings: aluminium tears by plasticity
     return _metal("aluminium", 2700.0, 69.0e9, 0.33, (275.0e6, 0.5e9), hardening_ratio=0.007, failure=0.25, real=real)
+
+
+def rubber(*, real: bool = False, pattern: bool = True) -> Material:
+    """Soft natural rubber (balls, tyres' tread, props): elastic, nearly incompressible, never breaks.
+
+    Real values and typical ranges: density 1100 kg/m^3 (920-1200); E = 1.5 MPa (1-5 at small strain); nu 0.499
+    (0.49-0.5). Animation values equal the real ones (rubber is soft already) except nu = 0.45: nu -> 0.5 makes the
+    bulk modulus and so the step's wave speed unbounded (nu = 0.45 gives about 360 steps per frame at 24 fps and
+    h = 1 cm, nu = 0.49 five times as many). Bounces, it does not tear (no fracture settings).
+    """
+    del real, pattern  # the same values either way (see the docstring); rubber never breaks
+    return Material(density=1100.0, youngs_modulus=1.5e6, poisson_ratio=0.45, name="rubber")
 
 
 PRESETS = {
     "glass": glass,
+    "porcelain": porcelain,
+    "ceramic": ceramic,
+    "stone": stone,
     "concrete": concrete,
+    "plaster": plaster,
     "wood": wood,
     "clay": clay,
     "steel": steel,
     "aluminium": aluminium,
+    "rubber": rubber,
 }
+BRITTLE = ("glass", "porcelain", "ceramic", "stone", "concrete", "plaster")  # the presets with a break pattern
 
 
-def preset(name: str, *, real: bool = False) -> Material:
+def preset(name: str, *, real: bool = False, pattern: bool = True) -> Material:
     """The preset called ``name`` (one of :data:`PRESETS`)."""
     if name not in PRESETS:
         raise ParameterError("name", name, " or ".join(map(repr, PRESETS)))
-    return PRESETS[name](real=real)
+    return PRESETS[name](real=real, pattern=pattern)
 
 
 def spacing_for_strength(material: Material, tensile_strength: float, *, horizon_factor: float = 3.015) -> float:
@@ -252,16 +449,26 @@ def spacing_for_strength(material: Material, tensile_strength: float, *, horizon
 
 
 __all__ = [
+    "BRITTLE",
     "COMPRESSIVE_BONUS",
+    "DEBRIS_DAMPING",
     "PRESETS",
+    "SAMPLING_JITTER",
+    "SHARD_BONUS",
+    "SHARD_BONUS_CAP",
     "STIFFNESS_SCALE",
     "TENSILE_STRENGTH",
     "aluminium",
+    "ceramic",
     "clay",
     "concrete",
     "glass",
+    "plaster",
+    "porcelain",
     "preset",
+    "rubber",
     "spacing_for_strength",
     "steel",
+    "stone",
     "wood",
 ]

@@ -80,8 +80,9 @@ def test_brittle_presets_break_clean_at_their_breaking_strain(name):
       in two halves (each half of the particles, +-1 particle layer) within 4 transits, with the damage (> 0.2) only
       in the two particle layers on each side of the middle and no plasticity anywhere (the model has none: brittle).
     So the breaking strain lies between 0.8 s0 and 1.5 s0 (-20 % / +50 %). Measured: glass and concrete split
-    160/160 at about 3 transits; 0.3 s and 2.5 s (glass, its step is smaller) on a quiet machine."""
-    material = presets.preset(name)
+    160/160 at about 3 transits; 0.3 s and 2.5 s (glass, its step is smaller) on a quiet machine. The plain material
+    (pattern=False): the break pattern's strength field scatters the breaking strain on purpose."""
+    material = presets.preset(name, pattern=False)
     s0 = material.critical_stretch / (1.0 - material.compressive_bonus * material.poisson_ratio)
     c = material.bar_wave_speed
     transit = GRIP / c  # the wave from a grip edge to the middle [s]
@@ -134,7 +135,7 @@ def test_clay_flows_soft_and_stays_whole_where_glass_breaks():
     bar (E s0 = 45 kPa); at 30 % strain, over 40 x glass's breaking strain s0, it is still one piece, with no
     bond broken beyond a damage of 0.1, and its plastic strain exceeds 10 x its yield strain (2 %): a large permanent
     deformation. About 3 s on a quiet machine."""
-    clay, glass = presets.clay(), presets.glass()
+    clay, glass = presets.clay(), presets.glass(pattern=False)
     glass_break_stress = glass.youngs_modulus * glass.critical_stretch / (1.0 - glass.compressive_bonus * 0.22)
     rows, solver = _pull_curve(clay, 0.4, 0.3 * FREE / 0.8, sample_steps=20)
     strain, stress, pieces, eqps = rows.T
@@ -168,8 +169,10 @@ def test_wood_splits_along_the_grain_at_a_fraction_of_the_load_across_it():
 
 def test_preset_step_costs_and_spacing_for_strength():
     """The numbers the guide's table quotes. At h = 1 cm (a block of 8 x 8 x 8 particles) the automatic step of each
-    animation preset fits a 1/24 s frame in 250 to 420 substeps (measured: glass 399, concrete 272, wood 297, clay 256,
-    steel 387, aluminium 388), the real values need more than 25,000 (measured 27,159 to 39,853). spacing_for_strength
+    animation preset fits a 1/24 s frame in 250 to 420 substeps (measured: glass 408, porcelain 417, ceramic 335,
+    stone 324, concrete 278, plaster 260, wood 297, clay 256, steel 387, aluminium 388, rubber 400; the brittle presets'
+    jittered particles shorten the step a little), the real values need more than 25,000 (measured 25,934 to 41,602)
+    except clay's and rubber's, which are soft already. spacing_for_strength
     is the inverse of Material.critical_stretch_for (E s_c(delta) equals the tensile strength to 1e-9): concrete's is
     11 cm within 5 %, glass's 0.08 mm within 5 %. Bad names and materials raise ParameterError naming the field."""
     import math
@@ -182,7 +185,7 @@ def test_preset_step_costs_and_spacing_for_strength():
 
     for name in presets.PRESETS:
         assert 250 <= substeps(presets.preset(name)) <= 420, name
-        if name != "clay":
+        if name not in ("clay", "rubber"):
             assert substeps(presets.preset(name, real=True)) > 25_000, name
     for name, expected in (("concrete", 0.11), ("glass", 7.6e-5)):
         material = presets.preset(name, real=True)
@@ -192,7 +195,7 @@ def test_preset_step_costs_and_spacing_for_strength():
         s_c = material.critical_stretch_for(3.015 * h)
         assert material.youngs_modulus * s_c == pytest.approx(strength, rel=1e-9)
     with pytest.raises(pdsim.ParameterError, match="name"):
-        presets.preset("rubber")
+        presets.preset("marble")
     with pytest.raises(pdsim.ParameterError, match="fracture_energy"):
         presets.spacing_for_strength(presets.steel(real=True), 400.0e6)
     with pytest.raises(pdsim.ParameterError, match="tensile_strength"):

@@ -328,6 +328,20 @@ def _(ws):
     _material(failure_plastic_strain=0.2)
 
 
+@case("correlation_without_scatter", A_MAT, "a strength_correlation_length without a Weibull modulus",
+      "strength_correlation_length only with strength_weibull_modulus", pdsim.ParameterError,
+      "strength_correlation_length=0.05", "unless strength_weibull_modulus")  # fmt: skip
+def _(ws):
+    _material(critical_stretch=0.01, strength_correlation_length=0.05)
+
+
+@case("jitter_unbreakable", A_MAT, "a sampling_jitter on a material that never breaks",
+      "sampling_jitter only on a material that breaks", pdsim.ParameterError, "sampling_jitter=0.5",
+      "never breaks")  # fmt: skip
+def _(ws):
+    _material(sampling_jitter=0.5)
+
+
 # -- bodies -----------------------------------------------------------------------------------------------------
 A_BODY = "bodies and spacing"
 

@@ -405,9 +405,16 @@ def write_doc(sections, path, png, command, machine):
         others=OTHER_SCENES,
         scene_notes=SCENE_NOTES,
     )
+    if os.path.exists(path):  # the presets' section (tools/preview_final.py) stays at the end of the page
+        with open(path) as f:
+            old = f.read()
+        if PRESETS_HEADING in old:
+            text = text.rstrip("\n") + "\n\n" + old[old.index(PRESETS_HEADING) :]
     with open(path, "w") as f:
         f.write(text)
 
+
+PRESETS_HEADING = "## Presets at preview and final spacing"  # written by tools/preview_final.py --doc
 
 LAYERED_NOTE = """
 The lattice test does not apply to the layered wall: its weak planes are horizontal (z = const), so its crack

@@ -21,6 +21,7 @@ per neighbour. Both kernels are gathers over a CSR list (one thread per particle
 produce the same sums in the same order.
 """
 
+import numpy as np
 import warp as wp
 
 from ..launch import launch
@@ -149,6 +150,60 @@ def bond_strength_factor(a: int, b: int, seed: int, modulus: float):
     return wp.pow(-wp.log(1.0 - u) / wp.log(2.0), 1.0 / modulus)
 
 
+STRENGTH_FIELD_MODES = 64  # cosine modes of a strength field (its one-point marginal is Gaussian to about 1 / N)
+
+
+def strength_field_modes(correlation_length: float, seed: int, count: int = STRENGTH_FIELD_MODES) -> np.ndarray:
+    """The modes of a Gaussian random field g(x) = sqrt(2 / N) sum_i cos(k_i . x + phi_i) with mean 0, variance 1
+    and correlation E[g(x) g(x + r)] = exp(-|r|^2 / (2 l^2)) (spectral synthesis: k_i ~ N(0, I / l^2), phi_i uniform
+    in [0, 2 pi)), drawn from ``seed`` (numpy's PCG64): float32 [count, 4] rows (k_i [1/m], phi_i [rad]). The same
+    (correlation_length [m], seed) gives the same field."""
+    rng = np.random.default_rng(int(seed))
+    k = rng.standard_normal((count, 3)) / float(correlation_length)
+    phase = rng.uniform(0.0, 2.0 * np.pi, count)
+    return np.concatenate([k, phase[:, None]], axis=1).astype(np.float32)
+
+
+@wp.func
+def weibull_from_gaussian(g: float, modulus: float):
+    """The Weibull variate of shape ``modulus`` and unit median, F = (-ln(1 - Phi(g)) / ln 2)^(1 / m), that has the
+    same probability as the standard normal value g (Phi its CDF); each tail computed where float32 resolves it."""
+    t = float(0.0)
+    if g < 0.0:
+        p = 0.5 * wp.erfc(-g / wp.sqrt(2.0))  # Phi(g), small: -ln(1 - p) by its series
+        t = p * (1.0 + p * (0.5 + p / 3.0))
+        if p > 1.0e-3:
+            t = -wp.log(1.0 - p)
+    else:
+        t = -wp.log(0.5 * wp.erfc(g / wp.sqrt(2.0)))  # -ln(1 - Phi(g)), the upper tail 1 - Phi(g) kept exact
+    return wp.pow(t / wp.log(2.0), 1.0 / modulus)
+
+
+@wp.func
+def strength_field_factor(x: wp.vec3, modes: wp.array(dtype=wp.vec4), first: int, count: int, modulus: float):
+    """The strength factor of a field at the body-local point x [m]: the Gaussian field
+    g(x) = sqrt(2 / N) sum_i cos(k_i . x + phi_i) over the modes [first, first + count) (strength_field_modes)
+    mapped to the Weibull marginal of shape ``modulus`` and unit median (weibull_from_gaussian)."""
+    acc = float(0.0)
+    for i in range(first, first + count):
+        m = modes[i]
+        acc += wp.cos(m[0] * x[0] + m[1] * x[1] + m[2] * x[2] + m[3])
+    return weibull_from_gaussian(acc * wp.sqrt(2.0 / float(count)), modulus)
+
+
+@wp.kernel
+def sample_strength_field(
+    points: wp.array(dtype=wp.vec3),
+    modes: wp.array(dtype=wp.vec4),
+    mode_count: int,
+    modulus: float,
+    factor: wp.array(dtype=float),
+):
+    """The strength factor of one field (modes [0, mode_count)) at each body-local point [m]."""
+    i = wp.tid()
+    factor[i] = strength_field_factor(points[i], modes, 0, mode_count, modulus)
+
+
 @wp.kernel
 def init_bond_fracture(
     family_offsets: wp.array(dtype=wp.int32),
@@ -161,22 +216,33 @@ def init_bond_fracture(
     local_index: wp.array(dtype=wp.int32),
     weibull_modulus: wp.array(dtype=float),
     strength_seed: wp.array(dtype=wp.int32),
+    field_positions: wp.array(dtype=wp.vec3),
+    field_first_mode: wp.array(dtype=wp.int32),
+    field_modes: wp.array(dtype=wp.vec4),
+    field_mode_count: int,
     bond_critical_stretch: wp.array(dtype=float),
 ):
     """Per-bond critical stretch: s_c of the particle scaled by 1 - (1 - strength_ratio) (n . a)^2 about the world
-    material axis a and, where the particle's weibull_modulus m > 0, by the bond's Weibull factor of shape m and unit
-    median (bond_strength_factor, from the two particles' body-local indices and the body's strength seed); infinite
-    when either particle lies in an unbreakable region. Symmetric in k and j (bonds never join two bodies)."""
+    material axis a and, where the particle's weibull_modulus m > 0, by a Weibull factor of shape m and unit median:
+    where the particle's field_first_mode >= 0, the body's strength field (strength_field_factor) at the bond's
+    midpoint in body-local coordinates (field_positions [m]); else the bond's own factor (bond_strength_factor, from
+    the two particles' body-local indices and the body's strength seed); infinite when either particle lies in an
+    unbreakable region. Symmetric in k and j (bonds never join two bodies; the midpoint's sum commutes)."""
     k = wp.tid()
     a = axis[k]
     m = weibull_modulus[k]
+    first = field_first_mode[k]
     for q in range(family_offsets[k], family_offsets[k + 1]):
         j = family_neighbors[q]
         g = bond_geom[q]
         c = wp.dot(wp.vec3(g[0], g[1], g[2]), a)
         sc = critical_stretch[k] * (1.0 - (1.0 - strength_ratio[k]) * c * c)
         if m > 0.0:
-            sc = sc * bond_strength_factor(local_index[k], local_index[j], strength_seed[k], m)
+            if first >= 0:
+                mid = 0.5 * (field_positions[k] + field_positions[j])
+                sc = sc * strength_field_factor(mid, field_modes, first, field_mode_count, m)
+            else:
+                sc = sc * bond_strength_factor(local_index[k], local_index[j], strength_seed[k], m)
         if unbreakable[k] != 0 or unbreakable[j] != 0:
             sc = 1.0e30
         bond_critical_stretch[q] = sc
@@ -254,6 +320,11 @@ def directional_bond_weights(count, *, device, **arguments):
 def bond_strengths(count, *, device, **arguments):
     """Writes the critical stretch of every bond [-] (init_bond_fracture)."""
     launch(init_bond_fracture, count, device=device, **arguments)
+
+
+def strength_field(count, *, device, **arguments):
+    """Writes the strength factor of one field at ``count`` body-local points [-] (sample_strength_field)."""
+    launch(sample_strength_field, count, device=device, **arguments)
 
 
 def anisotropic_stiffness(count, *, device, **arguments):

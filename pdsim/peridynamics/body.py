@@ -35,11 +35,13 @@ class PeridynamicBody(PointBody):
         material_rotation: 3x3 rotation from the material frame (where ``material.anisotropy.axis`` is given) to world
             space; identity by default. Turning a body and its material_rotation together gives the same result.
         device: Warp device used to sample the shape ("cpu" by default; sampling is a one-off).
-        sampling: "lattice" (default: particles on the simple-cubic lattice) or "jittered" (each lattice point moved
+        sampling: "lattice" (particles on the simple-cubic lattice) or "jittered" (each lattice point moved
             at random inside its own cell, volume h^3 kept, pdsim.sampling.jitter_points): the particle
-            arrangement then has no lattice planes for cracks to follow (docs/fracture.md).
+            arrangement then has no lattice planes for cracks to follow (docs/fracture.md). None (default):
+            "jittered" with the material's ``sampling_jitter`` where it has one, else "lattice".
         jitter: largest offset of a jittered particle along each axis, as a fraction of h, in (0, 1] (the offsets are
-            uniform in [-jitter h / 2, jitter h / 2)); 0.5 when None (default). Only with sampling="jittered".
+            uniform in [-jitter h / 2, jitter h / 2)); when None (default) the material's ``sampling_jitter``, or
+            0.5. Only with sampling="jittered".
         sampling_seed: seed of the jitter, an integer in [0, 2^31 - 1] (default 0): the same seed gives the same
             particles, wherever the body sits.
 
@@ -59,7 +61,7 @@ class PeridynamicBody(PointBody):
         damping: float = 0.0,
         material_rotation=None,
         device: str = "cpu",
-        sampling: str = "lattice",
+        sampling: str | None = None,
         jitter: float | None = None,
         sampling_seed: int = 0,
     ):
@@ -67,11 +69,15 @@ class PeridynamicBody(PointBody):
             raise ParameterError("material", material, "a pdsim.Material")
         if not isinstance(shape, SolidShape):
             raise ParameterError("shape", shape, "a pdsim SolidShape (pdsim.box, pdsim.load_mesh, ...)")
+        if sampling is None:
+            sampling = "lattice" if material.sampling_jitter is None else "jittered"
         if sampling not in SAMPLINGS:
             raise ParameterError("sampling", sampling, " or ".join(map(repr, SAMPLINGS)))
         if sampling == "lattice" and jitter is not None:
             raise ParameterError("jitter", jitter, "None (the default) unless sampling='jittered'")
-        jitter = check_range("jitter", 0.5 if jitter is None else jitter, 0.0, 1.0, hi_open=False)
+        if jitter is None:
+            jitter = 0.5 if material.sampling_jitter is None else material.sampling_jitter
+        jitter = check_range("jitter", jitter, 0.0, 1.0, hi_open=False)
         if isinstance(sampling_seed, bool) or not isinstance(sampling_seed, int | np.integer):
             raise ParameterError("sampling_seed", sampling_seed, "an integer in [0, 2147483647]")
         if not 0 <= int(sampling_seed) <= 2**31 - 1:

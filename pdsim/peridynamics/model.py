@@ -166,6 +166,32 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
     return f_dil, f_dev
 
 
+def _strength_fields(bodies, counts, device) -> dict:
+    """The init_bond_fracture arguments of the bodies' strength fields (Material.strength_correlation_length): each
+    particle's rest position in its body's frame (relative to the centre of the shape's bounding box, turned back by
+    the body's material_rotation; float64 on the host, then float32), the first of its body's modes (-1: no field)
+    and the modes of every body with a field, concatenated (kb.strength_field_modes)."""
+    count = kb.STRENGTH_FIELD_MODES
+    first, modes, local = [], [], []
+    for c, b in zip(counts, bodies, strict=True):  # per body (a handful), not per particle
+        ell = b.material.strength_correlation_length
+        if ell is None:
+            first.append(np.full(c, -1, dtype=np.int32))
+            local.append(np.zeros((c, 3)))
+            continue
+        first.append(np.full(c, count * len(modes), dtype=np.int32))
+        modes.append(kb.strength_field_modes(ell, b.material.strength_seed, count))
+        centre = 0.5 * (b.shape.bounds[0] + b.shape.bounds[1])
+        local.append((b.rest_positions - centre) @ b.material_rotation)  # R^T (x - c), row by row
+    table = np.concatenate(modes) if modes else np.zeros((1, 4), dtype=np.float32)
+    return {
+        "field_positions": wp.array(np.concatenate(local).astype(np.float32), dtype=wp.vec3, device=device),
+        "field_first_mode": wp.array(np.concatenate(first), dtype=wp.int32, device=device),
+        "field_modes": wp.array(table, dtype=wp.vec4, device=device),
+        "field_mode_count": count,
+    }
+
+
 def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -> PeridynamicModel:
     """Concatenates the bodies, builds their families and per-bond / per-particle constants (all in kernels)."""
     counts = [b.particle_count for b in bodies]
@@ -312,6 +338,7 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
             strength_seed=wp.array(
                 per_particle([b.material.strength_seed for b in bodies]).astype(np.int32), device=device
             ),
+            **_strength_fields(bodies, counts, device),
             bond_critical_stretch=bond_sc,
             device=device,
         )
