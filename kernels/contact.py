@@ -78,6 +78,30 @@ def contact_pair_modulus(ck: float, cj: float):
     return 2.0 / (1.0 / ck + 1.0 / cj)
 
 
+@wp.func
+def penalty_force(
+    n: wp.vec3, depth: float, v_rel: wp.vec3, k: float, m_red: float, damping_ratio: float, friction: float
+):
+    """The contact law of every penalty pair (particle-mesh, vertex-face, ground) [N]: a linear spring-dashpot along
+    the unit normal n (pointing from the other side to this one), F_n = max(k depth - c v_n, 0) (never pulling),
+    c = 2 damping_ratio sqrt(k m_red), v_n = v_rel . n (v_rel: this side's velocity minus the other's [m/s]), plus
+    regularised Coulomb friction on the tangential relative velocity v_t: |F_t| = min(friction F_n, c_t |v_t|)
+    opposing v_t, c_t = 2 sqrt(k m_red) (critically damped). depth [m] > 0 is the overlap, k [N/m] the penalty,
+    m_red [kg] the pair's reduced mass. A damping ratio zeta gives the restitution e = exp(-zeta pi / sqrt(1 - zeta^2))
+    of the linear law (pdsim/contact.py, damping_ratio_for_restitution)."""
+    damper = 2.0 * damping_ratio * wp.sqrt(k * m_red)
+    vn = wp.dot(v_rel, n)
+    fn = wp.max(k * depth - damper * vn, 0.0)
+    f = fn * n
+    if friction > 0.0:
+        vt = v_rel - vn * n
+        vt_len = wp.length(vt)
+        if vt_len > 0.0:
+            ft = wp.min(friction * fn, 2.0 * wp.sqrt(k * m_red) * vt_len)
+            f -= (ft / vt_len) * vt
+    return f
+
+
 EXPOSED = wp.constant(1)  # hash-grid group of the particles that take part in contact
 
 
@@ -336,6 +360,7 @@ def particle_mesh_contact(
     m_mass: wp.array(dtype=float),
     stiffness_rate: float,
     damping_ratio: float,
+    friction: float,
     p_force: wp.array(dtype=wp.vec3),
     m_force: wp.array(dtype=wp.vec3),
     dt: float,
@@ -346,12 +371,12 @@ def particle_mesh_contact(
     """Contact between the particles of one method and the closed surface mesh of another (cross-method contact).
 
     A particle (sphere of radius r at rest + u) closer to the surface than r, or inside it by less than 2 r, is
-    pushed out along the outward normal n by F = k d - c v_n (never pulling), d = r - signed distance, v_n the normal
-    velocity of the particle relative to the surface point (barycentric velocity of the face); the face's three
-    vertices take -F in proportion to their barycentric weights, so the pair's momentum is conserved exactly. The
-    penalty k = stiffness_rate m_red and the dashpot c = 2 damping_ratio sqrt(k m_red) use the pair's reduced mass
-    m_red, with stiffness_rate = (0.25 / dt)^2: one contact oscillates at omega dt = 0.25, so even tens of
-    simultaneous contacts on one point stay inside velocity Verlet's stability limit (omega dt < 2).
+    pushed out along the outward normal n by the contact law penalty_force (d = r - signed distance, the velocity of
+    the particle relative to the surface point, the barycentric velocity of the face); the face's three vertices take
+    -F in proportion to their barycentric weights, so the pair's momentum is conserved exactly. The penalty
+    k = stiffness_rate m_red uses the pair's reduced mass m_red, with stiffness_rate = (0.25 / dt)^2: one contact
+    oscillates at omega dt = 0.25, so even tens of simultaneous contacts on one point stay inside velocity Verlet's
+    stability limit (omega dt < 2).
     ``p_to_force`` and the mesh's forces: multiply a force [N] into each solver's force unit (1 / V for a force
     density, 1 for nodal forces); ``m_points`` maps the mesh's vertices to its solver's points.
 
@@ -375,11 +400,7 @@ def particle_mesh_contact(
     m_surface = wa * m_mass[a] + wb * m_mass[b] + wc * m_mass[c]
     mp = p_mass[i]
     m_red = mp * m_surface / (mp + m_surface)
-    k = stiffness_rate * m_red
-    damper = 2.0 * damping_ratio * wp.sqrt(k * m_red)
-    vn = wp.dot(p_v[i] - v_surface, n)
-    f = wp.max(k * (r - sdf) - damper * vn, 0.0)
-    force = f * n
+    force = penalty_force(n, r - sdf, p_v[i] - v_surface, stiffness_rate * m_red, m_red, damping_ratio, friction)
     wp.atomic_add(p_force, i, force * p_to_force[i])
     wp.atomic_sub(m_force, a, force * wa)
     wp.atomic_sub(m_force, b, force * wb)

@@ -22,6 +22,7 @@ import warp as wp
 from .checks import check_range
 from .errors import ParameterError
 from .kernels import contact as kc
+from .kernels import surface_contact as ksf
 from .kernels.launch import by_name
 
 CONTACT_NEIGHBOR_BUDGET = 12
@@ -113,7 +114,10 @@ class ParticleContact:
             0.94 S) with two contacts reaches about the body's largest bond sum (1.13 S), so the solver's stable step
             is practically unchanged in ordinary impacts.
         damping_ratio: normal damping as a fraction of the pair's critical damping, >= 0; default 0.02 (0.1 lost
-            40 % of the energy in a collision of cubes with offset lattices, 0 gained up to 0.3 %).
+            40 % of the energy in a collision of cubes with offset lattices, 0 gained up to 0.3 %). Give this or
+            ``restitution``.
+        restitution: the pair's normal restitution e in [0, 1]: damping_ratio = -ln e / sqrt(pi^2 + ln^2 e)
+            (damping_ratio_for_restitution), the same law as every other contact pair.
         friction: Coulomb coefficient between particles, >= 0; default 0.
         floor_factor: hard floor as a fraction of the contact distance, in [0, 1); pairs closer than it are projected
             apart with their approaching velocity removed (0 disables). Default 0.6: particles of different bodies
@@ -142,7 +146,8 @@ class ParticleContact:
         distance_factor: float = 1.35,
         bonded_factor: float = 0.9,
         stiffness_scale: float = 1.0,
-        damping_ratio: float = 0.02,
+        damping_ratio: float | None = None,
+        restitution: float | None = None,
         friction: float = 0.0,
         floor_factor: float = 0.6,
         shield_interior: bool = True,
@@ -164,7 +169,13 @@ class ParticleContact:
         self.distance_factor = check_range("distance_factor", distance_factor, 0.0, None)
         self.bonded_factor = check_range("bonded_factor", bonded_factor, 0.0, 1.0, hi_open=False)
         self.stiffness_scale = check_range("stiffness_scale", stiffness_scale, 0.0, None)
-        self.damping_ratio = check_range("damping_ratio", damping_ratio, 0.0, None, lo_open=False)
+        if damping_ratio is not None and restitution is not None:
+            raise ParameterError("restitution", restitution, "either restitution or damping_ratio, not both")
+        if restitution is not None:
+            damping_ratio = damping_ratio_for_restitution(restitution)
+        self.damping_ratio = check_range(
+            "damping_ratio", 0.02 if damping_ratio is None else damping_ratio, 0.0, None, lo_open=False
+        )
         self.friction = check_range("friction", friction, 0.0, None, lo_open=False)
         self.floor_factor = check_range("floor_factor", floor_factor, 0.0, 1.0, lo_open=False)
         self.shield_interior = bool(shield_interior)
@@ -350,11 +361,45 @@ class ParticleContact:
         return float(np.sqrt(2.0 * self._density_host / s).min())
 
 
+def damping_ratio_for_restitution(restitution: float) -> float:
+    """Damping ratio zeta of the linear spring-dashpot whose normal restitution is ``restitution`` e in (0, 1]:
+    zeta = -ln e / sqrt(pi^2 + ln^2 e) (e = 0 gives 1, critical damping).
+
+    Derivation: a pair of reduced mass m on a spring k with a dashpot c = 2 zeta sqrt(k m) meets at speed v0; its
+    overlap is x(t) = (v0 / omega_d) exp(-zeta omega t) sin(omega_d t), omega = sqrt(k / m),
+    omega_d = omega sqrt(1 - zeta^2). The overlap closes at t = pi / omega_d with speed
+    v0 exp(-zeta omega pi / omega_d), so e = exp(-zeta pi / sqrt(1 - zeta^2)); solving ln e = -zeta pi /
+    sqrt(1 - zeta^2) for zeta gives the formula. (The force of the law never pulls, so the pair separates slightly
+    before the overlap closes, when k x + c x' = 0: at e = 0.6 the rebound measured with the kernels is within 0.03
+    of e, tests/test_contact_law.py.)"""
+    e = check_range("restitution", restitution, 0.0, 1.0, lo_open=False, hi_open=False)
+    if e == 0.0:
+        return 1.0
+    log_e = float(np.log(e))
+    return -log_e / float(np.sqrt(np.pi**2 + log_e**2))
+
+
+def restitution_of_damping_ratio(damping_ratio: float) -> float:
+    """Normal restitution e = exp(-zeta pi / sqrt(1 - zeta^2)) of the linear spring-dashpot of damping ratio zeta
+    (0 at and above critical damping); the inverse of damping_ratio_for_restitution."""
+    zeta = check_range("damping_ratio", damping_ratio, 0.0, None, lo_open=False)
+    if zeta >= 1.0:
+        return 0.0
+    return float(np.exp(-zeta * np.pi / np.sqrt(1.0 - zeta * zeta)))
+
+
 class MethodContact:
-    """Contact between bodies of different methods within a step: the particles of each particle method (the
-    peridynamic solver's ``contact_particles()``) against the closed surface of each mesh method (the FEM solver's
-    ``contact_mesh()``), with a penalty and dashpot whose reaction goes to the face's vertices
-    (kernels/contact.py, particle_mesh_contact): the pair's momentum is conserved exactly.
+    """Contact between the bodies of mesh methods and everything else within a step: the particles of each particle
+    method (the peridynamic solver's ``contact_particles()``) against the closed surface of each mesh method (the FEM
+    solver's ``contact_mesh()``; kernels/contact.py, particle_mesh_contact), and the surface vertices of each mesh
+    method against the faces of the other pieces of its own surface and of every other mesh method's (FEM-FEM
+    contact: two bodies, or the pieces of a cracked body; kernels/surface_contact.py, vertex_face_contact). Every
+    pair uses the one contact law (kernels/contact.py, penalty_force) and gives the reaction to the face's vertices:
+    the pair's momentum is conserved exactly.
+
+    The stiffness is tied to the step: k = m_red (0.25 / dt)^2 (a contact oscillates at omega dt = 0.25, far inside
+    velocity Verlet's limit of 2), so contact never needs a smaller step. The restitution e a user sets is the
+    dashpot's damping ratio zeta = -ln e / sqrt(pi^2 + ln^2 e) (damping_ratio_for_restitution).
 
     The scene calls :meth:`apply` once per step, after every solver's ``compute_forces`` and before the kicks. The
     surface mesh is rebuilt when its topology version changes (fracture) and refitted to the current positions
@@ -364,13 +409,34 @@ class MethodContact:
         particle_solvers: solvers offering ``contact_particles()`` -> (point indices int32, radii float32) Warp arrays.
         mesh_solvers: solvers offering ``contact_mesh()`` -> (point indices int32 [v], triangles int32 [3 f] indexing
             those points, topology version).
-        damping_ratio: the dashpot as a fraction of the pair's critical damping, >= 0 (default 0.1).
+        damping_ratio: the dashpot as a fraction of the pair's critical damping, >= 0 (default 0.1, a restitution of
+            0.73); give this or ``restitution``.
+        restitution: the normal restitution e in [0, 1] of a pair (sets damping_ratio).
+        friction: Coulomb coefficient mu >= 0 between the surfaces (default 0).
+        surfaces: contact between mesh surfaces (FEM-FEM and the pieces of a cracked FEM body); default True.
     """
 
-    def __init__(self, particle_solvers, mesh_solvers, *, damping_ratio: float = 0.1):
+    def __init__(
+        self,
+        particle_solvers,
+        mesh_solvers,
+        *,
+        damping_ratio: float | None = None,
+        restitution: float | None = None,
+        friction: float = 0.0,
+        surfaces: bool = True,
+    ):
         self.particle_solvers = list(particle_solvers)
         self.mesh_solvers = list(mesh_solvers)
-        self.damping_ratio = check_range("damping_ratio", damping_ratio, 0.0, None, lo_open=False)
+        if damping_ratio is not None and restitution is not None:
+            raise ParameterError("restitution", restitution, "either restitution or damping_ratio, not both")
+        if restitution is not None:
+            damping_ratio = damping_ratio_for_restitution(restitution)
+        self.damping_ratio = check_range(
+            "damping_ratio", 0.1 if damping_ratio is None else damping_ratio, 0.0, None, lo_open=False
+        )
+        self.friction = check_range("friction", friction, 0.0, None, lo_open=False)
+        self.surfaces = bool(surfaces)
         self._meshes = {}  # id(solver) -> [version, points, faces, positions, wp.Mesh]
         self._to_force = {}  # id(solver) -> 1 / force_to_newton per point (Warp array)
         self._scratch = {}  # id(solver) -> work account of a solver without a watchdog
@@ -425,6 +491,7 @@ class MethodContact:
                     m_mass=ms.kin.mass,
                     stiffness_rate=rate,
                     damping_ratio=self.damping_ratio,
+                    friction=self.friction,
                     p_force=ps.force,
                     m_force=ms.force,
                     dt=dt,
@@ -432,6 +499,59 @@ class MethodContact:
                     m_work=m_work,
                     device=ps.kin.u.device,
                 )
+
+        if self.surfaces:
+            for a in self.mesh_solvers:
+                for b in self.mesh_solvers:
+                    self._surface_pair(a, b, rate, dt)
+
+    def _surface_pair(self, a, b, rate: float, dt: float) -> None:
+        """The surface vertices of mesh solver ``a`` against the faces of ``b`` (of other pieces when a is b)."""
+        _, a_points, _, _, _ = self._mesh(a)
+        _, b_points, b_faces, b_x, b_mesh = self._mesh(b)
+        a_label, _ = a.contact_pieces()
+        _, b_label = b.contact_pieces()
+        if a is not b:  # labels of different solvers never match
+            a_label = self._foreign_label(a_label)
+        skin_a, band_a = a.contact_skin()
+        skin_b, band_b = b.contact_skin()
+        ksf.vertex_face_forces(
+            v_points=a_points,
+            v_label=a_label,
+            v_rest=a.kin.rest,
+            v_u=a.kin.u,
+            v_v=a.kin.v,
+            v_mass=a.kin.mass,
+            v_to_force=self._force_scale(a),
+            mesh=b_mesh.id,
+            m_x=b_x,
+            m_points=b_points,
+            m_faces=b_faces,
+            m_label=b_label,
+            m_v=b.kin.v,
+            m_mass=b.kin.mass,
+            m_to_force=self._force_scale(b),
+            skin=min(skin_a, skin_b),
+            band=min(band_a, band_b),
+            stiffness_rate=rate,
+            damping_ratio=self.damping_ratio,
+            friction=self.friction,
+            v_force=a.force,
+            m_force=b.force,
+            dt=dt,
+            v_work=self._work_account(a),
+            m_work=self._work_account(b),
+            device=a.kin.u.device,
+        )
+
+    def _foreign_label(self, labels):
+        """Labels that match no face label (-1 everywhere), the size of ``labels``."""
+        key = ("foreign", labels.shape[0])
+        out = self._scratch.get(key)
+        if out is None:
+            out = wp.full(labels.shape[0], -1, dtype=wp.int32, device=labels.device)
+            self._scratch[key] = out
+        return out
 
     def _work_account(self, solver):
         """The array the contact work done on ``solver``'s points goes to: its watchdog's work account (slot
@@ -446,4 +566,11 @@ class MethodContact:
         return scratch
 
 
-__all__ = ["ContactDiagnostics", "MethodContact", "ParticleContact", "bond_stiffness_row_sum"]
+__all__ = [
+    "ContactDiagnostics",
+    "MethodContact",
+    "ParticleContact",
+    "bond_stiffness_row_sum",
+    "damping_ratio_for_restitution",
+    "restitution_of_damping_ratio",
+]

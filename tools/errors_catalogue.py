@@ -554,18 +554,6 @@ def _(ws):
     scene.build_solvers(device="cpu")
 
 
-@case("fem_contact_between_fem", A_FEM, "Scene.enable_contact() with two FEM bodies (contact between FEM surfaces is "
-      "not simulated)", "PeridynamicBody for bodies that collide, or enable_contact(False)",
-      pdsim.FeatureNotAvailableError, "'b0', 'b1'", "enable_contact", "PeridynamicBody")  # fmt: skip
-def _(ws):
-    scene = _scene()
-    for i, x in enumerate((0.0, 0.3)):
-        scene.add_fem_body(pdsim.box_tet_mesh((0.1, 0.1, 0.1), (2, 2, 2), center=(x, 0.0, 0.5)), _material(),
-                           name=f"b{i}")  # fmt: skip
-    scene.enable_contact(True)
-    scene.build_solvers(device="cpu")
-
-
 @case("inverted_element", A_FEM, "two elements folded over their shared face", "a valid, non-overlapping mesh",
       pdsim.GeometryError, "inverted")  # fmt: skip
 def _(ws):
