@@ -46,7 +46,7 @@ or crack) take part, through a grouped hash grid (see make_particle_contact_kern
 
 import warp as wp
 
-from .colliders import mesh_contact_point
+from .colliders import mesh_contact_point, penalty_force
 from .integration import PARTICLE_FREE
 from .launch import launch
 from .neighbors import same_body_count
@@ -78,28 +78,101 @@ def contact_pair_modulus(ck: float, cj: float):
     return 2.0 / (1.0 / ck + 1.0 / cj)
 
 
+FACE_NORMAL_MIN = wp.constant(1.0)  # |n_k - n_j| up to one unit vector: no pre-cut face between k and j
+BOND_NONE = wp.constant(0)  # the pair is not in the family (beyond the horizon)
+BOND_LIVE = wp.constant(1)
+BOND_DEAD = wp.constant(2)  # broken, or cut by a notch
+
+
 @wp.func
-def penalty_force(
-    n: wp.vec3, depth: float, v_rel: wp.vec3, k: float, m_red: float, damping_ratio: float, friction: float
+def bond_state_and_face_normal(
+    k: int,
+    j: int,
+    rest_positions: wp.array(dtype=wp.vec3),
+    family_offsets: wp.array(dtype=wp.int32),
+    family_neighbors: wp.array(dtype=wp.int32),
+    bond_alive: wp.array(dtype=wp.uint8),
+    bond_alive_initial: wp.array(dtype=wp.uint8),
 ):
-    """The contact law of every penalty pair (particle-mesh, vertex-face, ground) [N]: a linear spring-dashpot along
-    the unit normal n (pointing from the other side to this one), F_n = max(k depth - c v_n, 0) (never pulling),
-    c = 2 damping_ratio sqrt(k m_red), v_n = v_rel . n (v_rel: this side's velocity minus the other's [m/s]), plus
-    regularised Coulomb friction on the tangential relative velocity v_t: |F_t| = min(friction F_n, c_t |v_t|)
-    opposing v_t, c_t = 2 sqrt(k m_red) (critically damped). depth [m] > 0 is the overlap, k [N/m] the penalty,
-    m_red [kg] the pair's reduced mass. A damping ratio zeta gives the restitution e = exp(-zeta pi / sqrt(1 - zeta^2))
-    of the linear law (pdsim/contact.py, damping_ratio_for_restitution)."""
-    damper = 2.0 * damping_ratio * wp.sqrt(k * m_red)
-    vn = wp.dot(v_rel, n)
-    fn = wp.max(k * depth - damper * vn, 0.0)
-    f = fn * n
-    if friction > 0.0:
-        vt = v_rel - vn * n
-        vt_len = wp.length(vt)
-        if vt_len > 0.0:
-            ft = wp.min(friction * fn, 2.0 * wp.sqrt(k * m_red) * vt_len)
-            f -= (ft / vt_len) * vt
-    return f
+    """(state of the bond k-j now: BOND_NONE, BOND_LIVE or BOND_DEAD; the pre-cut face normal of k): one pass over
+    k's family. The face normal is D - L, the sums of the reference unit vectors of k's bonds dead (D) and live (L)
+    at the start (``bond_alive_initial``: the notches): it points from k across the notch it faces, and is fixed for
+    the run (a normal that turned as bonds break would make the contact's potential jump). In a full family
+    D = -L; where a free surface cuts the family the bonds it removes on either side of a notch mirror each other, so
+    their tangential parts cancel in D - L (D alone tilts towards the surface: faces sliding along a tilted normal
+    would appear to close)."""
+    state = BOND_NONE
+    normal = wp.vec3(0.0)
+    xk = rest_positions[k]
+    for q in range(family_offsets[k], family_offsets[k + 1]):
+        m = family_neighbors[q]
+        if m == j:
+            state = wp.where(bond_alive[q] == wp.uint8(0), BOND_DEAD, BOND_LIVE)
+        unit = wp.normalize(rest_positions[m] - xk)
+        normal += wp.where(bond_alive_initial[q] == wp.uint8(0), unit, -unit)
+    return state, normal
+
+
+@wp.func
+def crack_pair_geometry(
+    k: int,
+    j: int,
+    d: wp.vec3,
+    r2: float,
+    rest_positions: wp.array(dtype=wp.vec3),
+    body_id: wp.array(dtype=wp.int32),
+    radius: wp.array(dtype=float),
+    distance_factor: float,
+    bonded_factor: float,
+    family_offsets: wp.array(dtype=wp.int32),
+    family_neighbors: wp.array(dtype=wp.int32),
+    bond_alive: wp.array(dtype=wp.uint8),
+    bond_alive_initial: wp.array(dtype=wp.uint8),
+):
+    """Contact geometry of a pair when the bonds are known (bodies that break): (active, R, r, n) with the contact
+    distance R [m], the current distance r [m] (active when r < R; overlap R - r) and the unit direction n of the
+    force on k, for d = y_k - y_j. Particles of different bodies, of one body beyond each other's horizon, and pairs
+    with a live bond: the distance rule of contact_pair_distance along the pair (overlap R_b - r; a live bond at rest
+    is at its rest distance, beyond R_b, and one compressed below it keeps the contact it had, so the contact does not
+    jump on when the bond breaks). A pair whose bond is dead across a pre-cut face (a notch: the particles' fixed
+    normals n_k, n_j of bond_state_and_face_normal differ by more than one unit vector): the smaller of that overlap
+    and the closing of the gap across the face, measured along nu = normalize(n_k - n_j) (reference frame):
+    g = (y_j - y_k) . nu against R_g = bonded_factor (X_j - X_k) . nu, the force along -nu when that is the smaller.
+    Faces that slide along each other (g unchanged, R_g - g < 0) feel nothing, however close a diagonal pair comes;
+    faces that close repel. The overlap is the min of two continuous functions of the positions, so the force
+    switches on from zero; nu is antisymmetric in (k, j), so the pair forces stay equal and opposite. Other pairs
+    with a dead bond (cracks grown in the run, whose face normal is not fixed) use the distance rule: a normal that
+    turns as bonds break makes the gap, hence the potential, jump (measured: a pre-cracked glass plate pulled apart
+    gained 4 times the work put in with the normal taken from the bonds dead at each step)."""
+    R = distance_factor * (radius[k] + radius[j])
+    if r2 >= R * R or r2 == 0.0:
+        return 0, R, float(0.0), wp.vec3(0.0)
+    r = wp.sqrt(r2)
+    n = d / r
+    if body_id[k] != body_id[j]:
+        return 1, R, r, n
+    xi = rest_positions[j] - rest_positions[k]
+    state_k, nk = bond_state_and_face_normal(
+        k, j, rest_positions, family_offsets, family_neighbors, bond_alive, bond_alive_initial
+    )
+    state_j, nj = bond_state_and_face_normal(
+        j, k, rest_positions, family_offsets, family_neighbors, bond_alive, bond_alive_initial
+    )
+    Rb = wp.min(R, bonded_factor * wp.length(xi))
+    if state_k != BOND_DEAD and state_j != BOND_DEAD:  # either row dead counts (rows can break apart)
+        return wp.where(r < Rb, 1, 0), Rb, r, n
+    nu = nk - nj
+    g0 = float(0.0)
+    if wp.length(nu) > FACE_NORMAL_MIN:
+        nu = wp.normalize(nu)
+        g0 = wp.dot(xi, nu)
+    if g0 <= 0.0:  # no pre-cut face between them: the distance rule
+        return wp.where(r < Rb, 1, 0), Rb, r, n
+    g = -wp.dot(d, nu)
+    Rg = bonded_factor * g0
+    if Rg - g < Rb - r:  # the faces' closing is the smaller overlap
+        return wp.where(g < Rg, 1, 0), Rg, g, -nu
+    return wp.where(r < Rb, 1, 0), Rb, r, n
 
 
 EXPOSED = wp.constant(1)  # hash-grid group of the particles that take part in contact
@@ -150,15 +223,18 @@ def count_live_lattice_bonds(
 _contact_kernel_cache = {}
 
 
-def make_particle_contact_kernels(shielded: bool):
+def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
     """(force, energy_and_stiffness) kernels for particle contact, built once per variant. With ``shielded`` only
     exposed particles (group EXPOSED of a grouped hash grid, see count_lattice_neighbors) take part; interior
-    particles, which no foreign particle can reach through two exposed layers, are skipped. The energy kernel follows
-    the same rule, so it is the potential of the forces."""
-    key = bool(shielded)
+    particles, which no foreign particle can reach through two exposed layers, are skipped. With ``cracks`` the
+    bonds are known (family_offsets, family_neighbors, bond_alive) and a pair of one body follows
+    crack_pair_geometry (only faces that close across a dead bond repel); without, contact_pair_distance (the
+    family arrays are not read). The energy kernel follows the same rule, so it is the potential of the forces."""
+    key = (bool(shielded), bool(cracks))
     if key in _contact_kernel_cache:
         return _contact_kernel_cache[key]
-    SHIELDED = key
+    SHIELDED = key[0]
+    CRACKS = key[1]
 
     @wp.kernel(module="unique")
     def particle_contact_force(
@@ -173,6 +249,10 @@ def make_particle_contact_kernels(shielded: bool):
         modulus: wp.array(dtype=float),
         kind: wp.array(dtype=wp.int32),
         exposed: wp.array(dtype=wp.int32),
+        family_offsets: wp.array(dtype=wp.int32),
+        family_neighbors: wp.array(dtype=wp.int32),
+        bond_alive: wp.array(dtype=wp.uint8),
+        bond_alive_initial: wp.array(dtype=wp.uint8),
         query_radius: float,
         distance_factor: float,
         bonded_factor: float,
@@ -225,11 +305,19 @@ def make_particle_contact_kernels(shielded: bool):
             r2 = wp.dot(d, d)
             if r2 >= q2 or j == k:
                 continue
-            R = contact_pair_distance(k, j, rest_positions, body_id, radius, distance_factor, bonded_factor)
-            if r2 >= R * R or r2 == 0.0:
-                continue
-            r = wp.sqrt(r2)
-            n = d / r
+            if wp.static(CRACKS):
+                active, R, r, n = crack_pair_geometry(
+                    k, j, d, r2, rest_positions, body_id, radius, distance_factor, bonded_factor,
+                    family_offsets, family_neighbors, bond_alive, bond_alive_initial,
+                )  # fmt: skip
+                if active == 0:
+                    continue
+            else:
+                R = contact_pair_distance(k, j, rest_positions, body_id, radius, distance_factor, bonded_factor)
+                if r2 >= R * R or r2 == 0.0:
+                    continue
+                r = wp.sqrt(r2)
+                n = d / r
             vol_j = volume[j]
             mj = mass[j]
             # float32 range: C alone reaches 1e27 N/m^6 at sub-mm spacings, so only products with V_j are formed
@@ -278,6 +366,10 @@ def make_particle_contact_kernels(shielded: bool):
         volume: wp.array(dtype=float),
         modulus: wp.array(dtype=float),
         exposed: wp.array(dtype=wp.int32),
+        family_offsets: wp.array(dtype=wp.int32),
+        family_neighbors: wp.array(dtype=wp.int32),
+        bond_alive: wp.array(dtype=wp.uint8),
+        bond_alive_initial: wp.array(dtype=wp.uint8),
         query_radius: float,
         distance_factor: float,
         bonded_factor: float,
@@ -314,10 +406,19 @@ def make_particle_contact_kernels(shielded: bool):
             r2 = wp.dot(d, d)
             if r2 >= q2 or j == k:
                 continue
-            R = contact_pair_distance(k, j, rest_positions, body_id, radius, distance_factor, bonded_factor)
-            if r2 >= R * R:
-                continue
-            gap = R - wp.sqrt(r2)
+            if wp.static(CRACKS):
+                active, R, r, n = crack_pair_geometry(
+                    k, j, d, r2, rest_positions, body_id, radius, distance_factor, bonded_factor,
+                    family_offsets, family_neighbors, bond_alive, bond_alive_initial,
+                )  # fmt: skip
+                if active == 0:
+                    continue
+                gap = R - r
+            else:
+                R = contact_pair_distance(k, j, rest_positions, body_id, radius, distance_factor, bonded_factor)
+                if r2 >= R * R:
+                    continue
+                gap = R - wp.sqrt(r2)
             cv = contact_pair_modulus(ck, modulus[j]) * volume[j] * wp.min(sk, scale[j])
             e += 0.25 * cv * vol_k * gap * gap
             s += cv
@@ -374,9 +475,9 @@ def particle_mesh_contact(
     pushed out along the outward normal n by the contact law penalty_force (d = r - signed distance, the velocity of
     the particle relative to the surface point, the barycentric velocity of the face); the face's three vertices take
     -F in proportion to their barycentric weights, so the pair's momentum is conserved exactly. The penalty
-    k = stiffness_rate m_red uses the pair's reduced mass m_red, with stiffness_rate = (0.25 / dt)^2: one contact
-    oscillates at omega dt = 0.25, so even tens of simultaneous contacts on one point stay inside velocity Verlet's
-    stability limit (omega dt < 2).
+    k = stiffness_rate m_red uses the pair's reduced mass m_red, with stiffness_rate = (omega dt / dt)^2
+    (pdsim/contact.py CONTACT_OMEGA_DT = 0.15): even tens of simultaneous contacts on one point stay inside velocity
+    Verlet's stability limit (omega dt < 2).
     ``p_to_force`` and the mesh's forces: multiply a force [N] into each solver's force unit (1 / V for a force
     density, 1 for nodal forces); ``m_points`` maps the mesh's vertices to its solver's points.
 
@@ -437,17 +538,17 @@ def mark_exposed_by_cracks(*, device, **arguments):
     launch(count_live_lattice_bonds, arguments["rest_positions"].shape[0], device=device, **arguments)
 
 
-def particle_contact_forces(shielded: bool, *, device, **arguments):
+def particle_contact_forces(shielded: bool, cracks: bool = False, *, device, **arguments):
     """Contact force density, hard-floor shares and the next stiffness-cap scale (particle_contact_force of
-    make_particle_contact_kernels(shielded))."""
-    force_kernel, _ = make_particle_contact_kernels(shielded)
+    make_particle_contact_kernels(shielded, cracks))."""
+    force_kernel, _ = make_particle_contact_kernels(shielded, cracks)
     launch(force_kernel, arguments["rest_positions"].shape[0], device=device, **arguments)
 
 
-def particle_contact_energies(shielded: bool, *, device, **arguments):
+def particle_contact_energies(shielded: bool, cracks: bool = False, *, device, **arguments):
     """Per-particle contact energy, stiffness row sum and contact count (particle_contact_energy_and_stiffness of
-    make_particle_contact_kernels(shielded))."""
-    _, energy_kernel = make_particle_contact_kernels(shielded)
+    make_particle_contact_kernels(shielded, cracks))."""
+    _, energy_kernel = make_particle_contact_kernels(shielded, cracks)
     launch(energy_kernel, arguments["rest_positions"].shape[0], device=device, **arguments)
 
 

@@ -5,14 +5,14 @@ bounds come within ``band`` of it (``wp.mesh_query_aabb``), skipping the faces o
 vertices of one connected piece of the current mesh, so a body's own surface and the two sides of a crack that has not
 yet cut a piece free never touch). With the signed distance s of the vertex from that face (the face's outward normal
 gives the sign) and the overlap d = skin - s, a vertex with d > 0 and s > -band is pushed out by the contact law
-(kernels/contact.py, penalty_force) and the face's three vertices take the reaction in proportion to their barycentric
+(kernels/colliders.py, penalty_force) and the face's three vertices take the reaction in proportion to their barycentric
 weights, so each pair conserves momentum exactly. Both orders (vertices of A on faces of B and of B on faces of A) are
 launched: face-to-face contact is then symmetric.
 """
 
 import warp as wp
 
-from .contact import penalty_force
+from .colliders import penalty_force
 from .launch import launch
 from .watchdog import WATCH_COLLIDERS
 

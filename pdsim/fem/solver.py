@@ -253,6 +253,8 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
                     asked.setdefault("material_fracture", f"body '{b.name}': Material.{field}={getattr(m, field)!r}")
             if getattr(m, "anisotropy", None) is not None:
                 asked.setdefault("anisotropy", f"body '{b.name}': Material.anisotropy")
+        if getattr(context.ground, "restitution", None) is not None:
+            asked["ground_restitution"] = f"the ground plane's restitution={context.ground.restitution!r}"
         return asked
 
     def surfaces_could_meet(self) -> bool:
@@ -268,6 +270,8 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
             "material_fracture": "FEM fracture is set on the body: FemBody(..., tensile_strength=... [Pa], "
             "fracture_energy=... [J/m^2]); remove the Material field",
             "anisotropy": "the FEM material is isotropic; remove Material.anisotropy or use a PeridynamicBody",
+            "ground_restitution": "FEM vertices meet the ground by inelastic projection (they have no radius for the "
+            "ground's penalty contact): add the ground plane without restitution, or use a PeridynamicBody",
         }.get(feature, super().instead(feature))
 
     # -- model ----------------------------------------------------------------------------------------------------
