@@ -81,7 +81,8 @@ def contact_pair_modulus(ck: float, cj: float):
 FACE_NORMAL_MIN = wp.constant(1.0)  # |n_k - n_j| up to one unit vector: no pre-cut face between k and j
 BOND_NONE = wp.constant(0)  # the pair is not in the family (beyond the horizon)
 BOND_LIVE = wp.constant(1)
-BOND_DEAD = wp.constant(2)  # broken, or cut by a notch
+BOND_DEAD = wp.constant(2)  # broken in the run
+BOND_CUT = wp.constant(3)  # cut by a notch (dead from the start)
 
 
 @wp.func
@@ -94,8 +95,8 @@ def bond_state_and_face_normal(
     bond_alive: wp.array(dtype=wp.uint8),
     bond_alive_initial: wp.array(dtype=wp.uint8),
 ):
-    """(state of the bond k-j now: BOND_NONE, BOND_LIVE or BOND_DEAD; the pre-cut face normal of k): one pass over
-    k's family. The face normal is D - L, the sums of the reference unit vectors of k's bonds dead (D) and live (L)
+    """(state of the bond k-j: BOND_NONE, BOND_LIVE, BOND_DEAD or BOND_CUT; the pre-cut face normal of k): one pass
+    over k's family. The face normal is D - L, the sums of the reference unit vectors of k's bonds dead (D) and live (L)
     at the start (``bond_alive_initial``: the notches): it points from k across the notch it faces, and is fixed for
     the run (a normal that turned as bonds break would make the contact's potential jump). In a full family
     D = -L; where a free surface cuts the family the bonds it removes on either side of a notch mirror each other, so
@@ -108,6 +109,8 @@ def bond_state_and_face_normal(
         m = family_neighbors[q]
         if m == j:
             state = wp.where(bond_alive[q] == wp.uint8(0), BOND_DEAD, BOND_LIVE)
+            if bond_alive_initial[q] == wp.uint8(0):
+                state = BOND_CUT
         unit = wp.normalize(rest_positions[m] - xk)
         normal += wp.where(bond_alive_initial[q] == wp.uint8(0), unit, -unit)
     return state, normal
@@ -134,8 +137,8 @@ def crack_pair_geometry(
     force on k, for d = y_k - y_j. Particles of different bodies, of one body beyond each other's horizon, and pairs
     with a live bond: the distance rule of contact_pair_distance along the pair (overlap R_b - r; a live bond at rest
     is at its rest distance, beyond R_b, and one compressed below it keeps the contact it had, so the contact does not
-    jump on when the bond breaks). A pair whose bond is dead across a pre-cut face (a notch: the particles' fixed
-    normals n_k, n_j of bond_state_and_face_normal differ by more than one unit vector): the smaller of that overlap
+    jump on when the bond breaks). A pair whose bond a notch cut (BOND_CUT, the particles' fixed normals n_k, n_j of
+    bond_state_and_face_normal differing by more than one unit vector): the smaller of that overlap
     and the closing of the gap across the face, measured along nu = normalize(n_k - n_j) (reference frame):
     g = (y_j - y_k) . nu against R_g = bonded_factor (X_j - X_k) . nu, the force along -nu when that is the smaller.
     Faces that slide along each other (g unchanged, R_g - g < 0) feel nothing, however close a diagonal pair comes;
@@ -152,14 +155,16 @@ def crack_pair_geometry(
     if body_id[k] != body_id[j]:
         return 1, R, r, n
     xi = rest_positions[j] - rest_positions[k]
+    Rb = wp.min(R, bonded_factor * wp.length(xi))
+    if r >= Rb:  # beyond the distance rule's reach: no contact by either rule (the bond look-up is skipped)
+        return 0, Rb, r, n
     state_k, nk = bond_state_and_face_normal(
         k, j, rest_positions, family_offsets, family_neighbors, bond_alive, bond_alive_initial
     )
     state_j, nj = bond_state_and_face_normal(
         j, k, rest_positions, family_offsets, family_neighbors, bond_alive, bond_alive_initial
     )
-    Rb = wp.min(R, bonded_factor * wp.length(xi))
-    if state_k != BOND_DEAD and state_j != BOND_DEAD:  # either row dead counts (rows can break apart)
+    if state_k != BOND_CUT and state_j != BOND_CUT:  # not across a notch: the distance rule
         return wp.where(r < Rb, 1, 0), Rb, r, n
     nu = nk - nj
     g0 = float(0.0)

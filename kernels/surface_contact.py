@@ -3,11 +3,13 @@
 Each surface vertex (a sphere of radius ``skin``) looks for the nearest face of a surface mesh among the faces whose
 bounds come within ``band`` of it (``wp.mesh_query_aabb``), skipping the faces of its own piece (same label: faces and
 vertices of one connected piece of the current mesh, so a body's own surface and the two sides of a crack that has not
-yet cut a piece free never touch). With the signed distance s of the vertex from that face (the face's outward normal
-gives the sign) and the overlap d = skin - s, a vertex with d > 0 and s > -band is pushed out by the contact law
-(kernels/colliders.py, penalty_force) and the face's three vertices take the reaction in proportion to their barycentric
-weights, so each pair conserves momentum exactly. Both orders (vertices of A on faces of B and of B on faces of A) are
-launched: face-to-face contact is then symmetric.
+yet cut a piece free never touch). With the signed distance s of the vertex from that face (the side from the face's
+outward normal, or, where the nearest point is on an edge or a corner, from the sum of the unit normals of that
+piece's faces sharing it: one face's normal does not tell the side there) and the overlap d = skin - s, a vertex
+with d > 0 and s > -band is pushed out by the contact law (kernels/colliders.py, penalty_force) and the face's three
+vertices take the reaction in proportion to their barycentric weights, so each pair conserves momentum exactly.
+Both orders (vertices of A on faces of B and of B on faces of A) are launched: face-to-face contact is then
+symmetric. Edges crossing edges with no vertex inside a face are not detected.
 """
 
 import warp as wp
@@ -124,10 +126,28 @@ def vertex_face_contact(
     if area2 == 0.0:
         return
     face_n = face_n / area2
-    d = x - (best_w[0] * a + best_w[1] * b + best_w[2] * c)
+    closest = best_w[0] * a + best_w[1] * b + best_w[2] * c
+    d = x - closest
     dist = wp.sqrt(best_d2)
+    side = face_n
+    if wp.min(best_w) <= 0.0:
+        # closest on an edge or a corner: the side from the summed unit normals of the faces of that piece sharing
+        # the closest point (a pseudo-normal), not from one of them
+        side = wp.vec3(0.0)
+        tol = 1.0e-5 * wp.max(band, skin)
+        again = wp.mesh_query_aabb(mesh, closest - wp.vec3(tol), closest + wp.vec3(tol))
+        g = int(0)
+        while wp.mesh_query_aabb_next(again, g):
+            if m_label[g] != m_label[best]:
+                continue
+            ga = m_x[m_faces[3 * g + 0]]
+            gb = m_x[m_faces[3 * g + 1]]
+            gc = m_x[m_faces[3 * g + 2]]
+            gw = triangle_closest_weights(closest, ga, gb, gc)
+            if wp.length(closest - (gw[0] * ga + gw[1] * gb + gw[2] * gc)) <= tol:
+                side += wp.normalize(wp.cross(gb - ga, gc - ga))
     sign = float(1.0)
-    if wp.dot(d, face_n) < 0.0:
+    if wp.dot(d, side) < 0.0:
         sign = -1.0
     s = sign * dist
     if s >= skin or s <= -band:

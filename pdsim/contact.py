@@ -514,7 +514,7 @@ class MethodContact:
 
     def _force_scale(self, solver):
         scale = self._to_force.get(id(solver))
-        if scale is None:
+        if scale is None or scale.shape[0] != solver.kin.u.shape[0]:  # FEM fracture adds vertices
             scale = wp.array(
                 (1.0 / solver.kin.force_to_newton_host).astype(np.float32), dtype=float, device=solver.kin.u.device
             )

@@ -160,11 +160,11 @@ class FemViews:
         return self._contact_pieces[1], self._contact_pieces[2]
 
     def contact_skin(self) -> tuple[float, float]:
-        """(skin, band) [m] of contact between FEM surfaces: a surface vertex is a sphere of radius ``skin`` (a
-        quarter of the smallest body's mean edge length), and is found inside another piece down to ``band`` (one
-        mean edge length) below its surface."""
+        """(skin, band) [m] of contact between FEM surfaces: a surface vertex is a point (skin 0: the faces a crack
+        separates lie on each other when the piece comes free, and a skin would push them apart at once), found inside
+        another piece down to ``band`` (one mean edge length of the smallest body) below its surface."""
         width = float(min(self.model.widths))  # half a mean edge length
-        return 0.5 * width, 2.0 * width
+        return 0.0, 2.0 * width
 
     def _element_fragments(self) -> np.ndarray:
         """Piece id of every element, int64 [element_count]: the body-local index of the smallest element of its
