@@ -78,7 +78,7 @@ def contact_pair_modulus(ck: float, cj: float):
     return 2.0 / (1.0 / ck + 1.0 / cj)
 
 
-FACE_NORMAL_MIN = wp.constant(1.0)  # |n_k - n_j| up to one unit vector: no pre-cut face between k and j
+FACE_NORMAL_MIN = wp.constant(1.0)  # |n_k - n_j| up to one: the two notch faces do not face each other
 BOND_NONE = wp.constant(0)  # the pair is not in the family (beyond the horizon)
 BOND_LIVE = wp.constant(1)
 BOND_DEAD = wp.constant(2)  # broken in the run
@@ -95,15 +95,16 @@ def bond_state_and_face_normal(
     bond_alive: wp.array(dtype=wp.uint8),
     bond_alive_initial: wp.array(dtype=wp.uint8),
 ):
-    """(state of the bond k-j: BOND_NONE, BOND_LIVE, BOND_DEAD or BOND_CUT; the pre-cut face normal of k): one pass
-    over k's family. The face normal is D - L, the sums of the reference unit vectors of k's bonds dead (D) and live (L)
-    at the start (``bond_alive_initial``: the notches): it points from k across the notch it faces, and is fixed for
-    the run (a normal that turned as bonds break would make the contact's potential jump). In a full family
-    D = -L; where a free surface cuts the family the bonds it removes on either side of a notch mirror each other, so
-    their tangential parts cancel in D - L (D alone tilts towards the surface: faces sliding along a tilted normal
-    would appear to close)."""
+    """(state of the bond k-j: BOND_NONE, BOND_LIVE, BOND_DEAD or BOND_CUT; the notch-face normal of k, a unit
+    vector, zero when no bond of k was cut): one pass over k's family. The face normal is the direction of k's
+    shortest bond a notch cut (``bond_alive_initial`` 0; the mean of the shortest ones when several tie): the bond
+    that crosses the notch most squarely, so the normal does not tilt where the notch ends or a free surface cuts the
+    family (the sum of all cut bonds tilts there, towards the side with more of them; faces sliding along a tilted
+    normal would appear to close). It is fixed for the run: a normal that turned as bonds break would make the
+    contact's potential jump."""
     state = BOND_NONE
     normal = wp.vec3(0.0)
+    shortest = float(1.0e30)
     xk = rest_positions[k]
     for q in range(family_offsets[k], family_offsets[k + 1]):
         m = family_neighbors[q]
@@ -111,8 +112,16 @@ def bond_state_and_face_normal(
             state = wp.where(bond_alive[q] == wp.uint8(0), BOND_DEAD, BOND_LIVE)
             if bond_alive_initial[q] == wp.uint8(0):
                 state = BOND_CUT
-        unit = wp.normalize(rest_positions[m] - xk)
-        normal += wp.where(bond_alive_initial[q] == wp.uint8(0), unit, -unit)
+        if bond_alive_initial[q] == wp.uint8(0):
+            xi = rest_positions[m] - xk
+            length = wp.length(xi)
+            if length < shortest * (1.0 - 1.0e-4):
+                shortest = length
+                normal = xi / length
+            elif length <= shortest * (1.0 + 1.0e-4):
+                normal += xi / length
+    if shortest < 1.0e30:
+        normal = wp.normalize(normal)
     return state, normal
 
 
