@@ -143,9 +143,11 @@ class Scene:
         return self.ground
 
     def enable_contact(self, enabled: bool = True, **options) -> None:
-        """Short-range repulsion between particles that share no live bond (separate bodies, fragments). Automatic
-        by default: on when the scene has several bodies or a body that can break. ``options`` go to
-        pdsim.contact.ParticleContact (e.g. friction=0.3, distance_factor=1.35)."""
+        """Short-range repulsion between particles that share no live bond (separate bodies, fragments), and between
+        FEM surfaces. Automatic by default: on when the scene has several bodies or a body that can break.
+        ``options`` go to pdsim.contact.ParticleContact (e.g. friction=0.3, distance_factor=1.35); ``restitution``
+        (in (0, 1]) and ``friction`` also set the contact between methods and between FEM surfaces
+        (pdsim.contact.MethodContact), the one contact law of docs/stability.md."""
         self.contact = (options or True) if enabled else False
 
     def add_collider(self, collider):
