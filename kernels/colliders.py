@@ -59,6 +59,30 @@ def collide_ground_plane(
 
 
 @wp.func
+def penalty_force(
+    n: wp.vec3, depth: float, v_rel: wp.vec3, k: float, m_red: float, damping_ratio: float, friction: float
+):
+    """The contact law of every penalty pair (particle-mesh, vertex-face, ground) [N]: a linear spring-dashpot along
+    the unit normal n (pointing from the other side to this one), F_n = max(k depth - c v_n, 0) (never pulling),
+    c = 2 damping_ratio sqrt(k m_red), v_n = v_rel . n (v_rel: this side's velocity minus the other's [m/s]), plus
+    regularised Coulomb friction on the tangential relative velocity v_t: |F_t| = min(friction F_n, c_t |v_t|)
+    opposing v_t, c_t = 2 sqrt(k m_red) (critically damped). depth [m] > 0 is the overlap, k [N/m] the penalty,
+    m_red [kg] the pair's reduced mass. The restitution of a damping ratio, and the damping ratio of a restitution a
+    user sets: pdsim/contact.py, restitution_of_damping_ratio and damping_ratio_for_restitution."""
+    damper = 2.0 * damping_ratio * wp.sqrt(k * m_red)
+    vn = wp.dot(v_rel, n)
+    fn = wp.max(k * depth - damper * vn, 0.0)
+    f = fn * n
+    if friction > 0.0:
+        vt = v_rel - vn * n
+        vt_len = wp.length(vt)
+        if vt_len > 0.0:
+            ft = wp.min(friction * fn, 2.0 * wp.sqrt(k * m_red) * vt_len)
+            f -= (ft / vt_len) * vt
+    return f
+
+
+@wp.func
 def collider_response(
     x: wp.vec3,
     v: wp.vec3,
@@ -338,6 +362,37 @@ def collide_mesh(
     push_point(i, x, sdf, n, r, motion, friction, displacements, velocities, mass, reaction, phase)
 
 
+@wp.kernel
+def ground_plane_force(
+    rest: wp.array(dtype=wp.vec3),
+    displacements: wp.array(dtype=wp.vec3),
+    velocities: wp.array(dtype=wp.vec3),
+    kind: wp.array(dtype=wp.int32),
+    radius: wp.array(dtype=float),
+    mass: wp.array(dtype=float),
+    force_to_newton: wp.array(dtype=float),
+    normal: wp.vec3,
+    offset: float,
+    stiffness_rate: float,
+    damping_ratio: float,
+    friction: float,
+    force: wp.array(dtype=wp.vec3),
+):
+    """The ground plane n . x = offset (local frame) as a contact pair of the one law (penalty_force) for the free
+    points: a point (sphere of ``radius`` [m]) overlapping the plane by d = r + offset - n . x > 0 gets
+    F = penalty_force(n, d, v, k = stiffness_rate m, m, damping_ratio, friction) [N] (the plane is immovable: the
+    reduced mass is the point's mass m [kg]), added to force[i] as F / force_to_newton[i] (the solver's unit)."""
+    i = wp.tid()
+    if kind[i] != PARTICLE_FREE:
+        return
+    x = rest[i] + displacements[i]
+    depth = radius[i] + offset - wp.dot(normal, x)
+    if depth > 0.0:
+        m = mass[i]
+        f = penalty_force(normal, depth, velocities[i], stiffness_rate * m, m, damping_ratio, friction)
+        force[i] = force[i] + f / force_to_newton[i]
+
+
 # -- launches (pdsim/colliders.py) ------------------------------------------------------------------------------------
 # One thread per point of the solver's arrays: rest positions, displacements, velocities (vec3 [n]), collision radii
 # and kinematic kinds (int32 [n]); ``body`` is the collider's one-element RigidMotion array. The kernels' arguments are
@@ -353,6 +408,18 @@ def push_out_of_plane(*, normal, offset, friction, device, **arguments):
         normal=wp.vec3(*normal),
         offset=float(offset),
         friction=float(friction),
+        **arguments,
+    )
+
+
+def ground_forces(*, normal, offset, device, **arguments):
+    """The ground plane n . x = ``offset`` [m] (local frame) as a penalty contact (ground_plane_force)."""
+    launch(
+        ground_plane_force,
+        arguments["rest"].shape[0],
+        device=device,
+        normal=wp.vec3(*normal),
+        offset=float(offset),
         **arguments,
     )
 

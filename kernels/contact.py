@@ -46,7 +46,7 @@ or crack) take part, through a grouped hash grid (see make_particle_contact_kern
 
 import warp as wp
 
-from .colliders import mesh_contact_point
+from .colliders import mesh_contact_point, penalty_force
 from .integration import PARTICLE_FREE
 from .launch import launch
 from .neighbors import same_body_count
@@ -76,6 +76,117 @@ def contact_pair_modulus(ck: float, cj: float):
     symmetric in k and j, and free of the float32 overflow of the product C_k C_j (C is 4e22 N/m^6 for steel at
     h = 4 mm, 5e26 for glass at h = 0.5 mm: the product would be inf)."""
     return 2.0 / (1.0 / ck + 1.0 / cj)
+
+
+FACE_NORMAL_MIN = wp.constant(1.0)  # |n_k - n_j| up to one: the two notch faces do not face each other
+BOND_NONE = wp.constant(0)  # the pair is not in the family (beyond the horizon)
+BOND_LIVE = wp.constant(1)
+BOND_DEAD = wp.constant(2)  # broken in the run
+BOND_CUT = wp.constant(3)  # cut by a notch (dead from the start)
+
+
+@wp.func
+def bond_state_and_face_normal(
+    k: int,
+    j: int,
+    rest_positions: wp.array(dtype=wp.vec3),
+    family_offsets: wp.array(dtype=wp.int32),
+    family_neighbors: wp.array(dtype=wp.int32),
+    bond_alive: wp.array(dtype=wp.uint8),
+    bond_alive_initial: wp.array(dtype=wp.uint8),
+):
+    """(state of the bond k-j: BOND_NONE, BOND_LIVE, BOND_DEAD or BOND_CUT; the notch-face normal of k, a unit
+    vector, zero when no bond of k was cut): one pass over k's family. The face normal is the direction of k's
+    shortest bond a notch cut (``bond_alive_initial`` 0; the mean of the shortest ones when several tie): the bond
+    that crosses the notch most squarely, so the normal does not tilt where the notch ends or a free surface cuts the
+    family (the sum of all cut bonds tilts there, towards the side with more of them; faces sliding along a tilted
+    normal would appear to close). It is fixed for the run: a normal that turned as bonds break would make the
+    contact's potential jump."""
+    state = BOND_NONE
+    normal = wp.vec3(0.0)
+    shortest = float(1.0e30)
+    xk = rest_positions[k]
+    for q in range(family_offsets[k], family_offsets[k + 1]):
+        m = family_neighbors[q]
+        if m == j:
+            state = wp.where(bond_alive[q] == wp.uint8(0), BOND_DEAD, BOND_LIVE)
+            if bond_alive_initial[q] == wp.uint8(0):
+                state = BOND_CUT
+        if bond_alive_initial[q] == wp.uint8(0):
+            xi = rest_positions[m] - xk
+            length = wp.length(xi)
+            if length < shortest * (1.0 - 1.0e-4):
+                shortest = length
+                normal = xi / length
+            elif length <= shortest * (1.0 + 1.0e-4):
+                normal += xi / length
+    if shortest < 1.0e30:
+        normal = wp.normalize(normal)
+    return state, normal
+
+
+@wp.func
+def crack_pair_geometry(
+    k: int,
+    j: int,
+    d: wp.vec3,
+    r2: float,
+    rest_positions: wp.array(dtype=wp.vec3),
+    body_id: wp.array(dtype=wp.int32),
+    radius: wp.array(dtype=float),
+    distance_factor: float,
+    bonded_factor: float,
+    family_offsets: wp.array(dtype=wp.int32),
+    family_neighbors: wp.array(dtype=wp.int32),
+    bond_alive: wp.array(dtype=wp.uint8),
+    bond_alive_initial: wp.array(dtype=wp.uint8),
+):
+    """Contact geometry of a pair when the bonds are known (bodies that break): (active, R, r, n) with the contact
+    distance R [m], the current distance r [m] (active when r < R; overlap R - r) and the unit direction n of the
+    force on k, for d = y_k - y_j. Particles of different bodies, of one body beyond each other's horizon, and pairs
+    with a live bond: the distance rule of contact_pair_distance along the pair (overlap R_b - r; a live bond at rest
+    is at its rest distance, beyond R_b, and one compressed below it keeps the contact it had, so the contact does not
+    jump on when the bond breaks). A pair whose bond a notch cut (BOND_CUT, the particles' fixed normals n_k, n_j of
+    bond_state_and_face_normal differing by more than one unit vector): the smaller of that overlap
+    and the closing of the gap across the face, measured along nu = normalize(n_k - n_j) (reference frame):
+    g = (y_j - y_k) . nu against R_g = bonded_factor (X_j - X_k) . nu, the force along -nu when that is the smaller.
+    Faces that slide along each other (g unchanged, R_g - g < 0) feel nothing, however close a diagonal pair comes;
+    faces that close repel. The overlap is the min of two continuous functions of the positions, so the force
+    switches on from zero; nu is antisymmetric in (k, j), so the pair forces stay equal and opposite. Other pairs
+    with a dead bond (cracks grown in the run, whose face normal is not fixed) use the distance rule: a normal that
+    turns as bonds break makes the gap, hence the potential, jump (measured: a pre-cracked glass plate pulled apart
+    gained 4 times the work put in with the normal taken from the bonds dead at each step)."""
+    R = distance_factor * (radius[k] + radius[j])
+    if r2 >= R * R or r2 == 0.0:
+        return 0, R, float(0.0), wp.vec3(0.0)
+    r = wp.sqrt(r2)
+    n = d / r
+    if body_id[k] != body_id[j]:
+        return 1, R, r, n
+    xi = rest_positions[j] - rest_positions[k]
+    Rb = wp.min(R, bonded_factor * wp.length(xi))
+    if r >= Rb:  # beyond the distance rule's reach: no contact by either rule (the bond look-up is skipped)
+        return 0, Rb, r, n
+    state_k, nk = bond_state_and_face_normal(
+        k, j, rest_positions, family_offsets, family_neighbors, bond_alive, bond_alive_initial
+    )
+    state_j, nj = bond_state_and_face_normal(
+        j, k, rest_positions, family_offsets, family_neighbors, bond_alive, bond_alive_initial
+    )
+    if state_k != BOND_CUT and state_j != BOND_CUT:  # not across a notch: the distance rule
+        return wp.where(r < Rb, 1, 0), Rb, r, n
+    nu = nk - nj
+    g0 = float(0.0)
+    if wp.length(nu) > FACE_NORMAL_MIN:
+        nu = wp.normalize(nu)
+        g0 = wp.dot(xi, nu)
+    if g0 <= 0.0:  # no pre-cut face between them: the distance rule
+        return wp.where(r < Rb, 1, 0), Rb, r, n
+    g = -wp.dot(d, nu)
+    Rg = bonded_factor * g0
+    if Rg - g < Rb - r:  # the faces' closing is the smaller overlap
+        return wp.where(g < Rg, 1, 0), Rg, g, -nu
+    return wp.where(r < Rb, 1, 0), Rb, r, n
 
 
 EXPOSED = wp.constant(1)  # hash-grid group of the particles that take part in contact
@@ -126,15 +237,18 @@ def count_live_lattice_bonds(
 _contact_kernel_cache = {}
 
 
-def make_particle_contact_kernels(shielded: bool):
+def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
     """(force, energy_and_stiffness) kernels for particle contact, built once per variant. With ``shielded`` only
     exposed particles (group EXPOSED of a grouped hash grid, see count_lattice_neighbors) take part; interior
-    particles, which no foreign particle can reach through two exposed layers, are skipped. The energy kernel follows
-    the same rule, so it is the potential of the forces."""
-    key = bool(shielded)
+    particles, which no foreign particle can reach through two exposed layers, are skipped. With ``cracks`` the
+    bonds are known (family_offsets, family_neighbors, bond_alive) and a pair of one body follows
+    crack_pair_geometry (only faces that close across a dead bond repel); without, contact_pair_distance (the
+    family arrays are not read). The energy kernel follows the same rule, so it is the potential of the forces."""
+    key = (bool(shielded), bool(cracks))
     if key in _contact_kernel_cache:
         return _contact_kernel_cache[key]
-    SHIELDED = key
+    SHIELDED = key[0]
+    CRACKS = key[1]
 
     @wp.kernel(module="unique")
     def particle_contact_force(
@@ -149,6 +263,10 @@ def make_particle_contact_kernels(shielded: bool):
         modulus: wp.array(dtype=float),
         kind: wp.array(dtype=wp.int32),
         exposed: wp.array(dtype=wp.int32),
+        family_offsets: wp.array(dtype=wp.int32),
+        family_neighbors: wp.array(dtype=wp.int32),
+        bond_alive: wp.array(dtype=wp.uint8),
+        bond_alive_initial: wp.array(dtype=wp.uint8),
         query_radius: float,
         distance_factor: float,
         bonded_factor: float,
@@ -201,11 +319,19 @@ def make_particle_contact_kernels(shielded: bool):
             r2 = wp.dot(d, d)
             if r2 >= q2 or j == k:
                 continue
-            R = contact_pair_distance(k, j, rest_positions, body_id, radius, distance_factor, bonded_factor)
-            if r2 >= R * R or r2 == 0.0:
-                continue
-            r = wp.sqrt(r2)
-            n = d / r
+            if wp.static(CRACKS):
+                active, R, r, n = crack_pair_geometry(
+                    k, j, d, r2, rest_positions, body_id, radius, distance_factor, bonded_factor,
+                    family_offsets, family_neighbors, bond_alive, bond_alive_initial,
+                )  # fmt: skip
+                if active == 0:
+                    continue
+            else:
+                R = contact_pair_distance(k, j, rest_positions, body_id, radius, distance_factor, bonded_factor)
+                if r2 >= R * R or r2 == 0.0:
+                    continue
+                r = wp.sqrt(r2)
+                n = d / r
             vol_j = volume[j]
             mj = mass[j]
             # float32 range: C alone reaches 1e27 N/m^6 at sub-mm spacings, so only products with V_j are formed
@@ -254,6 +380,10 @@ def make_particle_contact_kernels(shielded: bool):
         volume: wp.array(dtype=float),
         modulus: wp.array(dtype=float),
         exposed: wp.array(dtype=wp.int32),
+        family_offsets: wp.array(dtype=wp.int32),
+        family_neighbors: wp.array(dtype=wp.int32),
+        bond_alive: wp.array(dtype=wp.uint8),
+        bond_alive_initial: wp.array(dtype=wp.uint8),
         query_radius: float,
         distance_factor: float,
         bonded_factor: float,
@@ -290,10 +420,19 @@ def make_particle_contact_kernels(shielded: bool):
             r2 = wp.dot(d, d)
             if r2 >= q2 or j == k:
                 continue
-            R = contact_pair_distance(k, j, rest_positions, body_id, radius, distance_factor, bonded_factor)
-            if r2 >= R * R:
-                continue
-            gap = R - wp.sqrt(r2)
+            if wp.static(CRACKS):
+                active, R, r, n = crack_pair_geometry(
+                    k, j, d, r2, rest_positions, body_id, radius, distance_factor, bonded_factor,
+                    family_offsets, family_neighbors, bond_alive, bond_alive_initial,
+                )  # fmt: skip
+                if active == 0:
+                    continue
+                gap = R - r
+            else:
+                R = contact_pair_distance(k, j, rest_positions, body_id, radius, distance_factor, bonded_factor)
+                if r2 >= R * R:
+                    continue
+                gap = R - wp.sqrt(r2)
             cv = contact_pair_modulus(ck, modulus[j]) * volume[j] * wp.min(sk, scale[j])
             e += 0.25 * cv * vol_k * gap * gap
             s += cv
@@ -336,6 +475,7 @@ def particle_mesh_contact(
     m_mass: wp.array(dtype=float),
     stiffness_rate: float,
     damping_ratio: float,
+    friction: float,
     p_force: wp.array(dtype=wp.vec3),
     m_force: wp.array(dtype=wp.vec3),
     dt: float,
@@ -346,12 +486,12 @@ def particle_mesh_contact(
     """Contact between the particles of one method and the closed surface mesh of another (cross-method contact).
 
     A particle (sphere of radius r at rest + u) closer to the surface than r, or inside it by less than 2 r, is
-    pushed out along the outward normal n by F = k d - c v_n (never pulling), d = r - signed distance, v_n the normal
-    velocity of the particle relative to the surface point (barycentric velocity of the face); the face's three
-    vertices take -F in proportion to their barycentric weights, so the pair's momentum is conserved exactly. The
-    penalty k = stiffness_rate m_red and the dashpot c = 2 damping_ratio sqrt(k m_red) use the pair's reduced mass
-    m_red, with stiffness_rate = (0.25 / dt)^2: one contact oscillates at omega dt = 0.25, so even tens of
-    simultaneous contacts on one point stay inside velocity Verlet's stability limit (omega dt < 2).
+    pushed out along the outward normal n by the contact law penalty_force (d = r - signed distance, the velocity of
+    the particle relative to the surface point, the barycentric velocity of the face); the face's three vertices take
+    -F in proportion to their barycentric weights, so the pair's momentum is conserved exactly. The penalty
+    k = stiffness_rate m_red uses the pair's reduced mass m_red, with stiffness_rate = (omega dt / dt)^2
+    (pdsim/contact.py CONTACT_OMEGA_DT = 0.15): even tens of simultaneous contacts on one point stay inside velocity
+    Verlet's stability limit (omega dt < 2).
     ``p_to_force`` and the mesh's forces: multiply a force [N] into each solver's force unit (1 / V for a force
     density, 1 for nodal forces); ``m_points`` maps the mesh's vertices to its solver's points.
 
@@ -375,11 +515,7 @@ def particle_mesh_contact(
     m_surface = wa * m_mass[a] + wb * m_mass[b] + wc * m_mass[c]
     mp = p_mass[i]
     m_red = mp * m_surface / (mp + m_surface)
-    k = stiffness_rate * m_red
-    damper = 2.0 * damping_ratio * wp.sqrt(k * m_red)
-    vn = wp.dot(p_v[i] - v_surface, n)
-    f = wp.max(k * (r - sdf) - damper * vn, 0.0)
-    force = f * n
+    force = penalty_force(n, r - sdf, p_v[i] - v_surface, stiffness_rate * m_red, m_red, damping_ratio, friction)
     wp.atomic_add(p_force, i, force * p_to_force[i])
     wp.atomic_sub(m_force, a, force * wa)
     wp.atomic_sub(m_force, b, force * wb)
@@ -416,17 +552,17 @@ def mark_exposed_by_cracks(*, device, **arguments):
     launch(count_live_lattice_bonds, arguments["rest_positions"].shape[0], device=device, **arguments)
 
 
-def particle_contact_forces(shielded: bool, *, device, **arguments):
+def particle_contact_forces(shielded: bool, cracks: bool = False, *, device, **arguments):
     """Contact force density, hard-floor shares and the next stiffness-cap scale (particle_contact_force of
-    make_particle_contact_kernels(shielded))."""
-    force_kernel, _ = make_particle_contact_kernels(shielded)
+    make_particle_contact_kernels(shielded, cracks))."""
+    force_kernel, _ = make_particle_contact_kernels(shielded, cracks)
     launch(force_kernel, arguments["rest_positions"].shape[0], device=device, **arguments)
 
 
-def particle_contact_energies(shielded: bool, *, device, **arguments):
+def particle_contact_energies(shielded: bool, cracks: bool = False, *, device, **arguments):
     """Per-particle contact energy, stiffness row sum and contact count (particle_contact_energy_and_stiffness of
-    make_particle_contact_kernels(shielded))."""
-    _, energy_kernel = make_particle_contact_kernels(shielded)
+    make_particle_contact_kernels(shielded, cracks))."""
+    _, energy_kernel = make_particle_contact_kernels(shielded, cracks)
     launch(energy_kernel, arguments["rest_positions"].shape[0], device=device, **arguments)
 
 

@@ -13,6 +13,7 @@ import trimesh
 import warp as wp
 
 from .checks import check_range
+from .contact import CONTACT_OMEGA_DT, damping_ratio_for_restitution
 from .errors import ParameterError
 from .kernels import colliders as kc
 from .output.views import RigidView
@@ -65,13 +66,26 @@ class Collider:
 
 @dataclass
 class GroundPlane(Collider):
-    """A static plane n . x = offset (world) that free points cannot cross (inelastic contact with Coulomb
-    friction)."""
+    """A static plane n . x = offset (world) that free points cannot cross.
+
+    Two forms of the same contact, chosen by ``restitution``:
+
+    - None (default): inelastic projection with Coulomb friction after the drift (``apply``, kernels/colliders.py
+      collide_ground_plane): the point's approaching normal velocity is removed.
+    - a restitution e in (0, 1]: the plane is a contact pair of the one law (kernels/colliders.py penalty_force,
+      ground_plane_force) in the force phase (``add_forces``): stiffness k = m (CONTACT_OMEGA_DT / dt)^2 per point
+      (pdsim/contact.py: tied to the step, so it never needs a smaller step), the dashpot's damping ratio of
+      restitution e (pdsim/contact.py damping_ratio_for_restitution) and Coulomb ``friction``.
+      A body whose lowest vibration is well above the contact's frequency then rebounds at e times its impact speed;
+      the projection stays as a floor one point radius below the surface (a point pushed that deep is projected back
+      to it). Points with zero radius (FEM vertices) cannot take it (pdsim/fem/solver.py refuses it).
+    """
 
     normal: tuple = (0.0, 0.0, 1.0)
     offset: float = 0.0
     friction: float = 0.5
     name: str | None = "ground"
+    restitution: float | None = None
 
     def view(self, time: float = 0.0, *, bounds=None):
         """The plane for the output: a square of the plane centred under the scene, 10 x the half-diagonal of
@@ -113,13 +127,43 @@ class GroundPlane(Collider):
                 self._no_mass = {**getattr(self, "_no_mass", {}), key: wp.zeros(0, dtype=float, device=rest.device)}
             mass = self._no_mass[key]
         n = np.asarray(self.normal, dtype=np.float64)
+        floor = 0.0 if self.restitution is None else self._floor_depth(key, radius)
         kc.push_out_of_plane(
             **_points(rest, displacements, velocities, radius, kind),
             normal=n,
-            offset=self.offset - n @ self.origin,
+            offset=self.offset - n @ self.origin - floor,
             friction=self.friction,
             mass=mass,
             impulse=self._impulse[key],
+            device=rest.device,
+        )
+
+    def _floor_depth(self, key, radius) -> float:
+        """Depth [m] below the surface of the penalty form's projection floor: the largest point radius of the
+        solver (read once per solver)."""
+        if not hasattr(self, "_floor"):
+            self._floor = {}
+        if key not in self._floor:
+            self._floor[key] = float(radius.numpy().max()) if radius.shape[0] else 0.0
+        return self._floor[key]
+
+    def add_forces(self, rest, displacements, velocities, radius, kind, mass, force_to_newton, force, dt: float):
+        """The penalty form's forces (``restitution`` set; nothing otherwise) on the free points, added to ``force``
+        in the solver's unit (force [N] / ``force_to_newton``), for the step ``dt`` [s]; the arrays as in ``apply``,
+        with the points' masses [kg]. Call it in the force phase, after the internal forces."""
+        if self.restitution is None:
+            return
+        n = np.asarray(self.normal, dtype=np.float64)
+        kc.ground_forces(
+            **_points(rest, displacements, velocities, radius, kind),
+            mass=mass,
+            force_to_newton=force_to_newton,
+            normal=n,
+            offset=self.offset - n @ self.origin,
+            stiffness_rate=(CONTACT_OMEGA_DT / float(dt)) ** 2,
+            damping_ratio=damping_ratio_for_restitution(self.restitution),
+            friction=self.friction,
+            force=force,
             device=rest.device,
         )
 

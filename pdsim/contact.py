@@ -22,6 +22,7 @@ import warp as wp
 from .checks import check_range
 from .errors import ParameterError
 from .kernels import contact as kc
+from .kernels import surface_contact as ksf
 from .kernels.launch import by_name
 
 CONTACT_NEIGHBOR_BUDGET = 12
@@ -85,10 +86,13 @@ class ParticleContact:
 
     A pair repels below the contact distance R_kj = distance_factor (r_k + r_j), or, for two particles of the same
     body, min(bonded_factor |X_j - X_k|, distance_factor (r_k + r_j)) from their reference positions X (LAMMPS PERI's
-    rule): a bonded pair at rest feels nothing and a compressed one only below bonded_factor of its rest distance, so
-    bonds need no look-up and broken ones need no bookkeeping. The force is a linear penalty with a little normal
-    damping and optional Coulomb friction (kernels/contact.py). A particle's contact stiffness is capped at that of
-    12 contacts, so ``stable_time_step()`` bounds the contact springs (docs/stability.md, Contact).
+    rule): a bonded pair at rest feels nothing and a compressed one only below bonded_factor of its rest distance.
+    Once the solver hands over its bonds (``track_bonds``, done for bodies that can break), two particles of one body
+    across a notch repel only when the notch's faces close below bonded_factor of their rest gap measured along the
+    faces' normal: faces that only slide feel nothing. The force is the linear
+    penalty with a little normal damping and optional Coulomb friction (kernels/contact.py). A particle's contact
+    stiffness is capped at that of 12 contacts, so ``stable_time_step()`` bounds the contact springs
+    (docs/stability.md, Contact).
 
     Args:
         rest_positions: reference positions X [m], shape [n, 3].
@@ -113,7 +117,10 @@ class ParticleContact:
             0.94 S) with two contacts reaches about the body's largest bond sum (1.13 S), so the solver's stable step
             is practically unchanged in ordinary impacts.
         damping_ratio: normal damping as a fraction of the pair's critical damping, >= 0; default 0.02 (0.1 lost
-            40 % of the energy in a collision of cubes with offset lattices, 0 gained up to 0.3 %).
+            40 % of the energy in a collision of cubes with offset lattices, 0 gained up to 0.3 %). Give this or
+            ``restitution``.
+        restitution: the pair's normal restitution e in (0, 1] (sets damping_ratio: damping_ratio_for_restitution,
+            the same law as every other contact pair).
         friction: Coulomb coefficient between particles, >= 0; default 0.
         floor_factor: hard floor as a fraction of the contact distance, in [0, 1); pairs closer than it are projected
             apart with their approaching velocity removed (0 disables). Default 0.6: particles of different bodies
@@ -142,7 +149,8 @@ class ParticleContact:
         distance_factor: float = 1.35,
         bonded_factor: float = 0.9,
         stiffness_scale: float = 1.0,
-        damping_ratio: float = 0.02,
+        damping_ratio: float | None = None,
+        restitution: float | None = None,
         friction: float = 0.0,
         floor_factor: float = 0.6,
         shield_interior: bool = True,
@@ -164,7 +172,13 @@ class ParticleContact:
         self.distance_factor = check_range("distance_factor", distance_factor, 0.0, None)
         self.bonded_factor = check_range("bonded_factor", bonded_factor, 0.0, 1.0, hi_open=False)
         self.stiffness_scale = check_range("stiffness_scale", stiffness_scale, 0.0, None)
-        self.damping_ratio = check_range("damping_ratio", damping_ratio, 0.0, None, lo_open=False)
+        if damping_ratio is not None and restitution is not None:
+            raise ParameterError("restitution", restitution, "either restitution or damping_ratio, not both")
+        if restitution is not None:
+            damping_ratio = damping_ratio_for_restitution(restitution)
+        self.damping_ratio = check_range(
+            "damping_ratio", 0.02 if damping_ratio is None else damping_ratio, 0.0, None, lo_open=False
+        )
         self.friction = check_range("friction", friction, 0.0, None, lo_open=False)
         self.floor_factor = check_range("floor_factor", floor_factor, 0.0, 1.0, lo_open=False)
         self.shield_interior = bool(shield_interior)
@@ -210,6 +224,27 @@ class ParticleContact:
         self._energy = wp.zeros(n, dtype=float, device=d)
         self._row_sum = wp.zeros(n, dtype=float, device=d)
         self._count = wp.zeros(n, dtype=wp.int32, device=d)
+        self.cracks = False  # the bonds are known (track_bonds): contact within a body only across dead bonds
+        self._bonds = {
+            "family_offsets": wp.zeros(1, dtype=wp.int32, device=d),
+            "family_neighbors": wp.zeros(1, dtype=wp.int32, device=d),
+            "bond_alive": wp.zeros(1, dtype=wp.uint8, device=d),
+            "bond_alive_initial": wp.zeros(1, dtype=wp.uint8, device=d),
+        }
+
+    def track_bonds(self, family_offsets, family_neighbors, bond_alive, bond_alive_initial):
+        """Gives the contact the bonds of its particles (the solver's CSR families, int32 [n + 1] and int32
+        [bond_count], live flags now, uint8 [bond_count], read in place every step, and at the start, the notches):
+        from then on two particles of one body across a notch repel only when the notch's faces close, the gap
+        measured along the faces' normal, so faces that slide along each other feel nothing; other pairs keep the
+        distance rule (kernels/contact.py, crack_pair_geometry). Rows must match this object's."""
+        self.cracks = True
+        self._bonds = {
+            "family_offsets": family_offsets,
+            "family_neighbors": family_neighbors,
+            "bond_alive": bond_alive,
+            "bond_alive_initial": bond_alive_initial,
+        }
 
     def _mark_exposed_at_rest(self, dim: int):
         grid = wp.HashGrid(dim, dim, dim, device=self.device)
@@ -283,6 +318,7 @@ class ParticleContact:
         self._build_grid(positions)
         kc.particle_contact_forces(
             self.shield_interior,
+            self.cracks,
             positions=positions,
             velocities=velocities,
             kind=self._all_free if kind is None else kind,
@@ -305,6 +341,7 @@ class ParticleContact:
             "grid": self.grid.id,
             **by_name(self, "rest_positions", "body_id", "radius", "volume", "modulus", "exposed"),
             **by_name(self, "query_radius", "distance_factor", "bonded_factor"),
+            **self._bonds,
         }
 
     def _build_grid(self, positions):
@@ -320,6 +357,7 @@ class ParticleContact:
         self._build_grid(positions)
         kc.particle_contact_energies(
             self.shield_interior,
+            self.cracks,
             positions=positions,
             scale=self._scale_next,  # after apply(): the scale its force pass applied (the forces' potential)
             energy=self._energy,
@@ -350,11 +388,71 @@ class ParticleContact:
         return float(np.sqrt(2.0 * self._density_host / s).min())
 
 
+CONTACT_OMEGA_DT = 0.15
+"""The penalty pairs' stiffness tied to the step (MethodContact, the ground's penalty form): k = m_red
+(CONTACT_OMEGA_DT / dt)^2, so one contact oscillates at omega dt = 0.15, far inside velocity Verlet's limit of 2 (tens
+of simultaneous contacts on one point stay stable, and contact never needs a smaller step). The dashpot switches on at
+full strength when a contact starts, part way through a step, so the restitution a pair gets depends on that phase
+(velocity Verlet with the dashpot on the half-step velocity): over eight phases of a step, a particle thrown at the
+ground's penalty form leaves at 0.070 to 0.105 for e = 0.1 and 0.584 to 0.614 for e = 0.6
+(tests/test_contact_law.py, test_drop_rebounds_at_the_restitution_set_on_the_ground; omega dt = 0.25 left e = 0.1
+beyond 0.05 in some phases)."""
+
+
+def restitution_of_damping_ratio(damping_ratio: float) -> float:
+    """Normal restitution e of the contact law (kernels/colliders.py penalty_force: a linear spring-dashpot whose
+    force never pulls) at damping ratio zeta >= 0.
+
+    A pair of reduced mass m meets at speed v0 on a spring k with a dashpot c = 2 zeta sqrt(k m); with
+    omega = sqrt(k / m) its overlap is x(t) = (v0 / (omega s)) exp(-zeta omega t) sin(omega s t), s = sqrt(1 - zeta^2)
+    (sinh and s = sqrt(zeta^2 - 1) above critical damping). Were the force allowed to pull, the pair would separate
+    when the overlap closes, at omega s t = pi, with e = exp(-zeta pi / s), i.e. zeta = -ln e / sqrt(pi^2 + ln^2 e).
+    The law's force k x + c x' never pulls, so the pair separates earlier, when k x + c x' = 0: at
+    T = omega s t with tan T = 2 zeta s / (2 zeta^2 - 1) (T in (0, pi); tanh T for zeta > 1), leaving with
+    e = -exp(-zeta T / s) (cos T - (zeta / s) sin T) (cosh, sinh above critical damping). That e is higher than the
+    classical one (0.64 against 0.6 at zeta = 0.16, 0.25 against 0.1 at zeta = 0.59) and reaches 0 only as zeta grows
+    without bound (exp(-2) = 0.135 at critical damping)."""
+    zeta = check_range("damping_ratio", damping_ratio, 0.0, None, lo_open=False)
+    if zeta == 1.0:
+        zeta = 1.0 + 1.0e-9  # the limit, continuous from both sides
+    if zeta < 1.0:
+        root = np.sqrt(1.0 - zeta * zeta)
+        t = np.arctan2(2.0 * zeta * root, 2.0 * zeta * zeta - 1.0)
+        return float(-np.exp(-zeta * t / root) * (np.cos(t) - (zeta / root) * np.sin(t)))
+    root = np.sqrt(zeta * zeta - 1.0)
+    t = np.arctanh(2.0 * zeta * root / (2.0 * zeta * zeta - 1.0))
+    return float(-np.exp(-zeta * t / root) * (np.cosh(t) - (zeta / root) * np.sinh(t)))
+
+
+def damping_ratio_for_restitution(restitution: float) -> float:
+    """Damping ratio zeta of the contact law whose normal restitution (restitution_of_damping_ratio) is
+    ``restitution`` e in (0, 1]: the inverse of that decreasing function, by bisection to 1e-12 in zeta (the
+    classical zeta = -ln e / sqrt(pi^2 + ln^2 e) of a dashpot allowed to pull would give a higher e here)."""
+    e = check_range("restitution", restitution, 0.0, 1.0, hi_open=False)
+    lo, hi = 0.0, 1.0
+    while restitution_of_damping_ratio(hi) > e:
+        hi *= 2.0
+    while hi - lo > 1.0e-12 * max(hi, 1.0):
+        mid = 0.5 * (lo + hi)
+        if restitution_of_damping_ratio(mid) > e:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
 class MethodContact:
-    """Contact between bodies of different methods within a step: the particles of each particle method (the
-    peridynamic solver's ``contact_particles()``) against the closed surface of each mesh method (the FEM solver's
-    ``contact_mesh()``), with a penalty and dashpot whose reaction goes to the face's vertices
-    (kernels/contact.py, particle_mesh_contact): the pair's momentum is conserved exactly.
+    """Contact between the bodies of mesh methods and everything else within a step: the particles of each particle
+    method (the peridynamic solver's ``contact_particles()``) against the closed surface of each mesh method (the FEM
+    solver's ``contact_mesh()``; kernels/contact.py, particle_mesh_contact), and the surface vertices of each mesh
+    method against the faces of the other pieces of its own surface and of every other mesh method's (FEM-FEM
+    contact: two bodies, or the pieces of a cracked body; kernels/surface_contact.py, vertex_face_contact). Every
+    pair uses the one contact law (kernels/contact.py, penalty_force) and gives the reaction to the face's vertices:
+    the pair's momentum is conserved exactly.
+
+    The stiffness is tied to the step: k = m_red (CONTACT_OMEGA_DT / dt)^2 (a contact oscillates at omega dt = 0.15,
+    far inside velocity Verlet's limit of 2), so contact never needs a smaller step. The restitution e a user sets
+    gives the dashpot's damping ratio (damping_ratio_for_restitution).
 
     The scene calls :meth:`apply` once per step, after every solver's ``compute_forces`` and before the kicks. The
     surface mesh is rebuilt when its topology version changes (fracture) and refitted to the current positions
@@ -364,13 +462,34 @@ class MethodContact:
         particle_solvers: solvers offering ``contact_particles()`` -> (point indices int32, radii float32) Warp arrays.
         mesh_solvers: solvers offering ``contact_mesh()`` -> (point indices int32 [v], triangles int32 [3 f] indexing
             those points, topology version).
-        damping_ratio: the dashpot as a fraction of the pair's critical damping, >= 0 (default 0.1).
+        damping_ratio: the dashpot as a fraction of the pair's critical damping, >= 0 (default 0.1, a restitution of
+            0.73); give this or ``restitution``.
+        restitution: the normal restitution e in (0, 1] of a pair (sets damping_ratio).
+        friction: Coulomb coefficient mu >= 0 between the surfaces (default 0).
+        surfaces: contact between mesh surfaces (FEM-FEM and the pieces of a cracked FEM body); default True.
     """
 
-    def __init__(self, particle_solvers, mesh_solvers, *, damping_ratio: float = 0.1):
+    def __init__(
+        self,
+        particle_solvers,
+        mesh_solvers,
+        *,
+        damping_ratio: float | None = None,
+        restitution: float | None = None,
+        friction: float = 0.0,
+        surfaces: bool = True,
+    ):
         self.particle_solvers = list(particle_solvers)
         self.mesh_solvers = list(mesh_solvers)
-        self.damping_ratio = check_range("damping_ratio", damping_ratio, 0.0, None, lo_open=False)
+        if damping_ratio is not None and restitution is not None:
+            raise ParameterError("restitution", restitution, "either restitution or damping_ratio, not both")
+        if restitution is not None:
+            damping_ratio = damping_ratio_for_restitution(restitution)
+        self.damping_ratio = check_range(
+            "damping_ratio", 0.1 if damping_ratio is None else damping_ratio, 0.0, None, lo_open=False
+        )
+        self.friction = check_range("friction", friction, 0.0, None, lo_open=False)
+        self.surfaces = bool(surfaces)
         self._meshes = {}  # id(solver) -> [version, points, faces, positions, wp.Mesh]
         self._to_force = {}  # id(solver) -> 1 / force_to_newton per point (Warp array)
         self._scratch = {}  # id(solver) -> work account of a solver without a watchdog
@@ -395,7 +514,7 @@ class MethodContact:
 
     def _force_scale(self, solver):
         scale = self._to_force.get(id(solver))
-        if scale is None:
+        if scale is None or scale.shape[0] != solver.kin.u.shape[0]:  # FEM fracture adds vertices
             scale = wp.array(
                 (1.0 / solver.kin.force_to_newton_host).astype(np.float32), dtype=float, device=solver.kin.u.device
             )
@@ -404,7 +523,7 @@ class MethodContact:
 
     def apply(self, dt: float) -> None:
         """Adds the contact forces of the current state into the solvers' force arrays (step length ``dt`` [s])."""
-        rate = (0.25 / float(dt)) ** 2
+        rate = (CONTACT_OMEGA_DT / float(dt)) ** 2
         for ms in self.mesh_solvers:
             _, m_points, m_faces, _, mesh = self._mesh(ms)
             m_work = self._work_account(ms)
@@ -425,6 +544,7 @@ class MethodContact:
                     m_mass=ms.kin.mass,
                     stiffness_rate=rate,
                     damping_ratio=self.damping_ratio,
+                    friction=self.friction,
                     p_force=ps.force,
                     m_force=ms.force,
                     dt=dt,
@@ -432,6 +552,59 @@ class MethodContact:
                     m_work=m_work,
                     device=ps.kin.u.device,
                 )
+
+        if self.surfaces:
+            for a in self.mesh_solvers:
+                for b in self.mesh_solvers:
+                    self._surface_pair(a, b, rate, dt)
+
+    def _surface_pair(self, a, b, rate: float, dt: float) -> None:
+        """The surface vertices of mesh solver ``a`` against the faces of ``b`` (of other pieces when a is b)."""
+        _, a_points, _, _, _ = self._mesh(a)
+        _, b_points, b_faces, b_x, b_mesh = self._mesh(b)
+        a_label, _ = a.contact_pieces()
+        _, b_label = b.contact_pieces()
+        if a is not b:  # labels of different solvers never match
+            a_label = self._foreign_label(a_label)
+        skin_a, band_a = a.contact_skin()
+        skin_b, band_b = b.contact_skin()
+        ksf.vertex_face_forces(
+            v_points=a_points,
+            v_label=a_label,
+            v_rest=a.kin.rest,
+            v_u=a.kin.u,
+            v_v=a.kin.v,
+            v_mass=a.kin.mass,
+            v_to_force=self._force_scale(a),
+            mesh=b_mesh.id,
+            m_x=b_x,
+            m_points=b_points,
+            m_faces=b_faces,
+            m_label=b_label,
+            m_v=b.kin.v,
+            m_mass=b.kin.mass,
+            m_to_force=self._force_scale(b),
+            skin=min(skin_a, skin_b),
+            band=min(band_a, band_b),
+            stiffness_rate=rate,
+            damping_ratio=self.damping_ratio,
+            friction=self.friction,
+            v_force=a.force,
+            m_force=b.force,
+            dt=dt,
+            v_work=self._work_account(a),
+            m_work=self._work_account(b),
+            device=a.kin.u.device,
+        )
+
+    def _foreign_label(self, labels):
+        """Labels that match no face label (-1 everywhere), the size of ``labels``."""
+        key = ("foreign", labels.shape[0])
+        out = self._scratch.get(key)
+        if out is None:
+            out = wp.full(labels.shape[0], -1, dtype=wp.int32, device=labels.device)
+            self._scratch[key] = out
+        return out
 
     def _work_account(self, solver):
         """The array the contact work done on ``solver``'s points goes to: its watchdog's work account (slot
@@ -446,4 +619,12 @@ class MethodContact:
         return scratch
 
 
-__all__ = ["ContactDiagnostics", "MethodContact", "ParticleContact", "bond_stiffness_row_sum"]
+__all__ = [
+    "CONTACT_OMEGA_DT",
+    "ContactDiagnostics",
+    "MethodContact",
+    "ParticleContact",
+    "bond_stiffness_row_sum",
+    "damping_ratio_for_restitution",
+    "restitution_of_damping_ratio",
+]

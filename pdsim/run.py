@@ -483,15 +483,19 @@ def advance_checked(scene, solvers, dt, substeps, coupling, limit, *, first=0):
 
 
 def method_contact(scene, solvers):
-    """Contact between bodies of different methods (pdsim.contact.MethodContact): on when the scene holds a particle
-    method and a mesh method and contact is not switched off; None otherwise."""
+    """Contact of mesh methods (pdsim.contact.MethodContact): on when contact is not switched off and the scene holds
+    a mesh method with a particle method, or mesh surfaces that can meet (several FEM bodies, or one that cracks);
+    None otherwise. The scene's contact options ``restitution`` and ``friction`` (Scene.enable_contact) set its law."""
     if scene.contact is False:
         return None
     particles = [s for s in solvers if callable(getattr(s, "contact_particles", None))]
     meshes = [s for s in solvers if callable(getattr(s, "contact_mesh", None))]
-    if not particles or not meshes:
+    surfaces = any(getattr(s, "surfaces_could_meet", lambda: False)() for s in meshes) or len(meshes) > 1
+    if not meshes or not (particles or surfaces):
         return None
-    return MethodContact(particles, meshes)
+    options = scene.contact if isinstance(scene.contact, dict) else {}
+    law = {key: options[key] for key in ("restitution", "friction") if key in options}
+    return MethodContact(particles, meshes, surfaces=surfaces, **law)
 
 
 def frame_graphs(solvers, graph_capture):

@@ -130,19 +130,25 @@ class Scene:
         """Adds a tetrahedral FEM body (a SolidShape meshed with fTetWild, or a TetMesh; options: see FemBody)."""
         return self.add_body(FemBody(shape, material, **kwargs))
 
-    def add_ground_plane(self, *, height: float = 0.0, friction: float = 0.5) -> GroundPlane:
-        """A ground plane perpendicular to the up axis at ``height`` [m], Coulomb ``friction`` >= 0."""
+    def add_ground_plane(
+        self, *, height: float = 0.0, friction: float = 0.5, restitution: float | None = None
+    ) -> GroundPlane:
+        """A ground plane perpendicular to the up axis at ``height`` [m], Coulomb ``friction`` >= 0, and the normal
+        ``restitution`` e in (0, 1] of the contact law (None: inelastic projection; pdsim.colliders.GroundPlane)."""
         h = check_range("height", height, None, None)
         mu = check_range("friction", friction, 0.0, None, lo_open=False)
-        ground = GroundPlane(normal=UP_AXES[self.up_axis], offset=h, friction=mu)
+        e = None if restitution is None else check_range("restitution", restitution, 0.0, 1.0, hi_open=False)
+        ground = GroundPlane(normal=UP_AXES[self.up_axis], offset=h, friction=mu, restitution=e)
         check_prim_names(self.bodies, self.colliders, ground)  # a body named "ground" clashes with /World/ground
         self.ground = ground
         return self.ground
 
     def enable_contact(self, enabled: bool = True, **options) -> None:
-        """Short-range repulsion between particles that share no live bond (separate bodies, fragments). Automatic
-        by default: on when the scene has several bodies or a body that can break. ``options`` go to
-        pdsim.contact.ParticleContact (e.g. friction=0.3, distance_factor=1.35)."""
+        """Short-range repulsion between particles that share no live bond (separate bodies, fragments), and between
+        FEM surfaces. Automatic by default: on when the scene has several bodies or a body that can break.
+        ``options`` go to pdsim.contact.ParticleContact (e.g. friction=0.3, distance_factor=1.35); ``restitution``
+        (in (0, 1]) and ``friction`` also set the contact between methods and between FEM surfaces
+        (pdsim.contact.MethodContact), the one contact law of docs/stability.md."""
         self.contact = (options or True) if enabled else False
 
     def add_collider(self, collider):

@@ -208,24 +208,22 @@ def _two_fem_blocks():
     return scene
 
 
-def test_contact_between_fem_surfaces_is_refused_when_asked_and_announced_when_automatic():
-    """Contact between FEM surfaces is not simulated. Asked for explicitly (Scene.enable_contact) with two FEM
-    bodies, the build raises FeatureNotAvailableError naming the bodies, the setting and the alternatives; with
-    automatic contact it warns once, naming the bodies, instead of letting them pass through each other silently;
-    with contact off, nothing is said."""
-    from pdsim.errors import FeatureNotAvailableError
-
-    scene = _two_fem_blocks()
-    scene.enable_contact(True)
-    with pytest.raises(FeatureNotAvailableError, match=r"'b0', 'b1'.*enable_contact.*PeridynamicBody"):
-        scene.build_solvers(device="cpu")
-    scene = _two_fem_blocks()
-    with pytest.warns(UserWarning, match=r"'b0', 'b1'.*pass through each other"):
-        scene.build_solvers(device="cpu")
-    scene = _two_fem_blocks()
-    scene.enable_contact(False)
+def test_contact_between_fem_surfaces_is_on_unless_switched_off():
+    """Two FEM bodies get contact between their surfaces (pdsim.contact.MethodContact with surfaces on), asked for
+    or automatic, without a warning; with contact off there is none (tests/test_fem_contact.py tests the physics)."""
     import warnings
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        scene.build_solvers(device="cpu")
+    from pdsim.run import method_contact
+
+    for enabled in (True, None):
+        scene = _two_fem_blocks()
+        if enabled:
+            scene.enable_contact(True)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            solvers = scene.build_solvers(device="cpu")
+        coupling = method_contact(scene, solvers)
+        assert coupling is not None and coupling.surfaces
+    scene = _two_fem_blocks()
+    scene.enable_contact(False)
+    assert method_contact(scene, scene.build_solvers(device="cpu")) is None

@@ -150,8 +150,11 @@ class Case:
     particle_count: int = 0
 
 
-def kalthoff_winkler(spacing: float = 4.0e-3, *, device: str = "cpu", time_step_safety: float = 0.7) -> Case:
-    """The Kalthoff-Winkler-like steel plate of the module docstring at particle spacing ``spacing`` [m]."""
+def kalthoff_winkler(
+    spacing: float = 4.0e-3, *, device: str = "cpu", time_step_safety: float = 0.7, contact: bool = True
+) -> Case:
+    """The Kalthoff-Winkler-like steel plate of the module docstring at particle spacing ``spacing`` [m]; ``contact``
+    False switches the scene's contact off (Scene.enable_contact(False))."""
     h = spacing
     lx, ly, lz = 0.1, 0.2, 2.0 * h
     body = pdsim.PeridynamicBody(pdsim.box((lx, ly, lz)), STEEL, h, name="plate")
@@ -160,6 +163,8 @@ def kalthoff_winkler(spacing: float = 4.0e-3, *, device: str = "cpu", time_step_
         y = layers[np.argmin(np.abs(layers - sign * 0.025))] + sign * 0.5 * h  # between two particle layers
         body.add_notch(pdsim.BoxRegion(lo=(-1.0, y - 1.0e-5, -1.0), hi=(-0.5 * lx + 0.05, y + 1.0e-5, 1.0)))
     scene = pdsim.Scene(gravity=(0.0, 0.0, 0.0), time_step_safety=time_step_safety)
+    if not contact:
+        scene.enable_contact(False)
     scene.add_body(body)
     # a 20 x 50 x 50 mm box 0.1 mm off the impacted face x = -lx / 2
     velocity = (IMPACT_SPEED, 0.0, 0.0)

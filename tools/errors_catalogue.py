@@ -613,23 +613,27 @@ def _(ws):
     scene.build_solvers(device="cpu")
 
 
-@case("fem_contact_between_fem", A_FEM, "Scene.enable_contact() with two FEM bodies (contact between FEM surfaces is "
-      "not simulated)", "PeridynamicBody for bodies that collide, or enable_contact(False)",
-      pdsim.FeatureNotAvailableError, "'b0', 'b1'", "enable_contact", "PeridynamicBody")  # fmt: skip
-def _(ws):
-    scene = _scene()
-    for i, x in enumerate((0.0, 0.3)):
-        scene.add_fem_body(pdsim.box_tet_mesh((0.1, 0.1, 0.1), (2, 2, 2), center=(x, 0.0, 0.5)), _material(),
-                           name=f"b{i}")  # fmt: skip
-    scene.enable_contact(True)
-    scene.build_solvers(device="cpu")
-
-
 @case("inverted_element", A_FEM, "two elements folded over their shared face", "a valid, non-overlapping mesh",
       pdsim.GeometryError, "inverted")  # fmt: skip
 def _(ws):
     v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0.2, 0.2, 1.0], [0.3, 0.3, 0.5]])
     pdsim.tet_mesh_from_arrays(v, [[0, 1, 2, 3], [0, 2, 1, 4]], name="folded")
+
+
+@case("fem_ground_restitution", A_FEM, "an FEM body with Scene.add_ground_plane(restitution=0.3)",
+      "a ground plane without restitution, or a PeridynamicBody", pdsim.FeatureNotAvailableError,
+      "restitution=0.3", "without restitution")  # fmt: skip
+def _(ws):
+    scene = _scene()
+    scene.add_fem_body(pdsim.box_tet_mesh((0.1, 0.1, 0.1), (2, 2, 2), center=(0.0, 0.0, 0.5)), _material(), name="b")
+    scene.add_ground_plane(restitution=0.3)
+    scene.build_solvers(device="cpu")
+
+
+@case("ground_restitution_range", A_SCENE, "Scene.add_ground_plane(restitution=1.5)", "(0, 1], or None",
+      pdsim.ParameterError, "restitution", "1.5")  # fmt: skip
+def _(ws):
+    _scene().add_ground_plane(restitution=1.5)
 
 
 @case("fem_measure", A_FEM, "FemBody(measure='cauchy')", "'linear', 'corotated' or 'green'", pdsim.ParameterError,

@@ -89,6 +89,7 @@ class FemCheckpoint:
         self._fragments = None
         self._surfaces = None
         self._contact_mesh = None
+        self._contact_pieces = None
         self._smooth_surfaces = self._new_smooth_surfaces()  # drawn again from the restored topology
 
 

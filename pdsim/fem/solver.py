@@ -52,9 +52,8 @@ new vertex numbering, copies inheriting their parent's; loads resolved again on 
 energy, the steps that follow a split also read and write the velocities on the host until the energy owed is paid.
 
 Colliders: the ground plane and the scene's colliders (pdsim/colliders.py) act on the free vertices with zero radius
-(float32 only). Contact between FEM pieces or bodies is not implemented: pieces of a cracked body pass through each
-other. Asking for it (Scene.enable_contact with several FEM bodies or a cracking one) raises
-FeatureNotAvailableError; with automatic contact the scene warns once when the FEM bodies are built.
+(float32 only). Contact between FEM bodies and between the pieces of a cracked body (surface vertices against the
+faces of other pieces) is pdsim.contact.MethodContact's, on unless the scene switches contact off.
 
 Output (:meth:`SolverFem.views`): per body a PointsView of its vertices and a MeshView "<name>_surface", whose
 topology version changes when its faces change; optionally an embedded render mesh "<name>_render". The surface of a
@@ -67,7 +66,6 @@ rebuilt when fracture changed the body's vertices (docs/fem_fracture.md).
 
 from __future__ import annotations
 
-import warnings
 from typing import ClassVar
 
 import numpy as np
@@ -255,29 +253,14 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
                     asked.setdefault("material_fracture", f"body '{b.name}': Material.{field}={getattr(m, field)!r}")
             if getattr(m, "anisotropy", None) is not None:
                 asked.setdefault("anisotropy", f"body '{b.name}': Material.anisotropy")
-        if context.contact and not context.contact_is_default and cls._surfaces_could_meet(bodies):
-            asked["contact_between_fem"] = "the scene's contact (Scene.enable_contact) between FEM surfaces"
+        if getattr(context.ground, "restitution", None) is not None:
+            asked["ground_restitution"] = f"the ground plane's restitution={context.ground.restitution!r}"
         return asked
 
-    @staticmethod
-    def _surfaces_could_meet(bodies) -> bool:
-        """Several FEM bodies, or one that cracks into pieces: surfaces that contact between FEM surfaces would
-        keep apart."""
-        return len(bodies) > 1 or any(getattr(b, "tensile_strength", None) is not None for b in bodies)
-
-    @classmethod
-    def check_features(cls, bodies, context: SolverContext) -> None:
-        """As Solver.check_features; with automatic contact, a warning that FEM surfaces do not collide with each
-        other (several FEM bodies, or the pieces of a cracking one), so that it is never silent."""
-        super().check_features(bodies, context)
-        if context.contact and context.contact_is_default and cls._surfaces_could_meet(bodies):
-            names = ", ".join(f"'{b.name}'" for b in bodies)
-            warnings.warn(
-                f"fem bodies ({names}): contact between FEM surfaces is not simulated, so separate FEM bodies and the "
-                "pieces of a cracked FEM body pass through each other (FEM bodies do collide with peridynamic bodies, "
-                "the ground and colliders); use PeridynamicBody for bodies that must collide with each other",
-                stacklevel=2,
-            )
+    def surfaces_could_meet(self) -> bool:
+        """Several FEM bodies, or one that cracks into pieces: surfaces that contact between FEM surfaces
+        (pdsim.contact.MethodContact) keeps apart."""
+        return len(self.bodies) > 1 or any(getattr(b, "tensile_strength", None) is not None for b in self.bodies)
 
     @classmethod
     def instead(cls, feature: str) -> str:
@@ -287,10 +270,8 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
             "material_fracture": "FEM fracture is set on the body: FemBody(..., tensile_strength=... [Pa], "
             "fracture_energy=... [J/m^2]); remove the Material field",
             "anisotropy": "the FEM material is isotropic; remove Material.anisotropy or use a PeridynamicBody",
-            "contact_between_fem": "contact between FEM surfaces is not simulated (FEM bodies do collide with "
-            "peridynamic bodies, the ground and colliders): use PeridynamicBody for bodies that must collide with each "
-            "other, or scene.enable_contact(False) to let separate FEM bodies and cracked pieces pass through each "
-            "other",
+            "ground_restitution": "FEM vertices meet the ground by inelastic projection (they have no radius for the "
+            "ground's penalty contact): add the ground plane without restitution, or use a PeridynamicBody",
         }.get(feature, super().instead(feature))
 
     # -- model ----------------------------------------------------------------------------------------------------
@@ -404,6 +385,7 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
         self._implicit = BackwardEuler(self)  # its operator mass is cached per topology
         self._surfaces = None  # per body (vertex ids, faces, fragment, crack), rebuilt lazily
         self._contact_mesh = None  # (vertex ids, triangles) Warp arrays for MethodContact, rebuilt lazily
+        self._contact_pieces = None  # (topology version, vertex labels, face labels) of the contact mesh
         self._fragments = None
 
     # -- scene integration ------------------------------------------------------------------------------------------

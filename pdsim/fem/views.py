@@ -12,6 +12,7 @@ import numpy as np
 import warp as wp
 
 from ..errors import FeatureNotAvailableError
+from ..fragment_labels import connected_components
 from ..fragment_surfaces import FragmentSurfaces
 from ..kernels.fem import elements as ke
 from ..output.views import MeshView, PointsView
@@ -139,6 +140,31 @@ class FemViews:
                 wp.array(local.ravel().astype(np.int32), dtype=wp.int32, device=self.device),
             )
         return (*self._contact_mesh, self.topology_version)
+
+    def contact_pieces(self):
+        """Piece labels of the contact mesh for contact between FEM surfaces (pdsim.contact.MethodContact): (label of
+        each contact-mesh vertex int32 [v], label of each triangle int32 [f]) Warp arrays. A piece is a vertex-connected
+        set of the current elements: separate bodies and the pieces a crack has cut free have different labels, the
+        two sides of a crack that has not yet cut a piece free the same. Rebuilt when the topology version changes."""
+        ids, faces, version = self.contact_mesh()
+        if self._contact_pieces is None or self._contact_pieces[0] != version:
+            tets = np.asarray(self._tets_h, dtype=np.int64)
+            labels = connected_components(self.point_count, np.repeat(tets[:, :1], 3, axis=1), tets[:, 1:])
+            vertex = labels[ids.numpy()].astype(np.int32)
+            face = vertex[faces.numpy().reshape(-1, 3)[:, 0]]
+            self._contact_pieces = (
+                version,
+                wp.array(vertex, dtype=wp.int32, device=self.device),
+                wp.array(face, dtype=wp.int32, device=self.device),
+            )
+        return self._contact_pieces[1], self._contact_pieces[2]
+
+    def contact_skin(self) -> tuple[float, float]:
+        """(skin, band) [m] of contact between FEM surfaces: a surface vertex is a point (skin 0: the faces a crack
+        separates lie on each other when the piece comes free, and a skin would push them apart at once), found inside
+        another piece down to ``band`` (one mean edge length of the smallest body) below its surface."""
+        width = float(min(self.model.widths))  # half a mean edge length
+        return 0.0, 2.0 * width
 
     def _element_fragments(self) -> np.ndarray:
         """Piece id of every element, int64 [element_count]: the body-local index of the smallest element of its

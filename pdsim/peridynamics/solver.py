@@ -158,6 +158,10 @@ class SolverPeridynamics(PointSolver):
         if contact is not None and contact is not False:
             options = {} if contact is True else dict(contact)
             self.contact = ParticleContact.from_bodies(self.bodies, device=self.device, origin=self.origin, **options)
+            if m.fracture:  # contact across a notch only where its faces close
+                self.contact.track_bonds(
+                    m.family_offsets, m.family_neighbors, self.state.bond_alive, m.bond_alive_initial
+                )
             self._positions = wp.zeros(n, dtype=wp.vec3, device=d)  # rest + u, the contact pass's positions
         self._dummy_u8, self._dummy_f, self._dummy_i = pd_step.placeholders(d)
         self._energy_density = wp.zeros(n, dtype=float, device=d)
@@ -179,6 +183,7 @@ class SolverPeridynamics(PointSolver):
             self.features.add("colliders")
         self.time = 0.0
         self.step_count = 0
+        self._step_dt = None  # the last step [s]: the ground's penalty form is tied to it (none before a step)
         self._stable_dt = None  # the stable step, for the watchdog's message (computed on the first check)
         self._refresh_accelerations()
 
@@ -319,6 +324,11 @@ class SolverPeridynamics(PointSolver):
         if self.contact is not None:
             pd_step.deformed_positions(m.particle_count, m.rest_positions, self.kin.u, self._positions, self.device)
             self.contact.apply(self._positions, self.kin.u, self.kin.v, s.force_density, self.kin.point_kind)
+        if self.ground is not None and self.ground.restitution is not None and self._step_dt is not None:
+            self.ground.add_forces(
+                m.rest_positions, self.kin.u, self.kin.v, m.radius, self.kin.point_kind, self.kin.mass,
+                self.kin.force_to_newton, s.force_density, self._step_dt,
+            )  # fmt: skip
         self.kin.add_loads(s.force_density, self._force_time)
 
     def _refresh_accelerations(self):
@@ -330,6 +340,7 @@ class SolverPeridynamics(PointSolver):
     def apply_colliders(self, time: float, dt: float):
         """Ground plane and colliders on the free particles (spheres of radius h/2) at ``time`` [s]."""
         m = self.model
+        self._step_dt = dt  # the step the force phase's ground penalty is tied to
         for c in self._colliders_all:
             c.apply(
                 m.rest_positions, self.kin.u, self.kin.v, m.radius, self.kin.point_kind, time, dt, mass=self.kin.mass

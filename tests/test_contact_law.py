@@ -1,0 +1,192 @@
+"""The one contact law (kernels/contact.py penalty_force, pdsim/contact.py): the restitution a user sets, and contact
+within a body only across dead bonds whose crack faces close (kernels/contact.py crack_pair_geometry)."""
+
+import math
+
+import numpy as np
+import pytest
+
+import pdsim
+from pdsim.contact import ParticleContact, damping_ratio_for_restitution, restitution_of_damping_ratio
+
+H = 0.01
+MAT = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.25, critical_stretch=0.05)
+
+
+@pytest.mark.parametrize("e", [0.05, 0.1, 0.3, 0.6, 0.9, 1.0])
+def test_damping_ratio_gives_the_restitution_of_the_non_pulling_spring_dashpot(e):
+    """damping_ratio_for_restitution inverts restitution_of_damping_ratio (to 1e-9), and an independent integration
+    of the law's pair, m x'' = -max(k x + c x', 0) for the overlap x (c = 2 zeta sqrt(k m), scipy's RK45 to 1e-10),
+    from x = 0, x' = v0 until the force vanishes (the pair separates) leaves with speed e v0 (within 1e-6). The
+    classical zeta = -ln e / sqrt(pi^2 + ln^2 e), exact for a dashpot that may pull, gives a higher restitution with
+    this law (asserted for e < 0.9: 0.64 at e = 0.6, 0.25 at e = 0.1), which is why the knob uses the exact inverse."""
+    from scipy.integrate import solve_ivp
+
+    zeta = damping_ratio_for_restitution(e)
+    assert restitution_of_damping_ratio(zeta) == pytest.approx(e, abs=1e-9)
+    k, m, v0 = 1.0e4, 0.5, 2.0
+
+    def rebound(z):
+        c = 2.0 * z * math.sqrt(k * m)
+
+        def released(t, y):
+            return k * y[0] + c * y[1]
+
+        released.terminal, released.direction = True, -1.0
+        sol = solve_ivp(
+            lambda t, y: [y[1], -max(k * y[0] + c * y[1], 0.0) / m],
+            (0.0, 1.0),
+            [1.0e-12, v0],
+            events=released,
+            rtol=1e-10,
+            atol=1e-14,
+        )
+        assert sol.t_events[0].size == 1
+        return -sol.y_events[0][0][1] / v0
+
+    assert rebound(zeta) == pytest.approx(e, abs=1e-6)
+    if e < 0.9:
+        classical = -math.log(e) / math.sqrt(math.pi**2 + math.log(e) ** 2)
+        assert rebound(classical) > e + 0.02
+
+
+def test_restitution_knob_is_checked():
+    """A restitution outside [0, 1], or given together with a damping ratio, is refused naming the field."""
+    with pytest.raises(pdsim.ParameterError, match="restitution"):
+        damping_ratio_for_restitution(1.5)
+    with pytest.raises(pdsim.ParameterError, match="restitution"):
+        ParticleContact(np.zeros((1, 3)), [0], 0.5, 1.0, 1.0, 1.0, 1.0, 1.0, damping_ratio=0.1, restitution=0.5)
+
+
+def _cut_block():
+    """An 8 x 4 x 4 h block cut through by a notch in the plane x = 0 (every bond crossing it starts dead): two
+    halves whose facing layers sit h apart, held by the solver's bond list (SolverPeridynamics gives its contact the
+    bonds of a body that can break)."""
+    body = pdsim.PeridynamicBody(pdsim.box((8 * H, 4 * H, 4 * H)), MAT, H, name="block")
+    body.add_notch(pdsim.BoxRegion((-0.01 * H, -1.0, -1.0), (0.01 * H, 1.0, 1.0)))
+    solver = pdsim.SolverPeridynamics([body], contact=True, device="cpu")
+    assert solver.contact.cracks
+    return body, solver
+
+
+def _contact_count(contact, solver, shift) -> int:
+    """Active contact pairs (counted from both sides) with the half x > 0 displaced by ``shift`` [m]."""
+    import warp as wp
+
+    rest = solver.contact.rest_positions.numpy().astype(np.float64)
+    u = np.zeros_like(rest)
+    u[rest[:, 0] > 0.0] = shift
+    positions = wp.array((rest + u).astype(np.float32), dtype=wp.vec3, device="cpu")
+    return int(contact.diagnostics(positions).count.sum())
+
+
+def test_crack_faces_that_slide_feel_no_contact_and_faces_that_close_do():
+    """Shear along a crack face is not contact: with one half of a notched block slid 0.3 h along the face (y), the
+    faces' gap unchanged, no pair is in contact; with the faces closed by 0.15 h (x), pairs across the notch are.
+    The former rule (same-body pairs repel below 0.9 of their rest distance, no bond look-up: the contact built
+    without the solver's bonds) puts the diagonal pairs across the notch into contact by the same slide, so this
+    test fails on it (asserted too). An intact body at rest has no contact either way."""
+    _, solver = _cut_block()
+    tracked = solver.contact
+    old = ParticleContact.from_bodies(solver.bodies, device="cpu", origin=solver.origin)
+    assert not old.cracks
+    assert _contact_count(tracked, solver, (0.0, 0.0, 0.0)) == 0
+    slide = (0.0, 0.3 * H, 0.0)
+    assert _contact_count(tracked, solver, slide) == 0
+    assert _contact_count(old, solver, slide) > 0  # the former rule: diagonal pairs 'touch' by sliding
+    assert _contact_count(tracked, solver, (-0.15 * H, 0.0, 0.0)) > 0
+    assert _contact_count(tracked, solver, (-0.15 * H, 0.3 * H, 0.0)) > 0  # closing while sliding still touches
+
+
+def test_sliding_crack_faces_receive_no_contact_force_in_a_step():
+    """The same notched block in the solver's step: the half x > 0 sheared at 2 m/s along the face for 20 steps (no
+    gravity) gets no contact force: the force density of the steps equals that of the same run with contact off,
+    bit for bit (the bonds across the notch are dead, so what remains is the halves' own elastic response)."""
+    forces = []
+    for contact in (True, False):
+        body = pdsim.PeridynamicBody(pdsim.box((8 * H, 4 * H, 4 * H)), MAT, H, name="block")
+        body.add_notch(pdsim.BoxRegion((-0.01 * H, -1.0, -1.0), (0.01 * H, 1.0, 1.0)))
+        body.set_initial_velocity((0.0, 2.0, 0.0), region=pdsim.BoxRegion((0.0, -1.0, -1.0), (1.0, 1.0, 1.0)))
+        solver = pdsim.SolverPeridynamics([body], contact=contact, device="cpu", threads=1)
+        dt = 0.7 * solver.stable_time_step()
+        for _ in range(20):
+            solver.step(dt)
+        forces.append(solver.state.force_density.numpy().copy())
+    slid = 20 * dt * 2.0
+    assert slid > 0.3 * H  # past the 0.25 h at which the former rule engaged
+    np.testing.assert_array_equal(forces[0], forces[1])
+
+
+def test_kalthoff_winkler_crack_angle_is_the_same_with_contact_on_and_off():
+    """The Kalthoff-Winkler-like steel plate of tools/contact_stability.py at h = 4 mm (2500 particles, 100 us): the
+    notch faces slide as the block between the notches is punched forward, and only sliding must not be contact, so
+    the crack angle (tools/crack_faces.py, crack_angle: the damaged particles ahead of the two notch tips fitted by a
+    line through each tip) must be the same with contact on and off, within 2 degrees (measured 46.3 on, 46.8 off).
+    With the former rule (contact built without the solver's bonds: same-body pairs repel below 0.9 of their rest
+    distance, which diagonal pairs across a notch reach by sliding 0.25 h) the angle with contact on was 39.2
+    degrees, 7.6 from contact off, so this test fails on it. At the gallery's h = 2 mm the criterion is not met:
+    59.4 on against 45.8 off (the former rule: 42.5; docs/fracture.md, "Crack faces and contact"), so this coarse
+    test does not show it at that resolution. About 3 s."""
+    import crack_faces  # tools/ (on the path through conftest.py)
+
+    off = crack_faces.run(4.0e-3, 100.0e-6, contact=False)
+    on = crack_faces.run(4.0e-3, 100.0e-6, contact=True)
+    assert math.isfinite(off["angle"]) and math.isfinite(on["angle"])
+    assert 30.0 < off["angle"] < 80.0  # a crack grew from the tips, away from the notch line
+    assert abs(on["angle"] - off["angle"]) < 2.0, (on["angle"], off["angle"])
+
+
+def _ground_solver(size_cells, center_z, velocity, *, restitution, friction, gravity):
+    """A PD block of ``size_cells`` particles per axis (h = 1 cm, E = 1 MPa) above a ground plane at z = 0."""
+    from pdsim.colliders import GroundPlane
+
+    size = np.asarray(size_cells, dtype=np.float64) * H
+    mat = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.25)
+    body = pdsim.PeridynamicBody(pdsim.box(tuple(size), center=(0.0, 0.0, center_z)), mat, H, name="block")
+    body.set_initial_velocity(velocity)
+    ground = GroundPlane(restitution=restitution, friction=friction)
+    return pdsim.SolverPeridynamics([body], ground=ground, gravity=gravity, device="cpu", threads=1)
+
+
+@pytest.mark.parametrize("e", [0.1, 0.6])
+def test_drop_rebounds_at_the_restitution_set_on_the_ground(e):
+    """A rigid particle (a one-cell PD block: no bonds, so no elastic energy of its own to give back) thrown at the
+    ground at 2 m/s (no gravity, so the rebound is the contact's alone) leaves at e times its impact speed within
+    0.05, whichever of eight phases of a step the contact starts at (velocity Verlet at omega dt = 0.15 with the
+    dashpot switching on part way through a step; the printed range is quoted in pdsim/contact.py CONTACT_OMEGA_DT).
+    The restitution is the contact's: a deformable block's rebound also returns the elastic energy it stores in the
+    impact, which no contact setting removes. With the ground's inelastic projection (restitution None) the particle
+    stays on the ground (asserted)."""
+    dt = 1.28e-4  # the step of a 3 x 3 x 3 block of this material (0.7 of its stable step)
+    rebounds = []
+    for phase in np.arange(8) / 8.0:  # where in a step the contact starts
+        gap = 1.0e-3 + phase * 2.0 * dt
+        solver = _ground_solver((1, 1, 1), 0.5 * H + gap, (0.0, 0.0, -2.0), restitution=e, friction=0.0,
+                                gravity=(0.0, 0.0, 0.0))  # fmt: skip
+        for _ in range(60):
+            solver.step(dt)
+        rebounds.append(float(solver.velocities()[0, 2]) / 2.0)
+    print(f"e = {e}: rebound / impact speed {min(rebounds):.3f} to {max(rebounds):.3f} over the phases")
+    np.testing.assert_allclose(rebounds, e, atol=0.05)
+    solver = _ground_solver((1, 1, 1), 0.5 * H + 1.0e-3, (0.0, 0.0, -2.0), restitution=None, friction=0.0,
+                            gravity=(0.0, 0.0, 0.0))  # fmt: skip
+    for _ in range(60):
+        solver.step(dt)
+    assert abs(float(solver.velocities()[0, 2])) < 1e-6
+
+
+@pytest.mark.parametrize("restitution", [None, 0.3], ids=["projection", "penalty"])
+def test_block_sliding_on_the_ground_stops_at_v2_over_2_mu_g(restitution):
+    """A 3 x 3 x 2 h PD block resting on the ground (gravity 9.81 m/s^2) and sliding at 1 m/s with Coulomb friction
+    mu = 0.4 stops after v^2 / (2 mu g) = 12.7 cm within 5 %, with the ground's inelastic projection and with its
+    penalty form (restitution 0.3): Coulomb friction, mu times the normal force, decelerates it at mu g."""
+    mu, g, v = 0.4, 9.81, 1.0
+    solver = _ground_solver((3, 3, 2), H, (v, 0.0, 0.0), restitution=restitution, friction=mu,
+                            gravity=(0.0, 0.0, -g))  # fmt: skip
+    dt = 0.7 * solver.stable_time_step()
+    x0 = solver.positions()[:, 0].mean()
+    for _ in range(int(1.2 * v / (mu * g) / dt)):
+        solver.step(dt)
+    moved = solver.positions()[:, 0].mean() - x0
+    assert abs(solver.velocities()[:, 0].mean()) < 0.01 * v
+    assert moved == pytest.approx(v**2 / (2.0 * mu * g), rel=0.05)

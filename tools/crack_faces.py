@@ -1,0 +1,102 @@
+"""Crack faces and contact: the Kalthoff-Winkler-like steel plate of tools/contact_stability.py with contact on and
+off, and the angle of the cracks that grow from its notch tips; writes the table of docs/fracture.md (section "Crack
+faces and contact").
+
+    python tools/crack_faces.py [--spacing 2e-3] [--end 100e-6] [--out docs]
+
+Contact within a body acts only where crack faces close across dead bonds (kernels/contact.py,
+crack_pair_geometry): the notch faces, which the punched block slides along, must not push the plate apart, so the
+crack angle must not depend on whether contact is on. The angle: the damaged particles (damage > 0.5) ahead of each
+notch tip (tip + 2 h < x < tip + 35 mm: the back face's spall is left out) and outside it (|y| > |y_tip| + h), in
+the plate's first particle layer, are fitted with a line through the tip (the principal direction of their offsets
+from the tip); the angle is measured from the notch direction (+x, the impact direction) towards the outside, in
+degrees, averaged over the two tips.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import math
+import platform
+import time
+from pathlib import Path
+
+import contact_stability as cs
+import numpy as np
+
+from pdsim.run import advance_frame
+
+NOTCH_TIP_X = 0.0  # the notches run from the plate's edge x = -0.05 m to x = 0 (tools/contact_stability.py)
+NOTCH_Y = 0.025  # [m], the notches' distance from the plate's centre line
+DAMAGED = 0.5
+BACK_FACE_MARGIN_X = 0.035  # [m] from the tip: the plate's back face (x = 0.05 m) spalls; its damage is left out
+
+
+def crack_angle(rest_positions: np.ndarray, damage: np.ndarray, spacing: float) -> float:
+    """Mean angle [deg] from +x of the cracks grown from the two notch tips (module docstring); nan when a tip has no
+    damaged particle ahead of it. ``rest_positions`` [n, 3] in the plate's frame (centre at the origin) [m]."""
+    x = np.asarray(rest_positions, dtype=np.float64)
+    layer = x[:, 2] < x[:, 2].mean()
+    angles = []
+    for sign in (1.0, -1.0):
+        offset = x[:, :2] - np.array([NOTCH_TIP_X, sign * NOTCH_Y])
+        ahead = (offset[:, 0] > 2.0 * spacing) & (offset[:, 0] < BACK_FACE_MARGIN_X)
+        pick = layer & (damage > DAMAGED) & ahead & (sign * offset[:, 1] > spacing)
+        if not pick.any():
+            return math.nan
+        p = offset[pick] * np.array([1.0, sign])  # the outside is +y for both tips
+        _, _, vt = np.linalg.svd(p.T @ p)
+        direction = vt[0] if vt[0] @ p.mean(axis=0) > 0.0 else -vt[0]
+        angles.append(math.degrees(math.atan2(direction[1], direction[0])))
+    return float(np.mean(angles))
+
+
+def run(spacing: float, end_time: float, contact: bool) -> dict:
+    """The plate at ``spacing`` [m] run to ``end_time`` [s] at the automatic step: crack angle [deg], damaged particle
+    count, wall time [s]."""
+    case = cs.kalthoff_winkler(spacing, contact=contact)
+    solver = case.solver
+    dt = case.scene.time_step_safety * min(s.stable_time_step() for s in case.solvers)
+    start = time.perf_counter()
+    advance_frame(case.solvers, dt, math.ceil(end_time / dt))
+    wall = time.perf_counter() - start
+    rest = np.concatenate([b.rest_positions for b in solver.bodies])
+    damage = solver.damage()
+    return {
+        "contact": contact,
+        "angle": crack_angle(rest, damage, spacing),
+        "damaged": int((damage > DAMAGED).sum()),
+        "particles": solver.particle_count,
+        "wall": wall,
+    }
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--spacing", type=float, default=2.0e-3, help="particle spacing h [m] (gallery: 2 mm)")
+    parser.add_argument("--end", type=float, default=100.0e-6, help="end time [s]")
+    parser.add_argument("--out", type=Path, default=None, help="print only when omitted")
+    args = parser.parse_args(argv)
+    rows = [run(args.spacing, args.end, contact) for contact in (False, True)]
+    lines = [
+        f"Kalthoff-Winkler-like steel plate, h = {args.spacing * 1e3:g} mm, 32 m/s, t = {args.end * 1e6:g} us "
+        f"({rows[0]['particles']} particles; {platform.processor() or platform.machine()}, "
+        f"{datetime.date.today().isoformat()}; `python tools/crack_faces.py --spacing {args.spacing:g} "
+        f"--end {args.end:g}`):",
+        "",
+        "| contact | crack angle from the notch [deg] | particles with damage > 0.5 | wall [s] |",
+        "|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(f"| {'on' if r['contact'] else 'off'} | {r['angle']:.1f} | {r['damaged']} | {r['wall']:.1f} |")
+    lines.append("")
+    lines.append(f"Difference: {abs(rows[1]['angle'] - rows[0]['angle']):.2f} degrees.")
+    text = "\n".join(lines)
+    print(text)
+    if args.out is not None:
+        (args.out / "crack_faces.txt").write_text(text + "\n")
+
+
+if __name__ == "__main__":
+    main()
