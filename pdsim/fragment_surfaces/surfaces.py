@@ -12,6 +12,7 @@ joining the debris breaks.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -172,11 +173,15 @@ class FragmentSurfaces:
         Returns:
             True when the shells were rebuilt.
         """
-        key = self.region_keys(labels, damage)
+        return self._update_key(self.region_keys(labels, damage), np.asarray(labels, dtype=np.int64))
+
+    def _update_key(self, key: np.ndarray, labels: np.ndarray) -> bool:
+        """Rebuilds the shells for region keys ``key`` (from :meth:`region_keys`) and fragment ``labels`` unless
+        the keys are those of the last build; True when rebuilt."""
         if self._key is not None and np.array_equal(key, self._key):
             return False
         t0 = time.perf_counter()
-        self._set_topology(key, np.asarray(labels, dtype=np.int64))
+        self._set_topology(key, labels)
         self.rebuild_seconds = time.perf_counter() - t0
         self.version += 1
         return True
@@ -202,17 +207,21 @@ class FragmentSurfaces:
         self._split_shells(points, tri, tri_shell, tri_crack, tri_patch, labels[first], region, k_count, shared)
         self._build_interpolation()
 
+    def _lattice_grid(self) -> LatticeGrid:
+        """The label grid (step 1), built on first use (a Warp query on ``device``)."""
+        if self._grid is None:
+            self._grid = build_lattice_grid(
+                self.rest_positions, self.shape, self.spacing, device=self.device, on_lattice=self.on_lattice
+            )
+        return self._grid
+
     def _clipped_complex(self, region: np.ndarray, k_count: int):
         """All regions' shells as one complex (steps 1-6): the regions of :func:`partition_regions` over the label
         grid (built once), clipped by the input surface, joined and cleaned (:func:`shared_complex`). Returns (points
         [m] [p, 3], tri [f, 3], shell [f], crack flag [f], patch [f], shared); sets ``clean_failed`` when the
         clean-up ran."""
         solid = self._input_manifold()
-        if self._grid is None:
-            self._grid = build_lattice_grid(
-                self.rest_positions, self.shape, self.spacing, device=self.device, on_lattice=self.on_lattice
-            )
-        regions = partition_regions(self._grid, region, crack_smoothing=self.crack_smoothing)
+        regions = partition_regions(self._lattice_grid(), region, crack_smoothing=self.crack_smoothing)
         pieces = clip_regions(regions, solid, self._surface[2], self.spacing, self.simplify, self.body_name)
         *shells, clean_failed = shared_complex(
             pieces, k_count, self._surface, self.spacing, simplify=self.simplify, clean=self.clean
@@ -327,6 +336,26 @@ class FragmentSurfaces:
         return [x[self._vertex_ranges[k] : self._vertex_ranges[k + 1]] for k in range(self.fragment_count)]
 
     # ------------------------------------------------------------------ output
+    def deferred_view(self, positions, velocities=None, labels=None, damage=None) -> Callable[[], MeshView]:
+        """What :meth:`update_topology` (when ``labels`` is given) and then :meth:`view` would return now, as a
+        function to run later, possibly on another thread: it holds copies of ``positions`` [m], ``velocities``
+        [m/s] (shape [particle_count, 3]), ``labels`` and ``damage`` ([particle_count]), so the caller may change
+        its arrays meanwhile. The label grid, the one Warp query of a rebuild, is built here, in the calling thread,
+        when the regions are more than one. Calls of the returned functions must run in the order they were made."""
+        x = np.array(positions, dtype=np.float64)
+        v = None if velocities is None else np.array(velocities, dtype=np.float64)
+        key = None if labels is None else self.region_keys(labels, damage)
+        frag = None if labels is None else np.array(labels, dtype=np.int64)
+        if key is not None and self._grid is None and (key != key[0]).any():
+            self._lattice_grid()
+
+        def build() -> MeshView:
+            if key is not None:
+                self._update_key(key, frag)
+            return self.view(x, v)
+
+        return build
+
     def view(self, positions, velocities=None):
         """The surface as a MeshView ``<body>_surface`` for particle ``positions`` [m] (shape [particle_count, 3])
         and ``velocities`` [m/s] (same shape; None: no vertex velocities): the drawn surface of :meth:`drawn`
