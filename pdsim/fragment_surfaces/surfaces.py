@@ -18,7 +18,7 @@ import numpy as np
 
 from ..geometry import SolidShape
 from ..output.views import MeshView
-from .booleans import clip_regions, input_manifold, plane_groups, refine_surface, shared_complex
+from .booleans import InputCuts, clip_regions, plane_groups, refine_surface, shared_complex
 from .drawn import DrawnSurface, drawn_surface
 from .embedding import ShellEmbedding, rigid_fit
 from .regions import LatticeGrid, build_lattice_grid, partition_regions
@@ -54,6 +54,8 @@ class FragmentSurfaces:
             grid vertices label them; False labels every grid vertex by the vote of its nearest particles (particles
             anywhere, possibly coinciding: the vertices of a cracked FEM mesh, see :func:`build_lattice_grid`).
         device: Warp device of the one-off grid-near-mesh query.
+        reuse: a rebuild takes the previous rebuild's clip of every region whose geometry is unchanged, bit for bit
+            (default True; the shells are the same either way, False clips every region again).
 
     Attributes:
         fragment_ids: fragment label of each shell (chips carry their particle's fragment label; several shells
@@ -65,6 +67,7 @@ class FragmentSurfaces:
         vertex_fragment: shell index (0..shell_count-1) of each vertex, int shape [vertex_count].
         version: number of topology rebuilds (0: the intact input mesh).
         rebuild_seconds: wall time of the last rebuild [s].
+        clips_made: regions the last rebuild clipped (the others took the previous rebuild's clips).
     """
 
     def __init__(
@@ -81,6 +84,7 @@ class FragmentSurfaces:
         clean: bool = True,
         on_lattice: bool = True,
         device: str = "cpu",
+        reuse: bool = True,
     ):
         rest = np.asarray(rest_positions, dtype=np.float64)
         if rest.ndim != 2 or rest.shape[1] != 3 or rest.shape[0] == 0:
@@ -107,7 +111,9 @@ class FragmentSurfaces:
         self._view_faces: np.ndarray | None = None  # the faces of the last view, of rebuild _view_of, and their version
         self._view_of = -1
         self._view_version = 0
-        self._manifold_mesh = None
+        self._cuts: InputCuts | None = None
+        self._clips = {} if reuse else None  # the last rebuild's clips, by region (booleans.clip_regions)
+        self.clips_made = 0
         self._grid: LatticeGrid | None = None
         self.device = device
         self.rebuild_seconds = 0.0
@@ -186,11 +192,11 @@ class FragmentSurfaces:
         self.version += 1
         return True
 
-    def _input_manifold(self):
-        """The (refined) input surface as a manifold3d solid, made once."""
-        if self._manifold_mesh is None:
-            self._manifold_mesh = input_manifold(self._surface, self.shape.name)
-        return self._manifold_mesh
+    def _input_cuts(self) -> InputCuts:
+        """The (refined) input surface as a manifold3d solid and its cuts by tiles, made once."""
+        if self._cuts is None:
+            self._cuts = InputCuts(self._surface, self.shape.name, self.spacing)
+        return self._cuts
 
     def _set_topology(self, key: np.ndarray, labels: np.ndarray) -> None:
         ids, first, region = np.unique(key, return_index=True, return_inverse=True)
@@ -220,9 +226,16 @@ class FragmentSurfaces:
         grid (built once), clipped by the input surface, joined and cleaned (:func:`shared_complex`). Returns (points
         [m] [p, 3], tri [f, 3], shell [f], crack flag [f], patch [f], shared); sets ``clean_failed`` when the
         clean-up ran."""
-        solid = self._input_manifold()
         regions = partition_regions(self._lattice_grid(), region, crack_smoothing=self.crack_smoothing)
-        pieces = clip_regions(regions, solid, self._surface[2], self.spacing, self.simplify, self.body_name)
+        pieces, self.clips_made = clip_regions(
+            regions,
+            self._input_cuts(),
+            self._surface[2],
+            self.spacing,
+            self.simplify,
+            self.body_name,
+            reuse=self._clips,
+        )
         *shells, clean_failed = shared_complex(
             pieces, k_count, self._surface, self.spacing, simplify=self.simplify, clean=self.clean
         )
