@@ -71,7 +71,7 @@ def run_one(sections: int, subdivide: int, spacing: float, frames: int) -> dict:
         report = scene.run(os.path.join(tmp, "drop.usdc"), progress=False, checkpoint_interval_s=None)
         wall = time.perf_counter() - t0
     return {
-        "triangles": int(len(shape.faces)),
+        "triangles": len(shape.faces),
         "particles": report.particle_count,
         "wall_s": wall,
         "frames": frames,
