@@ -9,7 +9,9 @@ joined into one complex whose cracks are triangulated once.
 4. **Clip** (:func:`clip_regions`). ``region ∩ input surface`` (manifold3d, every triangle of both meshes its own
    face id so that manifold3d keeps the triangulations) gives each region's shell. Faces from the input are outer
    faces, the rest are crack faces (told apart by manifold3d's original ids; the source triangle tells the region
-   across a crack face and the input plane of an outer face).
+   across a crack face and the input plane of an outer face). A region is clipped against the cut of the input by a
+   box around it (:class:`InputCuts`), and a region whose vertices and triangles are unchanged since the last
+   rebuild takes its previous clip.
 5. **Shared complex** (:func:`shared_complex`). All shells' vertices that coincide (within 1e-9 h) become one vertex,
    and each crack is triangulated once: the lower region's crack triangles, reversed, replace the higher region's (a
    shell whose sides do not match keeps its own, checked). The two sides of a crack thus use the very same
