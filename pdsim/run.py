@@ -138,11 +138,6 @@ class _FrameRun:
         self.worker = SurfaceWorker(threaded=options.surface_thread)
         self.last_written = None  # the last frame written to the cache by this run
 
-    def write_frame(self, frame: int) -> None:
-        """Writes frame ``frame`` of the current state now."""
-        self.start_frame(frame)
-        self.finish_frame()
-
     def start_frame(self, frame: int) -> None:
         """Takes frame ``frame``'s views of the current state (the solvers' deferred views, copies of the state they
         need, start building on the surface thread); :meth:`finish_frame` writes them."""
