@@ -5,8 +5,8 @@ The same torus (trimesh, ``--sections`` sections around the ring and a quarter o
 rounds of trimesh's midpoint subdivision (four triangles for each, the very same surface). The particles, the
 material and the drop are the same, so the two runs simulate the same thing; only the input mesh of the render
 surfaces differs. Each run is a child process (``--one``) timed from outside its import; the table gives, per mesh,
-the triangle count, the wall time of ``Scene.run`` [s], the render-surface rebuilds and the wall time the surface
-thread spent building views [s].
+the triangle count and the wall time of ``Scene.run`` [s]; the line above it the fragments and chips (particles
+with damage >= 0.5, each a region of the render surface) at the end.
 
     python tools/bench_triangle_count.py                      # 4,608 and 73,728 triangles
     python tools/bench_triangle_count.py --frames 12 --spacing 0.012
@@ -66,11 +66,19 @@ def drop_scene(shape, spacing: float, frames: int):
 def run_one(sections: int, subdivide: int, spacing: float, frames: int) -> dict:
     shape = torus_shape(sections, subdivide)
     scene = drop_scene(shape, spacing, frames)
+    seen = {}
+
+    def count(frame, solvers):  # fragments and chips (damage >= 0.5) at each frame's end
+        labels = solvers[0].fragment_ids()
+        seen["fragments"] = len(np.unique(labels))
+        seen["chips"] = int((solvers[0].damage() >= 0.5).sum())
+
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        report = scene.run(os.path.join(tmp, "drop.usdc"), progress=False, checkpoint_interval_s=None)
+        report = scene.run(os.path.join(tmp, "drop.usdc"), progress=False, checkpoint_interval_s=None, on_frame=count)
         wall = time.perf_counter() - t0
     return {
+        **seen,
         "triangles": len(shape.faces),
         "particles": report.particle_count,
         "wall_s": wall,
@@ -98,6 +106,7 @@ def main(argv=None) -> int:
         rows.append(json.loads(out.strip().splitlines()[-1]))
     print(f"machine: {platform.node()}, {os.cpu_count()} CPUs, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
     print(f"spacing {args.spacing} m, {args.frames} frames, {rows[0]['particles']} particles")
+    print(f"at the end: {rows[0]['fragments']} fragments, {rows[0]['chips']} particles with damage >= 0.5")
     print("| triangles | wall [s] |")
     print("|---:|---:|")
     for r in rows:
