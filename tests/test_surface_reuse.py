@@ -1,6 +1,6 @@
 """Render-surface rebuilds that reuse the clips of unchanged regions (the shells equal those of clipping every
-region again, bit for bit), and clips against a tile's cut of the input mesh, whose size is the fragment's
-neighbourhood's, not the whole mesh's."""
+region again, bit for bit; a breaking scene's cache: tests/test_surface_thread.py), and clips against a tile's cut
+of the input mesh, whose size is the fragment's neighbourhood's, not the whole mesh's."""
 
 from __future__ import annotations
 
@@ -8,7 +8,6 @@ import manifold3d
 import numpy as np
 import pytest
 import trimesh
-from test_resume_cache import _assert_same_cache, _pd_bar
 
 import pdsim
 from pdsim.fragment_surfaces import FragmentSurfaces
@@ -57,22 +56,6 @@ def test_reused_clips_give_the_shells_of_clipping_every_region_again():
         made_off.append(off.clips_made)
     assert made_off == [2, 3, 3 + 8]  # every region clipped
     assert sum(made_on) < sum(made_off)  # regions unchanged since the last rebuild took their clips
-
-
-def test_breaking_bar_cache_with_reuse_equals_the_cache_without(tmp_path, monkeypatch):
-    """The cache of a breaking bar (topology changes at frames 1, 2, 3 and 7) with clip reuse equals, attribute by
-    attribute and frame by frame, the cache with every region clipped again on every rebuild."""
-    with_reuse = tmp_path / "reuse.usdc"
-    _pd_bar().run(with_reuse, device="cpu", progress=False, checkpoint_interval_s=None)
-    real = FragmentSurfaces.__init__
-
-    def no_reuse(self, *args, **kwargs):
-        real(self, *args, **{**kwargs, "reuse": False})
-
-    monkeypatch.setattr(FragmentSurfaces, "__init__", no_reuse)
-    without = tmp_path / "no_reuse.usdc"
-    _pd_bar().run(without, device="cpu", progress=False, checkpoint_interval_s=None)
-    _assert_same_cache(without, with_reuse, 8)
 
 
 @pytest.fixture(scope="module")

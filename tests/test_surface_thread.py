@@ -1,6 +1,7 @@
 """The run's surface thread (pdsim/frame_worker.py): frame N's render surfaces build on a thread while frame N + 1
-simulates, and the cache is the one the main thread alone writes, bit for bit; errors of the thread are raised in the
-main thread; a stop while a slow surface build is in flight still stops at once."""
+simulates, and the cache is the one the main thread alone writes, bit for bit (and the one written without clip
+reuse); errors of the thread are raised in the main thread; a stop while a slow surface build is in flight still
+stops at once."""
 
 from __future__ import annotations
 
@@ -16,13 +17,35 @@ from pdsim.frame_worker import SurfaceWorker
 from pdsim.output.views import DeferredView, MeshView
 
 
-def test_threaded_cache_equals_the_main_thread_cache(tmp_path):
-    """A breaking bar (surface topology changes at frames 1, 2, 3 and 7) written with the surface thread equals, at
-    every time code and attribute, bit for bit, the cache written with every surface built in the main thread."""
-    inline, threaded = tmp_path / "inline.usdc", tmp_path / "threaded.usdc"
+@pytest.fixture(scope="module")
+def threaded_cache(tmp_path_factory):
+    """The cache of a breaking bar (surface topology changes at frames 1, 2, 3 and 7) as a run writes it by default:
+    surface thread on, clip reuse on."""
+    out = tmp_path_factory.mktemp("threaded") / "threaded.usdc"
+    _pd_bar().run(out, device="cpu", progress=False, checkpoint_interval_s=None)
+    return out
+
+
+def test_threaded_cache_equals_the_main_thread_cache(tmp_path, threaded_cache):
+    """The breaking bar written with the surface thread equals, at every time code and attribute, bit for bit, the
+    cache written with every surface built in the main thread."""
+    inline = tmp_path / "inline.usdc"
     _pd_bar().run(inline, device="cpu", progress=False, checkpoint_interval_s=None, surface_thread=False)
-    _pd_bar().run(threaded, device="cpu", progress=False, checkpoint_interval_s=None, surface_thread=True)
-    _assert_same_cache(inline, threaded, 8)
+    _assert_same_cache(inline, threaded_cache, 8)
+
+
+def test_cache_with_clip_reuse_equals_the_cache_without(tmp_path, monkeypatch, threaded_cache):
+    """The breaking bar's cache with clip reuse (pdsim/fragment_surfaces/booleans.py) equals, attribute by attribute
+    and frame by frame, the cache with every region clipped again on every rebuild."""
+    real = FragmentSurfaces.__init__
+
+    def no_reuse(self, *args, **kwargs):
+        real(self, *args, **{**kwargs, "reuse": False})
+
+    monkeypatch.setattr(FragmentSurfaces, "__init__", no_reuse)
+    without = tmp_path / "no_reuse.usdc"
+    _pd_bar().run(without, device="cpu", progress=False, checkpoint_interval_s=None)
+    _assert_same_cache(without, threaded_cache, 8)
 
 
 def test_surfaces_build_on_the_worker_thread_while_the_caller_goes_on():
