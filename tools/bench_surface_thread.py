@@ -3,7 +3,7 @@ run with every surface built in the main thread (``Scene.run(surface_thread=...)
 kernel cache). The two caches are the same bit for bit (tests/test_surface_thread.py).
 
     python tools/bench_surface_thread.py                       # drop_shatter at its PREVIEW settings, 3 pairs
-    python tools/bench_surface_thread.py --scene four_walls --pairs 1
+    python tools/bench_surface_thread.py --frames 10 --pairs 2     # the first 10 frames of 24
 """
 
 from __future__ import annotations
@@ -26,19 +26,23 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scene", default="drop_shatter", help="a scene of scenes/ with PREVIEW settings")
     parser.add_argument("--pairs", type=int, default=3, help="pairs of runs (default 3)")
+    parser.add_argument("--frames", type=int, default=None, help="frames (default: the PREVIEW settings')")
     args = parser.parse_args(argv)
     module = load_scene_module(args.scene)
+    settings = dict(module.PREVIEW)
+    if args.frames is not None:
+        settings["frames"] = args.frames
     walls = {True: [], False: []}
     with tempfile.TemporaryDirectory() as tmp:
-        module.build_scene(**module.PREVIEW).run(os.path.join(tmp, "warm.usdc"), progress=False)  # warm-up
+        module.build_scene(**settings).run(os.path.join(tmp, "warm.usdc"), progress=False)  # warm-up
         for _ in range(args.pairs):
             for threaded in (True, False):
-                scene = module.build_scene(**module.PREVIEW)
+                scene = module.build_scene(**settings)
                 t0 = time.perf_counter()
                 scene.run(os.path.join(tmp, f"{threaded}.usdc"), progress=False, surface_thread=threaded)
                 walls[threaded].append(time.perf_counter() - t0)
     print(f"machine: {platform.node()}, {os.cpu_count()} CPUs, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
-    print(f"{args.scene} at {module.PREVIEW}, {args.pairs} pairs")
+    print(f"{args.scene} at {settings}, {args.pairs} pairs")
     print("| surfaces built | wall [s] (runs) | median |")
     print("|---|---|---:|")
     for threaded, name in ((True, "on the surface thread"), (False, "in the main thread")):
