@@ -115,11 +115,11 @@ class InputCuts:
     Level l has tiles of edge ``T_l = CUT_TILE h 2^l``; the cut of tile i of level l is ``solid ∩ box`` with the box
     the tile grown by one tile on every side (3 T_l wide), made on first use from the cut of level l + 1 that holds
     that box (the one whose tile's start is nearest the box's: a box of level l, 3 T_l wide, then lies in that 6 T_l
-    wide box of level l + 1), so a cut costs what its parent holds. A region is clipped against the cut of the finest level whose tiles are at least its bounding box grown by
-    ``CUT_MARGIN`` h on every side, at the tile holding the grown box's lower corner (the box then lies inside the
-    cut's box); regions as large as the input use the whole solid. As point sets ``region ∩ cut = region ∩ solid``;
-    input triangles that cross a cut's box are split there, so the triangulation of the outer faces may differ from a
-    clip against the whole solid. A cut keeps the solid's original id and face ids (manifold3d carries them through
+    wide box of level l + 1), so a cut costs what its parent holds. A region is clipped against the cut of the
+    finest level whose tiles are at least its bounding box grown by ``CUT_MARGIN`` h on every side, at the tile
+    holding the grown box's lower corner (the box then lies inside the cut's box); regions as large as the input use
+    the whole solid. As point sets ``region ∩ cut = region ∩ solid``; input triangles that cross a cut's box are split
+    there, so the triangulation of the outer faces may differ from a clip against the whole solid. A cut keeps the solid's original id and face ids (manifold3d carries them through
     booleans), and its tolerance.
 
     Attributes:

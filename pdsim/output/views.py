@@ -129,4 +129,13 @@ def resolve_views(views) -> list:
     return [v.build() if isinstance(v, DeferredView) else v for v in views]
 
 
-__all__ = ["ATTRIBUTES", "DeferredView", "MeshView", "PointsView", "RigidView", "attribute_kind", "copied_view", "resolve_views"]
+__all__ = [
+    "ATTRIBUTES",
+    "DeferredView",
+    "MeshView",
+    "PointsView",
+    "RigidView",
+    "attribute_kind",
+    "copied_view",
+    "resolve_views",
+]
