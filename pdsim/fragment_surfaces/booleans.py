@@ -119,8 +119,8 @@ class InputCuts:
     finest level whose tiles are at least its bounding box grown by ``CUT_MARGIN`` h on every side, at the tile
     holding the grown box's lower corner (the box then lies inside the cut's box); regions as large as the input use
     the whole solid. As point sets ``region ∩ cut = region ∩ solid``; input triangles that cross a cut's box are split
-    there, so the triangulation of the outer faces may differ from a clip against the whole solid. A cut keeps the solid's original id and face ids (manifold3d carries them through
-    booleans), and its tolerance.
+    there, so the triangulation of the outer faces may differ from a clip against the whole solid. A cut keeps the
+    solid's original id and face ids (manifold3d carries them through booleans), and its tolerance.
 
     Attributes:
         solid: the whole input solid (:func:`input_manifold`).
