@@ -87,10 +87,11 @@ def test_a_stop_during_a_slow_surface_build_stops_at_once(tmp_path, monkeypatch)
     """A stop request while the surfaces of the frame before take 20 s: the run stops within the checkpoint budget
     (0.8 s), keeps no checkpoint of a frame it could not write, and the cache ends at the last frame written."""
     real = FragmentSurfaces.view
+    release = threading.Event()
 
     def slow(self, positions, velocities=None):
         if threading.current_thread() is not threading.main_thread() and slow.calls >= 3:
-            time.sleep(20.0)
+            release.wait(20.0)
         slow.calls += 1
         return real(self, positions, velocities)
 
@@ -115,6 +116,7 @@ def test_a_stop_during_a_slow_surface_build_stops_at_once(tmp_path, monkeypatch)
     assert time.monotonic() - stop.armed < 2.0 and time.monotonic() - t0 < 15.0
     assert ei.value.checkpoint is None  # frame 3's surfaces were still building: no checkpoint could be written
     assert ei.value.last_frame == 2
+    release.set()  # the abandoned build finishes (nothing of it is written)
 
 
 def test_mesh_view_is_snapshotted():
