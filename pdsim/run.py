@@ -38,8 +38,10 @@ from .colliders import collider_names
 from .contact import MethodContact
 from .divergence import attach_watchdogs, schedule_watchdogs
 from .errors import FeatureNotAvailableError, InstabilityError, OutputWriteError, ParameterError, PdsimError
+from .frame_worker import SurfaceWorker
 from .output.usd import UsdCache
 from .output.usd_files import pdsim_info
+from .output.views import copied_view
 from .output.writer import ViewWriter
 from .preflight import preflight
 from .rigid import rigid_bodies_of
@@ -78,6 +80,7 @@ class _Options:
     check_interval: int
     checkpoint_interval_s: float | None
     crack_events: bool = False
+    surface_thread: bool = True
 
 
 CACHE_LAYOUTS = ("file", "clips")
@@ -156,20 +159,41 @@ class _FrameRun:
         self.cache = self.writer = None
         self.frame = 0  # the frame being simulated
         self.events = crack_event_sources(solvers) if options.crack_events else []
+        self.worker = SurfaceWorker(threaded=options.surface_thread)
+        self.last_written = None  # the last frame written to the cache by this run
 
-    def write_frame(self, frame: int) -> None:
+    def start_frame(self, frame: int) -> None:
+        """Takes frame ``frame``'s views of the current state (the solvers' deferred views, copies of the state they
+        need, start building on the surface thread); :meth:`finish_frame` writes them."""
         t = frame * self.scene.frame_time
-        with self.profile.phase("surfaces"):
-            views = [v for s in self.solvers for v in s.views()]
-        views += [v for e in self.events for v in e.collect()]
+        with self.profile.phase("surfaces"):  # the solvers advance meanwhile: copies of the state
+            views = [copied_view(v) for s in self.solvers for v in s.frame_views()]
+        views += [copied_view(v) for e in self.events for v in e.collect()]
         for collider, name in self.rigid:
             view = collider.view(t, bounds=self.bounds)
             if name is not None:
                 view.name = name
             views.append(view)
+        self.worker.submit(frame, views, t)
+
+    def finish_frame(self, timeout: float | None = None) -> bool:
+        """Writes the frame started by :meth:`start_frame` once its views are built; False when they are not built
+        within ``timeout`` [s] (None: no limit), True otherwise (also when no frame is in flight). The profile counts
+        the wait for the surface thread as surfaces, and the thread's own build time apart (RunProfile.add_worker)."""
+        if self.worker.pending is None:
+            return True
+        built_before = self.worker.build_seconds
+        with self.profile.phase("surfaces"):
+            built = self.worker.wait(timeout)
+        if built is None:
+            return False
+        self.profile.add_worker("surfaces", self.worker.build_seconds - built_before)
+        frame, views, t = built
         with self.profile.phase("write"):
             self.writer.write(frame, views)
             self.cache.end_frame(frame, time=t)
+        self.last_written = frame
+        return True
 
     def write_checkpoint(self, frame: int, substep: int, abandon=None):
         """The run's state after ``substep`` steps of frame ``frame + 1`` (frame ``frame`` finished); ``abandon``:
@@ -199,7 +223,11 @@ class _FrameRun:
 
 
 def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, limit, bar, stop, on_frame) -> None:
-    """Frames ``start + 1 .. frames``: step, write, checkpoint when due or asked to stop (RunInterrupted)."""
+    """Frames ``start + 1 .. frames``: step, write, checkpoint when due or asked to stop (RunInterrupted).
+
+    Frame N's render surfaces build on the surface thread while frame N + 1 simulates; frame N is written when both
+    are done (before any checkpoint, which thus sees every frame up to its own written). ``on_frame`` runs when a
+    frame is simulated, its views taken."""
     frames, every = run.options.frames, run.options.checkpoint_interval_s
     last_checkpoint = time.monotonic()
     for frame in range(start + 1, frames + 1):
@@ -219,10 +247,14 @@ def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, lim
                 raise
             # stopped at a step boundary inside the frame, ``done`` steps into it
             written = _checkpoint(run, frame - 1, first_substep + done, stop)
-            raise RunInterrupted(exc.signal, checkpoint=written, last_frame=frame - 1) from None
+            raise RunInterrupted(exc.signal, checkpoint=written, last_frame=run.last_written) from None
+        except InstabilityError:
+            run.finish_frame()  # the frame before the divergence is still written
+            raise
         run.profile.move("simulate", "checks", _check_seconds(run.watchdogs) - checked)
         first_substep = 0
-        run.write_frame(frame)
+        run.finish_frame()
+        run.start_frame(frame)
         if on_frame is not None:
             on_frame(frame, run.solvers)
         bar.update(1)
@@ -233,7 +265,8 @@ def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, lim
                 written = _checkpoint(run, frame, 0, stop)
             last_checkpoint = time.monotonic()
             if stopping or (stop is not None and stop.requested):  # asked during the checkpoint: it is the last
-                raise RunInterrupted(stop.signal, checkpoint=written, last_frame=frame)
+                raise RunInterrupted(stop.signal, checkpoint=written, last_frame=run.last_written)
+    run.finish_frame()
 
 
 def _check_seconds(watchdogs) -> float:
@@ -249,6 +282,10 @@ def _checkpoint(run: _FrameRun, frame: int, substep: int, stop):
     that SIGTERM stops a large run within 2 s): then the previous checkpoint file, or None."""
     overdue = getattr(stop, "overdue", None)  # a StopRequest's; other stop objects never abandon a checkpoint
     abandon = None if overdue is None else (lambda: overdue(STOP_CHECKPOINT_BUDGET_S))
+    while not run.finish_frame(None if abandon is None else 0.05):  # the frame in flight first
+        if abandon():  # its surfaces are still building: the checkpoint would come too late
+            run.worker.abandon()
+            return run.ck_path if run.ck_path.is_file() else None
     try:
         return run.write_checkpoint(frame, substep, abandon=abandon)
     except CheckpointAbandoned:
@@ -278,6 +315,7 @@ def run_scene(
     on_frame=None,
     layout="file",
     profile=False,
+    surface_thread=True,
 ) -> RunReport:
     """Simulates ``scene`` and writes its USD cache to ``out``; the arguments and what the run guarantees are those
     of :meth:`pdsim.Scene.run`. ``profile``: False, True (print the phases' wall time at the end and write the run
@@ -289,6 +327,7 @@ def run_scene(
     if isinstance(debris_particles, bool) or int(debris_particles) != debris_particles or debris_particles < 0:
         raise ParameterError("debris_particles", debris_particles, "an integer >= 0 (0: no debris)")
     options.crack_events = bool(crack_events)
+    options.surface_thread = bool(surface_thread)
     out = options.out
     remove_stale_temporaries(out)  # what a killed run on this output left (at most one checkpoint's .tmp)
     names = collider_names(scene.colliders)
@@ -362,7 +401,7 @@ def run_scene(
         coupling = method_contact(scene, solvers)
         prof.lap("build")
         if not resume:
-            run.write_frame(0)
+            run.start_frame(0)
         bar = _progress(options.frames - start, enabled=progress, desc=f"pdsim {scene.name}")
         try:
             _frame_loop(

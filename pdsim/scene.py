@@ -287,6 +287,7 @@ class Scene:
         on_frame=None,
         layout: str = "file",
         profile=False,
+        surface_thread: bool = True,
     ) -> RunReport:
         """Simulates the scene and writes a USD animation cache to ``out`` (.usdc, .usda or .usd) and the folder of its
         frame layers ``<stem>.frames/`` beside it (docs/cache_format.md).
@@ -345,8 +346,9 @@ class Scene:
                 checkpoints are off; a checkpoint write still going 0.8 s after the request is abandoned and the
                 previous checkpoint kept, so that a StopRequest stops a large run within 2 s) and raises
                 pdsim.checkpoint.RunInterrupted (a KeyboardInterrupt).
-            on_frame: callable(frame, solvers) run after each frame is written (diagnostics such as energy audits;
-                each solver's ``watchdog.last`` holds its frame-end check).
+            on_frame: callable(frame, solvers) run after each frame is simulated and its views taken (diagnostics
+                such as energy audits; each solver's ``watchdog.last`` holds its frame-end check); the frame is
+                written once its render surfaces are built, before the next frame's views are taken.
             layout: ``"file"`` (default): the frames stream into ``<stem>.frames/`` while running and are packed into
                 the one self-contained file ``out`` when the run finishes; ``"clips"``: ``out`` stays a top-level
                 layer that refers to that folder (for caches too big to pack; docs/cache_format.md).
@@ -355,6 +357,8 @@ class Scene:
                 RunReport's fields: the phases, the pre-flight's cost estimate, ...); a pdsim.profile.RunProfile
                 started earlier (as True, counting from its start). The returned RunReport holds the phases and the
                 estimate either way.
+            surface_thread: build each frame's render surfaces on a thread while the next frame simulates (default);
+                False builds them in the main thread. The cache is the same either way.
         """
         return run_scene(
             self,
@@ -378,4 +382,5 @@ class Scene:
             on_frame=on_frame,
             layout=layout,
             profile=profile,
+            surface_thread=surface_thread,
         )

@@ -111,6 +111,11 @@ class Solver(ABC):
     def views(self) -> list:
         """Method-neutral output views of the current state (pdsim/output/views.py)."""
 
+    def frame_views(self) -> list:
+        """The views of :meth:`views`, where some may be DeferredViews (pdsim/output/views.py) that build their
+        values later from copies of the current state; the run builds those on its worker thread."""
+        return self.views()
+
     @property
     @abstractmethod
     def point_count(self) -> int:

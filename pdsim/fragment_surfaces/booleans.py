@@ -9,7 +9,9 @@ joined into one complex whose cracks are triangulated once.
 4. **Clip** (:func:`clip_regions`). ``region ∩ input surface`` (manifold3d, every triangle of both meshes its own
    face id so that manifold3d keeps the triangulations) gives each region's shell. Faces from the input are outer
    faces, the rest are crack faces (told apart by manifold3d's original ids; the source triangle tells the region
-   across a crack face and the input plane of an outer face).
+   across a crack face and the input plane of an outer face). A region is clipped against the cut of the input by a
+   box around it (:class:`InputCuts`), and a region whose vertices and triangles are unchanged since the last
+   rebuild takes its previous clip.
 5. **Shared complex** (:func:`shared_complex`). All shells' vertices that coincide (within 1e-9 h) become one vertex,
    and each crack is triangulated once: the lower region's crack triangles, reversed, replace the higher region's (a
    shell whose sides do not match keeps its own, checked). The two sides of a crack thus use the very same
@@ -20,6 +22,8 @@ joined into one complex whose cracks are triangulated once.
 
 from __future__ import annotations
 
+import hashlib
+
 import manifold3d
 import numpy as np
 from scipy.spatial import cKDTree
@@ -27,7 +31,7 @@ from scipy.spatial import cKDTree
 from ..fragment_labels import connected_components
 from .cleanup import clean_complex, shells_closed
 
-__all__ = ["clip_regions", "input_manifold", "plane_groups", "refine_surface", "shared_complex"]
+__all__ = ["InputCuts", "clip_regions", "input_manifold", "plane_groups", "refine_surface", "shared_complex"]
 
 
 def plane_groups(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -100,49 +104,145 @@ def input_manifold(surface, name: str):
     return solid.as_original()
 
 
-def clip_regions(regions, solid, plane: np.ndarray, spacing: float, simplify: float, body_name: str):
+CUT_TILE = 4.0  # edge of the finest tiles of the input's cuts [spacings] (see InputCuts)
+CUT_MARGIN = 0.37  # gap between a region's bounding box and its cut's box [spacings] (off the grid's planes)
+
+
+class InputCuts:
+    """The (refined) input surface as a manifold3d solid, and its cuts by the boxes of a hierarchy of tiles, so that
+    the clip of a small region costs what the input near it costs, not the whole input.
+
+    Level l has tiles of edge ``T_l = CUT_TILE h 2^l``; the cut of tile i of level l is ``solid ∩ box`` with the box
+    the tile grown by one tile on every side (3 T_l wide), made on first use from the cut of level l + 1 that holds
+    that box (the one whose tile's start is nearest the box's: a box of level l, 3 T_l wide, then lies in that 6 T_l
+    wide box of level l + 1), so a cut costs what its parent holds. A region is clipped against the cut of the
+    finest level whose tiles are at least its bounding box grown by ``CUT_MARGIN`` h on every side, at the tile
+    holding the grown box's lower corner (the box then lies inside the cut's box); regions as large as the input use
+    the whole solid. As point sets ``region ∩ cut = region ∩ solid``; input triangles that cross a cut's box are split
+    there, so the triangulation of the outer faces may differ from a clip against the whole solid. A cut keeps the
+    solid's original id and face ids (manifold3d carries them through booleans), and its tolerance.
+
+    Attributes:
+        solid: the whole input solid (:func:`input_manifold`).
+        cut_count: cuts made so far.
+    """
+
+    def __init__(self, surface, name: str, spacing: float):
+        self.solid = input_manifold(surface, name)
+        v = np.asarray(surface[0], dtype=np.float64)
+        self.margin = CUT_MARGIN * float(spacing)
+        self.tile = CUT_TILE * float(spacing)
+        self.origin = v.min(axis=0) - self.margin
+        self.extent = float(np.ptp(v, axis=0).max()) + 2.0 * self.margin
+        self._cuts: dict = {}
+        self.cut_count = 0
+
+    def for_box(self, lo: np.ndarray, hi: np.ndarray):
+        """The solid to clip a region with bounding box ``lo``, ``hi`` [m] against: a tile's cut or the solid."""
+        lo, hi = lo - self.margin, hi + self.margin
+        size = float((hi - lo).max())
+        level = max(int(np.ceil(np.log2(max(size, 1e-300) / self.tile))), 0)
+        return self._cut(level, np.floor((lo - self.origin) / (self.tile * 2.0**level)).astype(np.int64))
+
+    def _cut(self, level: int, index: np.ndarray):
+        """The cut of tile ``index`` [3] of ``level``, or the solid where a tile there spans the input."""
+        t = self.tile * 2.0**level
+        if t >= self.extent:
+            return self.solid
+        key = (level, *(int(i) for i in index))
+        cut = self._cuts.get(key)
+        if cut is None:
+            corner = self.origin + (index - 1.0) * t  # the box: the tile grown by one tile, 3 t wide
+            parent = self._cut(level + 1, np.floor((corner - self.origin) / (2.0 * t) + 0.5).astype(np.int64))
+            box = manifold3d.Manifold.cube((3.0 * t,) * 3).translate(tuple(float(c) for c in corner))
+            cut = (parent ^ box).set_tolerance(self.solid.get_tolerance())
+            self._cuts[key] = cut
+            self.cut_count += 1
+        return cut
+
+
+def _clip_key(rv: np.ndarray, rf: np.ndarray) -> bytes:
+    """A digest of a region's vertices and triangles (bit for bit): equal digests, equal clips."""
+    digest = hashlib.blake2b(digest_size=20)
+    for a in (np.ascontiguousarray(rv, dtype=np.float64), np.ascontiguousarray(rf, dtype=np.int64)):
+        digest.update(str(a.shape).encode())
+        digest.update(a.tobytes())
+    return digest.digest()
+
+
+def clip_regions(
+    regions,
+    cuts: InputCuts,
+    plane: np.ndarray,
+    spacing: float,
+    simplify: float,
+    body_name: str,
+    *,
+    reuse: dict | None = None,
+):
     """Region ∩ input surface for every region (step 4; manifold3d).
 
     Args:
         regions: per region (vertices [m] [v, 3], triangles [f, 3], region across each triangle [f]), from
             :func:`pdsim.fragment_surfaces.regions.partition_regions`.
-        solid: the input surface from :func:`input_manifold`; plane: plane id of each of its triangles [f_in].
+        cuts: the input surface and its cuts (:class:`InputCuts`); plane: plane id of each input triangle [f_in].
         spacing: particle spacing h [m]; simplify: manifold3d's simplification tolerance [spacings] (0: none).
         body_name: the body's name, for the error message.
+        reuse: None, or the clips of the previous call, by :func:`_clip_key` of their region; a region whose vertices
+            and triangles are those of a previous region, bit for bit, takes that clip (the same booleans on the
+            same input give the same result). The dict is replaced by this call's clips.
 
     Returns:
-        Per region (vertices [m] [v, 3], triangles [f, 3], region across each triangle [f] (-1 on outer faces),
-        plane id of each triangle [f] (-1 on crack faces)).
+        (pieces, clips made): per region (vertices [m] [v, 3], triangles [f, 3], region across each triangle [f]
+        (-1 on outer faces), plane id of each triangle [f] (-1 on crack faces)), and how many regions were clipped
+        (the others reused).
 
     Raises:
         RuntimeError: a region is not a manifold.
     """
-    solid_id = solid.original_id()
+    solid_id = cuts.solid.original_id()
     empty = (np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64))
-    pieces = []
+    pieces, made, kept = [], 0, {}
     for k, (rv, rf, racross) in enumerate(regions):
         if rf.shape[0] == 0:
             pieces.append(empty)
             continue
-        region_solid = _manifold(rv, rf)
-        if region_solid.status() != manifold3d.Error.NoError:
-            raise RuntimeError(f"region {k} of '{body_name}' is not a manifold ({region_solid.status()})")
-        piece = region_solid ^ solid
-        if simplify > 0.0:
-            piece = piece.simplify(simplify * spacing)
-        piece = piece.to_mesh64()
-        tri = np.asarray(piece.tri_verts, dtype=np.int64).reshape(-1, 3)
-        if tri.size == 0:
+        key = None if reuse is None else _clip_key(rv, rf)
+        clip = None if reuse is None else reuse.get(key)
+        if clip is None:
+            clip = _clip(rv, rf, cuts, solid_id, spacing, simplify, f"region {k} of '{body_name}'")
+            made += 1
+        if key is not None:
+            kept[key] = clip
+        if clip is None or clip[1].size == 0:
             pieces.append(empty)
             continue
-        run_start = np.asarray(piece.run_index, dtype=np.int64) // 3
-        run_id = np.asarray(piece.run_original_id, dtype=np.int64)
-        outer = np.repeat(run_id == solid_id, np.diff(run_start))
-        src = np.asarray(piece.face_id, dtype=np.int64)
+        points, tri, outer, src = clip
         across = np.where(outer, -1, racross[np.where(outer, 0, np.minimum(src, len(racross) - 1))])
         planes = np.where(outer, plane[np.where(outer, np.minimum(src, len(plane) - 1), 0)], -1)
-        pieces.append((np.asarray(piece.vert_properties, dtype=np.float64)[:, :3], tri, across, planes))
-    return pieces
+        pieces.append((points, tri, across, planes))
+    if reuse is not None:
+        reuse.clear()
+        reuse.update(kept)
+    return pieces, made
+
+
+def _clip(rv, rf, cuts: InputCuts, solid_id: int, spacing: float, simplify: float, what: str):
+    """One region (vertices [m] [v, 3], triangles [f, 3]) ∩ the input: (points [m] [p, 3], triangles [t, 3], outer
+    flag [t], source triangle [t]: an input triangle on outer faces, a region triangle on crack faces)."""
+    region_solid = _manifold(rv, rf)
+    if region_solid.status() != manifold3d.Error.NoError:
+        raise RuntimeError(f"{what} is not a manifold ({region_solid.status()})")
+    piece = region_solid ^ cuts.for_box(rv.min(axis=0), rv.max(axis=0))
+    if simplify > 0.0:
+        piece = piece.simplify(simplify * spacing)
+    piece = piece.to_mesh64()
+    tri = np.asarray(piece.tri_verts, dtype=np.int64).reshape(-1, 3)
+    run_start = np.asarray(piece.run_index, dtype=np.int64) // 3
+    run_id = np.asarray(piece.run_original_id, dtype=np.int64)
+    outer = np.repeat(run_id == solid_id, np.diff(run_start))
+    src = np.asarray(piece.face_id, dtype=np.int64)
+    return np.asarray(piece.vert_properties, dtype=np.float64)[:, :3], tri, outer, src
 
 
 def shared_complex(pieces, k_count: int, surface, spacing: float, *, simplify: float, clean: bool):

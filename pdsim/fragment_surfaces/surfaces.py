@@ -12,12 +12,13 @@ joining the debris breaks.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import numpy as np
 
 from ..geometry import SolidShape
 from ..output.views import MeshView
-from .booleans import clip_regions, input_manifold, plane_groups, refine_surface, shared_complex
+from .booleans import InputCuts, clip_regions, plane_groups, refine_surface, shared_complex
 from .drawn import DrawnSurface, drawn_surface
 from .embedding import ShellEmbedding, rigid_fit
 from .regions import LatticeGrid, build_lattice_grid, partition_regions
@@ -53,6 +54,8 @@ class FragmentSurfaces:
             grid vertices label them; False labels every grid vertex by the vote of its nearest particles (particles
             anywhere, possibly coinciding: the vertices of a cracked FEM mesh, see :func:`build_lattice_grid`).
         device: Warp device of the one-off grid-near-mesh query.
+        reuse: a rebuild takes the previous rebuild's clip of every region whose geometry is unchanged, bit for bit
+            (default True; the shells are the same either way, False clips every region again).
 
     Attributes:
         fragment_ids: fragment label of each shell (chips carry their particle's fragment label; several shells
@@ -64,6 +67,7 @@ class FragmentSurfaces:
         vertex_fragment: shell index (0..shell_count-1) of each vertex, int shape [vertex_count].
         version: number of topology rebuilds (0: the intact input mesh).
         rebuild_seconds: wall time of the last rebuild [s].
+        clips_made: regions the last rebuild clipped (the others took the previous rebuild's clips).
     """
 
     def __init__(
@@ -80,6 +84,7 @@ class FragmentSurfaces:
         clean: bool = True,
         on_lattice: bool = True,
         device: str = "cpu",
+        reuse: bool = True,
     ):
         rest = np.asarray(rest_positions, dtype=np.float64)
         if rest.ndim != 2 or rest.shape[1] != 3 or rest.shape[0] == 0:
@@ -106,7 +111,9 @@ class FragmentSurfaces:
         self._view_faces: np.ndarray | None = None  # the faces of the last view, of rebuild _view_of, and their version
         self._view_of = -1
         self._view_version = 0
-        self._manifold_mesh = None
+        self._cuts: InputCuts | None = None
+        self._clips = {} if reuse else None  # the last rebuild's clips, by region (booleans.clip_regions)
+        self.clips_made = 0
         self._grid: LatticeGrid | None = None
         self.device = device
         self.rebuild_seconds = 0.0
@@ -172,20 +179,24 @@ class FragmentSurfaces:
         Returns:
             True when the shells were rebuilt.
         """
-        key = self.region_keys(labels, damage)
+        return self._update_key(self.region_keys(labels, damage), np.asarray(labels, dtype=np.int64))
+
+    def _update_key(self, key: np.ndarray, labels: np.ndarray) -> bool:
+        """Rebuilds the shells for region keys ``key`` (from :meth:`region_keys`) and fragment ``labels`` unless
+        the keys are those of the last build; True when rebuilt."""
         if self._key is not None and np.array_equal(key, self._key):
             return False
         t0 = time.perf_counter()
-        self._set_topology(key, np.asarray(labels, dtype=np.int64))
+        self._set_topology(key, labels)
         self.rebuild_seconds = time.perf_counter() - t0
         self.version += 1
         return True
 
-    def _input_manifold(self):
-        """The (refined) input surface as a manifold3d solid, made once."""
-        if self._manifold_mesh is None:
-            self._manifold_mesh = input_manifold(self._surface, self.shape.name)
-        return self._manifold_mesh
+    def _input_cuts(self) -> InputCuts:
+        """The (refined) input surface as a manifold3d solid and its cuts by tiles, made once."""
+        if self._cuts is None:
+            self._cuts = InputCuts(self._surface, self.shape.name, self.spacing)
+        return self._cuts
 
     def _set_topology(self, key: np.ndarray, labels: np.ndarray) -> None:
         ids, first, region = np.unique(key, return_index=True, return_inverse=True)
@@ -202,18 +213,29 @@ class FragmentSurfaces:
         self._split_shells(points, tri, tri_shell, tri_crack, tri_patch, labels[first], region, k_count, shared)
         self._build_interpolation()
 
+    def _lattice_grid(self) -> LatticeGrid:
+        """The label grid (step 1), built on first use (a Warp query on ``device``)."""
+        if self._grid is None:
+            self._grid = build_lattice_grid(
+                self.rest_positions, self.shape, self.spacing, device=self.device, on_lattice=self.on_lattice
+            )
+        return self._grid
+
     def _clipped_complex(self, region: np.ndarray, k_count: int):
         """All regions' shells as one complex (steps 1-6): the regions of :func:`partition_regions` over the label
         grid (built once), clipped by the input surface, joined and cleaned (:func:`shared_complex`). Returns (points
         [m] [p, 3], tri [f, 3], shell [f], crack flag [f], patch [f], shared); sets ``clean_failed`` when the
         clean-up ran."""
-        solid = self._input_manifold()
-        if self._grid is None:
-            self._grid = build_lattice_grid(
-                self.rest_positions, self.shape, self.spacing, device=self.device, on_lattice=self.on_lattice
-            )
-        regions = partition_regions(self._grid, region, crack_smoothing=self.crack_smoothing)
-        pieces = clip_regions(regions, solid, self._surface[2], self.spacing, self.simplify, self.body_name)
+        regions = partition_regions(self._lattice_grid(), region, crack_smoothing=self.crack_smoothing)
+        pieces, self.clips_made = clip_regions(
+            regions,
+            self._input_cuts(),
+            self._surface[2],
+            self.spacing,
+            self.simplify,
+            self.body_name,
+            reuse=self._clips,
+        )
         *shells, clean_failed = shared_complex(
             pieces, k_count, self._surface, self.spacing, simplify=self.simplify, clean=self.clean
         )
@@ -327,6 +349,26 @@ class FragmentSurfaces:
         return [x[self._vertex_ranges[k] : self._vertex_ranges[k + 1]] for k in range(self.fragment_count)]
 
     # ------------------------------------------------------------------ output
+    def deferred_view(self, positions, velocities=None, labels=None, damage=None) -> Callable[[], MeshView]:
+        """What :meth:`update_topology` (when ``labels`` is given) and then :meth:`view` would return now, as a
+        function to run later, possibly on another thread: it holds copies of ``positions`` [m], ``velocities``
+        [m/s] (shape [particle_count, 3]), ``labels`` and ``damage`` ([particle_count]), so the caller may change
+        its arrays meanwhile. The label grid, the one Warp query of a rebuild, is built here, in the calling thread,
+        when the regions are more than one. Calls of the returned functions must run in the order they were made."""
+        x = np.array(positions, dtype=np.float64)
+        v = None if velocities is None else np.array(velocities, dtype=np.float64)
+        key = None if labels is None else self.region_keys(labels, damage)
+        frag = None if labels is None else np.array(labels, dtype=np.int64)
+        if key is not None and self._grid is None and (key != key[0]).any():
+            self._lattice_grid()
+
+        def build() -> MeshView:
+            if key is not None:
+                self._update_key(key, frag)
+            return self.view(x, v)
+
+        return build
+
     def view(self, positions, velocities=None):
         """The surface as a MeshView ``<body>_surface`` for particle ``positions`` [m] (shape [particle_count, 3])
         and ``velocities`` [m/s] (same shape; None: no vertex velocities): the drawn surface of :meth:`drawn`

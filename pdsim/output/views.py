@@ -8,7 +8,8 @@ same in every method (``ATTRIBUTES``); a solver writes the ones its live feature
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -116,4 +117,47 @@ class RigidView:
     angular_velocity: np.ndarray | None = None
 
 
-__all__ = ["ATTRIBUTES", "EventsView", "MeshView", "PointsView", "RigidView", "attribute_kind"]
+@dataclass
+class DeferredView:
+    """A view whose values are computed later, possibly on another thread: ``build()`` returns it (a
+    :class:`MeshView`). ``build`` holds copies of the state it needs, never the solver's live arrays, so the solver may
+    advance before it runs. name: the prim name of the view it builds."""
+
+    name: str
+    build: Callable[[], MeshView]
+
+
+def _copied(value):
+    """``value`` with every numpy array in it (also inside a dict) copied."""
+    if isinstance(value, np.ndarray):
+        return value.copy()
+    if isinstance(value, dict):
+        return {k: _copied(v) for k, v in value.items()}
+    return value
+
+
+def copied_view(view):
+    """``view`` (a PointsView, MeshView or RigidView) with copies of its arrays, so that it keeps the values of now
+    while the solver advances (a solver's arrays may be views of its live state); a DeferredView as it is (it holds
+    copies already)."""
+    if isinstance(view, DeferredView):
+        return view
+    return replace(view, **{f.name: _copied(getattr(view, f.name)) for f in fields(view)})
+
+
+def resolve_views(views) -> list:
+    """``views`` with every :class:`DeferredView` replaced by the view it builds (in the calling thread)."""
+    return [v.build() if isinstance(v, DeferredView) else v for v in views]
+
+
+__all__ = [
+    "ATTRIBUTES",
+    "DeferredView",
+    "EventsView",
+    "MeshView",
+    "PointsView",
+    "RigidView",
+    "attribute_kind",
+    "copied_view",
+    "resolve_views",
+]

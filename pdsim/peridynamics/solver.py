@@ -44,7 +44,7 @@ from ..kernels.peridynamics import bonds as kb
 from ..kernels.peridynamics import damping as pd_damping
 from ..kernels.peridynamics import step as pd_step
 from ..kinematics import PointKinematics
-from ..output.views import PointsView
+from ..output.views import DeferredView, PointsView, resolve_views
 from ..solver import PointSolver, SolverContext, array_state, assign_state, register_solver
 from .body import PeridynamicBody
 from .events import CrackEvents
@@ -452,11 +452,16 @@ class SolverPeridynamics(PointSolver):
         return self._fragments.labels
 
     def views(self) -> list:
+        """The views of :meth:`frame_views`, the surfaces built now."""
+        return resolve_views(self.frame_views())
+
+    def frame_views(self) -> list:
         """Per body: a PointsView (positions, velocities, widths = spacing; displacement, dilatation, and damage,
         fragment and plastic_strain where those features are live) and, unless ``surfaces`` was turned off, the
         renderable surface ``<body>_surface`` (a closed shell per fragment and per particle whose damage reached the
         surfaces' threshold, pdsim/fragment_surfaces.py; vertex velocities [m/s]; face attributes fragment and
-        crack; its topology changes only on frames where those regions change)."""
+        crack; its topology changes only on frames where those regions change), as a DeferredView that holds copies
+        of the state it needs."""
         x = self.positions()
         v = self.velocities()
         u = self.kin.displacements()
@@ -486,10 +491,10 @@ class SolverPeridynamics(PointSolver):
                 )
             )
             if self._surfaces is not None:
-                surf = self._surfaces[i]
+                broken = {}
                 if self.model.fracture:
-                    surf.update_topology(values["fragment"][sl], values["damage"][sl])
-                out.append(surf.view(x[sl], v[sl]))
+                    broken = {"labels": values["fragment"][sl], "damage": values["damage"][sl]}
+                out.append(DeferredView(f"{b.name}_surface", self._surfaces[i].deferred_view(x[sl], v[sl], **broken)))
         return out
 
     # -- host-side views and diagnostics (vectorised numpy) ---------------------------------------------------------
