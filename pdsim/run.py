@@ -174,7 +174,8 @@ class _FrameRun:
             if name is not None:
                 view.name = name
             views.append(view)
-        self.worker.submit(frame, views, t)
+        with self.profile.phase("surfaces"):  # without the surface thread, the build runs here
+            self.worker.submit(frame, views, t)
 
     def finish_frame(self, timeout: float | None = None) -> bool:
         """Writes the frame started by :meth:`start_frame` once its views are built; False when they are not built
@@ -187,7 +188,8 @@ class _FrameRun:
             built = self.worker.wait(timeout)
         if built is None:
             return False
-        self.profile.add_worker("surfaces", self.worker.build_seconds - built_before)
+        if self.worker.threaded:
+            self.profile.add_worker("surfaces", self.worker.build_seconds - built_before)
         frame, views, t = built
         with self.profile.phase("write"):
             self.writer.write(frame, views)

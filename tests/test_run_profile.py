@@ -53,8 +53,10 @@ def test_phases_add_up_and_are_written(tmp_path, capsys):
 
 def test_time_lands_in_its_phase(tmp_path, monkeypatch):
     """DELAY added to every render-surface view, then to every watchdog check: that phase holds at least DELAY per
-    call, and the other phases stay as they were (within half the added time: the runs' own spread)."""
-    base = _run(tmp_path, "base").profile["seconds"]
+    call, and the other phases stay as they were (within half the added time: the runs' own spread). The surfaces are
+    built in the main thread here (surface_thread=False); with the surface thread the delay lands in the worker's
+    own time, and the main thread waits for at most that much."""
+    base = _run(tmp_path, "base", surface_thread=False).profile["seconds"]
 
     view = FragmentSurfaces.view
     views = []
@@ -65,13 +67,18 @@ def test_time_lands_in_its_phase(tmp_path, monkeypatch):
         return view(self, *args, **kwargs)
 
     monkeypatch.setattr(FragmentSurfaces, "view", slow_view)
-    slow = _run(tmp_path, "surfaces").profile["seconds"]
-    monkeypatch.setattr(FragmentSurfaces, "view", view)
+    slow = _run(tmp_path, "surfaces", surface_thread=False).profile["seconds"]
     added = len(views) * DELAY
     assert len(views) == FRAMES + 1  # frame 0 and each frame
     assert slow["surfaces"] >= added
     for k in ("simulate", "write", "checks"):
         assert abs(slow[k] - base[k]) < 0.5 * added, k
+    views.clear()
+    threaded = _run(tmp_path, "thread").profile
+    assert len(views) == FRAMES + 1
+    assert threaded["worker_seconds"]["surfaces"] >= added
+    assert threaded["seconds"]["surfaces"] <= threaded["worker_seconds"]["surfaces"] + 0.5 * added
+    monkeypatch.setattr(FragmentSurfaces, "view", view)
 
     check = Watchdog._check
     calls = []
@@ -82,7 +89,7 @@ def test_time_lands_in_its_phase(tmp_path, monkeypatch):
         return check(self, *args, **kwargs)
 
     monkeypatch.setattr(Watchdog, "_check", slow_check)
-    slow = _run(tmp_path, "checks").profile["seconds"]
+    slow = _run(tmp_path, "checks", surface_thread=False).profile["seconds"]
     added = len(calls) * DELAY
     assert len(calls) >= FRAMES
     assert slow["checks"] >= added
