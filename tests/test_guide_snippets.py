@@ -4,8 +4,11 @@ The blocks are executed in order in one namespace (later blocks use the scenes a
 temporary folder, with ``pdsim.Scene.run`` cut to one frame on the CPU. Afterwards every scene the guide builds and
 does not run itself is run for one frame too, except the one it builds to show a FeatureNotAvailableError. A block
 preceded by ``<!-- guide:blender -->`` is Blender's Python: it runs in a subprocess when the ``bpy`` module is
-installed (``pip install -e ".[blender]"``) and is skipped otherwise. The material table's numbers are checked against
-pdsim.presets (its behaviour column is tests/test_guide_materials.py's).
+installed (``pip install -e ".[blender]"``, or an interpreter with it named by ``PDSIM_BLENDER_PYTHON``) and is
+skipped otherwise. Section 8 (a downloaded OBJ to a rendered Blender frame) loads ``suzanne.obj`` from the public test
+meshes beside the repository (``../shared/meshes``); its scene runs for SHOT_FRAMES frames, so that the ball has broken
+the head when Blender renders the last one. The material table's numbers are checked against pdsim.presets (its
+behaviour column is tests/test_guide_materials.py's).
 """
 
 from __future__ import annotations
@@ -14,16 +17,23 @@ import importlib.util
 import json
 import pathlib
 import re
+import shutil
 import subprocess
-import sys
+import textwrap
 
+import numpy as np
 import pytest
+from PIL import Image
+from test_cache_pack import _blender_python
 
 import pdsim
 from pdsim import presets
 
 GUIDE = pathlib.Path(__file__).parents[1] / "docs" / "guide.md"
+MESHES = pathlib.Path(__file__).parents[2] / "shared" / "meshes"  # the public test meshes beside the repository
 FRAMES = 1  # frames each run of the guide is cut to (after the rest pose)
+SHOT_FRAMES = 3  # frames of section 8's shot: the ball meets the head in frame 1
+SHOT = "head"  # section 8's scene
 MARKER = re.compile(r"<!--\s*guide:(\w+)\s*-->")
 
 
@@ -47,12 +57,15 @@ def _python_blocks() -> list[tuple[int, str, str]]:
 
 def _run_guide(tmp_path, monkeypatch):
     """Executes the guide's blocks (Blender's excepted) in ``tmp_path``; returns (namespace, [(scene, report)])."""
+    if not (MESHES / "suzanne.obj").is_file():
+        pytest.skip(f"the public test meshes are not at {MESHES} (section 8 loads suzanne.obj from there)")
+    shutil.copy(MESHES / "suzanne.obj", tmp_path / "suzanne.obj")
     monkeypatch.chdir(tmp_path)
     runs = []
     real_run = pdsim.Scene.run
 
     def short_run(self, out, **kwargs):
-        kwargs["frames"] = min(kwargs.get("frames") or self.frames, FRAMES)
+        kwargs["frames"] = min(kwargs.get("frames") or self.frames, SHOT_FRAMES if self.name == SHOT else FRAMES)
         kwargs["progress"] = False
         kwargs["device"] = "cpu"
         report = real_run(self, out, **kwargs)
@@ -71,18 +84,28 @@ def _run_guide(tmp_path, monkeypatch):
     return namespace, runs
 
 
-def test_guide_python_blocks_run(tmp_path, monkeypatch):
+@pytest.fixture(scope="module")
+def guide(tmp_path_factory):
+    """The guide's blocks run once for this module: (folder, namespace, [(scene, report)])."""
+    folder = tmp_path_factory.mktemp("guide")
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        namespace, runs = _run_guide(folder, monkeypatch)
+        yield folder, namespace, runs
+
+
+def test_guide_python_blocks_run(guide):
     """The blocks run; each run wrote its frame (plus the rest pose) into a cache that opens with the bodies'
     prims; then every other scene with bodies runs for one frame. Exactly one scene (the FEM body given a
     peridynamic yield stress, section 2.11) refuses with FeatureNotAvailableError, naming the FEM's own setting."""
     from pxr import Usd
 
-    namespace, runs = _run_guide(tmp_path, monkeypatch)
-    assert len(runs) >= 2, "the guide runs its first scene and the bodies scene"
+    tmp_path, namespace, runs = guide
+    assert len(runs) >= 3, "the guide runs its first scene, the bodies scene and section 8's shot"
     for scene, report in runs:
-        assert report.frames_written == FRAMES + 1
+        frames = SHOT_FRAMES if scene.name == SHOT else FRAMES
+        assert report.frames_written == frames + 1
         stage = Usd.Stage.Open(report.path)
-        assert stage.GetEndTimeCode() == FRAMES
+        assert stage.GetEndTimeCode() == frames
         for body in scene.bodies:
             assert stage.GetPrimAtPath(f"/World/{body.name}").IsValid(), body.name
     first = next(report for scene, report in runs if scene.name == "first")
@@ -158,8 +181,12 @@ def test_guide_blender_block(tmp_path, monkeypatch):
     no node work: the pane's surface has crack faces on the last frame (the per-face ``crack`` attribute, read on that
     frame), its slots hold the cache's materials pdsim_outer and pdsim_crack, and a small Cycles render of the pane
     shows orange pixels."""
-    if importlib.util.find_spec("bpy") is None:
-        pytest.skip('bpy (Blender as a Python module) is not installed: pip install -e ".[blender]"')
+    blender = _blender_python()
+    if blender is None:
+        pytest.skip(
+            'bpy (Blender as a Python module) is not installed: pip install -e ".[blender]", or set '
+            "PDSIM_BLENDER_PYTHON to an interpreter that has it"
+        )
     blocks = _python_blocks()
     monkeypatch.chdir(tmp_path)
     namespace = {"__name__": "guide"}
@@ -167,7 +194,7 @@ def test_guide_blender_block(tmp_path, monkeypatch):
     namespace["build_scene"]().run("first.usdc", frames=FRAMES, progress=False, device="cpu")
     code = next(code for _, marker, code in blocks if marker == "blender")
     proc = subprocess.run(
-        [sys.executable, "-c", code + BLENDER_CHECK],
+        [blender, "-c", code + BLENDER_CHECK],
         cwd=tmp_path,
         capture_output=True,
         text=True,
@@ -180,6 +207,69 @@ def test_guide_blender_block(tmp_path, monkeypatch):
     assert check["domain"] == "FACE" and check["crack_faces"] > 0, check
     assert check["slots"] == ["pdsim_crack", "pdsim_outer"], check
     assert _orange_pixels(tmp_path / "crack.png") > 0
+
+
+def test_guide_obj_to_blender_frame(guide):
+    """Section 8: suzanne.obj as downloaded (Y up, quads, open eye parts) loads with one line of repairs, its shot
+    breaks the head (crack faces on the last frame of the cache), pdsim's preview writes a still, and the section's
+    Blender block, run as it is in Blender's Python, renders the last frame with the crack material on the crack faces
+    (pixels of the crack orange) and the outer material elsewhere, and no particle spheres: the particles come in as
+    guides (no object renders them)."""
+    from pxr import Usd, UsdGeom
+
+    folder, namespace, runs = guide
+    assert "welded" in namespace["head"].repairs or "capped" in namespace["head"].repairs
+    shot = next(report for scene, report in runs if scene.name == SHOT)
+    stage = Usd.Stage.Open(shot.path)
+    crack = UsdGeom.Subset(stage.GetPrimAtPath(f"/World/{SHOT}_surface/crack"))
+    assert len(crack.GetIndicesAttr().Get(SHOT_FRAMES)) > 0, "the ball breaks the head by the last frame"
+    assert UsdGeom.Imageable(stage.GetPrimAtPath(f"/World/{SHOT}")).GetPurposeAttr().Get() == UsdGeom.Tokens.guide
+    assert (folder / "head.png").stat().st_size > 0
+    blender = _blender_python()
+    if blender is None:
+        pytest.skip(
+            'bpy (Blender as a Python module) is not installed: pip install -e ".[blender]", or set '
+            "PDSIM_BLENDER_PYTHON to an interpreter that has it"
+        )
+    blocks = [code for line, marker, code in _python_blocks() if marker == "blender" and line > _section_line(8)]
+    assert len(blocks) == 1
+    check = textwrap.dedent(
+        """
+        print("OBJECTS", sorted((ob.name, ob.type) for ob in bpy.context.scene.objects))
+        for ob in scene.objects:  # the head's surface alone, on a transparent film
+            ob.hide_render = ob.type != "LIGHT" and ob.name != "head_surface"
+        scene.render.film_transparent = True
+        scene.render.filepath = os.path.abspath("head_alone.png")
+        bpy.ops.render.render(write_still=True)
+        """
+    )
+    proc = subprocess.run(
+        [blender, "-c", blocks[0] + check], cwd=folder, capture_output=True, text=True, timeout=600, check=False
+    )
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    objects = next(ln for ln in proc.stdout.splitlines() if ln.startswith("OBJECTS"))
+    assert "'POINTCLOUD'" not in objects and "head_surface" in objects, objects
+    assert (folder / "head_blender.png").stat().st_size > 0
+    crack, outer = _head_pixels(folder / "head_alone.png")
+    assert 0 < crack < outer, (crack, outer)  # a few shards broken off: most of the head keeps its outer material
+
+
+def _section_line(number: int) -> int:
+    """Line number (1-based) of the guide's heading ``## <number>.``."""
+    lines = GUIDE.read_text(encoding="utf-8").splitlines()
+    return next(i + 1 for i, ln in enumerate(lines) if ln.startswith(f"## {number}."))
+
+
+def _head_pixels(path) -> tuple[int, int]:
+    """(crack, outer): opaque pixels of a render on a transparent film in the crack material's orange (hue 10-45
+    degrees, saturation > 0.4) and in the outer material's grey (saturation < 0.2)."""
+    rgba = Image.open(path).convert("RGBA")
+    opaque = np.asarray(rgba, dtype=np.float64)[..., 3] > 127
+    hsv = np.asarray(rgba.convert("RGB").convert("HSV"), dtype=np.float64) / 255.0
+    hue = hsv[..., 0] * 360.0
+    crack = opaque & (hue >= 10.0) & (hue <= 45.0) & (hsv[..., 1] > 0.4)
+    outer = opaque & (hsv[..., 1] < 0.2)
+    return int(crack.sum()), int(outer.sum())
 
 
 def test_guide_material_table_matches_the_presets():
