@@ -596,6 +596,12 @@ def _(ws):
 A_FEM = "FEM meshes"
 
 
+@case("ground_restitution_range", A_SCENE, "Scene.add_ground_plane(restitution=1.5)", "(0, 1], or None",
+      pdsim.ParameterError, "restitution", "1.5")  # fmt: skip
+def _(ws):
+    _scene().add_ground_plane(restitution=1.5)
+
+
 @case("sliver_element", A_FEM, "a tetrahedral mesh with a sliver (quality 3e-3: its stable step is 1/350 of the "
       "median element's)", "elements of quality >= min_quality (default 0.02), or a lower min_quality",
       pdsim.GeometryError, "is degenerate", "quality 0.00", "min_quality=0.02", "of the median element's")  # fmt: skip
@@ -628,12 +634,6 @@ def _(ws):
     scene.add_fem_body(pdsim.box_tet_mesh((0.1, 0.1, 0.1), (2, 2, 2), center=(0.0, 0.0, 0.5)), _material(), name="b")
     scene.add_ground_plane(restitution=0.3)
     scene.build_solvers(device="cpu")
-
-
-@case("ground_restitution_range", A_SCENE, "Scene.add_ground_plane(restitution=1.5)", "(0, 1], or None",
-      pdsim.ParameterError, "restitution", "1.5")  # fmt: skip
-def _(ws):
-    _scene().add_ground_plane(restitution=1.5)
 
 
 @case("fem_measure", A_FEM, "FemBody(measure='cauchy')", "'linear', 'corotated' or 'green'", pdsim.ParameterError,

@@ -259,7 +259,11 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
 
     def surfaces_could_meet(self) -> bool:
         """Several FEM bodies, or one that cracks into pieces: surfaces that contact between FEM surfaces
-        (pdsim.contact.MethodContact) keeps apart."""
+        (pdsim.contact.MethodContact) keeps apart. False for the implicit integrator, which solves before contact
+        forces are known: the pieces of one cracking implicit body do not collide (as documented in docs/guide.md,
+        section 3); several implicit bodies are refused by :meth:`check_method_contact`."""
+        if self.integrator != "explicit":
+            return False
         return len(self.bodies) > 1 or any(getattr(b, "tensile_strength", None) is not None for b in self.bodies)
 
     @classmethod
