@@ -26,21 +26,21 @@ def collide_ground_plane(
     kind: wp.array(dtype=wp.int32),
     radius: wp.array(dtype=float),
     normal: wp.vec3,
-    offset: float,
-    friction: float,
+    offset: wp.array(dtype=float),
+    friction: wp.array(dtype=float),
     mass: wp.array(dtype=float),
     impulse: wp.array(dtype=wp.vec3d),
 ):
     """Keeps free points (spheres of the given radius, at rest + displacement in the solver's local frame) above the
-    plane n . x = offset (local frame): a penetrating point is projected back onto the plane, its approaching normal
-    velocity removed (inelastic) and its tangential velocity reduced by Coulomb friction (friction * removed normal
-    speed, never reversing it). The impulse the plane gives, m (v_new - v_old) [N s], is added to ``impulse[0]``
+    plane n . x = offset[i] (local frame, per point [m]): a penetrating point is projected back onto the plane, its
+    approaching normal velocity removed (inelastic) and its tangential velocity reduced by Coulomb friction
+    (friction[i] * removed normal speed, never reversing it). The impulse the plane gives, m (v_new - v_old) [N s], is added to ``impulse[0]``
     (points of mass ``mass`` [kg]; pass an empty ``mass`` to skip it)."""
     i = wp.tid()
     if kind[i] != PARTICLE_FREE:
         return
     x = rest[i] + displacements[i]
-    depth = radius[i] + offset - wp.dot(normal, x)
+    depth = radius[i] + offset[i] - wp.dot(normal, x)
     if depth > 0.0:
         displacements[i] = displacements[i] + depth * normal
         v = velocities[i]
@@ -50,7 +50,7 @@ def collide_ground_plane(
             vt_len = wp.length(vt)
             scale = float(0.0)
             if vt_len > 0.0:
-                scale = wp.max(0.0, 1.0 - friction * (-vn) / vt_len)
+                scale = wp.max(0.0, 1.0 - friction[i] * (-vn) / vt_len)
             v_new = vt * scale
             velocities[i] = v_new
             if mass.shape[0] > 0:
@@ -374,22 +374,23 @@ def ground_plane_force(
     normal: wp.vec3,
     offset: float,
     stiffness_rate: float,
-    damping_ratio: float,
-    friction: float,
+    damping_ratio: wp.array(dtype=float),
+    friction: wp.array(dtype=float),
     force: wp.array(dtype=wp.vec3),
 ):
     """The ground plane n . x = offset (local frame) as a contact pair of the one law (penalty_force) for the free
-    points: a point (sphere of ``radius`` [m]) overlapping the plane by d = r + offset - n . x > 0 gets
-    F = penalty_force(n, d, v, k = stiffness_rate m, m, damping_ratio, friction) [N] (the plane is immovable: the
-    reduced mass is the point's mass m [kg]), added to force[i] as F / force_to_newton[i] (the solver's unit)."""
+    points whose pair with the plane has a damping ratio (damping_ratio[i], NaN: none, the point is left to the
+    projection): a point (sphere of ``radius`` [m]) overlapping the plane by d = r + offset - n . x > 0 gets
+    F = penalty_force(n, d, v, k = stiffness_rate m, m, damping_ratio[i], friction[i]) [N] (the plane is immovable:
+    the reduced mass is the point's mass m [kg]), added to force[i] as F / force_to_newton[i] (the solver's unit)."""
     i = wp.tid()
-    if kind[i] != PARTICLE_FREE:
+    if kind[i] != PARTICLE_FREE or wp.isnan(damping_ratio[i]):
         return
     x = rest[i] + displacements[i]
     depth = radius[i] + offset - wp.dot(normal, x)
     if depth > 0.0:
         m = mass[i]
-        f = penalty_force(normal, depth, velocities[i], stiffness_rate * m, m, damping_ratio, friction)
+        f = penalty_force(normal, depth, velocities[i], stiffness_rate * m, m, damping_ratio[i], friction[i])
         force[i] = force[i] + f / force_to_newton[i]
 
 
@@ -399,17 +400,10 @@ def ground_plane_force(
 # given as keywords named like their parameters (kernels/launch.py).
 
 
-def push_out_of_plane(*, normal, offset, friction, device, **arguments):
-    """Ground plane n . x = ``offset`` [m] (local frame), ``normal`` 3 numbers (collide_ground_plane)."""
-    launch(
-        collide_ground_plane,
-        arguments["rest"].shape[0],
-        device=device,
-        normal=wp.vec3(*normal),
-        offset=float(offset),
-        friction=float(friction),
-        **arguments,
-    )
+def push_out_of_plane(*, normal, device, **arguments):
+    """Ground plane n . x = ``offset`` [m] (local frame, float [n] per point), ``normal`` 3 numbers, ``friction``
+    float [n] per point (collide_ground_plane)."""
+    launch(collide_ground_plane, arguments["rest"].shape[0], device=device, normal=wp.vec3(*normal), **arguments)
 
 
 def ground_forces(*, normal, offset, device, **arguments):

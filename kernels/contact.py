@@ -18,7 +18,8 @@ as 2 / (1 / C_k + 1 / C_j) and only products C_kj V_j [N/m^4] are formed: the pr
 with the normal dashpot c^n_kj = 2 zeta sqrt(C_kj m_red / (V_k V_j)) (damping ratio zeta of the pair's relative
 oscillation, m_red the reduced mass) clamped so the normal force never pulls (no adhesion), and regularised Coulomb
 friction on the tangential relative velocity v_t: |f_t| = min(mu |f_n|, c^t_kj V_j |v_t|) opposing v_t, with the
-critically damped c^t_kj (zeta = 1). The pair energy is 1/2 C_kj V_k V_j (R_kj - r)^2 [J] (times the cap's scale
+critically damped c^t_kj (zeta = 1). zeta and mu are the pair's: each particle brings its material's (NaN: none) and
+the pair combines them (pair_damping_ratio, pair_friction), the scene's values standing in where neither brings one. The pair energy is 1/2 C_kj V_k V_j (R_kj - r)^2 [J] (times the cap's scale
 below). Every term is symmetric in (k, j), so the pair forces V_k f_kj and V_j f_jk are equal and opposite (momentum
 is conserved; the hard floor below conserves it only approximately, as each particle averages over its own floor
 contacts).
@@ -83,6 +84,32 @@ BOND_NONE = wp.constant(0)  # the pair is not in the family (beyond the horizon)
 BOND_LIVE = wp.constant(1)
 BOND_DEAD = wp.constant(2)  # broken in the run
 BOND_CUT = wp.constant(3)  # cut by a notch (dead from the start)
+
+
+@wp.func
+def pair_damping_ratio(zeta_k: float, zeta_j: float, scene: float):
+    """Damping ratio of a pair whose sides bring zeta_k and zeta_j (NaN: none): the smaller (the larger restitution,
+    pdsim/contact.py combine_restitution), the one side's where the other brings none, ``scene`` where neither does."""
+    if wp.isnan(zeta_k):
+        if wp.isnan(zeta_j):
+            return scene
+        return zeta_j
+    if wp.isnan(zeta_j):
+        return zeta_k
+    return wp.min(zeta_k, zeta_j)
+
+
+@wp.func
+def pair_friction(mu_k: float, mu_j: float, scene: float):
+    """Coulomb coefficient of a pair whose sides bring mu_k and mu_j (NaN: none): sqrt(mu_k mu_j) (pdsim/contact.py
+    combine_friction), the one side's where the other brings none, ``scene`` where neither does."""
+    if wp.isnan(mu_k):
+        if wp.isnan(mu_j):
+            return scene
+        return mu_j
+    if wp.isnan(mu_j):
+        return mu_k
+    return wp.sqrt(mu_k * mu_j)
 
 
 @wp.func
@@ -272,6 +299,8 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
         bonded_factor: float,
         damping_ratio: float,
         friction: float,
+        point_damping_ratio: wp.array(dtype=float),
+        point_friction: wp.array(dtype=float),
         floor_factor: float,
         budget_count: float,
         scale_in: wp.array(dtype=float),
@@ -342,13 +371,15 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
             cv_crit = 2.0 * wp.sqrt(cv * (mk * mj / (mk + mj)) / vol_k)
             vrel = vk - velocities[j]
             vn = wp.dot(vrel, n)
-            fn = wp.max(cv * (R - r) - damping_ratio * cv_crit * vn, 0.0)
+            zeta = pair_damping_ratio(point_damping_ratio[k], point_damping_ratio[j], damping_ratio)
+            mu = pair_friction(point_friction[k], point_friction[j], friction)
+            fn = wp.max(cv * (R - r) - zeta * cv_crit * vn, 0.0)
             f += fn * n
-            if friction > 0.0:
+            if mu > 0.0:
                 vt = vrel - vn * n
                 vt_len = wp.length(vt)
                 if vt_len > 0.0:
-                    ft = wp.min(friction * fn, cv_crit * vt_len)
+                    ft = wp.min(mu * fn, cv_crit * vt_len)
                     f -= (ft / vt_len) * vt
             r_floor = floor_factor * R
             if r < r_floor and free_k:

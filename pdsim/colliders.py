@@ -13,7 +13,7 @@ import trimesh
 import warp as wp
 
 from .checks import check_range
-from .contact import CONTACT_OMEGA_DT, damping_ratio_for_restitution
+from .contact import CONTACT_OMEGA_DT, combine_friction, combine_restitution, damping_ratios_for_restitutions
 from .errors import ParameterError
 from .kernels import colliders as kc
 from .output.views import RigidView
@@ -68,7 +68,9 @@ class Collider:
 class GroundPlane(Collider):
     """A static plane n . x = offset (world) that free points cannot cross.
 
-    Two forms of the same contact, chosen by ``restitution``:
+    Two forms of the same contact, chosen per point by the restitution of the point's pair with the plane (the plane's
+    ``restitution`` combined with the point's material's contact_restitution, pdsim/contact.py combine_restitution;
+    the pair's friction likewise combines ``friction`` with the material's contact_friction):
 
     - None (default): inelastic projection with Coulomb friction after the drift (``apply``, kernels/colliders.py
       collide_ground_plane): the point's approaching normal velocity is removed.
@@ -116,7 +118,10 @@ class GroundPlane(Collider):
         arrays = getattr(self, "_impulse", {})
         return np.sum([a.numpy()[0] for a in arrays.values()], axis=0) if arrays else np.zeros(3)
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None, contact=None):
+        """The projection (both forms) on the free points; ``contact``: the points' own (restitution, friction),
+        float64 [n] each, NaN where a point's material brings none (pdsim/contact.py material_contact_values); None:
+        none brings any."""
         if not hasattr(self, "_impulse"):
             self._impulse = {}
         key = (str(rest.device), id(rest))
@@ -126,32 +131,53 @@ class GroundPlane(Collider):
             if key not in getattr(self, "_no_mass", {}):
                 self._no_mass = {**getattr(self, "_no_mass", {}), key: wp.zeros(0, dtype=float, device=rest.device)}
             mass = self._no_mass[key]
-        n = np.asarray(self.normal, dtype=np.float64)
-        floor = 0.0 if self.restitution is None else self._floor_depth(key, radius)
+        pair = self._pair_values(key, radius, contact)
         kc.push_out_of_plane(
             **_points(rest, displacements, velocities, radius, kind),
-            normal=n,
-            offset=self.offset - n @ self.origin - floor,
-            friction=self.friction,
+            normal=np.asarray(self.normal, dtype=np.float64),
+            offset=pair["offset"],
+            friction=pair["friction"],
             mass=mass,
             impulse=self._impulse[key],
             device=rest.device,
         )
 
-    def _floor_depth(self, key, radius) -> float:
-        """Depth [m] below the surface of the penalty form's projection floor: the largest point radius of the
-        solver (read once per solver)."""
-        if not hasattr(self, "_floor"):
-            self._floor = {}
-        if key not in self._floor:
-            self._floor[key] = float(radius.numpy().max()) if radius.shape[0] else 0.0
-        return self._floor[key]
+    def _pair_values(self, key, radius, contact) -> dict:
+        """The plane's pair with each point, computed once per solver (``key``): the restitution and friction the
+        pair takes (pdsim/contact.py combine_restitution, combine_friction: the plane's own ``restitution`` and
+        ``friction`` against the point's material values), as float32 device arrays: ``damping_ratio`` of the
+        penalty form (NaN where the pair has no restitution: projection only), ``friction``, and the projection's
+        ``offset`` [m] (local frame; one point radius below the surface, the largest of the solver, where the
+        penalty form acts); ``penalty``: whether any point takes the penalty form."""
+        if not hasattr(self, "_pairs"):
+            self._pairs = {}
+        if key not in self._pairs:
+            n_points = radius.shape[0]
+            e_point, mu_point = (np.full(n_points, np.nan),) * 2 if contact is None else contact
+            e = combine_restitution(e_point, np.nan if self.restitution is None else self.restitution)
+            mu = combine_friction(mu_point, self.friction)
+            penalty = ~np.isnan(e)
+            floor = float(radius.numpy().max()) if n_points and penalty.any() else 0.0
+            n = np.asarray(self.normal, dtype=np.float64)
+            offset = np.where(penalty, self.offset - n @ self.origin - floor, self.offset - n @ self.origin)
+            d = radius.device
+            self._pairs[key] = {
+                "damping_ratio": wp.array(damping_ratios_for_restitutions(e).astype(np.float32), device=d),
+                "friction": wp.array(mu.astype(np.float32), device=d),
+                "offset": wp.array(offset.astype(np.float32), device=d),
+                "penalty": bool(penalty.any()),
+            }
+        return self._pairs[key]
 
-    def add_forces(self, rest, displacements, velocities, radius, kind, mass, force_to_newton, force, dt: float):
-        """The penalty form's forces (``restitution`` set; nothing otherwise) on the free points, added to ``force``
-        in the solver's unit (force [N] / ``force_to_newton``), for the step ``dt`` [s]; the arrays as in ``apply``,
-        with the points' masses [kg]. Call it in the force phase, after the internal forces."""
-        if self.restitution is None:
+    def add_forces(
+        self, rest, displacements, velocities, radius, kind, mass, force_to_newton, force, dt: float, contact=None
+    ):
+        """The penalty form's forces on the free points whose pair with the plane has a restitution (the plane's
+        ``restitution`` or the point's material's; nothing for the others), added to ``force`` in the solver's unit
+        (force [N] / ``force_to_newton``), for the step ``dt`` [s]; the arrays as in ``apply``, with the points'
+        masses [kg]. Call it in the force phase, after the internal forces."""
+        pair = self._pair_values((str(rest.device), id(rest)), radius, contact)
+        if not pair["penalty"]:
             return
         n = np.asarray(self.normal, dtype=np.float64)
         kc.ground_forces(
@@ -161,8 +187,8 @@ class GroundPlane(Collider):
             normal=n,
             offset=self.offset - n @ self.origin,
             stiffness_rate=(CONTACT_OMEGA_DT / float(dt)) ** 2,
-            damping_ratio=damping_ratio_for_restitution(self.restitution),
-            friction=self.friction,
+            damping_ratio=pair["damping_ratio"],
+            friction=pair["friction"],
             force=force,
             device=rest.device,
         )

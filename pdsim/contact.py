@@ -132,6 +132,13 @@ class ParticleContact:
             construction; after bonds break call ``update_exposure`` (crack faces become exposed), or leave this off
             for bodies that can break. Default True. Off, every particle takes part and, as in LAMMPS, interior
             particles of one body also repel when compressed below bonded_factor of their rest distance.
+        point_restitution: each particle's side of a pair's restitution, float64 [n] in (0, 1], NaN where it brings
+            none (its material's contact_restitution: material_contact_values). A pair takes the larger of its two
+            sides' (combine_restitution: in the kernel, the smaller damping ratio), the one side's where the other
+            brings none, and ``damping_ratio`` / ``restitution`` where neither does. None: all NaN.
+        point_friction: each particle's side of a pair's Coulomb coefficient, float64 [n] >= 0, NaN where it brings
+            none (its material's contact_friction). A pair takes sqrt(mu_k mu_j) (combine_friction), the one side's
+            where the other brings none, and ``friction`` where neither does. None: all NaN.
     """
 
     def __init__(
@@ -154,6 +161,8 @@ class ParticleContact:
         friction: float = 0.0,
         floor_factor: float = 0.6,
         shield_interior: bool = True,
+        point_restitution=None,
+        point_friction=None,
     ):
         rest = np.asarray(rest_positions, dtype=np.float64)
         if rest.ndim != 2 or rest.shape[1] != 3 or len(rest) == 0:
@@ -180,6 +189,13 @@ class ParticleContact:
             "damping_ratio", 0.02 if damping_ratio is None else damping_ratio, 0.0, None, lo_open=False
         )
         self.friction = check_range("friction", friction, 0.0, None, lo_open=False)
+        e_point = np.full(n, np.nan) if point_restitution is None else np.asarray(point_restitution, np.float64)
+        mu_point = np.full(n, np.nan) if point_friction is None else np.asarray(point_friction, np.float64)
+        for name, a, hi in (("point_restitution", e_point, 1.0), ("point_friction", mu_point, None)):
+            known = a[~np.isnan(a)] if a.shape == (n,) else None
+            if known is None or np.any(known <= 0.0 if hi else known < 0.0) or (hi and np.any(known > hi)):
+                allowed = "values in (0, 1] or NaN" if hi else "values >= 0 or NaN"
+                raise ParameterError(name, "an array" if a.shape == (n,) else f"shape {a.shape}", f"({n},) {allowed}")
         self.floor_factor = check_range("floor_factor", floor_factor, 0.0, 1.0, lo_open=False)
         self.shield_interior = bool(shield_interior)
         self.device = wp.get_device(device)
@@ -199,6 +215,9 @@ class ParticleContact:
         self.volume = wp.array(vol.astype(f32), dtype=float, device=d)
         self.mass = wp.array((rho * vol).astype(f32), dtype=float, device=d)
         self.modulus = wp.array(modulus.astype(f32), dtype=float, device=d)
+        # each particle's side of a pair (NaN: its material brings none): the kernel combines two sides
+        self.point_damping_ratio = wp.array(damping_ratios_for_restitutions(e_point).astype(f32), device=d)
+        self.point_friction = wp.array(mu_point.astype(f32), device=d)
         self.query_radius = float(self.distance_factor * 2.0 * r.max())
         dim = int(max(8, min(128, round(n ** (1.0 / 3.0)))))
         self.grid = wp.HashGrid(dim, dim, dim, device=d)
@@ -290,6 +309,8 @@ class ParticleContact:
             raise ParameterError("bodies", bodies, "at least one body")
         kwargs.setdefault("shield_interior", not any(getattr(b, "fractures", False) for b in bodies))
         counts = [b.particle_count for b in bodies]
+        kwargs.setdefault("point_restitution", material_contact_values(bodies)[0])
+        kwargs.setdefault("point_friction", material_contact_values(bodies)[1])
 
         def rep(values):
             return np.repeat(np.asarray(values, dtype=np.float64), counts)
@@ -327,7 +348,8 @@ class ParticleContact:
             device=self.device,
             **self._force_buffers,
             **self._pair_arguments(),
-            **by_name(self, "mass", "damping_ratio", "friction", "floor_factor"),
+            **by_name(self, "mass", "damping_ratio", "friction", "point_damping_ratio", "point_friction"),
+            floor_factor=self.floor_factor,
         )
         wp.copy(self._scale_next, self._scale)
         wp.copy(self._scale, self._scale_out)
@@ -440,6 +462,52 @@ def damping_ratio_for_restitution(restitution: float) -> float:
             hi = mid
     return 0.5 * (lo + hi)
 
+
+
+def combine_restitution(a, b) -> np.ndarray:
+    """The restitution of a pair whose two sides bring ``a`` and ``b`` (arrays or numbers, NaN: the side brings
+    none): the larger of the two (Box2D's b2MixRestitution rule, so a rubber ball bounces off a stone floor as
+    rubber); where one side brings none, the other's; NaN where neither does. float64, broadcast shape. The contact
+    law's damping ratio decreases with e (damping_ratio_for_restitution), so in the kernels the pair takes the smaller
+    damping ratio of its two sides, the same rule."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    return np.where(np.isnan(a), b, np.where(np.isnan(b), a, np.maximum(a, b)))
+
+
+def combine_friction(a, b) -> np.ndarray:
+    """The Coulomb coefficient of a pair whose two sides bring ``a`` and ``b`` (arrays or numbers, NaN: the side
+    brings none): the geometric mean sqrt(a b) (Box2D's b2MixFriction rule: a side with no friction makes the pair
+    frictionless); where one side brings none, the other's; NaN where neither does. float64, broadcast shape."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    return np.where(np.isnan(a), b, np.where(np.isnan(b), a, np.sqrt(a * b)))
+
+
+def damping_ratios_for_restitutions(restitution) -> np.ndarray:
+    """damping_ratio_for_restitution of every value of ``restitution`` (float64 array; NaN stays NaN), solved once
+    per distinct value."""
+    e = np.asarray(restitution, dtype=np.float64)
+    out = np.full(e.shape, np.nan)
+    known = ~np.isnan(e)
+    values, index = np.unique(e[known], return_inverse=True)
+    out[known] = np.array([damping_ratio_for_restitution(v) for v in values])[index] if len(values) else []
+    return out
+
+
+def material_contact_values(bodies) -> tuple[np.ndarray, np.ndarray]:
+    """The per-point contact values of ``bodies`` (any bodies with ``material`` and ``particle_count``),
+    concatenated in the given order: (restitution, friction), float64 [n], NaN where the body's material sets none
+    (pdsim.Material contact_restitution, contact_friction)."""
+    counts = [b.particle_count for b in bodies]
+
+    def rep(values):
+        return np.repeat(np.asarray([np.nan if v is None else v for v in values], dtype=np.float64), counts)
+
+    return (
+        rep([getattr(b.material, "contact_restitution", None) for b in bodies]),
+        rep([getattr(b.material, "contact_friction", None) for b in bodies]),
+    )
 
 class MethodContact:
     """Contact between the bodies of mesh methods and everything else within a step: the particles of each particle
@@ -625,6 +693,10 @@ __all__ = [
     "MethodContact",
     "ParticleContact",
     "bond_stiffness_row_sum",
+    "combine_friction",
+    "combine_restitution",
     "damping_ratio_for_restitution",
+    "damping_ratios_for_restitutions",
+    "material_contact_values",
     "restitution_of_damping_ratio",
 ]

@@ -36,7 +36,7 @@ import math
 import numpy as np
 import warp as wp
 
-from ..contact import ParticleContact
+from ..contact import ParticleContact, material_contact_values
 from ..errors import ParameterError
 from ..fragment_labels import FragmentTracker
 from ..fragment_surfaces import FragmentSurfaces
@@ -154,6 +154,7 @@ class SolverPeridynamics(PointSolver):
             ground.bind(self.origin)
         self.colliders = colliders
         self._colliders_all = ([ground] if ground is not None else []) + colliders
+        self._material_contact = material_contact_values(self.bodies)  # the points' (restitution, friction), NaN: none
         self.contact = None
         if contact is not None and contact is not False:
             options = {} if contact is True else dict(contact)
@@ -324,10 +325,10 @@ class SolverPeridynamics(PointSolver):
         if self.contact is not None:
             pd_step.deformed_positions(m.particle_count, m.rest_positions, self.kin.u, self._positions, self.device)
             self.contact.apply(self._positions, self.kin.u, self.kin.v, s.force_density, self.kin.point_kind)
-        if self.ground is not None and self.ground.restitution is not None and self._step_dt is not None:
+        if self.ground is not None and self._step_dt is not None:
             self.ground.add_forces(
                 m.rest_positions, self.kin.u, self.kin.v, m.radius, self.kin.point_kind, self.kin.mass,
-                self.kin.force_to_newton, s.force_density, self._step_dt,
+                self.kin.force_to_newton, s.force_density, self._step_dt, contact=self._material_contact,
             )  # fmt: skip
         self.kin.add_loads(s.force_density, self._force_time)
 
@@ -342,9 +343,11 @@ class SolverPeridynamics(PointSolver):
         m = self.model
         self._step_dt = dt  # the step the force phase's ground penalty is tied to
         for c in self._colliders_all:
+            more = {"contact": self._material_contact} if c is self.ground else {}
             c.apply(
-                m.rest_positions, self.kin.u, self.kin.v, m.radius, self.kin.point_kind, time, dt, mass=self.kin.mass
-            )
+                m.rest_positions, self.kin.u, self.kin.v, m.radius, self.kin.point_kind, time, dt, mass=self.kin.mass,
+                **more,
+            )  # fmt: skip
 
     def check_state(self, speed_limit: float):
         """Raises InstabilityError if a displacement or velocity is not finite or a speed exceeds ``speed_limit``
