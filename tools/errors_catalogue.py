@@ -342,6 +342,18 @@ def _(ws):
     _material(sampling_jitter=0.5)
 
 
+@case("contact_restitution_range", A_MAT, "Material(contact_restitution=0.0)", "(0, 1], or None",
+      pdsim.ParameterError, "contact_restitution=0.0", "(0, 1]")  # fmt: skip
+def _(ws):
+    _material(contact_restitution=0.0)
+
+
+@case("contact_friction_negative", A_MAT, "Material(contact_friction=-0.2)", "a Coulomb coefficient >= 0, or None",
+      pdsim.ParameterError, "contact_friction=-0.2", "[0, inf)")  # fmt: skip
+def _(ws):
+    _material(contact_friction=-0.2)
+
+
 # -- bodies -----------------------------------------------------------------------------------------------------
 A_BODY = "bodies and spacing"
 
