@@ -5,7 +5,9 @@ frame too. Colliders push a penetrating free point (a sphere of its collision ra
 outward normal, remove its approaching normal velocity relative to the collider's surface velocity and reduce the
 relative tangential velocity by Coulomb friction (the convention of ``collide_ground_plane``). A kinematic collider is
 not pushed back; the push moves the point's displacement. A dynamic rigid body (pdsim/rigid.py) uses the same
-kernels with the points' masses and takes the opposite impulses (``push_point``).
+kernels with the points' masses and takes the opposite impulses (``push_point``). Friction (and the ground's damping
+ratio) come per point: the Coulomb coefficient of each point's pair with the collider (pdsim/contact.py
+combine_friction of the collider's and the point's material's).
 """
 
 import warp as wp
@@ -34,8 +36,8 @@ def collide_ground_plane(
     """Keeps free points (spheres of the given radius, at rest + displacement in the solver's local frame) above the
     plane n . x = offset[i] (local frame, per point [m]): a penetrating point is projected back onto the plane, its
     approaching normal velocity removed (inelastic) and its tangential velocity reduced by Coulomb friction
-    (friction[i] * removed normal speed, never reversing it). The impulse the plane gives, m (v_new - v_old) [N s], is added to ``impulse[0]``
-    (points of mass ``mass`` [kg]; pass an empty ``mass`` to skip it)."""
+    (friction[i] * removed normal speed, never reversing it). The impulse the plane gives, m (v_new - v_old) [N s],
+    is added to ``impulse[0]`` (points of mass ``mass`` [kg]; pass an empty ``mass`` to skip it)."""
     i = wp.tid()
     if kind[i] != PARTICLE_FREE:
         return
@@ -274,7 +276,7 @@ def collide_sphere(
     radius: wp.array(dtype=float),
     body: wp.array(dtype=RigidMotion),
     sphere_radius: float,
-    friction: float,
+    friction: wp.array(dtype=float),
     mass: wp.array(dtype=float),
     reaction: wp.array(dtype=wp.vec3d),
     phase: int,
@@ -294,7 +296,7 @@ def collide_sphere(
         n = wp.vec3(0.0, 0.0, 1.0)
         if dist > 0.0:
             n = d / dist
-        push_point(i, x, sdf, n, r, motion, friction, displacements, velocities, mass, reaction, phase)
+        push_point(i, x, sdf, n, r, motion, friction[i], displacements, velocities, mass, reaction, phase)
 
 
 # Warp kernels cannot take a function argument (the signed distance of the shape): collide_box and collide_mesh
@@ -308,7 +310,7 @@ def collide_box(
     radius: wp.array(dtype=float),
     body: wp.array(dtype=RigidMotion),
     half_extents: wp.vec3,
-    friction: float,
+    friction: wp.array(dtype=float),
     mass: wp.array(dtype=float),
     reaction: wp.array(dtype=wp.vec3d),
     phase: int,
@@ -326,7 +328,7 @@ def collide_box(
     if touch == 0:
         return
     n = wp.transform_vector(pose, n_local)
-    push_point(i, x, sdf, n, r, motion, friction, displacements, velocities, mass, reaction, phase)
+    push_point(i, x, sdf, n, r, motion, friction[i], displacements, velocities, mass, reaction, phase)
 
 
 # Like collide_box, this repeats collide_sphere's parameters and point prologue (a Warp kernel takes no function).
@@ -339,7 +341,7 @@ def collide_mesh(
     radius: wp.array(dtype=float),
     mesh: wp.uint64,
     body: wp.array(dtype=RigidMotion),
-    friction: float,
+    friction: wp.array(dtype=float),
     mass: wp.array(dtype=float),
     reaction: wp.array(dtype=wp.vec3d),
     phase: int,
@@ -359,7 +361,7 @@ def collide_mesh(
     if touch == 0:
         return
     n = wp.transform_vector(pose, n_local)
-    push_point(i, x, sdf, n, r, motion, friction, displacements, velocities, mass, reaction, phase)
+    push_point(i, x, sdf, n, r, motion, friction[i], displacements, velocities, mass, reaction, phase)
 
 
 @wp.kernel

@@ -19,10 +19,10 @@ with the normal dashpot c^n_kj = 2 zeta sqrt(C_kj m_red / (V_k V_j)) (damping ra
 oscillation, m_red the reduced mass) clamped so the normal force never pulls (no adhesion), and regularised Coulomb
 friction on the tangential relative velocity v_t: |f_t| = min(mu |f_n|, c^t_kj V_j |v_t|) opposing v_t, with the
 critically damped c^t_kj (zeta = 1). zeta and mu are the pair's: each particle brings its material's (NaN: none) and
-the pair combines them (pair_damping_ratio, pair_friction), the scene's values standing in where neither brings one. The pair energy is 1/2 C_kj V_k V_j (R_kj - r)^2 [J] (times the cap's scale
-below). Every term is symmetric in (k, j), so the pair forces V_k f_kj and V_j f_jk are equal and opposite (momentum
-is conserved; the hard floor below conserves it only approximately, as each particle averages over its own floor
-contacts).
+the pair combines them (pair_damping_ratio, pair_friction), the scene's values standing in where neither brings one.
+The pair energy is 1/2 C_kj V_k V_j (R_kj - r)^2 [J] (times the cap's scale below). Every term is symmetric in
+(k, j), so the pair forces V_k f_kj and V_j f_jk are equal and opposite (momentum is conserved; the hard floor
+below conserves it only approximately, as each particle averages over its own floor contacts).
 
 **Stiffness cap.** Each particle's contact stiffness row sum sum_j C_kj V_j [N/m^4] (what contact adds to its
 Silling-Askari sum, hence to the stable step) is capped at its budget B_k = n_b C_k (2 r_k)^3, the stiffness of n_b

@@ -60,8 +60,23 @@ class Collider:
         """Sets the origin [m] of the solvers' local frame (world = origin + local)."""
         self.origin = np.asarray(origin, dtype=np.float64)
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None, contact=None):
+        """Pushes the solver's free points out of the collider at ``time`` [s] (step ``dt`` [s]); ``contact``: the
+        points' own (restitution, friction), float64 [n] each, NaN where a point's material brings none
+        (pdsim/contact.py material_contact_values); None: none brings any."""
         raise NotImplementedError
+
+    def point_friction(self, radius, contact):
+        """The Coulomb coefficient of each point's pair with this collider: its ``friction`` combined with the
+        point's material's (pdsim/contact.py combine_friction), float32 [n] on ``radius``'s device, computed once per
+        solver (the points' ``radius`` array and their ``contact`` values)."""
+        key = (str(radius.device), id(radius), radius.shape[0], id(contact))
+        cache = self.__dict__.setdefault("_point_friction", {})
+        if key not in cache:
+            mu_point = np.full(radius.shape[0], np.nan) if contact is None else contact[1]
+            mu = combine_friction(mu_point, self.friction).astype(np.float32)
+            cache[key] = (contact, wp.array(mu, dtype=float, device=radius.device))  # holds contact: its id stays
+        return cache[key][1]
 
 
 @dataclass
@@ -131,7 +146,7 @@ class GroundPlane(Collider):
             if key not in getattr(self, "_no_mass", {}):
                 self._no_mass = {**getattr(self, "_no_mass", {}), key: wp.zeros(0, dtype=float, device=rest.device)}
             mass = self._no_mass[key]
-        pair = self._pair_values(key, radius, contact)
+        pair = self._pair_values(radius, contact)
         kc.push_out_of_plane(
             **_points(rest, displacements, velocities, radius, kind),
             normal=np.asarray(self.normal, dtype=np.float64),
@@ -142,7 +157,7 @@ class GroundPlane(Collider):
             device=rest.device,
         )
 
-    def _pair_values(self, key, radius, contact) -> dict:
+    def _pair_values(self, radius, contact) -> dict:
         """The plane's pair with each point, computed once per solver (``key``): the restitution and friction the
         pair takes (pdsim/contact.py combine_restitution, combine_friction: the plane's own ``restitution`` and
         ``friction`` against the point's material values), as float32 device arrays: ``damping_ratio`` of the
@@ -151,6 +166,7 @@ class GroundPlane(Collider):
         penalty form acts); ``penalty``: whether any point takes the penalty form."""
         if not hasattr(self, "_pairs"):
             self._pairs = {}
+        key = (str(radius.device), id(radius), radius.shape[0], id(contact))
         if key not in self._pairs:
             n_points = radius.shape[0]
             e_point, mu_point = (np.full(n_points, np.nan),) * 2 if contact is None else contact
@@ -166,6 +182,7 @@ class GroundPlane(Collider):
                 "friction": wp.array(mu.astype(np.float32), device=d),
                 "offset": wp.array(offset.astype(np.float32), device=d),
                 "penalty": bool(penalty.any()),
+                "contact": contact,  # held, so that its id stays its own
             }
         return self._pairs[key]
 
@@ -176,7 +193,7 @@ class GroundPlane(Collider):
         ``restitution`` or the point's material's; nothing for the others), added to ``force`` in the solver's unit
         (force [N] / ``force_to_newton``), for the step ``dt`` [s]; the arrays as in ``apply``, with the points'
         masses [kg]. Call it in the force phase, after the internal forces."""
-        pair = self._pair_values((str(rest.device), id(rest)), radius, contact)
+        pair = self._pair_values(radius, contact)
         if not pair["penalty"]:
             return
         n = np.asarray(self.normal, dtype=np.float64)
@@ -389,7 +406,7 @@ class MeshCollider(Collider):
             static=True,
         )
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None, contact=None):
         band = _mesh_band(self.band, self._radius_bound, radius)
         motion = self._motions.get(band)
         if motion is None:  # static: the pose is written once per band (per solver's radii)
@@ -400,7 +417,7 @@ class MeshCollider(Collider):
             **_points(rest, displacements, velocities, radius, kind),
             mesh=self._mesh.mesh.id,
             body=motion.array,
-            friction=self.friction,
+            friction=self.point_friction(radius, contact),
             device=self.device,
             **kinematic(self.device),
         )
@@ -538,11 +555,11 @@ class RigidProjectile(Collider):
     def _bounding_radius(self) -> float:
         return 0.0
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None, contact=None):
         self._update_motion(time, dt, band=self._band(radius))
         self._push(
             _points(rest, displacements, velocities, radius, kind)
-            | {"body": self._motion.array, "friction": self.friction, "device": self.device}
+            | {"body": self._motion.array, "friction": self.point_friction(radius, contact), "device": self.device}
             | kinematic(self.device)
         )
 

@@ -463,7 +463,6 @@ def damping_ratio_for_restitution(restitution: float) -> float:
     return 0.5 * (lo + hi)
 
 
-
 def combine_restitution(a, b) -> np.ndarray:
     """The restitution of a pair whose two sides bring ``a`` and ``b`` (arrays or numbers, NaN: the side brings
     none): the larger of the two (Box2D's b2MixRestitution rule, so a rubber ball bounces off a stone floor as
@@ -508,6 +507,7 @@ def material_contact_values(bodies) -> tuple[np.ndarray, np.ndarray]:
         rep([getattr(b.material, "contact_restitution", None) for b in bodies]),
         rep([getattr(b.material, "contact_friction", None) for b in bodies]),
     )
+
 
 class MethodContact:
     """Contact between the bodies of mesh methods and everything else within a step: the particles of each particle

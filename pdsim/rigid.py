@@ -100,8 +100,9 @@ class RigidBody(Collider):
         orientation: rotation at time 0, unit quaternion (x, y, z, w), of the analytic shape's axes or of the mesh as
             given.
         velocity: of the centre of mass [m/s]; angular_velocity [rad/s] (world axes), at time 0.
-        friction: Coulomb coefficient of its contacts, >= 0 (with points: this one; with the ground, a static mesh or
-            another body: the geometric mean of the two sides' coefficients, pdsim/contact.py combine_friction).
+        friction: Coulomb coefficient of its contacts, >= 0 (with points: combined with their material's
+            contact_friction, this one alone where it has none; with the ground, a static mesh or another body: the
+            geometric mean of the two sides' coefficients, pdsim/contact.py combine_friction).
         restitution: None or 0 (default None): its contacts are inelastic (the impulse removes the approaching
             normal velocity); a restitution above 0 is not available (FeatureNotAvailableError), whatever the
             other side's material brings.
@@ -236,9 +237,10 @@ class RigidBody(Collider):
         self.origin = origin
 
     # -- contact with the solvers' points ---------------------------------------------------------------------------
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None, contact=None):
         """The body's collision kernel on a solver's points (kernels/colliders.py), with the opposite impulses
-        accumulated into ``reaction``: the solver must pass its point masses [kg]."""
+        accumulated into ``reaction``: the solver must pass its point masses [kg]; ``contact`` as in
+        Collider.apply (the points' friction combines with the body's)."""
         if self.system is None:
             raise ParameterError(
                 "rigid body", self.name, "a body added with Scene.add_rigid_body (set up by the scene)"
@@ -252,7 +254,7 @@ class RigidBody(Collider):
             "kind": kind,
             "radius": radius,
             "body": self.motion,
-            "friction": self.friction,
+            "friction": self.point_friction(radius, contact),
             "mass": mass,
             "reaction": self.reaction,
             "device": self.device,

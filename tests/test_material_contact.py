@@ -86,8 +86,8 @@ def test_particle_pair_takes_the_combined_friction_and_damping():
     scene-level law at the combined values (restitution: the larger, i.e. the smaller damping ratio; friction: the
     geometric mean), the same as a contact built with those values for the whole scene."""
     rest = np.array([[0.0, 0.0, 0.0], [0.009, 0.0, 0.0]])
-    common = dict(body_id=[0, 1], radius=0.005, volume=1.0e-6, density=1000.0, bulk_modulus=1.0e6,
-                  shear_modulus=6.0e5, horizon=0.03, shield_interior=False, floor_factor=0.0)  # fmt: skip
+    common = {"body_id": [0, 1], "radius": 0.005, "volume": 1.0e-6, "density": 1000.0, "bulk_modulus": 1.0e6,
+              "shear_modulus": 6.0e5, "horizon": 0.03, "shield_interior": False, "floor_factor": 0.0}  # fmt: skip
     v = np.array([[-0.5, 0.3, 0.0], [0.5, -0.3, 0.0]], dtype=np.float32)
 
     def force(contact):
@@ -167,3 +167,21 @@ def test_rigid_box_slides_with_the_combined_friction_and_refuses_a_restitution()
     with pytest.raises(FeatureNotAvailableError, match="restitution"):
         RigidBody(BoxShape((0.1, 0.1, 0.1)), density=1000.0, restitution=0.5)
     assert RigidBody(BoxShape((0.1, 0.1, 0.1)), density=1000.0, restitution=0.0).friction == 0.5
+
+
+def test_fem_block_slides_with_its_material_friction():
+    """An FEM block (0.06 x 0.06 x 0.03 m, 3 x 3 x 2 cells) resting on the ground (gravity 9.81 m/s^2) and sliding at
+    1 m/s, its material's contact_friction 0.64 against the ground's 0.25, takes sqrt(0.64 x 0.25) = 0.4 and stops
+    after v^2 / (2 mu g) = 12.7 cm within 5 % (the ground's 0.25 alone: 20.4 cm)."""
+    g, v, mu = 9.81, 1.0, 0.4
+    material = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.25, contact_friction=0.64)
+    body = pdsim.FemBody(pdsim.box_tet_mesh((0.06, 0.06, 0.03), (3, 3, 2), center=(0.0, 0.0, 0.015)), material)
+    body.set_initial_velocity((v, 0.0, 0.0))
+    solver = pdsim.SolverFem([body], ground=GroundPlane(friction=0.25), gravity=(0.0, 0.0, -g), device="cpu")
+    dt = 0.5 * solver.stable_time_step()
+    x0 = solver.positions()[:, 0].mean()
+    for _ in range(int(1.2 * v / (mu * g) / dt)):
+        solver.step(dt)
+    moved = solver.positions()[:, 0].mean() - x0
+    assert abs(solver.velocities()[:, 0].mean()) < 0.01 * v
+    assert moved == pytest.approx(v**2 / (2.0 * mu * g), rel=0.05)

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ..checks import check_range
 from ..errors import ParameterError
 from ..kernels.fem import elements as ke
@@ -107,10 +109,24 @@ class FemStep:
         self.reset_over_count()
 
     def apply_colliders(self, time: float, dt: float) -> None:
-        """Ground plane, then the scene's colliders, on the free vertices (zero radius) at ``time`` [s]."""
+        """Ground plane, then the scene's colliders, on the free vertices (zero radius) at ``time`` [s], each vertex
+        with its body's material friction (its restitution does not apply: the vertices meet them inelastically)."""
         kin = self.kin
+        contact = self._vertex_contact()
         for c in self.colliders:
-            c.apply(kin.rest, kin.u, kin.v, self._zero_radius, kin.point_kind, time, dt, mass=kin.mass)
+            c.apply(kin.rest, kin.u, kin.v, self._zero_radius, kin.point_kind, time, dt, mass=kin.mass, contact=contact)
+
+    def _vertex_contact(self):
+        """The vertices' own (restitution, friction) for the colliders (pdsim/colliders.py Collider.apply): no
+        restitution (NaN), each vertex's body's material contact_friction (NaN where it has none); rebuilt when the
+        vertices change (fracture splits)."""
+        body = self._vertex_body_h
+        if getattr(self, "_vertex_contact_of", None) is not body:
+            mu = [b.material.contact_friction for b in self.bodies]
+            mu = np.array([np.nan if v is None else v for v in mu], dtype=np.float64)[body]
+            self._vertex_contact_of = body
+            self._vertex_contact_values = (np.full(len(body), np.nan), mu)
+        return self._vertex_contact_values
 
     # -- stepping ---------------------------------------------------------------------------------------------------
     def begin_step(self, dt: float) -> None:

@@ -343,10 +343,9 @@ class SolverPeridynamics(PointSolver):
         m = self.model
         self._step_dt = dt  # the step the force phase's ground penalty is tied to
         for c in self._colliders_all:
-            more = {"contact": self._material_contact} if c is self.ground else {}
             c.apply(
                 m.rest_positions, self.kin.u, self.kin.v, m.radius, self.kin.point_kind, time, dt, mass=self.kin.mass,
-                **more,
+                contact=self._material_contact,
             )  # fmt: skip
 
     def check_state(self, speed_limit: float):
