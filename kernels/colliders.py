@@ -85,6 +85,32 @@ def penalty_force(
 
 
 @wp.func
+def pair_damping_ratio(zeta_k: float, zeta_j: float, scene: float):
+    """Damping ratio of a pair whose sides bring zeta_k and zeta_j (NaN: none): the smaller (the larger restitution,
+    pdsim/contact.py combine_restitution), the one side's where the other brings none, ``scene`` where neither does."""
+    if wp.isnan(zeta_k):
+        if wp.isnan(zeta_j):
+            return scene
+        return zeta_j
+    if wp.isnan(zeta_j):
+        return zeta_k
+    return wp.min(zeta_k, zeta_j)
+
+
+@wp.func
+def pair_friction(mu_k: float, mu_j: float, scene: float):
+    """Coulomb coefficient of a pair whose sides bring mu_k and mu_j (NaN: none): sqrt(mu_k mu_j) (pdsim/contact.py
+    combine_friction), the one side's where the other brings none, ``scene`` where neither does."""
+    if wp.isnan(mu_k):
+        if wp.isnan(mu_j):
+            return scene
+        return mu_j
+    if wp.isnan(mu_j):
+        return mu_k
+    return wp.sqrt(mu_k * mu_j)
+
+
+@wp.func
 def collider_response(
     x: wp.vec3,
     v: wp.vec3,

@@ -19,7 +19,8 @@ with the normal dashpot c^n_kj = 2 zeta sqrt(C_kj m_red / (V_k V_j)) (damping ra
 oscillation, m_red the reduced mass) clamped so the normal force never pulls (no adhesion), and regularised Coulomb
 friction on the tangential relative velocity v_t: |f_t| = min(mu |f_n|, c^t_kj V_j |v_t|) opposing v_t, with the
 critically damped c^t_kj (zeta = 1). zeta and mu are the pair's: each particle brings its material's (NaN: none) and
-the pair combines them (pair_damping_ratio, pair_friction), the scene's values standing in where neither brings one.
+the pair combines them (colliders.py pair_damping_ratio, pair_friction), the scene's values standing in where neither
+brings one.
 The pair energy is 1/2 C_kj V_k V_j (R_kj - r)^2 [J] (times the cap's scale below). Every term is symmetric in
 (k, j), so the pair forces V_k f_kj and V_j f_jk are equal and opposite (momentum is conserved; the hard floor
 below conserves it only approximately, as each particle averages over its own floor contacts).
@@ -47,7 +48,7 @@ or crack) take part, through a grouped hash grid (see make_particle_contact_kern
 
 import warp as wp
 
-from .colliders import mesh_contact_point, penalty_force
+from .colliders import mesh_contact_point, pair_damping_ratio, pair_friction, penalty_force
 from .integration import PARTICLE_FREE
 from .launch import launch
 from .neighbors import same_body_count
@@ -84,32 +85,6 @@ BOND_NONE = wp.constant(0)  # the pair is not in the family (beyond the horizon)
 BOND_LIVE = wp.constant(1)
 BOND_DEAD = wp.constant(2)  # broken in the run
 BOND_CUT = wp.constant(3)  # cut by a notch (dead from the start)
-
-
-@wp.func
-def pair_damping_ratio(zeta_k: float, zeta_j: float, scene: float):
-    """Damping ratio of a pair whose sides bring zeta_k and zeta_j (NaN: none): the smaller (the larger restitution,
-    pdsim/contact.py combine_restitution), the one side's where the other brings none, ``scene`` where neither does."""
-    if wp.isnan(zeta_k):
-        if wp.isnan(zeta_j):
-            return scene
-        return zeta_j
-    if wp.isnan(zeta_j):
-        return zeta_k
-    return wp.min(zeta_k, zeta_j)
-
-
-@wp.func
-def pair_friction(mu_k: float, mu_j: float, scene: float):
-    """Coulomb coefficient of a pair whose sides bring mu_k and mu_j (NaN: none): sqrt(mu_k mu_j) (pdsim/contact.py
-    combine_friction), the one side's where the other brings none, ``scene`` where neither does."""
-    if wp.isnan(mu_k):
-        if wp.isnan(mu_j):
-            return scene
-        return mu_j
-    if wp.isnan(mu_j):
-        return mu_k
-    return wp.sqrt(mu_k * mu_j)
 
 
 @wp.func
@@ -507,6 +482,10 @@ def particle_mesh_contact(
     stiffness_rate: float,
     damping_ratio: float,
     friction: float,
+    p_damping_ratio: wp.array(dtype=float),
+    p_friction: wp.array(dtype=float),
+    m_damping_ratio: wp.array(dtype=float),
+    m_friction: wp.array(dtype=float),
     p_force: wp.array(dtype=wp.vec3),
     m_force: wp.array(dtype=wp.vec3),
     dt: float,
@@ -524,7 +503,10 @@ def particle_mesh_contact(
     (pdsim/contact.py CONTACT_OMEGA_DT = 0.15): even tens of simultaneous contacts on one point stay inside velocity
     Verlet's stability limit (omega dt < 2).
     ``p_to_force`` and the mesh's forces: multiply a force [N] into each solver's force unit (1 / V for a force
-    density, 1 for nodal forces); ``m_points`` maps the mesh's vertices to its solver's points.
+    density, 1 for nodal forces); ``m_points`` maps the mesh's vertices to its solver's points. The pair's damping
+    ratio and friction combine the particle's side (p_damping_ratio[i], p_friction[i], by solver point; NaN: none)
+    with the face's (its first vertex's m_damping_ratio, m_friction), ``damping_ratio`` and ``friction`` standing in
+    where neither side brings one (pair_damping_ratio, pair_friction).
 
     Work: the positive part of the step's work of the contact force on each side, max(F . v_particle dt, 0) and
     max(-F . v_surface dt, 0) [J] at the step's velocities, is added to ``p_work[work_slot]`` and
@@ -546,7 +528,9 @@ def particle_mesh_contact(
     m_surface = wa * m_mass[a] + wb * m_mass[b] + wc * m_mass[c]
     mp = p_mass[i]
     m_red = mp * m_surface / (mp + m_surface)
-    force = penalty_force(n, r - sdf, p_v[i] - v_surface, stiffness_rate * m_red, m_red, damping_ratio, friction)
+    zeta = pair_damping_ratio(p_damping_ratio[i], m_damping_ratio[a], damping_ratio)
+    mu = pair_friction(p_friction[i], m_friction[a], friction)
+    force = penalty_force(n, r - sdf, p_v[i] - v_surface, stiffness_rate * m_red, m_red, zeta, mu)
     wp.atomic_add(p_force, i, force * p_to_force[i])
     wp.atomic_sub(m_force, a, force * wa)
     wp.atomic_sub(m_force, b, force * wb)

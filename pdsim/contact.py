@@ -494,11 +494,11 @@ def damping_ratios_for_restitutions(restitution) -> np.ndarray:
     return out
 
 
-def material_contact_values(bodies) -> tuple[np.ndarray, np.ndarray]:
+def material_contact_values(bodies, *, per_body: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The per-point contact values of ``bodies`` (any bodies with ``material`` and ``particle_count``),
     concatenated in the given order: (restitution, friction), float64 [n], NaN where the body's material sets none
-    (pdsim.Material contact_restitution, contact_friction)."""
-    counts = [b.particle_count for b in bodies]
+    (pdsim.Material contact_restitution, contact_friction); ``per_body``: one value per body instead."""
+    counts = [1 if per_body else b.particle_count for b in bodies]
 
     def rep(values):
         return np.repeat(np.asarray([np.nan if v is None else v for v in values], dtype=np.float64), counts)
@@ -516,7 +516,9 @@ class MethodContact:
     method against the faces of the other pieces of its own surface and of every other mesh method's (FEM-FEM
     contact: two bodies, or the pieces of a cracked body; kernels/surface_contact.py, vertex_face_contact). Every
     pair uses the one contact law (kernels/contact.py, penalty_force) and gives the reaction to the face's vertices:
-    the pair's momentum is conserved exactly.
+    the pair's momentum is conserved exactly. Each side's points bring their material's restitution and friction
+    (the solvers' ``point_contact_values()``), combined per pair (combine_restitution, combine_friction); the
+    ``damping_ratio`` / ``restitution`` and ``friction`` given here stand where neither side brings one.
 
     The stiffness is tied to the step: k = m_red (CONTACT_OMEGA_DT / dt)^2 (a contact oscillates at omega dt = 0.15,
     far inside velocity Verlet's limit of 2), so contact never needs a smaller step. The restitution e a user sets
@@ -561,6 +563,7 @@ class MethodContact:
         self._meshes = {}  # id(solver) -> [version, points, faces, positions, wp.Mesh]
         self._to_force = {}  # id(solver) -> 1 / force_to_newton per point (Warp array)
         self._scratch = {}  # id(solver) -> work account of a solver without a watchdog
+        self._sides = {}  # id(solver) -> (its point_contact_values, damping ratio, friction: Warp arrays)
         for ms in self.mesh_solvers:  # raise FeatureNotAvailableError now, before the run, for what they cannot honour
             check = getattr(ms, "check_method_contact", None)
             if check is not None:
@@ -580,6 +583,23 @@ class MethodContact:
             entry[4].refit()
         return entry
 
+    def _side(self, solver) -> dict:
+        """The solver's points' side of each pair (their material values, ``point_contact_values``) as float32
+        device arrays under the kernels' names: damping ratio (damping_ratios_for_restitutions) and friction, NaN
+        where a point's material brings none; rebuilt when the solver's values change (FEM fracture splits)."""
+        values = solver.point_contact_values()
+        entry = self._sides.get(id(solver))
+        if entry is None or entry[0] is not values:
+            e, mu = values
+            d = solver.kin.u.device
+            entry = (
+                values,
+                wp.array(damping_ratios_for_restitutions(e).astype(np.float32), dtype=float, device=d),
+                wp.array(np.asarray(mu, dtype=np.float32), dtype=float, device=d),
+            )
+            self._sides[id(solver)] = entry
+        return entry[1], entry[2]
+
     def _force_scale(self, solver):
         scale = self._to_force.get(id(solver))
         if scale is None or scale.shape[0] != solver.kin.u.shape[0]:  # FEM fracture adds vertices
@@ -595,8 +615,10 @@ class MethodContact:
         for ms in self.mesh_solvers:
             _, m_points, m_faces, _, mesh = self._mesh(ms)
             m_work = self._work_account(ms)
+            m_damping, m_friction = self._side(ms)
             for ps in self.particle_solvers:
                 p_points, p_radius = ps.contact_particles()
+                p_damping, p_friction = self._side(ps)
                 kc.particle_mesh_forces(
                     p_points=p_points,
                     p_rest=ps.kin.rest,
@@ -613,6 +635,10 @@ class MethodContact:
                     stiffness_rate=rate,
                     damping_ratio=self.damping_ratio,
                     friction=self.friction,
+                    p_damping_ratio=p_damping,
+                    p_friction=p_friction,
+                    m_damping_ratio=m_damping,
+                    m_friction=m_friction,
                     p_force=ps.force,
                     m_force=ms.force,
                     dt=dt,
@@ -636,6 +662,8 @@ class MethodContact:
             a_label = self._foreign_label(a_label)
         skin_a, band_a = a.contact_skin()
         skin_b, band_b = b.contact_skin()
+        v_damping, v_friction = self._side(a)
+        m_damping, m_friction = self._side(b)
         ksf.vertex_face_forces(
             v_points=a_points,
             v_label=a_label,
@@ -657,6 +685,10 @@ class MethodContact:
             stiffness_rate=rate,
             damping_ratio=self.damping_ratio,
             friction=self.friction,
+            v_damping_ratio=v_damping,
+            v_friction=v_friction,
+            m_damping_ratio=m_damping,
+            m_friction=m_friction,
             v_force=a.force,
             m_force=b.force,
             dt=dt,

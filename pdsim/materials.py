@@ -96,14 +96,14 @@ class Material:
             pdsim/contact.py, reaches e = 0 only as its damping grows without bound). A pair takes the larger of its
             two sides' values (pdsim.contact.combine_restitution); None (default): the material brings none and the
             pair takes the other side's (another body, the ground) or, when neither has one, the scene's
-            (Scene.enable_contact; the ground's restitution). Taken by peridynamic particles in particle contact and
-            against the ground plane; FEM vertices, kinematic colliders and rigid bodies meet points inelastically,
-            and the contact between methods and between FEM surfaces keeps the scene's value.
+            (Scene.enable_contact; the ground's restitution). Taken by every penalty pair: peridynamic particles
+            with each other, with FEM surfaces and with the ground plane, and FEM surface pairs; the ground's and
+            colliders' projections of FEM vertices, kinematic colliders and rigid bodies stay inelastic
+            (docs/stability.md, "One contact law").
         contact_friction: Coulomb coefficient mu >= 0 of this material's contacts. A pair takes the geometric mean
             sqrt(mu_a mu_b) of its two sides (pdsim.contact.combine_friction); None (default): as for
-            ``contact_restitution``, the other side's value or the scene's. Taken by peridynamic particles in
-            particle contact, and by peridynamic particles and FEM vertices against the ground plane, colliders and
-            rigid bodies; the contact between methods and between FEM surfaces keeps the scene's value.
+            ``contact_restitution``, the other side's value or the scene's. Taken by every contact of peridynamic
+            particles and FEM vertices (with each other, the ground plane, colliders and rigid bodies).
 
     Features a material does not use cost nothing: the solver allocates and launches plasticity only for materials
     with a yield stress and fracture only for materials that can break.

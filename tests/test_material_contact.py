@@ -185,3 +185,56 @@ def test_fem_block_slides_with_its_material_friction():
     moved = solver.positions()[:, 0].mean() - x0
     assert abs(solver.velocities()[:, 0].mean()) < 0.01 * v
     assert moved == pytest.approx(v**2 / (2.0 * mu * g), rel=0.05)
+
+
+def _cube_on_slab_velocity(cube_material, slab_material, contact_options, cube_method) -> np.ndarray:
+    """Mean velocity [m/s] of a 4 x 4 x 4 cm cube of ``cube_material`` (``cube_method`` "pd": peridynamic, h = 1 cm;
+    "fem": 2 x 2 x 2 cubes of 6 tetrahedra) thrown at 1 m/s down and 0.5 m/s sideways onto an FEM slab
+    (16 x 16 x 4 cm, 8 x 8 x 2 cubes) of ``slab_material`` 2 mm below it, after 25 ms (pdsim.contact.MethodContact:
+    particles against FEM surfaces, FEM surface pairs), with the scene's ``contact_options``
+    (Scene.enable_contact)."""
+    from pdsim.run import advance_frame, method_contact
+
+    scene = pdsim.Scene(fps=24.0, frames=1, gravity=(0.0, 0.0, 0.0))
+    slab_c, cube_c = (0.0, 0.0, 0.02), (0.0, 0.0, 0.04 + 0.002 + 0.02)
+    if cube_method == "pd":
+        cube = scene.add_peridynamic_body(pdsim.box((0.04, 0.04, 0.04), center=cube_c), cube_material, H, name="cube")
+    else:
+        cube = scene.add_body(pdsim.FemBody(pdsim.box_tet_mesh((0.04, 0.04, 0.04), (2, 2, 2), center=cube_c),
+                                            cube_material, name="cube"))  # fmt: skip
+    scene.add_body(pdsim.FemBody(pdsim.box_tet_mesh((0.16, 0.16, 0.04), (8, 8, 2), center=slab_c), slab_material,
+                                 name="slab"))  # fmt: skip
+    cube.set_initial_velocity((0.5, 0.0, -1.0))
+    scene.enable_contact(True, **contact_options)
+    solvers = scene.build_solvers(device="cpu")
+    coupling = method_contact(scene, solvers)
+    dt = scene.time_step_safety * min(s.stable_time_step() for s in solvers)
+    advance_frame(solvers, dt, int(0.025 / dt), coupling)
+    if cube_method == "pd":
+        return next(s for s in solvers if isinstance(s, pdsim.SolverPeridynamics)).velocities().mean(axis=0)
+    fem = next(s for s in solvers if isinstance(s, pdsim.SolverFem))
+    v, x = fem.velocities(), fem.positions()
+    return v[x[:, 2] > 0.041].mean(axis=0)  # the cube's vertices (the slab's top is at 0.04 m)
+
+
+@pytest.mark.parametrize("cube_method", ["pd", "fem"])
+def test_contact_between_methods_takes_the_combined_material_values(cube_method):
+    """A peridynamic or FEM cube (restitution 0.2, friction 0.25) thrown down and sideways onto an FEM slab (restitution
+    0.5, friction 0.64) leaves with the velocity it has when the scene sets the combined values, restitution 0.5 and
+    friction sqrt(0.25 x 0.64) = 0.4, for every pair (within 1e-3 m/s: float32 rounding of the geometric mean), and
+    not with the scene's values alone (its friction 0, restitution 0.73: the sideways speed differs by more than
+    0.05 m/s)."""
+    plain = {"density": 1000.0, "youngs_modulus": 1.0e6, "poisson_ratio": 0.3}
+    per_material = _cube_on_slab_velocity(
+        pdsim.Material(**plain, contact_restitution=0.2, contact_friction=0.25),
+        pdsim.Material(**plain, contact_restitution=0.5, contact_friction=0.64),
+        {},
+        cube_method,
+    )
+    combined = _cube_on_slab_velocity(pdsim.Material(**plain), pdsim.Material(**plain),
+                                      {"restitution": 0.5, "friction": 0.4}, cube_method)  # fmt: skip
+    scene_only = _cube_on_slab_velocity(pdsim.Material(**plain), pdsim.Material(**plain), {}, cube_method)
+    print(f"cube velocity: material {per_material}, combined {combined}, scene only {scene_only}")
+    assert per_material[2] > 0.1  # it has bounced
+    np.testing.assert_allclose(per_material, combined, atol=1.0e-3)
+    assert abs(per_material[0] - scene_only[0]) > 0.05

@@ -429,6 +429,12 @@ class SolverPeridynamics(PointSolver):
             speeds += [b.material.p_wave_speed, b.prescribed_speed()]
         return max(speeds)
 
+    def point_contact_values(self):
+        """The particles' own (restitution, friction), float64 [n] each: their body's material contact_restitution
+        and contact_friction, NaN where it has none (pdsim/contact.py material_contact_values); the same tuple every
+        call."""
+        return self._material_contact
+
     def contact_particles(self):
         """The particles that take part in contact with bodies of other methods (all of them) and their contact
         radii h/2 [m]: (int32 [n], float32 [n]) Warp arrays (pdsim.contact.MethodContact)."""
