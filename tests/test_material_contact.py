@@ -63,15 +63,21 @@ def test_drop_rebounds_at_the_combined_restitution(e_material, e_ground):
     np.testing.assert_allclose(rebounds, expected, atol=0.05)
 
 
-def test_block_sliding_with_a_material_friction_stops_at_v2_over_2_mu_g():
-    """A 3 x 3 x 2 h PD block of a material with contact_friction 0.64 sliding at 1 m/s on a ground plane of friction
-    0.25 (gravity 9.81 m/s^2, the ground's inelastic projection) takes the pair's friction sqrt(0.64 x 0.25) = 0.4
-    and stops after v^2 / (2 mu g) = 12.7 cm within 5 % (the ground's 0.25 alone would give 20.4 cm, the material's
-    0.64 alone 8.0 cm)."""
+@pytest.mark.parametrize("floor", ["ground", "mesh"])
+def test_block_sliding_with_a_material_friction_stops_at_v2_over_2_mu_g(floor):
+    """A 3 x 3 x 2 h PD block of a material with contact_friction 0.64 sliding at 1 m/s on a floor of friction 0.25
+    (the ground plane's inelastic projection, or a static MeshCollider slab; gravity 9.81 m/s^2) takes the pair's
+    friction sqrt(0.64 x 0.25) = 0.4 and stops after v^2 / (2 mu g) = 12.7 cm within 5 % (the floor's 0.25 alone
+    would give 20.4 cm, the material's 0.64 alone 8.0 cm)."""
     g, v = 9.81, 1.0
     mu = math.sqrt(0.64 * 0.25)
-    solver = _ground_solver(_material(None, 0.64), (3, 3, 2), H, (v, 0.0, 0.0), GroundPlane(friction=0.25),
-                            (0.0, 0.0, -g))  # fmt: skip
+    size = np.array([3, 3, 2]) * H
+    body = pdsim.PeridynamicBody(pdsim.box(tuple(size), center=(0.0, 0.0, H)), _material(None, 0.64), H, name="b")
+    body.set_initial_velocity((v, 0.0, 0.0))
+    floors = {"ground": {"ground": GroundPlane(friction=0.25)},
+              "mesh": {"colliders": [pdsim.MeshCollider(pdsim.box((1.0, 0.4, 0.1), center=(0.2, 0.0, -0.05)),
+                                                        friction=0.25)]}}  # fmt: skip
+    solver = pdsim.SolverPeridynamics([body], gravity=(0.0, 0.0, -g), device="cpu", threads=1, **floors[floor])
     dt = 0.7 * solver.stable_time_step()
     x0 = solver.positions()[:, 0].mean()
     for _ in range(int(1.2 * v / (mu * g) / dt)):
