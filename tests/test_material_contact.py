@@ -83,6 +83,7 @@ def test_block_sliding_with_a_material_friction_stops_at_v2_over_2_mu_g(floor):
     for _ in range(int(1.2 * v / (mu * g) / dt)):
         solver.step(dt)
     moved = solver.positions()[:, 0].mean() - x0
+    print(f"stopped after {moved:.4f} m, v^2 / (2 mu g) = {v**2 / (2.0 * mu * g):.4f} m")
     assert abs(solver.velocities()[:, 0].mean()) < 0.01 * v
     assert moved == pytest.approx(v**2 / (2.0 * mu * g), rel=0.05)
 
@@ -189,6 +190,7 @@ def test_fem_block_slides_with_its_material_friction():
     for _ in range(int(1.2 * v / (mu * g) / dt)):
         solver.step(dt)
     moved = solver.positions()[:, 0].mean() - x0
+    print(f"stopped after {moved:.4f} m, v^2 / (2 mu g) = {v**2 / (2.0 * mu * g):.4f} m")
     assert abs(solver.velocities()[:, 0].mean()) < 0.01 * v
     assert moved == pytest.approx(v**2 / (2.0 * mu * g), rel=0.05)
 
