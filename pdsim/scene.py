@@ -148,7 +148,8 @@ class Scene:
         FEM surfaces. Automatic by default: on when the scene has several bodies or a body that can break.
         ``options`` go to pdsim.contact.ParticleContact (e.g. friction=0.3, distance_factor=1.35); ``restitution``
         (in (0, 1]) and ``friction`` also set the contact between methods and between FEM surfaces
-        (pdsim.contact.MethodContact), the one contact law of docs/stability.md."""
+        (pdsim.contact.MethodContact), the one contact law of docs/stability.md. They are the values of pairs whose
+        materials bring none (pdsim.Material contact_restitution, contact_friction, combined per pair)."""
         self.contact = (options or True) if enabled else False
 
     def add_collider(self, collider):
