@@ -5,7 +5,9 @@ frame too. Colliders push a penetrating free point (a sphere of its collision ra
 outward normal, remove its approaching normal velocity relative to the collider's surface velocity and reduce the
 relative tangential velocity by Coulomb friction (the convention of ``collide_ground_plane``). A kinematic collider is
 not pushed back; the push moves the point's displacement. A dynamic rigid body (pdsim/rigid.py) uses the same
-kernels with the points' masses and takes the opposite impulses (``push_point``).
+kernels with the points' masses and takes the opposite impulses (``push_point``). Friction (and the ground's damping
+ratio) come per point: the Coulomb coefficient of each point's pair with the collider (pdsim/contact.py
+combine_friction of the collider's and the point's material's).
 """
 
 import warp as wp
@@ -26,21 +28,21 @@ def collide_ground_plane(
     kind: wp.array(dtype=wp.int32),
     radius: wp.array(dtype=float),
     normal: wp.vec3,
-    offset: float,
-    friction: float,
+    offset: wp.array(dtype=float),
+    friction: wp.array(dtype=float),
     mass: wp.array(dtype=float),
     impulse: wp.array(dtype=wp.vec3d),
 ):
     """Keeps free points (spheres of the given radius, at rest + displacement in the solver's local frame) above the
-    plane n . x = offset (local frame): a penetrating point is projected back onto the plane, its approaching normal
-    velocity removed (inelastic) and its tangential velocity reduced by Coulomb friction (friction * removed normal
-    speed, never reversing it). The impulse the plane gives, m (v_new - v_old) [N s], is added to ``impulse[0]``
-    (points of mass ``mass`` [kg]; pass an empty ``mass`` to skip it)."""
+    plane n . x = offset[i] (local frame, per point [m]): a penetrating point is projected back onto the plane, its
+    approaching normal velocity removed (inelastic) and its tangential velocity reduced by Coulomb friction
+    (friction[i] * removed normal speed, never reversing it). The impulse the plane gives, m (v_new - v_old) [N s],
+    is added to ``impulse[0]`` (points of mass ``mass`` [kg]; pass an empty ``mass`` to skip it)."""
     i = wp.tid()
     if kind[i] != PARTICLE_FREE:
         return
     x = rest[i] + displacements[i]
-    depth = radius[i] + offset - wp.dot(normal, x)
+    depth = radius[i] + offset[i] - wp.dot(normal, x)
     if depth > 0.0:
         displacements[i] = displacements[i] + depth * normal
         v = velocities[i]
@@ -50,7 +52,7 @@ def collide_ground_plane(
             vt_len = wp.length(vt)
             scale = float(0.0)
             if vt_len > 0.0:
-                scale = wp.max(0.0, 1.0 - friction * (-vn) / vt_len)
+                scale = wp.max(0.0, 1.0 - friction[i] * (-vn) / vt_len)
             v_new = vt * scale
             velocities[i] = v_new
             if mass.shape[0] > 0:
@@ -80,6 +82,32 @@ def penalty_force(
             ft = wp.min(friction * fn, 2.0 * wp.sqrt(k * m_red) * vt_len)
             f -= (ft / vt_len) * vt
     return f
+
+
+@wp.func
+def pair_damping_ratio(zeta_k: float, zeta_j: float, scene: float):
+    """Damping ratio of a pair whose sides bring zeta_k and zeta_j (NaN: none): the smaller (the larger restitution,
+    pdsim/contact.py combine_restitution), the one side's where the other brings none, ``scene`` where neither does."""
+    if wp.isnan(zeta_k):
+        if wp.isnan(zeta_j):
+            return scene
+        return zeta_j
+    if wp.isnan(zeta_j):
+        return zeta_k
+    return wp.min(zeta_k, zeta_j)
+
+
+@wp.func
+def pair_friction(mu_k: float, mu_j: float, scene: float):
+    """Coulomb coefficient of a pair whose sides bring mu_k and mu_j (NaN: none): sqrt(mu_k mu_j) (pdsim/contact.py
+    combine_friction), the one side's where the other brings none, ``scene`` where neither does."""
+    if wp.isnan(mu_k):
+        if wp.isnan(mu_j):
+            return scene
+        return mu_j
+    if wp.isnan(mu_j):
+        return mu_k
+    return wp.sqrt(mu_k * mu_j)
 
 
 @wp.func
@@ -274,7 +302,7 @@ def collide_sphere(
     radius: wp.array(dtype=float),
     body: wp.array(dtype=RigidMotion),
     sphere_radius: float,
-    friction: float,
+    friction: wp.array(dtype=float),
     mass: wp.array(dtype=float),
     reaction: wp.array(dtype=wp.vec3d),
     phase: int,
@@ -294,7 +322,7 @@ def collide_sphere(
         n = wp.vec3(0.0, 0.0, 1.0)
         if dist > 0.0:
             n = d / dist
-        push_point(i, x, sdf, n, r, motion, friction, displacements, velocities, mass, reaction, phase)
+        push_point(i, x, sdf, n, r, motion, friction[i], displacements, velocities, mass, reaction, phase)
 
 
 # Warp kernels cannot take a function argument (the signed distance of the shape): collide_box and collide_mesh
@@ -308,7 +336,7 @@ def collide_box(
     radius: wp.array(dtype=float),
     body: wp.array(dtype=RigidMotion),
     half_extents: wp.vec3,
-    friction: float,
+    friction: wp.array(dtype=float),
     mass: wp.array(dtype=float),
     reaction: wp.array(dtype=wp.vec3d),
     phase: int,
@@ -326,7 +354,7 @@ def collide_box(
     if touch == 0:
         return
     n = wp.transform_vector(pose, n_local)
-    push_point(i, x, sdf, n, r, motion, friction, displacements, velocities, mass, reaction, phase)
+    push_point(i, x, sdf, n, r, motion, friction[i], displacements, velocities, mass, reaction, phase)
 
 
 # Like collide_box, this repeats collide_sphere's parameters and point prologue (a Warp kernel takes no function).
@@ -339,7 +367,7 @@ def collide_mesh(
     radius: wp.array(dtype=float),
     mesh: wp.uint64,
     body: wp.array(dtype=RigidMotion),
-    friction: float,
+    friction: wp.array(dtype=float),
     mass: wp.array(dtype=float),
     reaction: wp.array(dtype=wp.vec3d),
     phase: int,
@@ -359,7 +387,7 @@ def collide_mesh(
     if touch == 0:
         return
     n = wp.transform_vector(pose, n_local)
-    push_point(i, x, sdf, n, r, motion, friction, displacements, velocities, mass, reaction, phase)
+    push_point(i, x, sdf, n, r, motion, friction[i], displacements, velocities, mass, reaction, phase)
 
 
 @wp.kernel
@@ -374,22 +402,23 @@ def ground_plane_force(
     normal: wp.vec3,
     offset: float,
     stiffness_rate: float,
-    damping_ratio: float,
-    friction: float,
+    damping_ratio: wp.array(dtype=float),
+    friction: wp.array(dtype=float),
     force: wp.array(dtype=wp.vec3),
 ):
     """The ground plane n . x = offset (local frame) as a contact pair of the one law (penalty_force) for the free
-    points: a point (sphere of ``radius`` [m]) overlapping the plane by d = r + offset - n . x > 0 gets
-    F = penalty_force(n, d, v, k = stiffness_rate m, m, damping_ratio, friction) [N] (the plane is immovable: the
-    reduced mass is the point's mass m [kg]), added to force[i] as F / force_to_newton[i] (the solver's unit)."""
+    points whose pair with the plane has a damping ratio (damping_ratio[i], NaN: none, the point is left to the
+    projection): a point (sphere of ``radius`` [m]) overlapping the plane by d = r + offset - n . x > 0 gets
+    F = penalty_force(n, d, v, k = stiffness_rate m, m, damping_ratio[i], friction[i]) [N] (the plane is immovable:
+    the reduced mass is the point's mass m [kg]), added to force[i] as F / force_to_newton[i] (the solver's unit)."""
     i = wp.tid()
-    if kind[i] != PARTICLE_FREE:
+    if kind[i] != PARTICLE_FREE or wp.isnan(damping_ratio[i]):
         return
     x = rest[i] + displacements[i]
     depth = radius[i] + offset - wp.dot(normal, x)
     if depth > 0.0:
         m = mass[i]
-        f = penalty_force(normal, depth, velocities[i], stiffness_rate * m, m, damping_ratio, friction)
+        f = penalty_force(normal, depth, velocities[i], stiffness_rate * m, m, damping_ratio[i], friction[i])
         force[i] = force[i] + f / force_to_newton[i]
 
 
@@ -399,17 +428,10 @@ def ground_plane_force(
 # given as keywords named like their parameters (kernels/launch.py).
 
 
-def push_out_of_plane(*, normal, offset, friction, device, **arguments):
-    """Ground plane n . x = ``offset`` [m] (local frame), ``normal`` 3 numbers (collide_ground_plane)."""
-    launch(
-        collide_ground_plane,
-        arguments["rest"].shape[0],
-        device=device,
-        normal=wp.vec3(*normal),
-        offset=float(offset),
-        friction=float(friction),
-        **arguments,
-    )
+def push_out_of_plane(*, normal, device, **arguments):
+    """Ground plane n . x = ``offset`` [m] (local frame, float [n] per point), ``normal`` 3 numbers, ``friction``
+    float [n] per point (collide_ground_plane)."""
+    launch(collide_ground_plane, arguments["rest"].shape[0], device=device, normal=wp.vec3(*normal), **arguments)
 
 
 def ground_forces(*, normal, offset, device, **arguments):

@@ -18,10 +18,12 @@ as 2 / (1 / C_k + 1 / C_j) and only products C_kj V_j [N/m^4] are formed: the pr
 with the normal dashpot c^n_kj = 2 zeta sqrt(C_kj m_red / (V_k V_j)) (damping ratio zeta of the pair's relative
 oscillation, m_red the reduced mass) clamped so the normal force never pulls (no adhesion), and regularised Coulomb
 friction on the tangential relative velocity v_t: |f_t| = min(mu |f_n|, c^t_kj V_j |v_t|) opposing v_t, with the
-critically damped c^t_kj (zeta = 1). The pair energy is 1/2 C_kj V_k V_j (R_kj - r)^2 [J] (times the cap's scale
-below). Every term is symmetric in (k, j), so the pair forces V_k f_kj and V_j f_jk are equal and opposite (momentum
-is conserved; the hard floor below conserves it only approximately, as each particle averages over its own floor
-contacts).
+critically damped c^t_kj (zeta = 1). zeta and mu are the pair's: each particle brings its material's (NaN: none) and
+the pair combines them (colliders.py pair_damping_ratio, pair_friction), the scene's values standing in where neither
+brings one.
+The pair energy is 1/2 C_kj V_k V_j (R_kj - r)^2 [J] (times the cap's scale below). Every term is symmetric in
+(k, j), so the pair forces V_k f_kj and V_j f_jk are equal and opposite (momentum is conserved; the hard floor
+below conserves it only approximately, as each particle averages over its own floor contacts).
 
 **Stiffness cap.** Each particle's contact stiffness row sum sum_j C_kj V_j [N/m^4] (what contact adds to its
 Silling-Askari sum, hence to the stable step) is capped at its budget B_k = n_b C_k (2 r_k)^3, the stiffness of n_b
@@ -46,7 +48,7 @@ or crack) take part, through a grouped hash grid (see make_particle_contact_kern
 
 import warp as wp
 
-from .colliders import mesh_contact_point, penalty_force
+from .colliders import mesh_contact_point, pair_damping_ratio, pair_friction, penalty_force
 from .integration import PARTICLE_FREE
 from .launch import launch
 from .neighbors import same_body_count
@@ -272,6 +274,8 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
         bonded_factor: float,
         damping_ratio: float,
         friction: float,
+        point_damping_ratio: wp.array(dtype=float),
+        point_friction: wp.array(dtype=float),
         floor_factor: float,
         budget_count: float,
         scale_in: wp.array(dtype=float),
@@ -342,13 +346,15 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
             cv_crit = 2.0 * wp.sqrt(cv * (mk * mj / (mk + mj)) / vol_k)
             vrel = vk - velocities[j]
             vn = wp.dot(vrel, n)
-            fn = wp.max(cv * (R - r) - damping_ratio * cv_crit * vn, 0.0)
+            zeta = pair_damping_ratio(point_damping_ratio[k], point_damping_ratio[j], damping_ratio)
+            mu = pair_friction(point_friction[k], point_friction[j], friction)
+            fn = wp.max(cv * (R - r) - zeta * cv_crit * vn, 0.0)
             f += fn * n
-            if friction > 0.0:
+            if mu > 0.0:
                 vt = vrel - vn * n
                 vt_len = wp.length(vt)
                 if vt_len > 0.0:
-                    ft = wp.min(friction * fn, cv_crit * vt_len)
+                    ft = wp.min(mu * fn, cv_crit * vt_len)
                     f -= (ft / vt_len) * vt
             r_floor = floor_factor * R
             if r < r_floor and free_k:
@@ -476,6 +482,10 @@ def particle_mesh_contact(
     stiffness_rate: float,
     damping_ratio: float,
     friction: float,
+    p_damping_ratio: wp.array(dtype=float),
+    p_friction: wp.array(dtype=float),
+    m_damping_ratio: wp.array(dtype=float),
+    m_friction: wp.array(dtype=float),
     p_force: wp.array(dtype=wp.vec3),
     m_force: wp.array(dtype=wp.vec3),
     dt: float,
@@ -493,7 +503,10 @@ def particle_mesh_contact(
     (pdsim/contact.py CONTACT_OMEGA_DT = 0.15): even tens of simultaneous contacts on one point stay inside velocity
     Verlet's stability limit (omega dt < 2).
     ``p_to_force`` and the mesh's forces: multiply a force [N] into each solver's force unit (1 / V for a force
-    density, 1 for nodal forces); ``m_points`` maps the mesh's vertices to its solver's points.
+    density, 1 for nodal forces); ``m_points`` maps the mesh's vertices to its solver's points. The pair's damping
+    ratio and friction combine the particle's side (p_damping_ratio[i], p_friction[i], by solver point; NaN: none)
+    with the face's (its first vertex's m_damping_ratio, m_friction), ``damping_ratio`` and ``friction`` standing in
+    where neither side brings one (pair_damping_ratio, pair_friction).
 
     Work: the positive part of the step's work of the contact force on each side, max(F . v_particle dt, 0) and
     max(-F . v_surface dt, 0) [J] at the step's velocities, is added to ``p_work[work_slot]`` and
@@ -515,7 +528,9 @@ def particle_mesh_contact(
     m_surface = wa * m_mass[a] + wb * m_mass[b] + wc * m_mass[c]
     mp = p_mass[i]
     m_red = mp * m_surface / (mp + m_surface)
-    force = penalty_force(n, r - sdf, p_v[i] - v_surface, stiffness_rate * m_red, m_red, damping_ratio, friction)
+    zeta = pair_damping_ratio(p_damping_ratio[i], m_damping_ratio[a], damping_ratio)
+    mu = pair_friction(p_friction[i], m_friction[a], friction)
+    force = penalty_force(n, r - sdf, p_v[i] - v_surface, stiffness_rate * m_red, m_red, zeta, mu)
     wp.atomic_add(p_force, i, force * p_to_force[i])
     wp.atomic_sub(m_force, a, force * wa)
     wp.atomic_sub(m_force, b, force * wb)

@@ -14,7 +14,7 @@ symmetric. Edges crossing edges with no vertex inside a face are not detected.
 
 import warp as wp
 
-from .colliders import penalty_force
+from .colliders import pair_damping_ratio, pair_friction, penalty_force
 from .launch import launch
 from .watchdog import WATCH_COLLIDERS
 
@@ -80,6 +80,10 @@ def vertex_face_contact(
     stiffness_rate: float,
     damping_ratio: float,
     friction: float,
+    v_damping_ratio: wp.array(dtype=float),
+    v_friction: wp.array(dtype=float),
+    m_damping_ratio: wp.array(dtype=float),
+    m_friction: wp.array(dtype=float),
     v_force: wp.array(dtype=wp.vec3),
     m_force: wp.array(dtype=wp.vec3),
     dt: float,
@@ -91,7 +95,9 @@ def vertex_face_contact(
     another piece (m_label[f] != v_label[q]) of the surface mesh ``mesh`` (current vertex positions m_x, triangles
     m_faces into them, solver points m_points); see the module docstring. Forces [N] are multiplied by v_to_force /
     m_to_force into each solver's force unit. The penalty k = stiffness_rate m_red (m_red the reduced mass of the
-    vertex and the face's barycentric mass). Work: the positive part of each side's work in the step, as
+    vertex and the face's barycentric mass); its damping ratio and friction combine the vertex's side
+    (v_damping_ratio[i], v_friction[i], by solver point; NaN: none) with the face's (its first vertex's), as
+    kernels/contact.py particle_mesh_contact. Work: the positive part of each side's work in the step, as
     kernels/contact.py particle_mesh_contact, into slot ``work_slot`` of v_work and m_work."""
     q = wp.tid()
     i = v_points[q]
@@ -162,7 +168,9 @@ def vertex_face_contact(
     m_surface = best_w[0] * m_mass[ia] + best_w[1] * m_mass[ib] + best_w[2] * m_mass[ic]
     mv = v_mass[i]
     m_red = mv * m_surface / (mv + m_surface)
-    force = penalty_force(n, skin - s, v_v[i] - v_surface, stiffness_rate * m_red, m_red, damping_ratio, friction)
+    zeta = pair_damping_ratio(v_damping_ratio[i], m_damping_ratio[ia], damping_ratio)
+    mu = pair_friction(v_friction[i], m_friction[ia], friction)
+    force = penalty_force(n, skin - s, v_v[i] - v_surface, stiffness_rate * m_red, m_red, zeta, mu)
     wp.atomic_add(v_force, i, force * v_to_force[i])
     wp.atomic_sub(m_force, ia, force * (best_w[0] * m_to_force[ia]))
     wp.atomic_sub(m_force, ib, force * (best_w[1] * m_to_force[ib]))

@@ -13,7 +13,7 @@ import trimesh
 import warp as wp
 
 from .checks import check_range
-from .contact import CONTACT_OMEGA_DT, damping_ratio_for_restitution
+from .contact import CONTACT_OMEGA_DT, combine_friction, combine_restitution, damping_ratios_for_restitutions
 from .errors import ParameterError
 from .kernels import colliders as kc
 from .output.views import RigidView
@@ -60,15 +60,32 @@ class Collider:
         """Sets the origin [m] of the solvers' local frame (world = origin + local)."""
         self.origin = np.asarray(origin, dtype=np.float64)
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None, contact=None):
+        """Pushes the solver's free points out of the collider at ``time`` [s] (step ``dt`` [s]); ``contact``: the
+        points' own (restitution, friction), float64 [n] each, NaN where a point's material brings none
+        (pdsim/contact.py material_contact_values); None: none brings any."""
         raise NotImplementedError
+
+    def point_friction(self, radius, contact):
+        """The Coulomb coefficient of each point's pair with this collider: its ``friction`` combined with the
+        point's material's (pdsim/contact.py combine_friction), float32 [n] on ``radius``'s device, computed once per
+        solver (the points' ``radius`` array and their ``contact`` values)."""
+        key = (str(radius.device), id(radius), radius.shape[0], id(contact))
+        cache = self.__dict__.setdefault("_point_friction", {})
+        if key not in cache:
+            mu_point = np.full(radius.shape[0], np.nan) if contact is None else contact[1]
+            mu = combine_friction(mu_point, self.friction).astype(np.float32)
+            cache[key] = (contact, wp.array(mu, dtype=float, device=radius.device))  # holds contact: its id stays
+        return cache[key][1]
 
 
 @dataclass
 class GroundPlane(Collider):
     """A static plane n . x = offset (world) that free points cannot cross.
 
-    Two forms of the same contact, chosen by ``restitution``:
+    Two forms of the same contact, chosen per point by the restitution of the point's pair with the plane (the plane's
+    ``restitution`` combined with the point's material's contact_restitution, pdsim/contact.py combine_restitution;
+    the pair's friction likewise combines ``friction`` with the material's contact_friction):
 
     - None (default): inelastic projection with Coulomb friction after the drift (``apply``, kernels/colliders.py
       collide_ground_plane): the point's approaching normal velocity is removed.
@@ -116,7 +133,10 @@ class GroundPlane(Collider):
         arrays = getattr(self, "_impulse", {})
         return np.sum([a.numpy()[0] for a in arrays.values()], axis=0) if arrays else np.zeros(3)
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None, contact=None):
+        """The projection (both forms) on the free points; ``contact``: the points' own (restitution, friction),
+        float64 [n] each, NaN where a point's material brings none (pdsim/contact.py material_contact_values); None:
+        none brings any."""
         if not hasattr(self, "_impulse"):
             self._impulse = {}
         key = (str(rest.device), id(rest))
@@ -126,32 +146,55 @@ class GroundPlane(Collider):
             if key not in getattr(self, "_no_mass", {}):
                 self._no_mass = {**getattr(self, "_no_mass", {}), key: wp.zeros(0, dtype=float, device=rest.device)}
             mass = self._no_mass[key]
-        n = np.asarray(self.normal, dtype=np.float64)
-        floor = 0.0 if self.restitution is None else self._floor_depth(key, radius)
+        pair = self._pair_values(radius, contact)
         kc.push_out_of_plane(
             **_points(rest, displacements, velocities, radius, kind),
-            normal=n,
-            offset=self.offset - n @ self.origin - floor,
-            friction=self.friction,
+            normal=np.asarray(self.normal, dtype=np.float64),
+            offset=pair["offset"],
+            friction=pair["friction"],
             mass=mass,
             impulse=self._impulse[key],
             device=rest.device,
         )
 
-    def _floor_depth(self, key, radius) -> float:
-        """Depth [m] below the surface of the penalty form's projection floor: the largest point radius of the
-        solver (read once per solver)."""
-        if not hasattr(self, "_floor"):
-            self._floor = {}
-        if key not in self._floor:
-            self._floor[key] = float(radius.numpy().max()) if radius.shape[0] else 0.0
-        return self._floor[key]
+    def _pair_values(self, radius, contact) -> dict:
+        """The plane's pair with each point, computed once per solver (``key``): the restitution and friction the
+        pair takes (pdsim/contact.py combine_restitution, combine_friction: the plane's own ``restitution`` and
+        ``friction`` against the point's material values), as float32 device arrays: ``damping_ratio`` of the
+        penalty form (NaN where the pair has no restitution: projection only), ``friction``, and the projection's
+        ``offset`` [m] (local frame; one point radius below the surface, the largest of the solver, where the
+        penalty form acts); ``penalty``: whether any point takes the penalty form."""
+        if not hasattr(self, "_pairs"):
+            self._pairs = {}
+        key = (str(radius.device), id(radius), radius.shape[0], id(contact))
+        if key not in self._pairs:
+            n_points = radius.shape[0]
+            e_point, mu_point = (np.full(n_points, np.nan),) * 2 if contact is None else contact
+            e = combine_restitution(e_point, np.nan if self.restitution is None else self.restitution)
+            mu = combine_friction(mu_point, self.friction)
+            penalty = ~np.isnan(e)
+            floor = float(radius.numpy().max()) if n_points and penalty.any() else 0.0
+            n = np.asarray(self.normal, dtype=np.float64)
+            offset = np.where(penalty, self.offset - n @ self.origin - floor, self.offset - n @ self.origin)
+            d = radius.device
+            self._pairs[key] = {
+                "damping_ratio": wp.array(damping_ratios_for_restitutions(e).astype(np.float32), device=d),
+                "friction": wp.array(mu.astype(np.float32), device=d),
+                "offset": wp.array(offset.astype(np.float32), device=d),
+                "penalty": bool(penalty.any()),
+                "contact": contact,  # held, so that its id stays its own
+            }
+        return self._pairs[key]
 
-    def add_forces(self, rest, displacements, velocities, radius, kind, mass, force_to_newton, force, dt: float):
-        """The penalty form's forces (``restitution`` set; nothing otherwise) on the free points, added to ``force``
-        in the solver's unit (force [N] / ``force_to_newton``), for the step ``dt`` [s]; the arrays as in ``apply``,
-        with the points' masses [kg]. Call it in the force phase, after the internal forces."""
-        if self.restitution is None:
+    def add_forces(
+        self, rest, displacements, velocities, radius, kind, mass, force_to_newton, force, dt: float, contact=None
+    ):
+        """The penalty form's forces on the free points whose pair with the plane has a restitution (the plane's
+        ``restitution`` or the point's material's; nothing for the others), added to ``force`` in the solver's unit
+        (force [N] / ``force_to_newton``), for the step ``dt`` [s]; the arrays as in ``apply``, with the points'
+        masses [kg]. Call it in the force phase, after the internal forces."""
+        pair = self._pair_values(radius, contact)
+        if not pair["penalty"]:
             return
         n = np.asarray(self.normal, dtype=np.float64)
         kc.ground_forces(
@@ -161,8 +204,8 @@ class GroundPlane(Collider):
             normal=n,
             offset=self.offset - n @ self.origin,
             stiffness_rate=(CONTACT_OMEGA_DT / float(dt)) ** 2,
-            damping_ratio=damping_ratio_for_restitution(self.restitution),
-            friction=self.friction,
+            damping_ratio=pair["damping_ratio"],
+            friction=pair["friction"],
             force=force,
             device=rest.device,
         )
@@ -363,7 +406,7 @@ class MeshCollider(Collider):
             static=True,
         )
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None, contact=None):
         band = _mesh_band(self.band, self._radius_bound, radius)
         motion = self._motions.get(band)
         if motion is None:  # static: the pose is written once per band (per solver's radii)
@@ -374,7 +417,7 @@ class MeshCollider(Collider):
             **_points(rest, displacements, velocities, radius, kind),
             mesh=self._mesh.mesh.id,
             body=motion.array,
-            friction=self.friction,
+            friction=self.point_friction(radius, contact),
             device=self.device,
             **kinematic(self.device),
         )
@@ -512,11 +555,11 @@ class RigidProjectile(Collider):
     def _bounding_radius(self) -> float:
         return 0.0
 
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None, contact=None):
         self._update_motion(time, dt, band=self._band(radius))
         self._push(
             _points(rest, displacements, velocities, radius, kind)
-            | {"body": self._motion.array, "friction": self.friction, "device": self.device}
+            | {"body": self._motion.array, "friction": self.point_friction(radius, contact), "device": self.device}
             | kinematic(self.device)
         )
 

@@ -132,6 +132,13 @@ class ParticleContact:
             construction; after bonds break call ``update_exposure`` (crack faces become exposed), or leave this off
             for bodies that can break. Default True. Off, every particle takes part and, as in LAMMPS, interior
             particles of one body also repel when compressed below bonded_factor of their rest distance.
+        point_restitution: each particle's side of a pair's restitution, float64 [n] in (0, 1], NaN where it brings
+            none (its material's contact_restitution: material_contact_values). A pair takes the larger of its two
+            sides' (combine_restitution: in the kernel, the smaller damping ratio), the one side's where the other
+            brings none, and ``damping_ratio`` / ``restitution`` where neither does. None: all NaN.
+        point_friction: each particle's side of a pair's Coulomb coefficient, float64 [n] >= 0, NaN where it brings
+            none (its material's contact_friction). A pair takes sqrt(mu_k mu_j) (combine_friction), the one side's
+            where the other brings none, and ``friction`` where neither does. None: all NaN.
     """
 
     def __init__(
@@ -154,6 +161,8 @@ class ParticleContact:
         friction: float = 0.0,
         floor_factor: float = 0.6,
         shield_interior: bool = True,
+        point_restitution=None,
+        point_friction=None,
     ):
         rest = np.asarray(rest_positions, dtype=np.float64)
         if rest.ndim != 2 or rest.shape[1] != 3 or len(rest) == 0:
@@ -180,6 +189,13 @@ class ParticleContact:
             "damping_ratio", 0.02 if damping_ratio is None else damping_ratio, 0.0, None, lo_open=False
         )
         self.friction = check_range("friction", friction, 0.0, None, lo_open=False)
+        e_point = np.full(n, np.nan) if point_restitution is None else np.asarray(point_restitution, np.float64)
+        mu_point = np.full(n, np.nan) if point_friction is None else np.asarray(point_friction, np.float64)
+        for name, a, hi in (("point_restitution", e_point, 1.0), ("point_friction", mu_point, None)):
+            known = a[~np.isnan(a)] if a.shape == (n,) else None
+            if known is None or np.any(known <= 0.0 if hi else known < 0.0) or (hi and np.any(known > hi)):
+                allowed = "values in (0, 1] or NaN" if hi else "values >= 0 or NaN"
+                raise ParameterError(name, "an array" if a.shape == (n,) else f"shape {a.shape}", f"({n},) {allowed}")
         self.floor_factor = check_range("floor_factor", floor_factor, 0.0, 1.0, lo_open=False)
         self.shield_interior = bool(shield_interior)
         self.device = wp.get_device(device)
@@ -199,6 +215,9 @@ class ParticleContact:
         self.volume = wp.array(vol.astype(f32), dtype=float, device=d)
         self.mass = wp.array((rho * vol).astype(f32), dtype=float, device=d)
         self.modulus = wp.array(modulus.astype(f32), dtype=float, device=d)
+        # each particle's side of a pair (NaN: its material brings none): the kernel combines two sides
+        self.point_damping_ratio = wp.array(damping_ratios_for_restitutions(e_point).astype(f32), device=d)
+        self.point_friction = wp.array(mu_point.astype(f32), device=d)
         self.query_radius = float(self.distance_factor * 2.0 * r.max())
         dim = int(max(8, min(128, round(n ** (1.0 / 3.0)))))
         self.grid = wp.HashGrid(dim, dim, dim, device=d)
@@ -290,6 +309,8 @@ class ParticleContact:
             raise ParameterError("bodies", bodies, "at least one body")
         kwargs.setdefault("shield_interior", not any(getattr(b, "fractures", False) for b in bodies))
         counts = [b.particle_count for b in bodies]
+        kwargs.setdefault("point_restitution", material_contact_values(bodies)[0])
+        kwargs.setdefault("point_friction", material_contact_values(bodies)[1])
 
         def rep(values):
             return np.repeat(np.asarray(values, dtype=np.float64), counts)
@@ -327,7 +348,8 @@ class ParticleContact:
             device=self.device,
             **self._force_buffers,
             **self._pair_arguments(),
-            **by_name(self, "mass", "damping_ratio", "friction", "floor_factor"),
+            **by_name(self, "mass", "damping_ratio", "friction", "point_damping_ratio", "point_friction"),
+            floor_factor=self.floor_factor,
         )
         wp.copy(self._scale_next, self._scale)
         wp.copy(self._scale, self._scale_out)
@@ -441,6 +463,52 @@ def damping_ratio_for_restitution(restitution: float) -> float:
     return 0.5 * (lo + hi)
 
 
+def combine_restitution(a, b) -> np.ndarray:
+    """The restitution of a pair whose two sides bring ``a`` and ``b`` (arrays or numbers, NaN: the side brings
+    none): the larger of the two (Box2D's b2MixRestitution rule, so a rubber ball bounces off a stone floor as
+    rubber); where one side brings none, the other's; NaN where neither does. float64, broadcast shape. The contact
+    law's damping ratio decreases with e (damping_ratio_for_restitution), so in the kernels the pair takes the smaller
+    damping ratio of its two sides, the same rule."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    return np.where(np.isnan(a), b, np.where(np.isnan(b), a, np.maximum(a, b)))
+
+
+def combine_friction(a, b) -> np.ndarray:
+    """The Coulomb coefficient of a pair whose two sides bring ``a`` and ``b`` (arrays or numbers, NaN: the side
+    brings none): the geometric mean sqrt(a b) (Box2D's b2MixFriction rule: a side with no friction makes the pair
+    frictionless); where one side brings none, the other's; NaN where neither does. float64, broadcast shape."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    return np.where(np.isnan(a), b, np.where(np.isnan(b), a, np.sqrt(a * b)))
+
+
+def damping_ratios_for_restitutions(restitution) -> np.ndarray:
+    """damping_ratio_for_restitution of every value of ``restitution`` (float64 array; NaN stays NaN), solved once
+    per distinct value."""
+    e = np.asarray(restitution, dtype=np.float64)
+    out = np.full(e.shape, np.nan)
+    known = ~np.isnan(e)
+    values, index = np.unique(e[known], return_inverse=True)
+    out[known] = np.array([damping_ratio_for_restitution(v) for v in values])[index] if len(values) else []
+    return out
+
+
+def material_contact_values(bodies, *, per_body: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """The per-point contact values of ``bodies`` (any bodies with ``material`` and ``particle_count``),
+    concatenated in the given order: (restitution, friction), float64 [n], NaN where the body's material sets none
+    (pdsim.Material contact_restitution, contact_friction); ``per_body``: one value per body instead."""
+    counts = [1 if per_body else b.particle_count for b in bodies]
+
+    def rep(values):
+        return np.repeat(np.asarray([np.nan if v is None else v for v in values], dtype=np.float64), counts)
+
+    return (
+        rep([getattr(b.material, "contact_restitution", None) for b in bodies]),
+        rep([getattr(b.material, "contact_friction", None) for b in bodies]),
+    )
+
+
 class MethodContact:
     """Contact between the bodies of mesh methods and everything else within a step: the particles of each particle
     method (the peridynamic solver's ``contact_particles()``) against the closed surface of each mesh method (the FEM
@@ -448,7 +516,9 @@ class MethodContact:
     method against the faces of the other pieces of its own surface and of every other mesh method's (FEM-FEM
     contact: two bodies, or the pieces of a cracked body; kernels/surface_contact.py, vertex_face_contact). Every
     pair uses the one contact law (kernels/contact.py, penalty_force) and gives the reaction to the face's vertices:
-    the pair's momentum is conserved exactly.
+    the pair's momentum is conserved exactly. Each side's points bring their material's restitution and friction
+    (the solvers' ``point_contact_values()``), combined per pair (combine_restitution, combine_friction); the
+    ``damping_ratio`` / ``restitution`` and ``friction`` given here stand where neither side brings one.
 
     The stiffness is tied to the step: k = m_red (CONTACT_OMEGA_DT / dt)^2 (a contact oscillates at omega dt = 0.15,
     far inside velocity Verlet's limit of 2), so contact never needs a smaller step. The restitution e a user sets
@@ -493,6 +563,7 @@ class MethodContact:
         self._meshes = {}  # id(solver) -> [version, points, faces, positions, wp.Mesh]
         self._to_force = {}  # id(solver) -> 1 / force_to_newton per point (Warp array)
         self._scratch = {}  # id(solver) -> work account of a solver without a watchdog
+        self._sides = {}  # id(solver) -> (its point_contact_values, damping ratio, friction: Warp arrays)
         for ms in self.mesh_solvers:  # raise FeatureNotAvailableError now, before the run, for what they cannot honour
             check = getattr(ms, "check_method_contact", None)
             if check is not None:
@@ -512,6 +583,23 @@ class MethodContact:
             entry[4].refit()
         return entry
 
+    def _side(self, solver) -> dict:
+        """The solver's points' side of each pair (their material values, ``point_contact_values``) as float32
+        device arrays under the kernels' names: damping ratio (damping_ratios_for_restitutions) and friction, NaN
+        where a point's material brings none; rebuilt when the solver's values change (FEM fracture splits)."""
+        values = solver.point_contact_values()
+        entry = self._sides.get(id(solver))
+        if entry is None or entry[0] is not values:
+            e, mu = values
+            d = solver.kin.u.device
+            entry = (
+                values,
+                wp.array(damping_ratios_for_restitutions(e).astype(np.float32), dtype=float, device=d),
+                wp.array(np.asarray(mu, dtype=np.float32), dtype=float, device=d),
+            )
+            self._sides[id(solver)] = entry
+        return entry[1], entry[2]
+
     def _force_scale(self, solver):
         scale = self._to_force.get(id(solver))
         if scale is None or scale.shape[0] != solver.kin.u.shape[0]:  # FEM fracture adds vertices
@@ -527,8 +615,10 @@ class MethodContact:
         for ms in self.mesh_solvers:
             _, m_points, m_faces, _, mesh = self._mesh(ms)
             m_work = self._work_account(ms)
+            m_damping, m_friction = self._side(ms)
             for ps in self.particle_solvers:
                 p_points, p_radius = ps.contact_particles()
+                p_damping, p_friction = self._side(ps)
                 kc.particle_mesh_forces(
                     p_points=p_points,
                     p_rest=ps.kin.rest,
@@ -545,6 +635,10 @@ class MethodContact:
                     stiffness_rate=rate,
                     damping_ratio=self.damping_ratio,
                     friction=self.friction,
+                    p_damping_ratio=p_damping,
+                    p_friction=p_friction,
+                    m_damping_ratio=m_damping,
+                    m_friction=m_friction,
                     p_force=ps.force,
                     m_force=ms.force,
                     dt=dt,
@@ -568,6 +662,8 @@ class MethodContact:
             a_label = self._foreign_label(a_label)
         skin_a, band_a = a.contact_skin()
         skin_b, band_b = b.contact_skin()
+        v_damping, v_friction = self._side(a)
+        m_damping, m_friction = self._side(b)
         ksf.vertex_face_forces(
             v_points=a_points,
             v_label=a_label,
@@ -589,6 +685,10 @@ class MethodContact:
             stiffness_rate=rate,
             damping_ratio=self.damping_ratio,
             friction=self.friction,
+            v_damping_ratio=v_damping,
+            v_friction=v_friction,
+            m_damping_ratio=m_damping,
+            m_friction=m_friction,
             v_force=a.force,
             m_force=b.force,
             dt=dt,
@@ -625,6 +725,10 @@ __all__ = [
     "MethodContact",
     "ParticleContact",
     "bond_stiffness_row_sum",
+    "combine_friction",
+    "combine_restitution",
     "damping_ratio_for_restitution",
+    "damping_ratios_for_restitutions",
+    "material_contact_values",
     "restitution_of_damping_ratio",
 ]

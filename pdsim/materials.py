@@ -92,6 +92,18 @@ class Material:
         sampling_jitter: the particle jitter, in (0, 1] of the spacing, that a peridynamic body of this material
             takes when its ``sampling`` is not given (pdsim.PeridynamicBody: sampling="jittered" with this jitter);
             None (default): the lattice. Needs a material that breaks (it keeps cracks off the lattice planes).
+        contact_restitution: normal restitution e in (0, 1] of this material's contacts (the one contact law,
+            pdsim/contact.py, reaches e = 0 only as its damping grows without bound). A pair takes the larger of its
+            two sides' values (pdsim.contact.combine_restitution); None (default): the material brings none and the
+            pair takes the other side's (another body, the ground) or, when neither has one, the scene's
+            (Scene.enable_contact; the ground's restitution). Taken by every penalty pair: peridynamic particles
+            with each other, with FEM surfaces and with the ground plane, and FEM surface pairs; the ground's and
+            colliders' projections of FEM vertices, kinematic colliders and rigid bodies stay inelastic
+            (docs/stability.md, "One contact law").
+        contact_friction: Coulomb coefficient mu >= 0 of this material's contacts. A pair takes the geometric mean
+            sqrt(mu_a mu_b) of its two sides (pdsim.contact.combine_friction); None (default): as for
+            ``contact_restitution``, the other side's value or the scene's. Taken by every contact of peridynamic
+            particles and FEM vertices (with each other, the ground plane, colliders and rigid bodies).
 
     Features a material does not use cost nothing: the solver allocates and launches plasticity only for materials
     with a yield stress and fracture only for materials that can break.
@@ -115,6 +127,8 @@ class Material:
     debris_damage: float = 0.7
     strength_correlation_length: float | None = None
     sampling_jitter: float | None = None
+    contact_restitution: float | None = None
+    contact_friction: float | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "density", check_range("density", self.density, 0.0, None))
@@ -183,6 +197,12 @@ class Material:
         if self.sampling_jitter is not None:
             jitter = check_range("sampling_jitter", self.sampling_jitter, 0.0, 1.0, hi_open=False)
             object.__setattr__(self, "sampling_jitter", jitter)
+        if self.contact_restitution is not None:
+            e = check_range("contact_restitution", self.contact_restitution, 0.0, 1.0, hi_open=False)
+            object.__setattr__(self, "contact_restitution", e)
+        if self.contact_friction is not None:
+            mu = check_range("contact_friction", self.contact_friction, 0.0, None, lo_open=False)
+            object.__setattr__(self, "contact_friction", mu)
         scatter = self.strength_weibull_modulus is not None or self.debris_damping > 0.0
         if self.sampling_jitter is not None and not self.breaks:
             raise ParameterError(

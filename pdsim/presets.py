@@ -25,8 +25,10 @@ alike at every spacing) and the full compressive bonus capped at 3 s_c (:data:`S
 :data:`SHARD_BONUS_CAP`). ``pattern=False`` gives the plain material (uniform strength, lattice sampling, no debris
 damping, the compressive bonus :data:`COMPRESSIVE_BONUS`), whose breaking strain is exactly the calibrated one. The
 other presets have no pattern settings (wood splits by its grain; clay, steel and aluminium tear by plasticity;
-rubber never breaks), so ``pattern`` changes nothing for them. Contact friction is a setting of the ground, the
-colliders and the scene's contact, not of the material; docs/guide.md suggests values per preset.
+rubber never breaks), so ``pattern`` changes nothing for them.
+
+Contact. Every preset carries a ``contact_restitution`` and a ``contact_friction`` (:data:`CONTACT`), the values its
+contacts bring to a pair (combined with the other side's, pdsim/contact.py combine_restitution, combine_friction).
 
 Spacing. The particles across the thinnest part of a body set the accuracy of its stiffness (docs/accuracy.md: 10 %
 at about 5 across, 5 % at 10) and its cost. With a real ``fracture_energy`` G the critical stretch, and so the
@@ -38,6 +40,8 @@ animation presets use a critical stretch instead, so a coarse preview breaks at 
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 
 from .checks import check_range, check_vec3
@@ -60,6 +64,40 @@ SHARD_BONUS = 1.0
 SHARD_BONUS_CAP = 1.5
 DEBRIS_DAMPING = 3000.0  # glass and porcelain; the weaker presets take half (their dust came loose less)
 SAMPLING_JITTER = 0.5
+
+# The presets' contact values (restitution e, Coulomb friction mu), the material's side of a contact pair: measured
+# coefficients of restitution of balls and chips dropped on hard floors (glass, porcelain, stone and concrete shed
+# most of the impact's energy: 0.1-0.2; plaster and clay crush: 0.05; wood 0.3-0.5; hardened steel on steel 0.5-0.6;
+# aluminium a little lower; rubber balls 0.75-0.9) and the usual dry static friction tables (glass 0.4 against most
+# surfaces once not perfectly clean, ceramic 0.5, stone, concrete and plaster 0.6, wood 0.5, metals on metals 0.4
+# with the oxide layer, rubber 0.9 on hard dry surfaces).
+CONTACT = {
+    "glass": (0.1, 0.4),
+    "porcelain": (0.15, 0.5),
+    "ceramic": (0.15, 0.5),
+    "stone": (0.1, 0.6),
+    "concrete": (0.1, 0.6),
+    "plaster": (0.05, 0.6),
+    "wood": (0.3, 0.5),
+    "clay": (0.05, 0.6),
+    "steel": (0.5, 0.4),
+    "aluminium": (0.4, 0.4),
+    "rubber": (0.8, 0.9),
+}
+
+
+def _contact(preset_function):
+    """The preset ``preset_function`` with its contact values (:data:`CONTACT`, by its name) set on the material
+    it returns."""
+    restitution, friction = CONTACT[preset_function.__name__]
+
+    @functools.wraps(preset_function)
+    def with_contact(*args, **kwargs) -> Material:
+        material = preset_function(*args, **kwargs)
+        return dataclasses.replace(material, contact_restitution=restitution, contact_friction=friction)
+
+    return with_contact
+
 
 # Typical tensile strengths [Pa] of the real materials (for spacing_for_strength and the guide's table); wood: across
 # the grain (the strength that splitting along the grain needs).
@@ -132,6 +170,7 @@ def _metal(
     )
 
 
+@_contact
 def glass(*, real: bool = False, pattern: bool = True) -> Material:
     """Soda-lime (float, window) glass: brittle.
 
@@ -163,6 +202,7 @@ def glass(*, real: bool = False, pattern: bool = True) -> Material:
     )
 
 
+@_contact
 def porcelain(*, real: bool = False, pattern: bool = True) -> Material:
     """Hard-paste porcelain (vitrified: cups, figurines, tiles): brittle, a little stiffer and lighter than glass.
 
@@ -186,6 +226,7 @@ def porcelain(*, real: bool = False, pattern: bool = True) -> Material:
     )
 
 
+@_contact
 def ceramic(*, real: bool = False, pattern: bool = True) -> Material:
     """Glazed stoneware and earthenware (mugs, plates, pots, vases): brittle, more porous and weaker than porcelain.
 
@@ -211,6 +252,7 @@ def ceramic(*, real: bool = False, pattern: bool = True) -> Material:
     )
 
 
+@_contact
 def stone(*, real: bool = False, pattern: bool = True) -> Material:
     """Natural stone (granite, marble, sandstone; statues, blocks): brittle, strong in compression, weak in tension.
 
@@ -238,6 +280,7 @@ def stone(*, real: bool = False, pattern: bool = True) -> Material:
     )
 
 
+@_contact
 def concrete(*, real: bool = False, pattern: bool = True) -> Material:
     """Normal-strength concrete (C30/37): brittle in tension, about ten times stronger in compression.
 
@@ -267,6 +310,7 @@ def concrete(*, real: bool = False, pattern: bool = True) -> Material:
     )
 
 
+@_contact
 def plaster(*, real: bool = False, pattern: bool = True) -> Material:
     """Set gypsum plaster (plaster of Paris: casts, mouldings, busts): light, brittle and weak; it breaks into chunks
     and crumbs.
@@ -293,6 +337,7 @@ def plaster(*, real: bool = False, pattern: bool = True) -> Material:
     )
 
 
+@_contact
 def wood(*, real: bool = False, grain=(1.0, 0.0, 0.0), pattern: bool = True) -> Material:
     """Softwood (spruce, pine; 12 % moisture): stiff and strong along the grain, weak across it, so it splits along
     the grain.
@@ -337,6 +382,7 @@ def wood(*, real: bool = False, grain=(1.0, 0.0, 0.0), pattern: bool = True) -> 
     )
 
 
+@_contact
 def clay(*, real: bool = False, pattern: bool = True) -> Material:
     """Plastic (modelling or pottery) clay: soft, flows at a low stress, keeps its new shape and tears only after very
     large strains.
@@ -361,6 +407,7 @@ def clay(*, real: bool = False, pattern: bool = True) -> Material:
     )
 
 
+@_contact
 def steel(*, real: bool = False, pattern: bool = True) -> Material:
     """Mild structural steel (S235-S355): ductile.
 
@@ -377,6 +424,7 @@ def steel(*, real: bool = False, pattern: bool = True) -> Material:
     return _metal("steel", 7850.0, 210.0e9, 0.3, (250.0e6, 1.0e9), hardening_ratio=0.005, failure=0.4, real=real)
 
 
+@_contact
 def aluminium(*, real: bool = False, pattern: bool = True) -> Material:
     """Aluminium alloy 6061-T6: ductile, with less hardening and an earlier tear than mild steel.
 
@@ -392,6 +440,7 @@ def aluminium(*, real: bool = False, pattern: bool = True) -> Material:
     return _metal("aluminium", 2700.0, 69.0e9, 0.33, (275.0e6, 0.5e9), hardening_ratio=0.007, failure=0.25, real=real)
 
 
+@_contact
 def rubber(*, real: bool = False, pattern: bool = True) -> Material:
     """Soft natural rubber (balls, tyres' tread, props): elastic, nearly incompressible, never breaks.
 

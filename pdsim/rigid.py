@@ -42,6 +42,7 @@ from .colliders import (
     _rotate,
 )
 from .colliders import _vec3 as _vector
+from .contact import combine_friction
 from .errors import FeatureNotAvailableError, ParameterError
 from .kernels import colliders as kc
 from .kernels import rigid as kr
@@ -99,8 +100,12 @@ class RigidBody(Collider):
         orientation: rotation at time 0, unit quaternion (x, y, z, w), of the analytic shape's axes or of the mesh as
             given.
         velocity: of the centre of mass [m/s]; angular_velocity [rad/s] (world axes), at time 0.
-        friction: Coulomb coefficient of its contacts, >= 0 (with points: this one; with the ground, a static mesh or
-            another body: the larger of the two sides' coefficients).
+        friction: Coulomb coefficient of its contacts, >= 0 (with points: combined with their material's
+            contact_friction, this one alone where it has none; with the ground, a static mesh or another body: the
+            geometric mean of the two sides' coefficients, pdsim/contact.py combine_friction).
+        restitution: None or 0 (default None): its contacts are inelastic (the impulse removes the approaching
+            normal velocity); a restitution above 0 is not available (FeatureNotAvailableError), whatever the
+            other side's material brings.
         band: detection depth below a mesh's surface [m] (> 0; meshes only), default a tenth of its bounding radius.
         name: prim name in the cache (``/World/colliders/<name>``); None: ``RigidBody_<index>`` in the scene.
 
@@ -122,9 +127,16 @@ class RigidBody(Collider):
         friction: float = 0.5,
         band: float | None = None,
         name: str | None = None,
+        restitution: float | None = None,
     ):
         self.name = _check_name(name)
         self.friction = check_range("friction", friction, 0.0, None, lo_open=False)
+        if restitution is not None and check_range("restitution", restitution, 0.0, 1.0, lo_open=False) != 0.0:
+            raise FeatureNotAvailableError(
+                f"rigid body {name!r}: restitution={restitution!r} is not available (a rigid body's contacts are "
+                "inelastic); leave restitution None or 0, or make the body a PeridynamicBody with a material's "
+                "contact_restitution"
+            )
         self.orientation = _quat("orientation", orientation)
         self.velocity = _vector("velocity", velocity)
         self.angular_velocity = _vector("angular_velocity", angular_velocity)
@@ -225,9 +237,10 @@ class RigidBody(Collider):
         self.origin = origin
 
     # -- contact with the solvers' points ---------------------------------------------------------------------------
-    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None):
+    def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None, contact=None):
         """The body's collision kernel on a solver's points (kernels/colliders.py), with the opposite impulses
-        accumulated into ``reaction``: the solver must pass its point masses [kg]."""
+        accumulated into ``reaction``: the solver must pass its point masses [kg]; ``contact`` as in
+        Collider.apply (the points' friction combines with the body's)."""
         if self.system is None:
             raise ParameterError(
                 "rigid body", self.name, "a body added with Scene.add_rigid_body (set up by the scene)"
@@ -241,7 +254,7 @@ class RigidBody(Collider):
             "kind": kind,
             "radius": radius,
             "body": self.motion,
-            "friction": self.friction,
+            "friction": self.point_friction(radius, contact),
             "mass": mass,
             "reaction": self.reaction,
             "device": self.device,
@@ -400,7 +413,7 @@ class RigidBodies:
                     sample_radius=b.radius_array,
                     normal=wp.vec3d(*n),
                     offset=wp.float64(float(self.ground.offset) - float(n @ self.origin)),
-                    friction=wp.float64(max(b.friction, self.ground.friction)),
+                    friction=wp.float64(float(combine_friction(b.friction, self.ground.friction))),
                     device=d,
                 )
             for c, shape, motion in self._static_shapes:
@@ -411,7 +424,7 @@ class RigidBodies:
                     sample_radius=b.radius_array,
                     other=shape,
                     other_motion=motion,
-                    friction=wp.float64(max(b.friction, c.friction)),
+                    friction=wp.float64(float(combine_friction(b.friction, c.friction))),
                     device=d,
                 )
         for i, a in enumerate(self.bodies):
@@ -425,7 +438,7 @@ class RigidBodies:
                     shape_b=b.shape,
                     samples_b=b.samples_array,
                     radius_b=b.radius_array,
-                    friction=wp.float64(max(a.friction, b.friction)),
+                    friction=wp.float64(float(combine_friction(a.friction, b.friction))),
                     device=d,
                 )
 

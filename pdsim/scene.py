@@ -148,7 +148,8 @@ class Scene:
         FEM surfaces. Automatic by default: on when the scene has several bodies or a body that can break.
         ``options`` go to pdsim.contact.ParticleContact (e.g. friction=0.3, distance_factor=1.35); ``restitution``
         (in (0, 1]) and ``friction`` also set the contact between methods and between FEM surfaces
-        (pdsim.contact.MethodContact), the one contact law of docs/stability.md."""
+        (pdsim.contact.MethodContact), the one contact law of docs/stability.md. They are the values of pairs whose
+        materials bring none (pdsim.Material contact_restitution, contact_friction, combined per pair)."""
         self.contact = (options or True) if enabled else False
 
     def add_collider(self, collider):
@@ -177,11 +178,13 @@ class Scene:
         friction: float = 0.5,
         band: float | None = None,
         name: str | None = None,
+        restitution: float | None = None,
     ) -> RigidBody:
         """A dynamic rigid body (pdsim.rigid.RigidBody): ``shape`` a pdsim.rigid.SphereShape(radius),
         BoxShape(size) or a closed mesh (SolidShape, ``load_mesh``); ``density`` [kg/m^3] or ``mass`` [kg]; its
         centre of mass ``position`` [m], ``orientation`` (x, y, z, w), ``velocity`` [m/s] and ``angular_velocity``
-        [rad/s] at time 0; Coulomb ``friction``. It falls under the scene's gravity and is in two-way contact with
+        [rad/s] at time 0; Coulomb ``friction``; ``restitution`` None or 0 (its contacts are inelastic: a higher
+        value raises FeatureNotAvailableError). It falls under the scene's gravity and is in two-way contact with
         peridynamic and FEM bodies, the ground, static mesh colliders and the other rigid bodies; written to the cache
         as ``/World/colliders/<name>`` (a transform over its rest mesh, with its velocity and angular velocity)."""
         body = RigidBody(
@@ -195,6 +198,7 @@ class Scene:
             friction=friction,
             band=band,
             name=name,
+            restitution=restitution,
         )
         body.gravity = np.asarray(self.gravity, dtype=np.float64)
         return self.add_collider(body)

@@ -342,6 +342,18 @@ def _(ws):
     _material(sampling_jitter=0.5)
 
 
+@case("contact_restitution_range", A_MAT, "Material(contact_restitution=0.0)", "(0, 1], or None",
+      pdsim.ParameterError, "contact_restitution=0.0", "(0, 1]")  # fmt: skip
+def _(ws):
+    _material(contact_restitution=0.0)
+
+
+@case("contact_friction_negative", A_MAT, "Material(contact_friction=-0.2)", "a Coulomb coefficient >= 0, or None",
+      pdsim.ParameterError, "contact_friction=-0.2", "[0, inf)")  # fmt: skip
+def _(ws):
+    _material(contact_friction=-0.2)
+
+
 # -- bodies -----------------------------------------------------------------------------------------------------
 A_BODY = "bodies and spacing"
 
@@ -569,6 +581,13 @@ def _(ws):
       "exactly one of density")  # fmt: skip
 def _(ws):
     _scene().add_rigid_body(pdsim.SphereShape(0.03), density=7850.0, mass=1.0)
+
+
+@case("rigid_body_restitution", A_SCENE, "Scene.add_rigid_body(..., restitution=0.5)",
+      "restitution None or 0 (a rigid body's contacts are inelastic)", pdsim.FeatureNotAvailableError,
+      "restitution=0.5", "inelastic")  # fmt: skip
+def _(ws):
+    _scene().add_rigid_body(pdsim.SphereShape(0.03), density=7850.0, restitution=0.5, name="ball")
 
 
 @case("rigid_body_with_projectile", A_SCENE, "a rigid body and a kinematic projectile in one scene (they do not "

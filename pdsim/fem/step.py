@@ -8,7 +8,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ..checks import check_range
+from ..contact import material_contact_values
 from ..errors import ParameterError
 from ..kernels.fem import elements as ke
 from ..kernels.fem import solver as ks
@@ -107,10 +110,25 @@ class FemStep:
         self.reset_over_count()
 
     def apply_colliders(self, time: float, dt: float) -> None:
-        """Ground plane, then the scene's colliders, on the free vertices (zero radius) at ``time`` [s]."""
+        """Ground plane, then the scene's colliders, on the free vertices (zero radius) at ``time`` [s], each vertex
+        with its body's material friction (its restitution does not apply: the vertices meet them inelastically)."""
         kin = self.kin
+        contact = self.point_contact_values(colliders=True)
         for c in self.colliders:
-            c.apply(kin.rest, kin.u, kin.v, self._zero_radius, kin.point_kind, time, dt, mass=kin.mass)
+            c.apply(kin.rest, kin.u, kin.v, self._zero_radius, kin.point_kind, time, dt, mass=kin.mass, contact=contact)
+
+    def point_contact_values(self, colliders: bool = False):
+        """The vertices' own (restitution, friction), float64 [n] each: their body's material contact_restitution
+        and contact_friction (NaN where it has none; pdsim/contact.py material_contact_values), for the contact
+        between methods and surfaces; ``colliders``: the values for the ground and colliders, without restitution
+        (the vertices meet them inelastically). Rebuilt when the vertices change (fracture splits); the same tuple
+        otherwise."""
+        body = self._vertex_body_h
+        if getattr(self, "_vertex_contact_of", None) is not body:
+            e, mu = (np.asarray(values)[body] for values in material_contact_values(self.bodies, per_body=True))
+            self._vertex_contact_of = body
+            self._vertex_contact_values = {False: (e, mu), True: (np.full(len(body), np.nan), mu)}
+        return self._vertex_contact_values[bool(colliders)]
 
     # -- stepping ---------------------------------------------------------------------------------------------------
     def begin_step(self, dt: float) -> None:

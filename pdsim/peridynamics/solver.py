@@ -36,7 +36,7 @@ import math
 import numpy as np
 import warp as wp
 
-from ..contact import ParticleContact
+from ..contact import ParticleContact, material_contact_values
 from ..errors import ParameterError
 from ..fragment_labels import FragmentTracker
 from ..fragment_surfaces import FragmentSurfaces
@@ -154,6 +154,7 @@ class SolverPeridynamics(PointSolver):
             ground.bind(self.origin)
         self.colliders = colliders
         self._colliders_all = ([ground] if ground is not None else []) + colliders
+        self._material_contact = material_contact_values(self.bodies)  # the points' (restitution, friction), NaN: none
         self.contact = None
         if contact is not None and contact is not False:
             options = {} if contact is True else dict(contact)
@@ -324,10 +325,10 @@ class SolverPeridynamics(PointSolver):
         if self.contact is not None:
             pd_step.deformed_positions(m.particle_count, m.rest_positions, self.kin.u, self._positions, self.device)
             self.contact.apply(self._positions, self.kin.u, self.kin.v, s.force_density, self.kin.point_kind)
-        if self.ground is not None and self.ground.restitution is not None and self._step_dt is not None:
+        if self.ground is not None and self._step_dt is not None:
             self.ground.add_forces(
                 m.rest_positions, self.kin.u, self.kin.v, m.radius, self.kin.point_kind, self.kin.mass,
-                self.kin.force_to_newton, s.force_density, self._step_dt,
+                self.kin.force_to_newton, s.force_density, self._step_dt, contact=self._material_contact,
             )  # fmt: skip
         self.kin.add_loads(s.force_density, self._force_time)
 
@@ -343,8 +344,9 @@ class SolverPeridynamics(PointSolver):
         self._step_dt = dt  # the step the force phase's ground penalty is tied to
         for c in self._colliders_all:
             c.apply(
-                m.rest_positions, self.kin.u, self.kin.v, m.radius, self.kin.point_kind, time, dt, mass=self.kin.mass
-            )
+                m.rest_positions, self.kin.u, self.kin.v, m.radius, self.kin.point_kind, time, dt, mass=self.kin.mass,
+                contact=self._material_contact,
+            )  # fmt: skip
 
     def check_state(self, speed_limit: float):
         """Raises InstabilityError if a displacement or velocity is not finite or a speed exceeds ``speed_limit``
@@ -426,6 +428,12 @@ class SolverPeridynamics(PointSolver):
         for b in self.bodies:
             speeds += [b.material.p_wave_speed, b.prescribed_speed()]
         return max(speeds)
+
+    def point_contact_values(self):
+        """The particles' own (restitution, friction), float64 [n] each: their body's material contact_restitution
+        and contact_friction, NaN where it has none (pdsim/contact.py material_contact_values); the same tuple every
+        call."""
+        return self._material_contact
 
     def contact_particles(self):
         """The particles that take part in contact with bodies of other methods (all of them) and their contact
