@@ -65,12 +65,21 @@ CASES = ("drop", "hit")
 CENTRE = np.array([0.0, 0.0, DIAMETER / 2.0 + 0.002])  # the sphere's centre [m], 2 mm above the ground
 
 
-def build_case(case: str, material: pdsim.Material, spacing: float, *, frames=FRAMES, duration=DURATION, horizon=None):
+def build_case(
+    case: str,
+    material: pdsim.Material,
+    spacing: float,
+    *,
+    frames=FRAMES,
+    duration=DURATION,
+    horizon=None,
+    ball_radius=BALL_RADIUS,
+):
     """The scene of one case: "drop" (the sphere falls onto the ground plane at SPEED, under gravity) or "hit" (the
     sphere resting on the ground, a dynamic rigid steel ball of BALL_RADIUS and BALL_DENSITY coming down onto it at
     SPEED along BALL_DIRECTION, under gravity: it slows down and bounces as the sphere pushes back);
     ground and ball with Coulomb friction FRICTION; ``frames`` frames over ``duration`` [s]; ``horizon`` [m]: the
-    body's horizon (None: the default 3.015 spacings)."""
+    body's horizon (None: the default 3.015 spacings); ``ball_radius`` [m]: the ball's."""
     if case not in CASES:
         raise ValueError(f"case {case!r}: one of {CASES}")
     scene = pdsim.Scene(fps=24, frames=frames, frame_time=duration / frames, name=f"sphere_{case}")
@@ -82,9 +91,9 @@ def build_case(case: str, material: pdsim.Material, spacing: float, *, frames=FR
         body.set_initial_velocity((0.0, 0.0, -SPEED))
     else:
         d = np.asarray(BALL_DIRECTION, dtype=np.float64) / np.linalg.norm(BALL_DIRECTION)
-        start = CENTRE - d * (DIAMETER / 2.0 + BALL_RADIUS + 0.002)
+        start = CENTRE - d * (DIAMETER / 2.0 + ball_radius + 0.002)
         scene.add_rigid_body(
-            pdsim.SphereShape(BALL_RADIUS),
+            pdsim.SphereShape(ball_radius),
             density=BALL_DENSITY,
             position=tuple(start),
             velocity=tuple(SPEED * d),
@@ -145,18 +154,30 @@ def figures(solver, body_index: int = 0, *, volume=math.pi / 6.0 * DIAMETER**3) 
 
 
 def measure(
-    preset: str, case: str, spacing: float, *, frames=FRAMES, duration=DURATION, horizon=None, **overrides
+    preset: str,
+    case: str,
+    spacing: float,
+    *,
+    frames=FRAMES,
+    duration=DURATION,
+    horizon=None,
+    ball_radius=BALL_RADIUS,
+    **overrides,
 ) -> dict:
     """Runs one preset (pdsim.presets, with Material ``overrides``) in one case at ``spacing`` [m] (``horizon`` [m]:
-    the body's horizon, None for the default); its figures."""
+    the body's horizon, None for the default; ``ball_radius`` [m]: the hit's ball); its figures."""
     import dataclasses
 
     material = pdsim.presets.preset(preset)
     if overrides:
         material = dataclasses.replace(material, **overrides)
-    solver, wall = run_scene(build_case(case, material, spacing, frames=frames, duration=duration, horizon=horizon))
+    scene = build_case(
+        case, material, spacing, frames=frames, duration=duration, horizon=horizon, ball_radius=ball_radius
+    )
+    solver, wall = run_scene(scene)
     r = {**figures(solver), "wall_s": wall, "preset": preset, "case": case, "spacing": spacing}
-    return r if horizon is None else {**r, "horizon": horizon}
+    r = r if horizon is None else {**r, "horizon": horizon}
+    return r if ball_radius == BALL_RADIUS else {**r, "ball_radius": ball_radius}
 
 
 def _ratio(coarse: dict, fine: dict, key: str) -> float:
@@ -371,6 +392,7 @@ def main(argv=None):
     ap.add_argument("--frames", type=int, default=FRAMES)
     ap.add_argument("--duration", type=float, default=DURATION)
     ap.add_argument("--horizon", type=float, help="the bodies' horizon [m] (default: 3.015 spacings)")
+    ap.add_argument("--ball-radius", type=float, default=BALL_RADIUS, help="the hit's steel ball [m] (default 0.05)")
     ap.add_argument(
         "--set", nargs="+", default=[], metavar="FIELD=VALUE", help="Material fields over the preset's (numbers)"
     )
@@ -415,6 +437,7 @@ def main(argv=None):
                         frames=args.frames,
                         duration=args.duration,
                         horizon=args.horizon,
+                        ball_radius=args.ball_radius,
                         **overrides,
                     )
                     r = {**r, **({"set": overrides} if overrides else {})}
