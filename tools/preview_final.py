@@ -238,7 +238,7 @@ def table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
-HEADING = "## Presets at preview and final spacing"  # the last section of docs/fracture.md (fracture_patterns keeps it)
+HEADING = "## Presets at preview and final spacing"  # a section of docs/fracture.md (fracture_patterns keeps it)
 
 
 # The prose after the table (what the figures show, what is not met and why; the pane's note).
@@ -382,13 +382,18 @@ not measured here.
 
 
 def write_section(path: str, body: str) -> None:
-    """Replaces the page's section under HEADING (the rest of the page) with ``body``, or appends it."""
+    """Replaces the page's section under HEADING (up to the next section of its level, or the end) with ``body``, or
+    appends it."""
     with open(path) as f:
         text = f.read()
+    tail = ""
     if HEADING in text:
-        text = text[: text.index(HEADING)]
+        start = text.index(HEADING)
+        end = text.find("\n## ", start + len(HEADING))
+        tail = "" if end < 0 else "\n" + text[end:].strip("\n") + "\n"
+        text = text[:start]
     with open(path, "w") as f:
-        f.write(text.rstrip("\n") + "\n\n" + HEADING + "\n\n" + body.strip("\n") + "\n")
+        f.write(text.rstrip("\n") + "\n\n" + HEADING + "\n\n" + body.strip("\n") + "\n" + tail)
 
 
 def section(results: list[dict], meta: dict, notes: str) -> str:
