@@ -279,34 +279,34 @@ out, 93 % of it dust) and the four hits (glass 0.2 %, ceramic 2.0 %, stone 2.7 %
 their figures. The presets' pattern settings are unchanged: no setting measured below meets the missing cases
 without breaking the met ones or passing on one seed only.
 
-Why dust dominates. (1) The impact overloads the animation materials by far. A body hit at v strains by about
-v / c; it breaks where that passes s_c. At 6 m/s v / (c s_c) is 23 for glass (c = 53 m/s, s_c 0.005), 35 for ceramic,
-46 for stone and 73 for plaster, and the dust share of the drop follows that order: 8.2, 15.5, 24.4 and 93 %. Energy
-says the same: straining all of the glass sphere to its s_c stores 1.2 J (plaster's: 0.05 J), against the drop's
-636 J (280 J). (Real glass: v / (c s_c) = 1.6.) Raising s_c brings it down: the stone drop with `--set
-critical_stretch=0.005` (glass's strain: overload 28) gives 15.9 % dust and 3 pieces, 0.004 gives 22.1 % and 2; the
-plaster drop with 0.004 gives 32.3 % dust, with 0.005 48.3 % (6.6 % broken out). The breaking strain is the
-material's calibration, not a pattern setting (its docstring keeps stone and plaster weaker than glass), so it is
-left as it is here. (2) Debris damping then decides what the excess energy does: too little and the crushed zone
-flies apart as dust, too much and it is held together. The glass hit: `--set debris_damping=0` breaks out 86 % of the
-sphere (71 % of it dust, 4 pieces over 5 %), 50 / s 9.3 % (95 % dust), 150 / s 5.2 %, 300 / s 3.2 %, 1000 / s
-1.2 %, the shipped 3000 / s 0.2 %; the plaster drop: 500 / s 66 % broken out (84 % dust), the shipped 1500 / s
-7.6 % (93 %), 3000 / s 0.3 %. No rate gives shards in the hit, and a rate that lets the hit break (100 / s) turns
-the glass drop to dust (69 % dust of 85 % broken out). (3) The compressive bonus cap: a higher cap keeps the material
-under the contact from crushing: the stone drop with a cap of 2 gives 20.2 % dust and 4 pieces, 2.5 gives 22.4 % and
-3; the plaster drop with 3 gives 34.8 % dust (11 % broken out), and 3 with debris damping 750 / s 46 % dust of 52 %
-broken out, one piece. (4) The strength field: the stone drop with Weibull modulus 8 (less scatter) gives 22.9 % dust
-and 2 pieces, with a correlation length of 10 cm 19.8 % and 2; the plaster drop with modulus 6, 60 % dust. (5) The
-seed: the stone drop gives 24.4 % dust with `strength_seed` 0 (the preset's), 19.9 % with 1 and 18.8 % with 2 (3
-pieces each); the ceramic drop 15.5, 19.8 and 15.6 %; the glass drop 8.2 % and, with seed 2, 5.3 % (6 pieces). The
+Why dust dominates. (1) The impact overloads the animation materials by far. A body hit at v strains by about v / c; it
+breaks where that passes s_c. At 6 m/s v / (c s_c) is 23 for glass (c = 53 m/s, s_c 0.005), 35 for ceramic, 46 for
+stone and 73 for plaster, and the dust share of the drop follows that order: 8.2, 15.5, 24.4 and 93 %. Energy says the
+same: straining all of the glass sphere to its s_c stores 1.2 J (plaster's: 0.05 J), against the drop's 636 J (280 J).
+(Real glass: v / (c s_c) = 1.6.) Raising s_c brings it down: the stone drop with `--set critical_stretch=0.005`
+(glass's strain: overload 28) gives 15.9 % dust and 3 pieces, 0.004 gives 22.1 % and 2; the plaster drop with 0.004
+gives 32.3 % dust, with 0.005 48.3 % (6.6 % broken out). The breaking strain is the material's calibration, not a
+pattern setting (its docstring keeps stone and plaster weaker than glass), so it is left as it is here. (2) Debris
+damping then decides what the excess energy does: too little and the crushed zone flies apart as dust, too much and it
+is held together. The glass hit: `--set debris_damping=0` breaks out 11.2 % of the sphere, all of it dust (with the 10
+cm ball, `--ball-radius 0.1`: 94.9 %, 76.6 % of it dust, 2 pieces over 5 %), 50 / s 9.3 % (95 % dust), 100 / s 6.8 %,
+150 / s 5.2 %, 300 / s 3.2 %, 1000 / s 1.2 %, the shipped 3000 / s 0.2 %, all of it dust; the plaster drop: 500 / s 66
+% broken out (84 % dust), the shipped 1500 / s 7.6 % (93 %), 3000 / s 0.3 %. No rate gives shards in the hit, and a low
+rate (100 / s) turns the glass drop to dust (69 % dust of 85 % broken out). (3) The compressive bonus cap: a higher cap
+keeps the material under the contact from crushing: the stone drop with a cap of 2 gives 20.2 % dust and 4 pieces, 2.5
+gives 22.4 % and 3; the plaster drop with 3 gives 34.8 % dust (11 % broken out), and 3 with debris damping 750 / s 46 %
+dust of 52 % broken out, one piece. (4) The strength field: the stone drop with Weibull modulus 8 (less scatter) gives
+22.9 % dust and 2 pieces, with a correlation length of 10 cm 19.8 % and 2; the plaster drop with modulus 6, 60 % dust.
+(5) The seed: the stone drop gives 24.4 % dust with `strength_seed` 0 (the preset's), 19.9 % with 1 and 18.8 % with 2
+(3 pieces each); the ceramic drop 15.5, 19.8 and 15.6 %; the glass drop 8.2 % and, with seed 2, 5.3 % (6 pieces). The
 stone drop thus misses the dust limit by less than the seeds scatter; the plaster drop misses it by far, because its
-overload is three times glass's. The hits: a 4 kg ball touches one or two particles of the 2 cm preview, and no
-setting measured makes those particles split the sphere: they are crushed to dust (no debris damping) or held
-(damping), or nothing breaks (glass with s_c 0.01 and no damping: 0.3 % broken out; 0.02: none). A real point
-impact splits a body through cone and median cracks that start in a contact zone of millimetres, which a 2 cm
-spacing cannot resolve. A heavier ball does not help: a 10 cm steel ball (`--ball-radius 0.1`: 32.9 kg, 590 J,
-docs/data/preview_final_20mm_ball100mm.json) breaks out 0.8 % of the glass sphere and 18.5 to 29.5 % of the others,
-58 to 90 % of it dust, one piece over 5 % in each.
+overload is three times glass's. The hits: a 4 kg ball touches one or two particles of the 2 cm preview, and no setting
+measured makes those particles split the sphere: they are crushed to dust (no debris damping) or held (damping), or
+nothing breaks (glass with s_c 0.01 and no damping: 0.3 % broken out; 0.02: none). A real point impact splits a body
+through cone and median cracks that start in a contact zone of millimetres, which a 2 cm spacing cannot resolve. A
+heavier ball does not help: a 10 cm steel ball (`--ball-radius 0.1`: 32.9 kg, 590 J,
+docs/data/preview_final_20mm_ball100mm.json) breaks out 0.8 % of the glass sphere and 18.5 to 29.5 % of the others, 58
+to 90 % of it dust, one piece over 5 % in each.
 
 Preview against final (the second table). The broken-out share agrees within +-30 % for the glass drop (-17 %), the
 ceramic drop (+6 %) and the plaster hit (-11 %), and not for the stone drop (+34 %), the plaster drop (7.6 % against
