@@ -17,11 +17,13 @@ engineering checks.
 
 Break pattern. The brittle presets (glass, porcelain, ceramic, stone, concrete, plaster) carry, with
 ``pattern=True`` (default), the settings that make them break into shards rather than dust at an artist's preview
-spacing and alike at a finer one (docs/fracture.md, "Presets at preview and final spacing"): a strength field with a
+spacing (dropped glass and ceramic; not yet stone, plaster or a small ball's hit) and, in pieces of a few cm, about
+alike at a finer one, which adds fine debris (docs/fracture.md, "Presets at preview and final spacing"): a strength
+field with a
 material correlation length (``strength_weibull_modulus``, ``strength_correlation_length``: the weak spots are the
 material's, the same at every spacing), jittered particles (``sampling_jitter`` 0.5: no lattice planes for cracks
 to follow), debris damping (:data:`DEBRIS_DAMPING` per second of the animation values, a fixed rate so that it acts
-alike at every spacing) and the full compressive bonus capped at 3 s_c (:data:`SHARD_BONUS`,
+alike at every spacing) and the full compressive bonus capped at 1.5 s_c (:data:`SHARD_BONUS`,
 :data:`SHARD_BONUS_CAP`). ``pattern=False`` gives the plain material (uniform strength, lattice sampling, no debris
 damping, the compressive bonus :data:`COMPRESSIVE_BONUS`), whose breaking strain is exactly the calibrated one. The
 other presets have no pattern settings (wood splits by its grain; clay, steel and aluminium tear by plasticity;

@@ -90,9 +90,10 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scene-args", default="{}", help="build_scene keywords, JSON")
     ap.add_argument("--json", help="write the result here")
+    ap.add_argument("--stop-after", type=int, default=2, help="frames to run past the first free piece")
     args = ap.parse_args(argv)
     wp.config.quiet = True
-    result = measure(json.loads(args.scene_args))
+    result = measure(json.loads(args.scene_args), stop_after=args.stop_after)
     print(json.dumps(result["events"]))
     if args.json:
         with open(args.json, "w") as f:
