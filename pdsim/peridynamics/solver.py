@@ -359,6 +359,12 @@ class SolverPeridynamics(PointSolver):
         self.time += dt
         self.step_count += 1
 
+    def end_frame(self) -> None:
+        """The frame-end work of a run (pdsim.run.advance_checked, after the frame's steps and checks): the rigid
+        hand-off's test (pdsim/peridynamics/handoff.py)."""
+        if self.handoff is not None:
+            self.handoff.update()
+
     def graph_key(self) -> tuple:
         """The shared parts (pdsim.solver.PointSolver.graph_key) and the rigid fragments' arrays."""
         key = super().graph_key()
@@ -395,8 +401,6 @@ class SolverPeridynamics(PointSolver):
             self.watchdog.check(speed_limit, where, hint)
         else:
             self.kin.check(speed_limit, where, hint=hint)
-        if self.handoff is not None:
-            self.handoff.update()  # the frame-end test of the rigid hand-off
 
     def checkpoint(self) -> dict:
         """The state to continue this run exactly (pdsim.solver.Solver.checkpoint): the shared kinematics, the bond
