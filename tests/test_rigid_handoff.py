@@ -30,7 +30,7 @@ def _notched_block(origin, handoff):
     body = pdsim.PeridynamicBody(
         pdsim.box((0.08, 0.04, 0.04), center=tuple(o)), MATERIAL, SPACING, name="block", rigid_handoff=handoff
     )
-    body.add_notch(pdsim.BoxRegion(lo=tuple(o + [-0.001, -1, -1]), hi=tuple(o + [0.001, 1, 1])))
+    body.add_notch(pdsim.BoxRegion(lo=tuple(o + np.array([-0.001, -1, -1])), hi=tuple(o + np.array([0.001, 1, 1]))))
     return body
 
 
@@ -110,13 +110,14 @@ def _pieces(frames=16, shift=(0.0, 0.0, 0.0)):
     o = np.asarray(shift, dtype=np.float64)
     scene = pdsim.Scene(fps=24, frames=frames, frame_time=5.0e-3, name="pieces")
     soft = pdsim.Material(density=2500.0, youngs_modulus=5.0e7, poisson_ratio=0.25, critical_stretch=2.0e-3)
-    centre = o + [0.0, 0.0, 0.1]
+    centre = o + np.array([0.0, 0.0, 0.1])
     body = pdsim.PeridynamicBody(
         pdsim.box((0.08, 0.04, 0.04), center=tuple(centre)), soft, SPACING, name="block",
         rigid_handoff=pdsim.RigidHandoff(strain=1.0e-4, frames=2),
     )  # fmt: skip
-    body.add_notch(pdsim.BoxRegion(lo=tuple(centre + [-0.001, -1, -1]), hi=tuple(centre + [0.001, 1, 1])))
-    body.set_initial_velocity([0.5, 0.0, -1.5] + np.cross([0.0, 4.0, 0.0], body.rest_positions - centre))
+    cut = np.array([0.001, 1.0, 1.0])
+    body.add_notch(pdsim.BoxRegion(lo=tuple(centre - cut), hi=tuple(centre + cut)))
+    body.set_initial_velocity(np.array([0.5, 0.0, -1.5]) + np.cross([0.0, 4.0, 0.0], body.rest_positions - centre))
     scene.add_body(body)
     scene.add_ground_plane(height=float(o[2]))
     return scene
@@ -151,7 +152,7 @@ def test_handoff_on_with_nothing_handed_off_is_bit_identical_to_off():
     for handoff in (None, pdsim.RigidHandoff()):
         s = SolverPeridynamics([_notched_block((0.0, 0.0, 0.0), handoff)], threads=1)
         x = s.positions()
-        s.set_velocities(np.cross([0.0, 0.0, 30.0], x - x.mean(0)) + [0.0, 0.0, 1.0])
+        s.set_velocities(np.cross([0.0, 0.0, 30.0], x - x.mean(0)) + np.array([0.0, 0.0, 1.0]))
         s.simulate(0.5 * s.stable_time_step(), 50)
         out.append((s.kin.u.numpy().copy(), s.kin.v.numpy().copy()))
     assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])

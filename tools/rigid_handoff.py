@@ -140,8 +140,8 @@ def main(argv=None) -> None:
         " body's largest fragment. Step: wall time of a frame's steps (`advance_frame`); frame: with the frame-end"
         " hand-off test and the output. Times are means over the last third of the frames.",
         "",
-        "| scene | frames | broken-out (off / on) | in rigid fragments (on) | step off [s] | step on [s] | step speed-up |"
-        " frame off [s] | frame on [s] | frame speed-up |",
+        "| scene | frames | broken-out (off / on) | in rigid fragments (on) | step off [s] | step on [s] |"
+        " step speed-up | frame off [s] | frame on [s] | frame speed-up |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     pictures = []

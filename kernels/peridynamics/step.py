@@ -48,10 +48,10 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
     cached. With ``handoff`` the dilatation and force passes skip every particle k with ``rigid_body[k] >= 0`` (a
     collision proxy of a rigid fragment, pdsim/peridynamics/handoff.py): none of its bonds is visited, its force
     density is zero and its dilatation and bond cache keep their last values; without it ``rigid_body`` is a
-    placeholder the kernels never read. Every kernel takes the first particle of its launch (``first``): a launch covers the particles
-    first .. first + dim - 1, and each writes only its particles' rows and their bonds' rows (bonds are stored per
-    particle family; the plastic mirror is the one exception, module docstring), so launches over disjoint particle
-    ranges of one pass can run at the same time."""
+    placeholder the kernels never read. Every kernel takes the first particle of its launch (``first``): a launch
+    covers the particles first .. first + dim - 1, and each writes only its particles' rows and their bonds' rows
+    (bonds are stored per particle family; the plastic mirror is the one exception, module docstring), so launches
+    over disjoint particle ranges of one pass can run at the same time."""
     key = (bool(fracture), bool(plastic), bool(handoff))
     if key in _cache:
         return _cache[key]
