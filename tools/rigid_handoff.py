@@ -7,7 +7,7 @@ alone, then the whole frame with the hand-off's frame-end test and the output; C
 the machine is shared), and renders ``pdsim preview``
 stills of the last frame of both runs side by side. Writes docs/rigid_handoff.md and docs/rigid_handoff/*.png.
 
-Run:  python tools/rigid_handoff.py [--scenes four_walls glass_pane] [--frames N]
+Run:  python tools/rigid_handoff.py [--scenes four_walls glass_pane] [--frames N] [--page NAME.md]
 """
 
 from __future__ import annotations
@@ -30,7 +30,11 @@ from pdsim.peridynamics import PeridynamicBody, RigidHandoff, SolverPeridynamics
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = os.path.join(ROOT, "scenes")
 DOCS = os.path.join(ROOT, "docs")
-VIEWS = {"four_walls": {"fit": "first"}, "glass_pane": {"camera": "-35,15", "fit": "first"}}
+VIEWS = {
+    "four_walls": {"fit": "first"},
+    "glass_pane": {"camera": "-35,15", "fit": "first"},
+    "drop_shatter": {"camera": "-60,30", "fit": "first"},
+}
 
 
 def load_scene_module(name: str):
@@ -134,6 +138,7 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="+", default=["glass_pane", "four_walls"])
     parser.add_argument("--frames", type=int, default=None, help="frames to run (default: the preview's)")
+    parser.add_argument("--page", default="rigid_handoff.md", help="the page written in docs/")
     parser.add_argument(
         "--difference", action="store_true", help="only compare the stills already in docs/rigid_handoff/"
     )
@@ -157,6 +162,7 @@ def main(argv=None) -> None:
             "# Rigid hand-off: measured",
             "",
             f"`python tools/rigid_handoff.py --scenes {' '.join(args.scenes)}"
+            + (f" --page {args.page}" if args.page != "rigid_handoff.md" else "")
             + (f" --frames {args.frames}`" if args.frames else "`")
             + f" on {when} ({machine}, one bond thread, load average {load} at the end; the machine is shared, so"
             " the times are the process's CPU time, not wall time). Each scene at its preview settings, with the "
@@ -182,7 +188,7 @@ def main(argv=None) -> None:
         for name, png, frame in pictures:
             if png is not None:
                 lines += [f"- {name}, frame {frame}:", "", f"  ![{name}](rigid_handoff/{png})", ""]
-        with open(os.path.join(DOCS, "rigid_handoff.md"), "w") as f:
+        with open(os.path.join(DOCS, args.page), "w") as f:
             f.write("\n".join(lines) + "\n")
         print("\n".join(lines), flush=True)
 
