@@ -101,6 +101,36 @@ def run(name: str, handoff: bool, cache: str, frames: int | None) -> dict:
     return {"report": report, "steps": np.asarray(steps), "frames": frame_times, "rows": rows, "bonds": total_bonds}
 
 
+def interleaved(name: str, cache: str, frames: int | None, rounds: int = 7, steps: int = 40) -> dict:
+    """The step cost at the last frame of a hand-off run, against the same state without the hand-off: the run's
+    peridynamic solver (rigid fragments live) and a solver of the scene without the hand-off given its checkpoint,
+    ``steps`` steps each, alternated over ``rounds`` rounds; medians of the process CPU time per step [s]."""
+    held = {}
+
+    def keep(frame, solvers):
+        held["solvers"] = solvers
+
+    module = load_scene_module(name)
+    preview = dict(getattr(module, "PREVIEW", {}))
+    scene = module.build_scene(**preview)
+    for b in scene.bodies:
+        if brittle(b):
+            b.rigid_handoff = RigidHandoff()
+    report = scene.run(cache, device="cpu", progress=False, frames=frames, on_frame=keep)
+    on = next(s for s in held["solvers"] if isinstance(s, SolverPeridynamics))
+    plain = module.build_scene(**preview).build_solvers(device="cpu", check=False)
+    off = next(s for s in plain if isinstance(s, SolverPeridynamics))
+    off.threads = on.threads = 1
+    off.restore(on.checkpoint())
+    times = {"on": [], "off": []}
+    for _ in range(rounds):
+        for key, solver in (("on", on), ("off", off)):
+            t0 = time.process_time()
+            solver.simulate(report.dt, steps)
+            times[key].append((time.process_time() - t0) / steps)
+    return {k: float(np.median(v)) for k, v in times.items()}
+
+
 def last_third(values: np.ndarray) -> float:
     n = len(values)
     return float(np.mean(values[n - n // 3 :])) if n >= 3 else float(np.mean(values))
@@ -142,7 +172,23 @@ def main(argv=None) -> None:
     parser.add_argument(
         "--difference", action="store_true", help="only compare the stills already in docs/rigid_handoff/"
     )
+    parser.add_argument(
+        "--interleaved",
+        action="store_true",
+        help="only the step cost at the last frame with and without the hand-off, alternated (printed)",
+    )
     args = parser.parse_args(argv)
+    if args.interleaved:
+        wp.config.quiet = True
+        os.environ["PDSIM_THREADS"] = "1"
+        with tempfile.TemporaryDirectory() as tmp:
+            for name in args.scenes:
+                t = interleaved(name, os.path.join(tmp, f"{name}.usdc"), args.frames)
+                print(
+                    f"{name}: {1e3 * t['off']:.3f} ms a step without, {1e3 * t['on']:.3f} ms with the hand-off"
+                    f" ({t['off'] / t['on']:.2f}x), median CPU time of 7 rounds of 40 steps each"
+                )
+        return
     if args.difference:
         for name in args.scenes:
             off, on = (os.path.join(DOCS, "rigid_handoff", f"{name}_{m}.png") for m in ("off", "on"))

@@ -96,13 +96,16 @@ def pose_members(
     velocities[k] = wp.vec3(wp.float32(v[0]), wp.float32(v[1]), wp.float32(v[2]))
 
 
-def project(*, fragment_count: int, member_count: int, device, **arguments):
+def project(*, fragment_count: int, member_count: int, device, record_cmd: bool = False, **arguments) -> list:
     """The rigid fragments' projection (project_fragments, one thread per fragment) and their members posed by it
-    (pose_members, one thread per member)."""
+    (pose_members, one thread per member); with ``record_cmd`` nothing runs and the two recorded launches are
+    returned, to be replayed (``cmd.launch()``) while the arrays stay the same."""
     project_args = {k: arguments[k] for k in _PROJECT_NAMES}
     pose_args = {k: arguments[k] for k in _POSE_NAMES}
-    launch(project_fragments, fragment_count, device=device, **project_args)
-    launch(pose_members, member_count, device=device, **pose_args)
+    return [
+        launch(project_fragments, fragment_count, device=device, record_cmd=record_cmd, **project_args),
+        launch(pose_members, member_count, device=device, record_cmd=record_cmd, **pose_args),
+    ]
 
 
 def pose(*, count: int, device, **arguments):
