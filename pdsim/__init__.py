@@ -38,7 +38,7 @@ from .lattice import (
 )
 from .loads import TimeCurve
 from .materials import Anisotropy, Material
-from .peridynamics import PeridynamicBody, SolverPeridynamics
+from .peridynamics import PeridynamicBody, RigidHandoff, SolverPeridynamics
 from .regions import BoxRegion, HalfSpace, SphereRegion
 from .rigid import BoxShape, RigidBody, SphereShape
 from .scene import RunReport, Scene
@@ -75,6 +75,7 @@ __all__ = [
     "PeridynamicBody",
     "PointKind",
     "RigidBody",
+    "RigidHandoff",
     "RunReport",
     "Scene",
     "SolidShape",

@@ -505,7 +505,7 @@ def advance_checked(scene, solvers, dt, substeps, coupling, limit, *, first=0):
     """One frame from sub-step ``first``: solvers without mass (the lattice) advance the whole frame (when ``first``
     is 0), the others ``substeps - first`` steps (:func:`advance_frame`; their watchdogs check every few steps inside
     it and may raise a stop request), then every solver's ``check_state`` (the frame-end check, with the watchdogs'
-    strain pass)."""
+    strain pass), then every solver's ``end_frame`` where it has one."""
     points = [s for s in solvers if isinstance(s, PointSolver)]
     for s in points:
         if s.watchdog is not None:
@@ -521,6 +521,9 @@ def advance_checked(scene, solvers, dt, substeps, coupling, limit, *, first=0):
         if s.watchdog is not None:
             s.watchdog.full_check = True
         s.check_state(limit)
+    for s in solvers:
+        if callable(getattr(s, "end_frame", None)):
+            s.end_frame()  # frame-end work of a solver (the peridynamic rigid hand-off)
 
 
 def method_contact(scene, solvers):

@@ -30,7 +30,8 @@ CASES = [
 def test_brittle_preset_breaks_into_shards_at_preview_spacing(preset, case):
     """At the preview spacing (2 cm: 15 particles across the sphere, 1,791 particles) after 40 ms: at most 20 % of
     the broken-out mass is dust (fragments of fewer than 8 particles) and at least 3 fragments each hold more than
-    5 % of the body's mass. Met by the glass and stone drops; the other cases are marked with what they measure (figures with the presets' contact values)."""
+    5 % of the body's mass. Met by the glass and stone drops; the other cases are marked with what they measure
+    (with the presets' contact values)."""
     r = pf.measure(preset, case, pf.PREVIEW_SPACING)
     assert r["particles"] == 1791
     assert r["dust"] <= 0.20, r

@@ -414,6 +414,18 @@ def _(ws):
     pdsim.PeridynamicBody(pdsim.box((0.1, 0.1, 0.1)), _material(), spacing=0.02, surface_correction="madenci")
 
 
+@case("rigid_handoff", A_BODY, "rigid_handoff='yes'", "None, False, True or a pdsim.RigidHandoff",
+      pdsim.ParameterError, "rigid_handoff='yes'", "pdsim.RigidHandoff")  # fmt: skip
+def _(ws):
+    pdsim.PeridynamicBody(pdsim.box((0.1, 0.1, 0.1)), _material(), spacing=0.02, rigid_handoff="yes")
+
+
+@case("rigid_handoff_frames", A_BODY, "pdsim.RigidHandoff(frames=0)", "an integer >= 1", pdsim.ParameterError,
+      "frames=0", ">= 1")  # fmt: skip
+def _(ws):
+    pdsim.RigidHandoff(frames=0)
+
+
 # -- boundary conditions and loads ------------------------------------------------------------------------------
 A_BC = "boundary conditions and loads"
 

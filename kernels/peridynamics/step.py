@@ -43,17 +43,21 @@ from ..launch import argument_names
 _cache = {}
 
 
-def make_step_kernels(fracture: bool, plastic: bool):
+def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
     """Kernels (dilatation with the fused plastic update, force, energy) for the given feature set, built once and
-    cached. Every kernel takes the first particle of its launch (``first``): a launch covers the particles
-    first .. first + dim - 1, and each writes only its particles' rows and their bonds' rows (bonds are stored per
-    particle family; the plastic mirror is the one exception, module docstring), so launches over disjoint particle
-    ranges of one pass can run at the same time."""
-    key = (bool(fracture), bool(plastic))
+    cached. With ``handoff`` the dilatation and force passes skip every particle k with ``rigid_body[k] >= 0`` (a
+    collision proxy of a rigid fragment, pdsim/peridynamics/handoff.py): none of its bonds is visited, its force
+    density is zero and its dilatation and bond cache keep their last values; without it ``rigid_body`` is a
+    placeholder the kernels never read. Every kernel takes the first particle of its launch (``first``): a launch
+    covers the particles first .. first + dim - 1, and each writes only its particles' rows and their bonds' rows
+    (bonds are stored per particle family; the plastic mirror is the one exception, module docstring), so launches
+    over disjoint particle ranges of one pass can run at the same time."""
+    key = (bool(fracture), bool(plastic), bool(handoff))
     if key in _cache:
         return _cache[key]
     FRACTURE = key[0]
     PLASTIC = key[1]
+    HANDOFF = key[2]
 
     # tools/feature_cost.py holds a deliberate stripped copy of the elastic dilatation and force below (it measures
     # what the feature branches cost an elastic scene): keep it in step (tests/test_bench_tools.py checks the bits).
@@ -85,6 +89,7 @@ def make_step_kernels(fracture: bool, plastic: bool):
         eqps: wp.array(dtype=float),
         bond_reverse: wp.array(dtype=wp.int32),
         bond_plastic_reverse: wp.array(dtype=float),
+        rigid_body: wp.array(dtype=wp.int32),
     ):
         """theta_k = d_k sum_live w e V beta G^dil for particle k = first + tid; caches each live bond's (n, e)
         for the later passes and, with fracture, the particle's most compressive live stretch (for the
@@ -99,6 +104,9 @@ def make_step_kernels(fracture: bool, plastic: bool):
         (|eta| - L would lose it to cancellation below a strain of about 1e-5). A broken bond is skipped: no later pass
         reads its cache."""
         k = first + wp.tid()
+        if wp.static(HANDOFF):
+            if rigid_body[k] >= 0:
+                return
         uk = displacements[k]
         acc = float(0.0)
         smin = float(0.0)
@@ -200,6 +208,7 @@ def make_step_kernels(fracture: bool, plastic: bool):
         plastic_bond_count: int,
         bond_plastic: wp.array(dtype=float),
         bond_plastic_reverse: wp.array(dtype=float),
+        rigid_body: wp.array(dtype=wp.int32),
         force_density: wp.array(dtype=wp.vec3),
     ):
         """Force density [N/m^3] at particle k = first + tid over live bonds, with plastic extensions where the
@@ -207,6 +216,10 @@ def make_step_kernels(fracture: bool, plastic: bool):
         pass). The test reads only quantities both directed copies of a bond share, so both break in the same step.
         It compares extensions, e - (e^p_kj + e^p_jk) / 2 > s_c L, rather than stretches (no division per bond)."""
         k = first + wp.tid()
+        if wp.static(HANDOFF):
+            if rigid_body[k] >= 0:
+                force_density[k] = wp.vec3(0.0)
+                return
         bpk = bp[k]
         f = wp.vec3(0.0)
         smin_k = float(0.0)

@@ -2,6 +2,7 @@
 them, the explicit solver and the renderable fragment surfaces."""
 
 from .body import SURFACE_CORRECTIONS, PeridynamicBody
+from .handoff import RigidHandoff
 from .model import PeridynamicModel, PeridynamicState, build_model
 from .solver import SolverPeridynamics
 
@@ -10,6 +11,7 @@ __all__ = [
     "PeridynamicBody",
     "PeridynamicModel",
     "PeridynamicState",
+    "RigidHandoff",
     "SolverPeridynamics",
     "build_model",
 ]

@@ -14,6 +14,7 @@ from ..loads import surface_forces_from_triangles
 from ..materials import Material
 from ..regions import BoxRegion, region_mask
 from ..sampling import fill_solid, jitter_points, morton_order
+from .handoff import handoff_setting
 
 SURFACE_CORRECTIONS = ("directional", "family", "none")
 SAMPLINGS = ("lattice", "jittered")
@@ -44,6 +45,9 @@ class PeridynamicBody(PointBody):
             0.5. Only with sampling="jittered".
         sampling_seed: seed of the jitter, an integer in [0, 2^31 - 1] (default 0): the same seed gives the same
             particles, wherever the body sits.
+        rigid_handoff: None or False (off, default), True (the defaults) or a pdsim.RigidHandoff: fragments of the
+            body that stop deforming become rigid bodies (pdsim/peridynamics/handoff.py; only for a material that
+            breaks).
 
     Particles are sorted along a Morton curve so that neighbours are close in memory.
     """
@@ -64,6 +68,7 @@ class PeridynamicBody(PointBody):
         sampling: str | None = None,
         jitter: float | None = None,
         sampling_seed: int = 0,
+        rigid_handoff=None,
     ):
         if not isinstance(material, Material):
             raise ParameterError("material", material, "a pdsim.Material")
@@ -92,6 +97,7 @@ class PeridynamicBody(PointBody):
         self.surface_correction = surface_correction
         self.partial_volumes = bool(partial_volumes)
         self.damping = check_range("damping", damping, 0.0, None, lo_open=False)
+        self.rigid_handoff = handoff_setting(rigid_handoff)
         self.material_rotation = _rotation_matrix(material_rotation)
         self.notches: list = []  # BoxRegion or SolidShape: bonds crossing them start broken
         positions, volumes = fill_solid(shape, self.spacing, device=device)

@@ -48,6 +48,7 @@ from ..output.views import DeferredView, PointsView, resolve_views
 from ..solver import PointSolver, SolverContext, array_state, assign_state, register_solver
 from .body import PeridynamicBody
 from .events import CrackEvents
+from .handoff import FragmentHandoff
 from .model import PeridynamicState, build_model
 from .ranges import ParticleRanges, resolve_threads
 
@@ -144,10 +145,14 @@ class SolverPeridynamics(PointSolver):
             self.state.bond_plastic = wp.zeros(max(m.plastic_bond_count, 1), dtype=float, device=d)
             self.state.bond_plastic_reverse = wp.zeros(max(m.plastic_bond_count, 1), dtype=float, device=d)
             self.state.eqps = wp.zeros(n, dtype=float, device=d)
-        self._kernels = pd_step.make_step_kernels(m.fracture, m.plastic)
+        handoff = m.fracture and any(b.rigid_handoff is not None and b.material.breaks for b in self.bodies)
+        self._kernels = pd_step.make_step_kernels(m.fracture, m.plastic, handoff)
         self._offsets_host = m.family_offsets.numpy()[: n + 1].astype(np.int64)
         self._ranges = None
+        self.handoff = None  # FragmentHandoff (pdsim/peridynamics/handoff.py) when a body has rigid_handoff on
         self.threads = threads
+        if handoff:
+            self.handoff = FragmentHandoff(self)
         for c in colliders:
             c.bind(self.origin)
         if ground is not None:
@@ -199,6 +204,16 @@ class SolverPeridynamics(PointSolver):
     def threads(self, value: int | None):
         count = resolve_threads(value, self.device, self.model.bond_count)
         self._ranges = ParticleRanges(self._offsets_host, count, self.device)
+        self.rebalance_ranges()
+
+    def rebalance_ranges(self) -> None:
+        """Splits the bond passes' particle ranges on the bonds they visit (the particles of rigid fragments visit
+        none), keeping the thread count."""
+        if self.handoff is None or not self.handoff.active:
+            return
+        sizes = np.diff(self._offsets_host) * (self.handoff.fragment_of < 0)
+        cost = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        self._ranges = ParticleRanges(cost, len(self._ranges.ranges), self.device)
 
     # -- time step -----------------------------------------------------------------------------------------------
     def stable_time_step(self) -> float:
@@ -284,6 +299,7 @@ class SolverPeridynamics(PointSolver):
             bp=s.bp,
             bond_ne=s.bond_ne,
             stretch_min=s.stretch_min if frac else f1,
+            rigid_body=self.handoff.rigid_body if self.handoff is not None else self._dummy_i,
             **plastic_args,
         )
         pd_step.bond_forces(
@@ -306,6 +322,7 @@ class SolverPeridynamics(PointSolver):
             plastic_bond_count=m.plastic_bond_count,
             bond_plastic=plastic,
             bond_plastic_reverse=s.bond_plastic_reverse if m.plastic else f1,
+            rigid_body=self.handoff.rigid_body if self.handoff is not None else self._dummy_i,
             force_density=s.force_density,
         )
         if m.debris_rate is not None:  # Material.debris_damping (kernels/peridynamics/damping.py)
@@ -331,6 +348,40 @@ class SolverPeridynamics(PointSolver):
                 self.kin.force_to_newton, s.force_density, self._step_dt, contact=self._material_contact,
             )  # fmt: skip
         self.kin.add_loads(s.force_density, self._force_time)
+
+    def begin_step(self, dt: float) -> None:
+        """Kick-drift of the shared kinematics, the rigid fragments' projection over the drift (their particles
+        posed on their rigid motion), then the colliders at t + dt."""
+        if self.handoff is None or not self.handoff.active:
+            super().begin_step(dt)
+            return
+        if self.watchdog is not None and self.kin.watchdog is not self.watchdog:
+            self.watchdog.bind(self.kin)
+        self._force_time = self.time + dt
+        self.kin.begin_step(self.time, dt)
+        self.handoff.project(dt)
+        self.apply_colliders(self._force_time, dt)
+
+    def end_step(self, dt: float) -> None:
+        """Second half kick, then the rigid fragments' projection; advances time and the step count."""
+        self.kin.end_step(self.force, self.inv_mass, dt)
+        if self.handoff is not None:
+            self.handoff.project(0.0)
+        self.time += dt
+        self.step_count += 1
+
+    def end_frame(self) -> None:
+        """The frame-end work of a run (pdsim.run.advance_checked, after the frame's steps and checks): the rigid
+        hand-off's test (pdsim/peridynamics/handoff.py)."""
+        if self.handoff is not None:
+            self.handoff.update()
+
+    def graph_key(self) -> tuple:
+        """The shared parts (pdsim.solver.PointSolver.graph_key) and the rigid fragments' arrays."""
+        key = super().graph_key()
+        if self.handoff is not None:
+            key += (self.handoff.rigid_body, self.handoff.members, self._ranges)
+        return key
 
     def _refresh_accelerations(self):
         """Forces and accelerations at the current state without advancing time (after a change of state)."""
@@ -370,6 +421,8 @@ class SolverPeridynamics(PointSolver):
         particle contact's stiffness-cap scales and exposure."""
         s = self.state
         out = {"kinematics": self.kinematics_checkpoint(), "bonds": {}}
+        if self.handoff is not None:
+            out["handoff"] = self.handoff.checkpoint()
         for name in ("theta", "bp", "force_density", "bond_ne", "bond_alive", "stretch_min"):
             out["bonds"][name] = array_state(getattr(s, name))
         out["bonds"]["bond_plastic"] = array_state(s.bond_plastic)
@@ -395,6 +448,8 @@ class SolverPeridynamics(PointSolver):
         for name, values in state["bonds"].items():
             assign_state(getattr(s, name), values, name)
         self._mirror_plastic()
+        if self.handoff is not None:
+            self.handoff.restore(state["handoff"])
         if self.contact is not None:
             c = state.get("contact")
             if c is None:

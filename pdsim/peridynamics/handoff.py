@@ -1,0 +1,325 @@
+"""Rigid hand-off: a fragment of a breakable peridynamic body that has stopped deforming becomes a rigid body.
+
+A fragment (a connected set of particles over live bonds, pdsim/fragment_labels.py) is handed off when, at the end of
+``frames`` consecutive frames, its equivalent strain
+
+    eps = sqrt(2 (K_int + E_el) / (M c_p^2))
+
+stays below ``strain`` [-]. K_int [J] is the kinetic energy of its particles not in rigid motion (K - 1/2 M v^2 -
+1/2 w . L, with v the velocity of the centre of mass, L the angular momentum about it and w = I^+ L), E_el [J] its
+elastic energy, M [kg] its mass and c_p [m/s] its material's P-wave speed: a plane wave of strain eps carries a
+kinetic and an elastic energy density of 1/2 rho c_p^2 eps^2 each, so eps is the root-mean-square strain of the
+fragment's vibration. Only fragments of a body with the setting on, of free particles only (no boundary condition),
+in a body that has broken into more than one fragment, are handed off.
+
+From the hand-off on (kernels/peridynamics/handoff.py):
+
+- the fragment's particles stay as collision proxies: every step they move as free points under every force and
+  impulse (particle contact, colliders, the ground, dynamic rigid bodies, contact with other methods, loads, gravity),
+  then their motion is projected onto the rigid motion of the same linear and angular momentum, and they are posed
+  on it (after the drift and after the second half kick);
+- its bonds are no longer visited (the dilatation and force passes return at once for its particles,
+  kernels/peridynamics/step.py), and the CPU threads' particle ranges are rebalanced on the remaining bonds;
+- its render surface, embedded in its particles (pdsim/fragment_surfaces/), rides its rigid motion.
+
+At the hand-off the fragment keeps its linear and angular momentum exactly; the energy K_int + E_el (at most
+1/2 M c_p^2 strain^2) is dropped (``released``). The fragment no longer breaks further, and its internal vibration is
+gone (docs/fracture.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from ..bodies import PointKind
+from ..checks import check_range
+from ..errors import ParameterError
+from ..kernels.peridynamics import handoff as kh
+
+DEFAULT_STRAIN_FRACTION = 0.1  # default threshold: this fraction of the material's critical stretch
+
+
+@dataclass(frozen=True)
+class RigidHandoff:
+    """The rigid hand-off setting of a peridynamic body (``PeridynamicBody(rigid_handoff=...)``).
+
+    Args:
+        strain: threshold of the equivalent strain eps (module docstring) [-], > 0; None: DEFAULT_STRAIN_FRACTION
+            times the material's critical stretch at the body's horizon.
+        frames: consecutive frames a fragment must stay below it, integer >= 1.
+    """
+
+    strain: float | None = None
+    frames: int = 3
+
+    def __post_init__(self):
+        if self.strain is not None:
+            object.__setattr__(self, "strain", check_range("strain", self.strain, 0.0, None))
+        if isinstance(self.frames, bool) or int(self.frames) != self.frames or self.frames < 1:
+            raise ParameterError("frames", self.frames, "an integer >= 1 (consecutive frames below the threshold)")
+
+
+def handoff_setting(value) -> RigidHandoff | None:
+    """A body's ``rigid_handoff`` argument as a RigidHandoff (True: the defaults) or None (None or False: off)."""
+    if value is None or value is False:
+        return None
+    if value is True:
+        return RigidHandoff()
+    if isinstance(value, RigidHandoff):
+        return value
+    raise ParameterError("rigid_handoff", value, "None, False, True or a pdsim.RigidHandoff")
+
+
+class FragmentHandoff:
+    """The rigid fragments of one peridynamic solver: per-particle quiet-frame counters on the host, the fragments'
+    state on the device (module docstring). Built by the solver when a body has ``rigid_handoff`` on."""
+
+    def __init__(self, solver):
+        self.solver = solver
+        m = solver.model
+        d = solver.device
+        n = m.particle_count
+        body_of = np.repeat(np.arange(len(solver.bodies)), np.diff(np.asarray(m.body_offsets)))
+        self.body_of = body_of
+        self.body_start = np.asarray(m.body_offsets)[body_of]
+        threshold, speed, enabled = [], [], []
+        for b in solver.bodies:
+            setting = b.rigid_handoff
+            enabled.append(setting is not None and b.material.breaks)
+            strain = None if setting is None else setting.strain
+            if strain is None:
+                sc = b.material.critical_stretch_for(b.horizon) if b.material.breaks else 0.0
+                strain = DEFAULT_STRAIN_FRACTION * sc
+            threshold.append(strain)
+            speed.append(b.material.p_wave_speed)
+        self.frames_needed = np.array([b.rigid_handoff.frames if b.rigid_handoff else 0 for b in solver.bodies])
+        self.enabled = np.asarray(enabled, dtype=bool)[body_of]
+        self.threshold = np.asarray(threshold, dtype=np.float64)[body_of]
+        self.wave_speed = np.asarray(speed, dtype=np.float64)[body_of]
+        self.quiet = np.zeros(n, dtype=np.int64)  # consecutive frames each particle's fragment stayed quiet
+        self.fragment_of = np.full(n, -1, dtype=np.int32)  # rigid fragment per particle, -1: deformable
+        self.rigid_body = wp.array(self.fragment_of, dtype=wp.int32, device=d)
+        self.released = {"internal_kinetic": 0.0, "elastic": 0.0}  # energy dropped at hand-offs [J]
+        self._set_state(
+            np.zeros(1, dtype=np.int32), np.zeros(0, dtype=np.int32), np.zeros((0, 3)), np.zeros((0, 3, 3)),
+            np.zeros((0, 4)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)),
+        )  # fmt: skip
+
+    # -- device state ---------------------------------------------------------------------------------------------
+    def _set_state(self, offsets, members, body_offset, inv_inertia, orientation, centre, velocity, angular):
+        d = self.solver.device
+        self.fragment_count = len(offsets) - 1
+        self.member_count = len(members)
+        self.member_offsets = wp.array(offsets.astype(np.int32), dtype=wp.int32, device=d)
+        self.members = wp.array(members.astype(np.int32), dtype=wp.int32, device=d)
+        fragment = np.repeat(np.arange(self.fragment_count, dtype=np.int32), np.diff(offsets))
+        self.member_fragment = wp.array(fragment, dtype=wp.int32, device=d)
+        self.body_offset = wp.array(body_offset, dtype=wp.vec3d, device=d)
+        self.body_inv_inertia = wp.array(inv_inertia, dtype=wp.mat33d, device=d)
+        self.orientation = wp.array(orientation, dtype=wp.quatd, device=d)
+        self.centre = wp.array(centre, dtype=wp.vec3d, device=d)
+        self.velocity = wp.array(velocity, dtype=wp.vec3d, device=d)
+        self.angular_velocity = wp.array(angular, dtype=wp.vec3d, device=d)
+        self.fragment_of = np.full(self.solver.model.particle_count, -1, dtype=np.int32)
+        self.fragment_of[members] = fragment
+        self.rigid_body = wp.array(self.fragment_of, dtype=wp.int32, device=d)
+        self._commands = {}  # (rotate_dt, ids of u and v) -> the recorded launches of project
+
+    def _host_state(self) -> list:
+        return [
+            self.member_offsets.numpy().astype(np.int32), self.members.numpy().astype(np.int32),
+            self.body_offset.numpy().astype(np.float64), self.body_inv_inertia.numpy().astype(np.float64),
+            self.orientation.numpy().astype(np.float64), self.centre.numpy().astype(np.float64),
+            self.velocity.numpy().astype(np.float64), self.angular_velocity.numpy().astype(np.float64),
+        ]  # fmt: skip
+
+    @property
+    def active(self) -> bool:
+        """True once a fragment is rigid."""
+        return self.fragment_count > 0
+
+    def rigid_particles(self) -> np.ndarray:
+        """bool [particle_count]: the particles of rigid fragments."""
+        return self.fragment_of >= 0
+
+    def live_bond_rows(self) -> int:
+        """Bond rows the dilatation and force passes visit per pass: those of particles not in a rigid fragment."""
+        sizes = np.diff(self.solver._offsets_host)
+        return int(sizes[self.fragment_of < 0].sum())
+
+    # -- the step ---------------------------------------------------------------------------------------------------
+    def project(self, rotate_dt: float) -> None:
+        """Projects the rigid fragments' particles onto rigid motion and poses them (kernels/peridynamics/handoff.py);
+        ``rotate_dt`` [s]: the time over which the orientation turns (the step after the drift, 0 after the kick)."""
+        if self.fragment_count == 0:
+            return
+        s = self.solver
+        key = (float(rotate_dt), id(s.kin.u), id(s.kin.v))
+        commands = self._commands.get(key)
+        if commands is None:  # recorded once per configuration: a replay skips wp.launch's argument packing
+            commands = kh.project(
+                fragment_count=self.fragment_count,
+                member_count=self.member_count,
+                device=s.device,
+                record_cmd=True,
+                member_offsets=self.member_offsets,
+                members=self.members,
+                member_fragment=self.member_fragment,
+                body_offset=self.body_offset,
+                rest=s.model.rest_positions,
+                displacements=s.kin.u,
+                velocities=s.kin.v,
+                mass=s.kin.mass,
+                body_inv_inertia=self.body_inv_inertia,
+                rotate_dt=float(rotate_dt),
+                orientation=self.orientation,
+                centre=self.centre,
+                velocity=self.velocity,
+                angular_velocity=self.angular_velocity,
+            )
+            self._commands[key] = (commands, s.kin.u, s.kin.v)  # the arrays kept alive: their ids stay theirs
+        else:
+            commands = commands[0]
+        for cmd in commands:
+            cmd.launch()
+
+    # -- the frame-end test -------------------------------------------------------------------------------------------
+    def update(self) -> int:
+        """The frame-end test (module docstring): counts the quiet frames of the deformable fragments and hands off
+        those that reached their body's ``frames``; returns the number of fragments handed off."""
+        s = self.solver
+        labels = s.fragment_ids().astype(np.int64) + self.body_start  # global id: first particle of the fragment
+        n = len(labels)
+        free = s.kin.point_kind.numpy() == int(PointKind.FREE)
+        candidate = self.enabled & (self.fragment_of < 0)
+        bad = np.zeros(n, dtype=bool)  # per fragment id: holds a particle that cannot be handed off
+        np.logical_or.at(bad, labels, ~(candidate & free))
+        pieces = np.zeros(len(s.bodies), dtype=np.int64)  # fragments per body
+        firsts = np.unique(labels)
+        np.add.at(pieces, self.body_of[firsts], 1)
+        bad |= pieces[self.body_of] <= 1  # an unbroken body is not a fragment
+        eligible = ~bad[labels]
+        if not eligible.any():
+            self.quiet[:] = 0
+            return 0
+        x = s.model.rest_positions.numpy().astype(np.float64) + s.kin.u.numpy().astype(np.float64)
+        v = s.kin.velocities()
+        mass = np.asarray(s.kin.mass_host, dtype=np.float64)
+        energy = s.model.volumes_host * s.strain_energy_density()
+        ids, inverse = np.unique(labels[eligible], return_inverse=True)
+        props = rigid_properties(x[eligible], v[eligible], mass[eligible], inverse, len(ids))
+        e_el = np.bincount(inverse, weights=energy[eligible], minlength=len(ids))
+        idx = np.flatnonzero(eligible)
+        c2 = np.zeros(len(ids))
+        limit = np.zeros(len(ids))
+        c2[inverse] = self.wave_speed[idx] ** 2
+        limit[inverse] = self.threshold[idx]
+        eps = np.sqrt(2.0 * np.maximum(props["internal_kinetic"] + e_el, 0.0) / (props["mass"] * c2))
+        quiet_fragment = eps < limit
+        quiet = np.zeros(n, dtype=np.int64)
+        quiet[idx] = np.where(quiet_fragment[inverse], self.quiet[idx] + 1, 0)
+        self.quiet = quiet
+        need = np.zeros(len(ids), dtype=np.int64)
+        need[inverse] = self.frames_needed[self.body_of[idx]]
+        ready_count = np.full(len(ids), np.iinfo(np.int64).max)
+        np.minimum.at(ready_count, inverse, quiet[idx])
+        ready = ready_count >= need
+        if not ready.any():
+            return 0
+        self._hand_off(idx, inverse, ready, props, x)
+        self.released["internal_kinetic"] += float(props["internal_kinetic"][ready].sum())
+        self.released["elastic"] += float(e_el[ready].sum())
+        return int(ready.sum())
+
+    def _hand_off(self, idx, inverse, ready, props, x) -> None:
+        """Appends the fragments ``ready`` (of the eligible particles ``idx`` grouped by ``inverse``) to the rigid
+        fragments and poses their particles on their rigid motion."""
+        take = ready[inverse]
+        new_members = idx[take]
+        group = inverse[take]
+        order = np.argsort(group, kind="stable")
+        new_members, group = new_members[order], group[order]
+        kept = np.flatnonzero(ready)
+        renumber = np.full(len(ready), -1, dtype=np.int64)
+        renumber[kept] = np.arange(len(kept))
+        group = renumber[group]
+        counts = np.bincount(group, minlength=len(kept))
+        offsets, members, body_offset, inv_inertia, orientation, centre, velocity, angular = self._host_state()
+        start = int(offsets[-1])
+        centre_new = props["centre"][kept]
+        new = [
+            np.concatenate([offsets, start + np.cumsum(counts)]).astype(np.int32),
+            np.concatenate([members, new_members]).astype(np.int32),
+            np.concatenate([body_offset, x[new_members] - centre_new[group]]),
+            np.concatenate([inv_inertia, props["inv_inertia"][kept]]),
+            np.concatenate([orientation, np.tile([0.0, 0.0, 0.0, 1.0], (len(kept), 1))]),
+            np.concatenate([centre, centre_new]),
+            np.concatenate([velocity, props["velocity"][kept]]),
+            np.concatenate([angular, props["angular_velocity"][kept]]),
+        ]
+        self._set_state(*new)
+        s = self.solver
+        kh.pose(
+            member_fragment=self.member_fragment, members=self.members, body_offset=self.body_offset,
+            rest=s.model.rest_positions, orientation=self.orientation, centre=self.centre, velocity=self.velocity,
+            angular_velocity=self.angular_velocity, displacements=s.kin.u, velocities=s.kin.v,
+            count=self.member_count, device=s.device,
+        )  # fmt: skip
+        self.quiet[new_members] = 0
+        s.rebalance_ranges()
+
+    # -- checkpoints ------------------------------------------------------------------------------------------------
+    def checkpoint(self) -> dict:
+        names = ("offsets", "members", "body_offset", "inv_inertia", "orientation", "centre", "velocity", "angular")
+        out = {k: np.array(a, copy=True) for k, a in zip(names, self._host_state())}
+        out["quiet"] = np.array(self.quiet, copy=True)
+        out["released"] = np.array([self.released["internal_kinetic"], self.released["elastic"]])
+        return out
+
+    def restore(self, state: dict) -> None:
+        names = ("offsets", "members", "body_offset", "inv_inertia", "orientation", "centre", "velocity", "angular")
+        arrays = [np.asarray(state[k]) for k in names]
+        self._set_state(*arrays)
+        self.quiet = np.array(state["quiet"], dtype=np.int64, copy=True)
+        released = np.asarray(state["released"], dtype=np.float64)
+        self.released = {"internal_kinetic": float(released[0]), "elastic": float(released[1])}
+        self.solver.rebalance_ranges()
+
+
+def rigid_properties(x, v, mass, group, count: int) -> dict:
+    """Per group of points (``group`` [n] in 0..count-1) of positions x [m], velocities v [m/s] and masses [kg]:
+    mass, centre (of mass), velocity (of the centre of mass), angular momentum L about the centre, inertia tensor I
+    (points) and its pseudo-inverse, angular velocity w = I^+ L, kinetic energy and internal kinetic energy
+    K - 1/2 M v^2 - 1/2 w . L [J]. Vectorised (numpy), float64."""
+    m_tot = np.bincount(group, weights=mass, minlength=count)
+
+    def gsum(values):
+        values = values.reshape(len(group), -1)
+        return np.stack([np.bincount(group, weights=values[:, i], minlength=count) for i in range(values.shape[1])], 1)
+
+    centre = gsum(mass[:, None] * x) / m_tot[:, None]
+    velocity = gsum(mass[:, None] * v) / m_tot[:, None]
+    r = x - centre[group]
+    vr = v - velocity[group]
+    ang = gsum(mass[:, None] * np.cross(r, vr))
+    rr = gsum(mass[:, None, None] * (np.einsum("ni,nj->nij", r, r))).reshape(count, 3, 3)
+    inertia = np.trace(rr, axis1=1, axis2=2)[:, None, None] * np.eye(3) - rr
+    scale = np.maximum(np.abs(inertia).max(axis=(1, 2)), np.finfo(np.float64).tiny)
+    inv_inertia = np.linalg.pinv(inertia / scale[:, None, None], rcond=1e-9, hermitian=True) / scale[:, None, None]
+    omega = np.einsum("gij,gj->gi", inv_inertia, ang)
+    kinetic = 0.5 * np.bincount(group, weights=mass * np.einsum("ni,ni->n", v, v), minlength=count)
+    rigid = 0.5 * m_tot * np.einsum("gi,gi->g", velocity, velocity) + 0.5 * np.einsum("gi,gi->g", omega, ang)
+    return {
+        "mass": m_tot,
+        "centre": centre,
+        "velocity": velocity,
+        "angular_momentum": ang,
+        "inertia": inertia,
+        "inv_inertia": inv_inertia,
+        "angular_velocity": omega,
+        "kinetic": kinetic,
+        "internal_kinetic": kinetic - rigid,
+    }

@@ -1,0 +1,188 @@
+"""The rigid hand-off (pdsim/peridynamics/handoff.py): a quiet fragment of a breakable peridynamic body becomes a
+rigid body whose particles are collision proxies and whose bonds are no longer visited.
+
+Covered: linear and angular momentum through the hand-off and in free flight afterwards, the energy it drops (the
+fragment's internal kinetic and elastic energy, computed here independently), near the origin and 1 km away; the bond
+passes skip the fragments' particles (no bond force on them under a stretch that would give a large one); a scene in
+which the pieces of a notched block go rigid, fall and rest on the ground as rigid shapes; the setting on but nothing
+handed off is bit-identical to the setting off; a run with the hand-off stopped and resumed writes the same cache bit
+for bit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_resume_cache import _assert_same_cache, _interrupt, _run_reference
+
+import pdsim
+from pdsim.checkpoint import checkpoint_path
+from pdsim.peridynamics import SolverPeridynamics
+from pdsim.peridynamics.handoff import rigid_properties
+
+MATERIAL = pdsim.Material(density=2500.0, youngs_modulus=5.0e9, poisson_ratio=0.25, critical_stretch=2.0e-3)
+SPACING = 0.01
+
+
+def _notched_block(origin, handoff):
+    """A 8 x 4 x 4 particle block cut in two halves by a notch at x = 0 (both halves free)."""
+    o = np.asarray(origin, dtype=np.float64)
+    body = pdsim.PeridynamicBody(
+        pdsim.box((0.08, 0.04, 0.04), center=tuple(o)), MATERIAL, SPACING, name="block", rigid_handoff=handoff
+    )
+    body.add_notch(pdsim.BoxRegion(lo=tuple(o + np.array([-0.001, -1, -1])), hi=tuple(o + np.array([0.001, 1, 1]))))
+    return body
+
+
+def _angular_momentum_about_centre(s):
+    x, v, m = s.positions(), s.velocities(), s.masses()
+    c = (m[:, None] * x).sum(0) / m.sum()
+    return (m[:, None] * np.cross(x - c, v)).sum(0)
+
+
+@pytest.mark.parametrize("origin", [(0.0, 0.0, 0.0), (1000.0, -700.0, 300.0)], ids=["origin", "1km"])
+def test_handoff_keeps_momentum_and_drops_only_the_internal_energy(origin):
+    """Two deformed, vibrating, spinning halves handed off: linear momentum within 1e-6 and angular momentum within
+    1e-5 (relative, float32 state), the kinetic energy lost equals the internal kinetic energy computed here from the
+    particles (1e-6 relative), plus the elastic energy; then 200 free steps keep P, L and K (1e-5) and every
+    particle distance (1e-6 m)."""
+    s = SolverPeridynamics([_notched_block(origin, pdsim.RigidHandoff(strain=1.0, frames=1))], threads=1)
+    x = s.positions()
+    c = x.mean(axis=0)
+    rng = np.random.default_rng(4)
+    s.set_displacements(1.0e-5 * rng.standard_normal(x.shape))  # an elastic energy
+    x = s.positions()
+    v = np.array([1.0, 0.5, -0.3]) + np.cross([3.0, -2.0, 20.0], x - c) + 0.05 * rng.standard_normal(x.shape)
+    s.set_velocities(v)
+    v = s.velocities()
+    m = s.masses()
+    p0, l0, k0, e0 = s.linear_momentum(), s.angular_momentum(c), s.kinetic_energy(), s.strain_energy()
+    labels = s.fragment_ids()
+    group = np.unique(labels, return_inverse=True)[1]
+    ref = rigid_properties(x - c, v, m, group, 2)
+    # independent: the kinetic energy of the rigid motion with the same momentum and angular momentum per half
+    rigid_k = sum(
+        0.5 * m[group == g].sum() * ref["velocity"][g] @ ref["velocity"][g]
+        + 0.5 * ref["angular_momentum"][g] @ np.linalg.solve(ref["inertia"][g], ref["angular_momentum"][g])
+        for g in range(2)
+    )
+    assert s.handoff.update() == 2 and s.handoff.rigid_particles().all()
+    p1, l1, k1 = s.linear_momentum(), s.angular_momentum(c), s.kinetic_energy()
+    np.testing.assert_allclose(p1, p0, rtol=0, atol=1e-6 * np.linalg.norm(p0))
+    np.testing.assert_allclose(l1, l0, rtol=0, atol=1e-5 * np.linalg.norm(l0))
+    assert abs((k0 - k1) - (k0 - rigid_k)) < 1e-6 * k0
+    assert abs(s.handoff.released["internal_kinetic"] - (k0 - rigid_k)) < 1e-6 * k0
+    assert abs(s.handoff.released["elastic"] - e0) < 1e-6 * e0 and e0 > 0.0
+    assert 0.0 < k0 - k1 < 0.05 * k0  # the vibration given: about 1 % of the kinetic energy
+    d0 = np.linalg.norm(s.positions()[:, None] - s.positions()[None, labels == labels[0]], axis=2)[labels == labels[0]]
+    l_c = _angular_momentum_about_centre(s)
+    s.simulate(0.5 * s.stable_time_step(), 200)
+    np.testing.assert_allclose(s.linear_momentum(), p1, rtol=0, atol=1e-5 * np.linalg.norm(p1))
+    np.testing.assert_allclose(_angular_momentum_about_centre(s), l_c, rtol=0, atol=1e-5 * np.linalg.norm(l_c))
+    assert abs(s.kinetic_energy() - k1) < 1e-5 * k1
+    x2 = s.positions()
+    d2 = np.linalg.norm(x2[:, None] - x2[None, labels == labels[0]], axis=2)[labels == labels[0]]
+    assert np.abs(d2 - d0).max() < 1e-6
+    assert np.linalg.norm(x2.mean(0) - x.mean(0)) > 2.0e-4  # it flew (and turned: 200 steps of 1.3 us)
+
+
+def test_rigid_fragments_skip_their_bonds():
+    """After the hand-off the dilatation and force passes visit no bond of the fragments: a 1 % stretch of their
+    particles gives no force density and leaves their dilatation as it was, where the same stretch without the
+    hand-off gives a force density above 1e8 N/m^3; the bond rows visited drop to zero."""
+    stretched = {}
+    for on in (False, True):
+        s = SolverPeridynamics([_notched_block((0.0, 0.0, 0.0), pdsim.RigidHandoff(strain=1.0, frames=1))], threads=1)
+        if on:
+            assert s.handoff.live_bond_rows() == s.bond_count
+            assert s.handoff.update() == 2
+            assert s.handoff.live_bond_rows() == 0
+        theta = s.dilatation()
+        s.set_displacements(0.01 * (s.positions() - s.positions().mean(0)))
+        stretched[on] = (np.abs(s.force_density()).max(), np.abs(s.dilatation() - theta).max())
+    assert stretched[False][0] > 1e8 and stretched[False][1] > 1e-3
+    assert stretched[True] == (0.0, 0.0)
+
+
+def _pieces(frames=16, shift=(0.0, 0.0, 0.0)):
+    """The notched block (softened: E 50 MPa) thrown spinning at the ground from 8 cm: its halves go rigid in
+    flight (2 quiet frames), then land and come to rest."""
+    o = np.asarray(shift, dtype=np.float64)
+    scene = pdsim.Scene(fps=24, frames=frames, frame_time=5.0e-3, name="pieces")
+    soft = pdsim.Material(density=2500.0, youngs_modulus=5.0e7, poisson_ratio=0.25, critical_stretch=2.0e-3)
+    centre = o + np.array([0.0, 0.0, 0.1])
+    body = pdsim.PeridynamicBody(
+        pdsim.box((0.08, 0.04, 0.04), center=tuple(centre)), soft, SPACING, name="block",
+        rigid_handoff=pdsim.RigidHandoff(strain=1.0e-4, frames=2),
+    )  # fmt: skip
+    cut = np.array([0.001, 1.0, 1.0])
+    body.add_notch(pdsim.BoxRegion(lo=tuple(centre - cut), hi=tuple(centre + cut)))
+    body.set_initial_velocity(np.array([0.5, 0.0, -1.5]) + np.cross([0.0, 4.0, 0.0], body.rest_positions - centre))
+    scene.add_body(body)
+    scene.add_ground_plane(height=float(o[2]))
+    return scene
+
+
+def test_pieces_go_rigid_and_rest_on_the_ground(tmp_path):
+    """Both halves are rigid by the last frame (100 % of the particles); their particles still meet the ground
+    (none below -h/4) and each half keeps its shape (distances within 1e-6 m of the hand-off's)."""
+    seen = {}
+
+    def on_frame(frame, solvers):
+        s = solvers[0]
+        seen[frame] = (s.handoff.rigid_particles().copy(), s.positions().copy(), s.fragment_ids().copy())
+
+    _pieces().run(tmp_path / "p.usdc", device="cpu", progress=False, on_frame=on_frame)
+    rigid, x, labels = seen[max(seen)]
+    assert rigid.all()
+    first = min(f for f, r in seen.items() if r[0].all())
+    assert first < max(seen)
+    assert x[:, 2].min() > -0.25 * SPACING
+    x0 = seen[first][1]
+    for lab in np.unique(labels):
+        sel = labels == lab
+        d0 = np.linalg.norm(x0[sel][:, None] - x0[sel][None], axis=2)
+        d1 = np.linalg.norm(x[sel][:, None] - x[sel][None], axis=2)
+        assert np.abs(d1 - d0).max() < 1e-6
+
+
+def test_handoff_on_with_nothing_handed_off_is_bit_identical_to_off():
+    """The setting on changes nothing until a fragment is handed off (the skip test is the only change)."""
+    out = []
+    for handoff in (None, pdsim.RigidHandoff()):
+        s = SolverPeridynamics([_notched_block((0.0, 0.0, 0.0), handoff)], threads=1)
+        x = s.positions()
+        s.set_velocities(np.cross([0.0, 0.0, 30.0], x - x.mean(0)) + np.array([0.0, 0.0, 1.0]))
+        s.simulate(0.5 * s.stable_time_step(), 50)
+        out.append((s.kin.u.numpy().copy(), s.kin.v.numpy().copy()))
+    assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
+
+
+def test_resume_with_rigid_fragments_is_bit_identical(tmp_path):
+    """Stopped inside a frame after the halves went rigid, then resumed: the cache equals the uninterrupted run's."""
+    build = _pieces
+    reference = _run_reference(build, tmp_path)
+    out = tmp_path / "out.usdc"
+    _interrupt(build, out, 9, 2, checkpoint_interval_s=60.0)
+    build().run(out, device="cpu", progress=False, resume=True)
+    assert not checkpoint_path(out).exists()
+    _assert_same_cache(reference, out, 16)
+
+
+def test_one_rigid_half_is_bit_identical_on_one_and_three_threads():
+    """One half handed off (the other vibrates above the threshold): 100 steps on 1 and on 3 CPU threads (ranges
+    rebalanced on the bonds still visited) give the same state bit for bit."""
+    out = []
+    for threads in (1, 3):
+        s = SolverPeridynamics([_notched_block((0.0, 0.0, 0.0), pdsim.RigidHandoff(strain=5.0e-4, frames=1))])
+        s.threads = threads
+        x = s.positions()
+        rng = np.random.default_rng(2)
+        shake = np.where(x[:, :1] > 0.0, 1.0, 0.0) * rng.standard_normal(x.shape)
+        s.set_velocities(np.cross([0.0, 5.0, 30.0], x - x.mean(0)) + shake)
+        assert s.handoff.update() == 1
+        assert s.handoff.rigid_particles().sum() == len(x) // 2
+        assert s.threads == threads
+        s.simulate(0.5 * s.stable_time_step(), 100)
+        out.append((s.kin.u.numpy().copy(), s.kin.v.numpy().copy()))
+    assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
