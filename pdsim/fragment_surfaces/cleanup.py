@@ -510,21 +510,68 @@ def clean_complex(
         offset = np.bincount(patch, offset, p_count) / np.maximum(np.bincount(patch, minlength=p_count), 1)
         plane_eq = np.concatenate([normal, offset[:, None]], axis=1)
         plane_eq[np.asarray(crack_patch, dtype=bool)] = np.nan
+    flag = _needs_work(points, tri, spacing, short_edge, sliver_angle)
     for _ in range(_MAX_CLEAN_ROUNDS):
-        new, keep, collapsed = _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle, plane_eq)
-        t1, s1, p1 = new[keep], shell[keep], patch[keep]
+        # A round works on the triangles within two rings of the flagged ones (every triangle that holds a vertex of a
+        # flagged triangle or one of its neighbours): they hold every candidate's neighbourhood in every shell, so
+        # the round decides there as it would on the whole complex, and nothing outside them changes.
+        if not flag.any():
+            break
+        sub, active = _neighbourhood(tri, flag, len(points))
+        ts, ss, ps = tri[sub], shell[sub], patch[sub]
+        new, keep, collapsed = _collapse_round(points, ts, ss, ps, spacing, short_edge, sliver_angle, plane_eq)
+        t1, s1, p1 = new[keep], ss[keep], ps[keep]
         t0 = t1.copy()
         t1, flipped = _flip_round(points, t1, s1, p1, sliver_angle)
         if collapsed == 0 and flipped == 0:
             # vertex moves change no connectivity: the shells stay closed
             if _relax_round(points, t1, p1, plane_eq, sliver_angle, max_turn=RELAX_TURN, surface=surface) == 0:
                 break
-            tri, shell, patch = t1, s1, p1
+            flag[sub] = _needs_work(points, t1, spacing, short_edge, sliver_angle)
             continue
         # the shells this round changed must still be closed (a rare configuration the checks missed: stop here)
-        changed = np.concatenate([shell[~keep | (new != tri).any(axis=1)], s1[(t1 != t0).any(axis=1)]])
-        touched = np.isin(s1, np.unique(changed))
-        if not shells_closed(t1[touched], s1[touched], len(points)).all():
+        changed = np.concatenate([ss[~keep | (new != ts).any(axis=1)], s1[(t1 != t0).any(axis=1)]])
+        if not _closed_near(t1, s1, active, np.unique(changed), len(points)):
             break
-        tri, shell, patch = t1, s1, p1
+        whole = np.ones(len(tri), dtype=bool)
+        whole[sub[~keep]] = False
+        tri, flag = tri.copy(), flag.copy()
+        tri[sub[keep]] = t1
+        flag[sub[keep]] = _needs_work(points, t1, spacing, short_edge, sliver_angle)
+        tri, shell, patch, flag = tri[whole], shell[whole], patch[whole], flag[whole]
     return tri, shell, patch
+
+
+def _needs_work(points, tri, spacing, short_edge, sliver_angle) -> np.ndarray:
+    """Bool [f]: the triangle has a side shorter than ``short_edge`` spacings or an angle under ``sliver_angle``
+    [degrees] (a round of :func:`clean_complex` has to look at it)."""
+    t = points[tri]
+    side = np.linalg.norm(t[:, [1, 2, 0]] - t, axis=2)
+    return (side.min(axis=1) < short_edge * spacing) | (_min_angles(t) < sliver_angle)
+
+
+def _neighbourhood(tri, flag, vertex_count):
+    """The triangles a clean-up round works on: (ids [k] of the triangles holding a vertex within one ring of a
+    flagged triangle's vertex, ascending; bool [v] of those active vertices, whose every triangle is among the ids).
+    Every clean-up candidate (a side or corner of a flagged triangle) has its whole neighbourhood there."""
+    seed = np.zeros(vertex_count, dtype=bool)
+    seed[tri[flag]] = True
+    active = seed.copy()
+    active[tri[seed[tri].any(axis=1)]] = True
+    return np.flatnonzero(active[tri].any(axis=1)), active
+
+
+def _closed_near(tri, shell, active, shells, vertex_count) -> bool:
+    """Whether, in the shells ``shells`` (ids, ascending), every directed edge with an ``active`` end occurs once
+    among ``tri`` [f, 3] (with ``shell`` [f]) and its reverse once. ``tri`` must hold every triangle of those shells
+    that has an active vertex, so the counts are those of the whole shells (an incremental closedness check)."""
+    a = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
+    b = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
+    s = np.tile(shell, 3)
+    pos = np.minimum(np.searchsorted(shells, s), max(len(shells) - 1, 0))
+    sel = (active[a] | active[b]) & (shells[pos] == s) if len(shells) else np.zeros(len(a), dtype=bool)
+    a, b, s = a[sel], b[sel], s[sel]
+    key = (s * vertex_count + a) * vertex_count + b
+    rev = (s * vertex_count + b) * vertex_count + a
+    uk, counts = np.unique(key, return_counts=True)
+    return bool(np.all(counts == 1) and np.all(np.isin(rev, uk, assume_unique=False)))
