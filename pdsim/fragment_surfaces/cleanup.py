@@ -40,10 +40,11 @@ def _corner_angles(t: np.ndarray) -> np.ndarray:
     """Interior angles [degrees], float64 shape [f, 3], of triangles given by their corners [m] [f, 3, 3] (angle at
     corner i)."""
     out = np.empty(t.shape[:2], dtype=np.float64)
-    for i in range(3):
-        a = t[:, (i + 1) % 3] - t[:, i]
-        b = t[:, (i + 2) % 3] - t[:, i]
-        cos = np.einsum("ij,ij->i", a, b) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300)
+    side = [t[:, (i + 1) % 3] - t[:, i] for i in range(3)]  # side i runs from corner i to corner i + 1
+    length = [np.sqrt((e * e).sum(axis=1)) for e in side]
+    for i in range(3):  # corner i: between side i and the reverse of side i + 2
+        j = (i + 2) % 3
+        cos = -np.einsum("ij,ij->i", side[i], side[j]) / np.maximum(length[i] * length[j], 1e-300)
         out[:, i] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
     return out
 
@@ -103,13 +104,10 @@ def _independent_choice(rows, cols, prio, count, size) -> np.ndarray:
         live = open_[rows]
         best = np.full(size, np.inf)
         np.minimum.at(best, cols[live], prio[rows[live]])
-        win = open_.copy()
-        np.logical_and.at(win, rows, best[cols] == prio[rows])
+        win = open_ & (np.bincount(rows[best[cols] != prio[rows]], minlength=count) == 0)
         chosen |= win
         blocked[cols[win[rows]]] = True
-        hit = np.zeros(count, dtype=bool)
-        np.logical_or.at(hit, rows, blocked[cols])
-        open_ &= ~hit
+        open_ &= np.bincount(rows[blocked[cols]], minlength=count) == 0
     return chosen
 
 
@@ -571,7 +569,9 @@ def _closed_near(tri, shell, active, shells, vertex_count) -> bool:
     pos = np.minimum(np.searchsorted(shells, s), max(len(shells) - 1, 0))
     sel = (active[a] | active[b]) & (shells[pos] == s) if len(shells) else np.zeros(len(a), dtype=bool)
     a, b, s = a[sel], b[sel], s[sel]
-    key = (s * vertex_count + a) * vertex_count + b
+    key = np.sort((s * vertex_count + a) * vertex_count + b)
+    if np.any(key[1:] == key[:-1]):
+        return False
     rev = (s * vertex_count + b) * vertex_count + a
-    uk, counts = np.unique(key, return_counts=True)
-    return bool(np.all(counts == 1) and np.all(np.isin(rev, uk, assume_unique=False)))
+    pos = np.minimum(np.searchsorted(key, rev), max(len(key) - 1, 0))
+    return bool(np.all(key[pos] == rev)) if len(key) else True
