@@ -45,9 +45,7 @@ def test_local_rounds_match_whole_complex_rounds(monkeypatch):
     assert triangle_angles(points, t).min() > 5.0
     np.testing.assert_array_equal(t[s == 1], tri[shell == 1])
 
-    monkeypatch.setattr(
-        cleanup, "_neighbourhood", lambda tri, flag, n: (np.arange(len(tri)), np.ones(n, dtype=bool))
-    )
+    monkeypatch.setattr(cleanup, "_neighbourhood", lambda tri, flag, n: (np.arange(len(tri)), np.ones(n, dtype=bool)))
     seen.clear()
     whole = cleanup.clean_complex(points.copy(), tri, shell, patch, 1.0)
     assert max(seen) == 18
