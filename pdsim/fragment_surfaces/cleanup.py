@@ -183,8 +183,7 @@ def _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle
     common_nbrs = np.asarray(nbr[su].multiply(nbr[sd]).sum(axis=1)).ravel()
     shell_size = np.bincount(s_of, minlength=int(shell.max()) + 1)[shells_c]
     good = np.where(dst_in_shell, edge_in_shell & (common_nbrs == 2) & (shell_size > 6), True)
-    link_ok = np.ones(len(src), dtype=bool)
-    np.logical_and.at(link_ok, c_rep, good)
+    link_ok = np.bincount(c_rep[~good], minlength=len(src)) == 0
     src, dst = src[link_ok], dst[link_ok]
     if src.size == 0:
         return tri, np.ones(len(tri), dtype=bool), 0
@@ -268,8 +267,7 @@ def _flip_round(points, tri, shell, patch, sliver_angle):
     group_key = (np.minimum(a, b) * n_v + np.maximum(a, b)) * (int(patch.max()) + 1) + patch[sliver]
     _, group = np.unique(group_key, return_inverse=True)
     group = group.reshape(-1)
-    all_ok = np.ones(group.max() + 1, dtype=bool)
-    np.logical_and.at(all_ok, group, ok)
+    all_ok = np.bincount(group[~ok], minlength=group.max() + 1) == 0
     ok &= all_ok[group]
     cand = np.flatnonzero(ok)
     if cand.size == 0:
@@ -396,8 +394,7 @@ def _relax_round(
         ) * np.linalg.norm(n_new, axis=1)
         a_new = np.full(len(cand), np.inf)
         np.minimum.at(a_new, c_of, _min_angles(t_new))
-        turned = np.zeros(len(cand), dtype=bool)
-        np.logical_or.at(turned, c_of, ~cos_ok & (_min_angles(t_old) >= sliver_angle))
+        turned = np.bincount(c_of[~cos_ok & (_min_angles(t_old) >= sliver_angle)], minlength=len(cand)) > 0
         better = (a_new > old_min + 1e-6) & ~turned
         if surface is not None:
             better &= _on_input_planes(pos, own_patch, surface)
