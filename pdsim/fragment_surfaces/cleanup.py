@@ -478,7 +478,10 @@ def clean_complex(
     Collapses of one round have disjoint neighbourhoods (chosen shortest first), so they are checked and applied
     together, vectorised; the two sides of a crack share vertices and triangles, so both sides collapse alike. Each
     round also flips edges (:func:`_flip_round`); when neither collapses nor flips are left, the vertices of the
-    remaining slivers are moved (:func:`_relax_round`; ``points`` is changed in place) and the rounds go on.
+    remaining slivers are moved (:func:`_relax_round`; ``points`` is changed in place) and the rounds go on. Every
+    round works on the triangles within two rings of the flagged ones (a side under ``short_edge`` spacings or an
+    angle under ``sliver_angle``), where every candidate's neighbourhood lies, and checks closedness only on the edges
+    near them; the result is that of rounds over the whole complex.
 
     Args:
         points: vertex positions [m], float64 [v, 3].
