@@ -40,10 +40,11 @@ def _corner_angles(t: np.ndarray) -> np.ndarray:
     """Interior angles [degrees], float64 shape [f, 3], of triangles given by their corners [m] [f, 3, 3] (angle at
     corner i)."""
     out = np.empty(t.shape[:2], dtype=np.float64)
-    for i in range(3):
-        a = t[:, (i + 1) % 3] - t[:, i]
-        b = t[:, (i + 2) % 3] - t[:, i]
-        cos = np.einsum("ij,ij->i", a, b) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300)
+    side = [t[:, (i + 1) % 3] - t[:, i] for i in range(3)]  # side i runs from corner i to corner i + 1
+    length = [np.sqrt((e * e).sum(axis=1)) for e in side]
+    for i in range(3):  # corner i: between side i and the reverse of side i + 2
+        j = (i + 2) % 3
+        cos = -np.einsum("ij,ij->i", side[i], side[j]) / np.maximum(length[i] * length[j], 1e-300)
         out[:, i] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
     return out
 
@@ -103,13 +104,10 @@ def _independent_choice(rows, cols, prio, count, size) -> np.ndarray:
         live = open_[rows]
         best = np.full(size, np.inf)
         np.minimum.at(best, cols[live], prio[rows[live]])
-        win = open_.copy()
-        np.logical_and.at(win, rows, best[cols] == prio[rows])
+        win = open_ & (np.bincount(rows[best[cols] != prio[rows]], minlength=count) == 0)
         chosen |= win
         blocked[cols[win[rows]]] = True
-        hit = np.zeros(count, dtype=bool)
-        np.logical_or.at(hit, rows, blocked[cols])
-        open_ &= ~hit
+        open_ &= np.bincount(rows[blocked[cols]], minlength=count) == 0
     return chosen
 
 
@@ -185,8 +183,7 @@ def _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle
     common_nbrs = np.asarray(nbr[su].multiply(nbr[sd]).sum(axis=1)).ravel()
     shell_size = np.bincount(s_of, minlength=int(shell.max()) + 1)[shells_c]
     good = np.where(dst_in_shell, edge_in_shell & (common_nbrs == 2) & (shell_size > 6), True)
-    link_ok = np.ones(len(src), dtype=bool)
-    np.logical_and.at(link_ok, c_rep, good)
+    link_ok = np.bincount(c_rep[~good], minlength=len(src)) == 0
     src, dst = src[link_ok], dst[link_ok]
     if src.size == 0:
         return tri, np.ones(len(tri), dtype=bool), 0
@@ -270,8 +267,7 @@ def _flip_round(points, tri, shell, patch, sliver_angle):
     group_key = (np.minimum(a, b) * n_v + np.maximum(a, b)) * (int(patch.max()) + 1) + patch[sliver]
     _, group = np.unique(group_key, return_inverse=True)
     group = group.reshape(-1)
-    all_ok = np.ones(group.max() + 1, dtype=bool)
-    np.logical_and.at(all_ok, group, ok)
+    all_ok = np.bincount(group[~ok], minlength=group.max() + 1) == 0
     ok &= all_ok[group]
     cand = np.flatnonzero(ok)
     if cand.size == 0:
@@ -398,8 +394,7 @@ def _relax_round(
         ) * np.linalg.norm(n_new, axis=1)
         a_new = np.full(len(cand), np.inf)
         np.minimum.at(a_new, c_of, _min_angles(t_new))
-        turned = np.zeros(len(cand), dtype=bool)
-        np.logical_or.at(turned, c_of, ~cos_ok & (_min_angles(t_old) >= sliver_angle))
+        turned = np.bincount(c_of[~cos_ok & (_min_angles(t_old) >= sliver_angle)], minlength=len(cand)) > 0
         better = (a_new > old_min + 1e-6) & ~turned
         if surface is not None:
             better &= _on_input_planes(pos, own_patch, surface)
@@ -483,7 +478,10 @@ def clean_complex(
     Collapses of one round have disjoint neighbourhoods (chosen shortest first), so they are checked and applied
     together, vectorised; the two sides of a crack share vertices and triangles, so both sides collapse alike. Each
     round also flips edges (:func:`_flip_round`); when neither collapses nor flips are left, the vertices of the
-    remaining slivers are moved (:func:`_relax_round`; ``points`` is changed in place) and the rounds go on.
+    remaining slivers are moved (:func:`_relax_round`; ``points`` is changed in place) and the rounds go on. Every
+    round works on the triangles within two rings of the flagged ones (a side under ``short_edge`` spacings or an
+    angle under ``sliver_angle``), where every candidate's neighbourhood lies, and checks closedness only on the edges
+    near them; the result is that of rounds over the whole complex.
 
     Args:
         points: vertex positions [m], float64 [v, 3].
@@ -510,21 +508,70 @@ def clean_complex(
         offset = np.bincount(patch, offset, p_count) / np.maximum(np.bincount(patch, minlength=p_count), 1)
         plane_eq = np.concatenate([normal, offset[:, None]], axis=1)
         plane_eq[np.asarray(crack_patch, dtype=bool)] = np.nan
+    flag = _needs_work(points, tri, spacing, short_edge, sliver_angle)
     for _ in range(_MAX_CLEAN_ROUNDS):
-        new, keep, collapsed = _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle, plane_eq)
-        t1, s1, p1 = new[keep], shell[keep], patch[keep]
+        # A round works on the triangles within two rings of the flagged ones (every triangle that holds a vertex of a
+        # flagged triangle or one of its neighbours): they hold every candidate's neighbourhood in every shell, so
+        # the round decides there as it would on the whole complex, and nothing outside them changes.
+        if not flag.any():
+            break
+        sub, active = _neighbourhood(tri, flag, len(points))
+        ts, ss, ps = tri[sub], shell[sub], patch[sub]
+        new, keep, collapsed = _collapse_round(points, ts, ss, ps, spacing, short_edge, sliver_angle, plane_eq)
+        t1, s1, p1 = new[keep], ss[keep], ps[keep]
         t0 = t1.copy()
         t1, flipped = _flip_round(points, t1, s1, p1, sliver_angle)
         if collapsed == 0 and flipped == 0:
             # vertex moves change no connectivity: the shells stay closed
             if _relax_round(points, t1, p1, plane_eq, sliver_angle, max_turn=RELAX_TURN, surface=surface) == 0:
                 break
-            tri, shell, patch = t1, s1, p1
+            flag[sub] = _needs_work(points, t1, spacing, short_edge, sliver_angle)
             continue
         # the shells this round changed must still be closed (a rare configuration the checks missed: stop here)
-        changed = np.concatenate([shell[~keep | (new != tri).any(axis=1)], s1[(t1 != t0).any(axis=1)]])
-        touched = np.isin(s1, np.unique(changed))
-        if not shells_closed(t1[touched], s1[touched], len(points)).all():
+        changed = np.concatenate([ss[~keep | (new != ts).any(axis=1)], s1[(t1 != t0).any(axis=1)]])
+        if not _closed_near(t1, s1, active, np.unique(changed), len(points)):
             break
-        tri, shell, patch = t1, s1, p1
+        whole = np.ones(len(tri), dtype=bool)
+        whole[sub[~keep]] = False
+        tri, flag = tri.copy(), flag.copy()
+        tri[sub[keep]] = t1
+        flag[sub[keep]] = _needs_work(points, t1, spacing, short_edge, sliver_angle)
+        tri, shell, patch, flag = tri[whole], shell[whole], patch[whole], flag[whole]
     return tri, shell, patch
+
+
+def _needs_work(points, tri, spacing, short_edge, sliver_angle) -> np.ndarray:
+    """Bool [f]: the triangle has a side shorter than ``short_edge`` spacings or an angle under ``sliver_angle``
+    [degrees] (a round of :func:`clean_complex` has to look at it)."""
+    t = points[tri]
+    side = np.linalg.norm(t[:, [1, 2, 0]] - t, axis=2)
+    return (side.min(axis=1) < short_edge * spacing) | (_min_angles(t) < sliver_angle)
+
+
+def _neighbourhood(tri, flag, vertex_count):
+    """The triangles a clean-up round works on: (ids [k] of the triangles holding a vertex within one ring of a
+    flagged triangle's vertex, ascending; bool [v] of those active vertices, whose every triangle is among the ids).
+    Every clean-up candidate (a side or corner of a flagged triangle) has its whole neighbourhood there."""
+    seed = np.zeros(vertex_count, dtype=bool)
+    seed[tri[flag]] = True
+    active = seed.copy()
+    active[tri[seed[tri].any(axis=1)]] = True
+    return np.flatnonzero(active[tri].any(axis=1)), active
+
+
+def _closed_near(tri, shell, active, shells, vertex_count) -> bool:
+    """Whether, in the shells ``shells`` (ids, ascending), every directed edge with an ``active`` end occurs once
+    among ``tri`` [f, 3] (with ``shell`` [f]) and its reverse once. ``tri`` must hold every triangle of those shells
+    that has an active vertex, so the counts are those of the whole shells (an incremental closedness check)."""
+    a = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
+    b = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
+    s = np.tile(shell, 3)
+    pos = np.minimum(np.searchsorted(shells, s), max(len(shells) - 1, 0))
+    sel = (active[a] | active[b]) & (shells[pos] == s) if len(shells) else np.zeros(len(a), dtype=bool)
+    a, b, s = a[sel], b[sel], s[sel]
+    key = np.sort((s * vertex_count + a) * vertex_count + b)
+    if np.any(key[1:] == key[:-1]):
+        return False
+    rev = (s * vertex_count + b) * vertex_count + a
+    pos = np.minimum(np.searchsorted(key, rev), max(len(key) - 1, 0))
+    return bool(np.all(key[pos] == rev)) if len(key) else True
