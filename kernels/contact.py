@@ -346,8 +346,13 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
             cv_crit = 2.0 * wp.sqrt(cv * (mk * mj / (mk + mj)) / vol_k)
             vrel = vk - velocities[j]
             vn = wp.dot(vrel, n)
-            zeta = pair_damping_ratio(point_damping_ratio[k], point_damping_ratio[j], damping_ratio)
-            mu = pair_friction(point_friction[k], point_friction[j], friction)
+            # the materials' values act between bodies; within one body the scene's law stands (a material's low
+            # restitution, a strong dashpot, between compressed neighbours of a flowing body would tear it)
+            zeta = damping_ratio
+            mu = friction
+            if body_id[k] != body_id[j]:
+                zeta = pair_damping_ratio(point_damping_ratio[k], point_damping_ratio[j], damping_ratio)
+                mu = pair_friction(point_friction[k], point_friction[j], friction)
             fn = wp.max(cv * (R - r) - zeta * cv_crit * vn, 0.0)
             f += fn * n
             if mu > 0.0:

@@ -250,8 +250,8 @@ def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, lim
             # stopped at a step boundary inside the frame, ``done`` steps into it
             written = _checkpoint(run, frame - 1, first_substep + done, stop)
             raise RunInterrupted(exc.signal, checkpoint=written, last_frame=run.last_written) from None
-        except InstabilityError:
-            run.finish_frame()  # the frame before the divergence is still written
+        except BaseException:  # a divergence, an error, Ctrl-C: the frames simulated before it are still written
+            run.finish_frame()
             raise
         run.profile.move("simulate", "checks", _check_seconds(run.watchdogs) - checked)
         first_substep = 0
