@@ -15,17 +15,17 @@ the real breaking strains (1e-4 to 1e-3) would make every touch shatter. Each an
 uses and why; the real values are kept for slow-motion shots (``Scene(frame_time=...)`` of microseconds) and
 engineering checks.
 
-Break pattern. The brittle presets (glass, porcelain, ceramic, stone, concrete, plaster) carry, with
-``pattern=True`` (default), the settings meant to make them break into shards rather than dust at an artist's
-preview spacing; tests/test_preset_patterns.py records which drops and hits meet that (docs/fracture.md, "Presets at
-preview and final spacing"): a strength field with a material correlation length (``strength_weibull_modulus``, ``strength_correlation_length``: the weak spots are the
-material's, the same at every spacing), jittered particles (``sampling_jitter`` 0.5: no lattice planes for cracks
-to follow), debris damping (:data:`DEBRIS_DAMPING` per second of the animation values, a fixed rate so that it acts
-alike at every spacing) and the full compressive bonus capped at 1.5 s_c (:data:`SHARD_BONUS`,
-:data:`SHARD_BONUS_CAP`). ``pattern=False`` gives the plain material (uniform strength, lattice sampling, no debris
-damping, the compressive bonus :data:`COMPRESSIVE_BONUS`), whose breaking strain is exactly the calibrated one. The
-other presets have no pattern settings (wood splits by its grain; clay, steel and aluminium tear by plasticity;
-rubber never breaks), so ``pattern`` changes nothing for them.
+Break pattern. The brittle presets (glass, porcelain, ceramic, stone, concrete, plaster) carry, with ``pattern=True``
+(default), the settings meant to make them break into shards rather than dust at an artist's preview spacing;
+tests/test_preset_patterns.py records which drops and hits meet that (docs/fracture.md, "Presets at preview and final
+spacing"): a strength field with a material correlation length (``strength_weibull_modulus``,
+``strength_correlation_length``: the weak spots are the material's, the same at every spacing), jittered particles
+(``sampling_jitter`` 0.5: no lattice planes for cracks to follow), debris damping (:data:`DEBRIS_DAMPING` per second
+of the animation values, a fixed rate so that it acts alike at every spacing) and the full compressive bonus capped at
+1.5 s_c (:data:`SHARD_BONUS`, :data:`SHARD_BONUS_CAP`). ``pattern=False`` gives the plain material (uniform strength,
+lattice sampling, no debris damping, the compressive bonus :data:`COMPRESSIVE_BONUS`), whose breaking strain is
+exactly the calibrated one. The other presets have no pattern settings (wood splits by its grain; clay, steel and
+aluminium tear by plasticity; rubber never breaks), so ``pattern`` changes nothing for them.
 
 Contact. Every preset carries a ``contact_restitution`` and a ``contact_friction`` (:data:`CONTACT`), the values its
 contacts bring to a pair (combined with the other side's, pdsim/contact.py combine_restitution, combine_friction).
