@@ -4,9 +4,10 @@ memory and the cache's size, from counts and a calibration measured on this mach
 The counts are the pre-flight's (pdsim/preflight.py): per body its points, its bonds (peridynamics: the interior
 count per particle, an upper bound) or links (lattice), its elements (FEM), its steps per frame, and its render
 surface's vertices at rest (the input surface refined to edges of one spacing, as pdsim.fragment_surfaces builds it;
-an FEM body's boundary vertices; lattices write points only). The calibration (``cost_calibration.json`` beside this
-module, written by ``python tools/preflight_calibration.py --cost --write``) holds the machine, date, command and load
-average it was measured with and:
+an FEM body's boundary vertices; lattices write points only). A calibration per device kind
+(``cost_calibration_cpu.json``, ``cost_calibration_cuda.json`` beside this module, written by ``python
+tools/preflight_calibration.py --cost --device KIND --write`` on that kind of machine) holds the machine, date, command
+and load average it was measured with and:
 
 - ``step_seconds``: wall time of one step: a constant per step (the launches) of each method, and per estimated bond
   visit (elastic, with fracture, with plasticity) and per particle (peridynamics), per element (elastic, with
@@ -17,8 +18,8 @@ average it was measured with and:
 - ``cache_bytes``: cache bytes per frame, per point of each method and per surface vertex, plus a constant;
 - ``memory_bytes``: peak host memory per surface vertex (the render surfaces and their views).
 
-Only the CPU backend is calibrated: on CUDA the estimate is the CPU's and says so (``calibrated`` False). The implicit
-and static FEM solves have no step calibration: their time is left out (``seconds_per_frame`` None).
+A run on a device kind with no calibration gets the CPU's figures and says so (``calibrated`` False). The implicit and
+static FEM solves have no step calibration: their time is left out (``seconds_per_frame`` None).
 """
 
 from __future__ import annotations
@@ -32,13 +33,38 @@ import numpy as np
 from .fem.model import _mean_edge_length
 from .fragment_surfaces.booleans import refine_surface
 
-CALIBRATION_FILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "cost_calibration.json")
+DEVICE_KINDS = ("cpu", "cuda")  # the device kinds a calibration can be measured on
 HOUR = 3600.0  # a run estimated to take longer than this [s] is warned about
 PD_FEATURES = ("elastic", "fracture", "plastic")  # the peridynamic step's calibrated variants
 FEM_FEATURES = ("elastic", "fracture")  # the explicit FEM step's calibrated variants
 
-with open(CALIBRATION_FILE, encoding="utf-8") as _f:
-    CALIBRATION = json.load(_f)
+
+def device_kind(device) -> str:
+    """'cpu' or 'cuda' of a Warp device name such as 'cuda:0'."""
+    return str(device).split(":")[0]
+
+
+def calibration_file(kind: str) -> str:
+    """The calibration file of device kind ``kind`` ('cpu' or 'cuda') beside this module."""
+    return os.path.join(os.path.dirname(os.path.abspath(__file__)), f"cost_calibration_{kind}.json")
+
+
+def _load_calibrations() -> dict:
+    out = {}
+    for kind in DEVICE_KINDS:
+        if os.path.exists(calibration_file(kind)):
+            with open(calibration_file(kind), encoding="utf-8") as f:
+                out[kind] = json.load(f)
+    return out
+
+
+CALIBRATIONS = _load_calibrations()  # device kind -> calibration, for the kinds measured
+CALIBRATION = CALIBRATIONS["cpu"]  # the CPU's: the figures given on a kind with none of its own
+
+
+def calibration_for(device) -> dict:
+    """The calibration of ``device``'s kind, or the CPU's where that kind has none."""
+    return CALIBRATIONS.get(device_kind(device), CALIBRATION)
 
 
 def _method(body) -> str:
@@ -118,13 +144,16 @@ def step_seconds(counts: dict, calibration: dict = CALIBRATION) -> float:
 
 
 def estimate_cost(bodies: list[dict], *, substeps: int, frames: int, device: str,
-                  calibration: dict = CALIBRATION) -> dict:  # fmt: skip
+                  calibration: dict | None = None) -> dict:  # fmt: skip
     """The cost of a run of ``frames`` frames of ``substeps`` steps of bodies with counts ``bodies`` (body_counts).
 
     Returns plain JSON values: seconds_per_frame, build_seconds and total_seconds [s] (None where a body has no step
     calibration), surface_vertices (at rest), surface_bytes (host memory of the render surfaces [B]), cache_bytes
     (the cache, frames 0..frames [B]), calibrated (False off the calibration's device: the CPU figures are given),
-    device, and the calibration's machine, date and command."""
+    device, and the calibration's machine, date and command. ``calibration``: None takes ``device``'s
+    (:func:`calibration_for`)."""
+    if calibration is None:
+        calibration = calibration_for(device)
     fs, bs, cb = calibration["frame_seconds"], calibration["build_seconds"], calibration["cache_bytes"]
     vertices = float(sum(b["surface_vertices"] for b in bodies))
     step = 0.0
@@ -137,7 +166,7 @@ def estimate_cost(bodies: list[dict], *, substeps: int, frames: int, device: str
     build = bs["constant"] + sum(points.values()) * bs["point"]
     build += sum(b["bonds"] for b in bodies) * bs["bond"] + sum(b["elements"] for b in bodies) * bs["element"]
     cache_frame = cb["frame"] + vertices * cb["surface_vertex"] + sum(points[m] * cb["point"][m] for m in points)
-    on_device = str(device).split(":")[0] == calibration["device"]
+    on_device = device_kind(device) == calibration["device"]
     return {
         "seconds_per_frame": per_frame if timed else None,
         "build_seconds": build if timed else None,

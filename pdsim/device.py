@@ -20,3 +20,11 @@ def resolve_device(name: str | None) -> str | None:
     if wp.get_cuda_device_count() == 0:
         raise ParameterError("device", "cuda", "'cpu' on this machine (no CUDA device found)")
     return "cuda"
+
+
+def wait_for(devices) -> None:
+    """Waits until the work launched on each CUDA device of ``devices`` (Warp devices or their names) is done; the CPU
+    backend's launches are synchronous, so CPU devices are skipped."""
+    for device in {str(d) for d in devices}:
+        if wp.get_device(device).is_cuda:
+            wp.synchronize_device(device)

@@ -567,7 +567,7 @@ def _warn_time(scene, report: PreflightReport, frames: int) -> None:
     field_name, value = _knob(big)
     power = 3 if _method(big) == "lattice" else 4  # points, and steps per frame but for the lattice's fixed count
     gpu = "" if str(e["device"]).startswith("cuda") else ", or a GPU (--device cuda)"
-    basis = "" if e["calibrated"] else " from the CPU's calibration (none for CUDA yet)"
+    basis = "" if e["calibrated"] else f" from the CPU's calibration (none for {e['device']} yet)"
     msg = (
         f"this run may take about {format_seconds(total)}{basis}: {frames} frames of about "
         f"{format_seconds(e['seconds_per_frame'])} ({report.points:,} points, {report.substeps} steps per frame); a "

@@ -36,6 +36,7 @@ from .checkpoint import (
 from .checks import check_frames, check_range, check_time_step, format_bytes
 from .colliders import collider_names
 from .contact import MethodContact
+from .device import wait_for
 from .divergence import attach_watchdogs, schedule_watchdogs
 from .errors import FeatureNotAvailableError, InstabilityError, OutputWriteError, ParameterError, PdsimError
 from .frame_worker import SurfaceWorker
@@ -243,6 +244,7 @@ def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, lim
                 advance_checked(
                     run.scene, run.solvers, run.steps.dt, run.steps.substeps, coupling, limit, first=first_substep
                 )
+                wait_for(_solver_devices(run.solvers))  # the frame's steps timed here, not at the views' first read
         except RunInterrupted as exc:
             done = getattr(exc, "in_frame", None)
             if done is None:
@@ -269,6 +271,11 @@ def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, lim
             if stopping or (stop is not None and stop.requested):  # asked during the checkpoint: it is the last
                 raise RunInterrupted(stop.signal, checkpoint=written, last_frame=run.last_written)
     run.finish_frame()
+
+
+def _solver_devices(solvers) -> list:
+    """The Warp devices the solvers run on."""
+    return [s.kin.device if hasattr(s, "kin") else s.device for s in solvers]
 
 
 def _check_seconds(watchdogs) -> float:
@@ -548,7 +555,7 @@ def frame_graphs(solvers, graph_capture):
     first = solvers[0]
     cached = getattr(first, "_frame_graphs", None)
     if cached is None or len(cached[0]) != len(solvers) or any(a is not b for a, b in zip(cached[0], solvers)):
-        device = first.kin.device if hasattr(first, "kin") else first.device
+        device = _solver_devices([first])[0]
         cached = (list(solvers), FrameGraphs(device, graph_capture))
         first._frame_graphs = cached
     return cached[1]

@@ -1,16 +1,19 @@
 #!/usr/bin/env bash
-# The GPU checks of pdsim, in one script for a borrowed GPU machine (Python 3.12 with numpy and scipy, no registry):
-# installs the wheels packed by tools/gpu_wheels.sh and pdsim from this tree, then, each stage under a time limit so
-# that the whole script ends within SUITE_BUDGET_S (default 330 s):
+# The GPU checks of pdsim, in one script for a borrowed GPU machine (Python 3.12 with numpy, scipy, tqdm and pytest,
+# no registry): unpacks the site folder packed by tools/gpu_wheels.sh, installs pdsim from this tree beside it, then
+# runs each stage under a time limit so that the whole script ends within SUITE_BUDGET_S (default 480 s):
 #
-#   1. the CUDA tests of tests/test_gpu_path.py: CPU/CUDA agreement for peridynamics, FEM and lattice, a captured
-#      CUDA graph replayed against frames launched step by step, the device fragment labeller on CUDA;
-#   2. the peridynamic throughput of an elastic block of N_PD^3 particles (default 100: 1e6), step by step and as a
-#      graph (tools/bench_gpu.py pd);
-#   3. scenes/four_walls.py at spacing 0.0025 m for WALLS_FRAMES frames, timed (tools/bench_gpu.py four-walls).
+#   1. calibration: the pre-flight's cost constants measured on the GPU
+#      (tools/preflight_calibration.py --cost --device cuda --write --out $OUT/cost_calibration_cuda.json);
+#   2. compare: the pre-flight's estimates against gallery scenes run on the GPU at their preview settings
+#      (tools/preflight_calibration.py --compare --device cuda);
+#   3. default_scene: `pdsim run --device cuda --profile` (the run report beside the log);
+#   4. tests: the CUDA tests of tests/test_gpu_path.py (CPU/CUDA agreement for peridynamics, FEM and lattice, a
+#      captured CUDA graph against frames launched step by step, the device fragment labeller on CUDA);
+#   5. pd_throughput: the peridynamic throughput of an elastic block of N_PD^3 particles (tools/bench_gpu.py pd).
 #
-# Results go to $OUT (default ./gpu_out): gpu_suite.json (each stage's exit status and seconds, the device), tests.log
-# and tests.xml, pd_throughput.json, four_walls.json, and each stage's log.
+# Results go to $OUT (default ./gpu_out), at most 8 files: gpu_suite.json (each stage's exit status and seconds, the
+# device), cost_calibration_cuda.json, and each stage's log (the default scene's log ends with its run report).
 #
 #   bash tools/gpu_suite.sh stage    # a command that carries some of the parts: keep them for the next command
 #   bash tools/gpu_suite.sh          # the command that carries the last part: reassemble, install, run
@@ -24,12 +27,12 @@ OUT="${OUT:-$ROOT/gpu_out}"
 PYTHON="${PYTHON:-python3}"
 WHEELS="${WHEELS:-$ROOT/.gpu_wheels}"
 STAGE="${STAGE:-$HOME/.pdsim_gpu_wheels}"
-SUITE_BUDGET_S="${SUITE_BUDGET_S:-330}"
+SUITE_BUDGET_S="${SUITE_BUDGET_S:-480}"
 N_PD="${N_PD:-100}"
 PD_FRAMES="${PD_FRAMES:-3}"
 PD_SUBSTEPS="${PD_SUBSTEPS:-20}"
-WALLS_SPACING="${WALLS_SPACING:-0.0025}"
-WALLS_FRAMES="${WALLS_FRAMES:-3}"
+REPEATS="${REPEATS:-2}"
+SITE="${SITE:-/tmp/pdsim_gpu_site}"
 START=$(date +%s)
 mkdir -p "$OUT" "$STAGE"
 
@@ -40,7 +43,7 @@ stage_parts() {
     if [ -f "$WHEELS/manifest.sha256" ]; then
         cp "$WHEELS/manifest.sha256" "$STAGE/"
     fi
-    for part in "$WHEELS"/part[0-9][0-9]/wheels.tar.[0-9][0-9]; do
+    for part in "$WHEELS"/part[0-9][0-9]/site.tar.xz.[0-9][0-9]; do
         [ -f "$part" ] || continue
         cp "$part" "$STAGE/"
     done
@@ -66,17 +69,17 @@ stage_parts() {
 }
 
 assemble() {
-    local tar_sum
-    tar_sum=$(grep -v '^#' "$STAGE/manifest.sha256" | awk '$2 == "wheels.tar" {print $1}')
-    cat "$STAGE"/wheels.tar.[0-9][0-9] > "$STAGE/wheels.tar"
-    if [ "$(sha256sum "$STAGE/wheels.tar" | cut -d' ' -f1)" != "$tar_sum" ]; then
-        log "wheels.tar does not match its manifest sum"
+    local sum
+    sum=$(grep -v '^#' "$STAGE/manifest.sha256" | awk '$2 == "site.tar.xz" {print $1}')
+    cat "$STAGE"/site.tar.xz.[0-9][0-9] > "$STAGE/site.tar.xz"
+    if [ "$(sha256sum "$STAGE/site.tar.xz" | cut -d' ' -f1)" != "$sum" ]; then
+        log "site.tar.xz does not match its manifest sum"
         return 1
     fi
-    rm -rf "$STAGE/wheels" && mkdir -p "$STAGE/wheels"
-    tar -xf "$STAGE/wheels.tar" -C "$STAGE/wheels"
-    rm -f "$STAGE/wheels.tar"
-    log "wheels: $(tr '\n' ' ' < "$STAGE/wheels/wheels.txt")"
+    rm -rf "$SITE" && mkdir -p "$SITE"
+    tar -xJf "$STAGE/site.tar.xz" -C "$SITE"
+    rm -f "$STAGE/site.tar.xz"
+    log "site: $(tr '\n' ' ' < "$SITE/wheels.txt")"
 }
 
 case "$MODE" in
@@ -104,28 +107,20 @@ assemble || exit 4
 
 # -- install ---------------------------------------------------------------------------------------------------------
 export PIP_DISABLE_PIP_VERSION_CHECK=1 PYTHONUNBUFFERED=1
-# a virtual environment over the system's numpy and scipy; where the interpreter has no venv module, the system
-# interpreter itself (the machine is given back afterwards), said in the log
-VENV="$HOME/.pdsim_gpu_venv"
-PIP_EXTRA=()
-if [ -x "$VENV/bin/python" ] || "$PYTHON" -m venv --system-site-packages "$VENV" > "$OUT/install.log" 2>&1; then
-    PY="$VENV/bin/python"
-else
-    log "no venv module: installing into $PYTHON's own site-packages"
-    PY="$PYTHON"
-    PIP_EXTRA=(--break-system-packages)
-fi
-(cd "$STAGE/wheels" && "$PY" -m pip install --quiet --no-index --no-deps "${PIP_EXTRA[@]}" ./*.whl) \
-    >> "$OUT/install.log" 2>&1 || {
-    log "installing the wheels failed (install.log)"
-    exit 5
-}
-"$PY" -m pip install --quiet --no-index --no-deps --no-build-isolation "${PIP_EXTRA[@]}" . \
-    >> "$OUT/install.log" 2>&1 || {
+PY="$PYTHON"
+"$PY" -m pip install --quiet --no-index --no-deps --no-build-isolation --target "$SITE/pdsim_tree" . \
+    > "$OUT/install.log" 2>&1 || {
     log "installing pdsim failed (install.log)"
     exit 5
 }
-log "installed"
+export PYTHONPATH="$SITE/pdsim_tree:$SITE"
+export PATH="$SITE/pdsim_tree/bin:$PATH"
+"$PY" -c "import warp, pdsim, pxr; warp.init(); print('warp', warp.__version__, 'cuda devices', warp.get_cuda_device_count())" \
+    >> "$OUT/install.log" 2>&1 || {
+    log "pdsim does not import (install.log)"
+    exit 5
+}
+log "installed: $(tail -1 "$OUT/install.log")"
 
 # -- stages ----------------------------------------------------------------------------------------------------------
 STAGES_JSON=""
@@ -149,12 +144,14 @@ run_stage() { # name, limit [s], command...
 }
 
 export WARP_CACHE_PATH="${WARP_CACHE_PATH:-$HOME/.cache/pdsim_warp}"
-run_stage tests 150 "$PY" -m pytest -q -rs -p no:cacheprovider tests/test_gpu_path.py -k "cuda" \
-    --junitxml="$OUT/tests.xml"
-run_stage pd_throughput 110 "$PY" tools/bench_gpu.py pd --n "$N_PD" --frames "$PD_FRAMES" --substeps "$PD_SUBSTEPS" \
-    --device cuda --json-out "$OUT/pd_throughput.json"
-run_stage four_walls 100 "$PY" tools/bench_gpu.py four-walls --spacing "$WALLS_SPACING" --frames "$WALLS_FRAMES" \
-    --device cuda --json-out "$OUT/four_walls.json"
+run_stage calibration 230 "$PY" tools/preflight_calibration.py --cost --device cuda --repeats "$REPEATS" --write \
+    --out "$OUT/cost_calibration_cuda.json"
+run_stage compare 90 "$PY" tools/preflight_calibration.py --compare --device cuda
+run_stage default_scene 45 bash -c "mkdir -p /tmp/pdsim_default && \"$PY\" -m pdsim.cli run --device cuda --profile \
+    --out /tmp/pdsim_default/default.usdc && cat /tmp/pdsim_default/default.report.json"
+run_stage tests 80 "$PY" -m pytest -q -rs -p no:cacheprovider tests/test_gpu_path.py -k "cuda"
+run_stage pd_throughput 40 "$PY" tools/bench_gpu.py pd --n "$N_PD" --frames "$PD_FRAMES" --substeps "$PD_SUBSTEPS" \
+    --device cuda
 
 DEVICE=$(nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader 2>/dev/null | head -1)
 WARP=$("$PY" -c "import warp; print(warp.__version__)" 2>/dev/null)

@@ -12,9 +12,9 @@ fracture and plasticity); FEM about 500 B per element with its vertices; Silling
 c_p at horizon factors 1.5 / 3.015 / 6 (about 0.3 m h / c_p); fill_solid 60 to 65 B per lattice point; caches 55 to
 85 B per point and frame.
 
-    python tools/preflight_calibration.py --cost [--write]   # the cost estimates' constants (pdsim/cost.py)
-    python tools/preflight_calibration.py --compare [SCENE ...]   # the estimates against gallery runs
-    python tools/preflight_calibration.py --table   # the calibration as a markdown table
+    python tools/preflight_calibration.py --cost [--device cuda] [--write]   # the cost estimates' constants
+    python tools/preflight_calibration.py --compare [SCENE ...] [--device cuda]   # the estimates against gallery runs
+    python tools/preflight_calibration.py --table [--device cuda]   # a calibration as a markdown table
 
 ``--cost`` runs small blocks of each method (peridynamics elastic, with fracture, with plasticity; explicit FEM
 elastic and with fracture; a lattice) for a few frames each with the run's profile (pdsim/profile.py), three times
@@ -23,9 +23,11 @@ least squares, against the pre-flight's own counts (pdsim.cost.body_counts): the
 estimated bond visit and per particle, per element and vertex, per lattice point and link; the per-frame time outside
 the steps (views, render surfaces, writer) per point of each method and per surface vertex; the build time; cache
 bytes per frame; and, in a child process, the host memory of the render surfaces per surface vertex (the peak of
-numpy's traced allocations while the first views with their surfaces are built). ``--write`` stores them in
-pdsim/cost_calibration.json with the machine, date, command and load average; the worst ratio of each fit is printed.
-Rerun it (and ``python tools/errors_catalogue.py``, whose disk message quotes an estimate) on a quiet machine.
+numpy's traced allocations while the first views with their surfaces are built). ``--device cuda`` runs the blocks on
+the GPU, with larger blocks added (on a GPU the small ones only time the launches). ``--write`` stores them in the
+device kind's file, pdsim/cost_calibration_cpu.json or pdsim/cost_calibration_cuda.json (``--out PATH``: elsewhere),
+with the machine, date, command and load average; the worst ratio of each fit is printed. Rerun it (and ``python
+tools/errors_catalogue.py``, whose disk message quotes an estimate) on a quiet machine.
 """
 
 from __future__ import annotations
@@ -201,14 +203,29 @@ COST_RUNS = [
 METHODS = ("peridynamics", "fem", "lattice")
 
 
-def measure_run(method: str, size: int, variant) -> dict:
-    """One profiled run: the pre-flight's counts and estimate, the profile's phases, the cache's size [B]."""
+# added on a GPU, where the small blocks above are bound by the launches: blocks of up to 216,000 particles (26 M
+# bonds) and 384,000 elements
+CUDA_RUNS = [
+    ("pd", 40, (3.015, "elastic")),
+    ("pd", 60, (3.015, "elastic")),
+    ("pd", 40, (3.015, "fracture")),
+    ("pd", 40, (3.015, "plastic")),
+    ("fem", 30, None),
+    ("fem", 40, None),
+    ("fem", 30, "fracture"),
+    ("lattice", 60, 40),
+]
+
+
+def measure_run(method: str, size: int, variant, device: str = "cpu") -> dict:
+    """One profiled run on ``device``: the pre-flight's counts and estimate, the profile's phases, the cache's size
+    [B]."""
     from pdsim.preflight import _bonds_per_particle
 
     scene = cost_scene(method, size, variant)
     counts = [pdsim.cost.body_counts(b, _bonds_per_particle) for b in scene.bodies]
     with tempfile.TemporaryDirectory() as tmp:
-        report = scene.run(Path(tmp) / "c.usdc", device="cpu", progress=False, checkpoint_interval_s=None)
+        report = scene.run(Path(tmp) / "c.usdc", device=device, progress=False, checkpoint_interval_s=None)
         size_bytes = sum(p.stat().st_size for p in Path(tmp).rglob("*") if p.is_file())
     sec = report.profile["seconds"]
     return {
@@ -227,9 +244,9 @@ def measure_run(method: str, size: int, variant) -> dict:
 REPEATS = 3  # runs per configuration: the least time of each part is kept (the others' load only adds time)
 
 
-def best_of(repeats: int, config) -> dict:
+def best_of(repeats: int, config, device: str = "cpu") -> dict:
     """measure_run ``repeats`` times: the least step, frame and build times."""
-    runs = [measure_run(*config) for _ in range(repeats)]
+    runs = [measure_run(*config, device=device) for _ in range(repeats)]
     best = dict(runs[0])
     for k in ("step_seconds", "frame_seconds", "build_seconds"):
         best[k] = min(r[k] for r in runs)
@@ -250,12 +267,20 @@ def _nnls(rows, y, names):
     return dict(zip(names, (float(v) for v in x)))
 
 
-def cost_calibration() -> dict:
-    """Runs COST_RUNS (after a warm-up run of each method) and fits the constants of pdsim/cost.py."""
+def cost_calibration(device: str = "cpu", repeats: int = REPEATS) -> dict:
+    """Runs COST_RUNS (and CUDA_RUNS on a GPU) on ``device`` after a warm-up run of each method, and fits the
+    constants of pdsim/cost.py."""
     wp.config.quiet = True
+    kind = pdsim.cost.device_kind(device)
     for method in ("pd", "fem", "lattice"):
-        measure_run(method, 6, {"pd": (3.015, "plastic"), "fem": None, "lattice": 2}[method])  # kernels loaded
-    runs = [best_of(REPEATS, r) for r in COST_RUNS]
+        for variant in {"pd": [(3.015, "plastic"), (3.015, "fracture"), (3.015, "elastic")], "fem": [None, "fracture"],
+                        "lattice": [2]}[method]:  # fmt: skip
+            measure_run(method, 6, variant, device=device)  # kernels loaded (and, on CUDA, compiled)
+    configs = COST_RUNS + (CUDA_RUNS if kind == "cuda" else [])
+    runs = []
+    for r in configs:
+        runs.append(best_of(repeats, r, device))
+        print(f"  measured {runs[-1]['run']}", flush=True)
     for r in runs:
         c = r["counts"][0]
         print(f"{r['run']}: {c['points']} points, {c['bonds']:.3g} bonds, {c['elements']} elements, "
@@ -300,12 +325,13 @@ def cost_calibration() -> dict:
     per_vertex = surf["bytes"] / surf["estimated"]
     print(f"render surfaces: {per_vertex:.0f} B of host memory per surface vertex ({surf['vertices']} vertices "
           f"written, {surf['estimated']:.0f} counted by the pre-flight)")  # fmt: skip
+    on = "the CPU" if kind == "cpu" else wp.get_device(device).name
     return {
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.processor() or platform.system()}, "
-        f"Warp {wp.config.version} on the CPU",
+        f"Warp {wp.config.version} on {on}",
         "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-        "command": "python tools/preflight_calibration.py --cost --write",
-        "device": "cpu",
+        "command": f"python tools/preflight_calibration.py --cost --device {kind} --write",
+        "device": kind,
         "load_average": [round(x, 2) for x in os.getloadavg()],
         "step_seconds": step,
         "frame_seconds": {
@@ -333,10 +359,10 @@ def cost_calibration() -> dict:
 COMPARE_SCENES = ("cantilever", "fem_slab_crack", "lattice_3d_tear", "glass_pane")
 
 
-def compare(names) -> None:
-    """Runs each gallery scene at its PREVIEW settings (all its preview frames) and prints a markdown table of the
-    pre-flight's estimates against the run: median wall time from one frame's end to the next, the run's wall time,
-    the cache's size."""
+def compare(names, device: str = "cpu") -> None:
+    """Runs each gallery scene at its PREVIEW settings (all its preview frames) on ``device`` and prints a markdown
+    table of the pre-flight's estimates against the run: median wall time from one frame's end to the next, the run's
+    wall time, the cache's size."""
     import importlib.util
     import time
 
@@ -359,7 +385,7 @@ def compare(names) -> None:
 
         with tempfile.TemporaryDirectory() as tmp:
             out = Path(tmp) / f"{name}.usdc"
-            report = scene.run(out, device="cpu", progress=False, checkpoint_interval_s=None, on_frame=stamp)
+            report = scene.run(out, device=device, progress=False, checkpoint_interval_s=None, on_frame=stamp)
             size = out.stat().st_size
         e = report.estimate
         per_frame = float(np.median(np.diff(stamps)))
@@ -372,7 +398,7 @@ def compare(names) -> None:
 
 
 def calibration_table(d: dict) -> str:
-    """The calibration ``d`` (pdsim/cost_calibration.json) as a markdown table (docs/benchmarks.md)."""
+    """The calibration ``d`` (pdsim/cost_calibration_*.json) as a markdown table (docs/benchmarks.md)."""
     s, f, c, b = d["step_seconds"], d["frame_seconds"], d["cache_bytes"], d["build_seconds"]
     p, cp = f["point"], c["point"]
     rows = [
@@ -405,25 +431,30 @@ def calibration_table(d: dict) -> str:
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cost", action="store_true", help="measure the cost estimates' constants (pdsim/cost.py)")
-    parser.add_argument("--write", action="store_true", help="with --cost: write pdsim/cost_calibration.json")
+    parser.add_argument("--write", action="store_true",
+                        help="with --cost: write the device kind's pdsim/cost_calibration_KIND.json")  # fmt: skip
+    parser.add_argument("--out", type=Path, help="with --cost --write: write the calibration here instead")
+    parser.add_argument("--device", default="cpu", help="the Warp device to measure on (default cpu; cuda)")
+    parser.add_argument("--repeats", type=int, default=REPEATS, help=f"runs per configuration (default {REPEATS})")
     parser.add_argument("--compare", nargs="*", metavar="SCENE",
                         help=f"estimates against runs of gallery scenes at their preview settings (default: "
                         f"{' '.join(COMPARE_SCENES)})")  # fmt: skip
-    parser.add_argument("--table", action="store_true", help="print pdsim/cost_calibration.json as a markdown table")
+    parser.add_argument("--table", action="store_true",
+                        help="print the device kind's calibration as a markdown table")  # fmt: skip
     args = parser.parse_args(argv)
     if args.table:
-        print(calibration_table(pdsim.cost.CALIBRATION))
+        print(calibration_table(pdsim.cost.calibration_for(args.device)))
         return
     if args.compare is not None:
-        compare(args.compare or COMPARE_SCENES)
+        compare(args.compare or COMPARE_SCENES, args.device)
         return
     if not args.cost:
         memory_calibration()
         return
-    calibration = cost_calibration()
+    calibration = cost_calibration(args.device, args.repeats)
     text = json.dumps(calibration, indent=1)
     if args.write:
-        path = Path(pdsim.cost.CALIBRATION_FILE)
+        path = args.out or Path(pdsim.cost.calibration_file(calibration["device"]))
         path.write_text(text + "\n", encoding="utf-8")
         print(f"wrote {path}")
     else:
