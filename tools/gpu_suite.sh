@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU checks of pdsim, in one script for a borrowed GPU machine (Python 3.12 with numpy, scipy, tqdm and pytest,
-# no registry): unpacks the site folder packed by tools/gpu_wheels.sh, installs pdsim from this tree beside it, then
+# no registry): unpacks the site folder packed by tools/gpu_wheels.sh, puts this tree on the path beside it, then
 # runs each stage under a time limit so that the whole script ends within SUITE_BUDGET_S (default 480 s):
 #
 #   1. calibration: the pre-flight's cost constants measured on the GPU
@@ -108,13 +108,9 @@ assemble || exit 4
 # -- install ---------------------------------------------------------------------------------------------------------
 export PIP_DISABLE_PIP_VERSION_CHECK=1 PYTHONUNBUFFERED=1
 PY="$PYTHON"
-"$PY" -m pip install --quiet --no-index --no-deps --no-build-isolation --target "$SITE/pdsim_tree" . \
-    > "$OUT/install.log" 2>&1 || {
-    log "installing pdsim failed (install.log)"
-    exit 5
-}
-export PYTHONPATH="$SITE/pdsim_tree:$SITE"
-export PATH="$SITE/pdsim_tree/bin:$PATH"
+# pdsim as pyproject.toml installs it (kernels/ as pdsim.kernels) without a build step: a link in this copy of the tree
+[ -e pdsim/kernels ] || ln -s ../kernels pdsim/kernels
+export PYTHONPATH="$ROOT:$SITE"
 "$PY" -c "import warp, pdsim, pxr; warp.init(); print('warp', warp.__version__, 'cuda devices', warp.get_cuda_device_count())" \
     >> "$OUT/install.log" 2>&1 || {
     log "pdsim does not import (install.log)"
