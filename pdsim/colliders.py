@@ -44,7 +44,7 @@ class Collider:
     points in its local frame: rest positions [m], displacements [m] and velocities [m/s] (vec3 [n]), collision radii
     [m] (float [n], zero for FEM vertices), kinematic kinds (int32 [n], 0 = free), ``time`` [s] the time of the
     positions (the end of the step) and ``dt`` [s] the step that led there. The scene first calls
-    ``bind(origin)``: world = origin + local."""
+    ``bind(origin, device)``: world = origin + local, on the solvers' device."""
 
     friction: float = 0.0
     origin: np.ndarray = np.zeros(3)
@@ -56,9 +56,16 @@ class Collider:
         plane)."""
         raise NotImplementedError
 
-    def bind(self, origin) -> None:
-        """Sets the origin [m] of the solvers' local frame (world = origin + local)."""
+    def bind(self, origin, device=None) -> None:
+        """Sets the origin [m] of the solvers' local frame (world = origin + local) and the Warp device they run on
+        (None: unchanged); the collider's own device arrays are rebuilt on a new device."""
         self.origin = np.asarray(origin, dtype=np.float64)
+        if device is not None and getattr(self, "device", None) != wp.get_device(device):
+            self.device = wp.get_device(device)
+            self._on_device()
+
+    def _on_device(self) -> None:
+        """Rebuilds the collider's device arrays on ``self.device`` (a collider without any has nothing to do)."""
 
     def apply(self, rest, displacements, velocities, radius, kind, time: float, dt: float, mass=None, contact=None):
         """Pushes the solver's free points out of the collider at ``time`` [s] (step ``dt`` [s]); ``contact``: the
@@ -375,7 +382,7 @@ class MeshCollider(Collider):
         shape: the mesh.
         friction: Coulomb coefficient, >= 0.
         band: detection depth below the surface [m] (> 0) or None.
-        device: Warp device.
+        device: Warp device of its arrays until a solver binds it to the device the run uses.
         name: prim name in the cache (``/World/colliders/<name>``); None: ``<class name>_<index>`` in the scene.
     """
 
@@ -391,8 +398,12 @@ class MeshCollider(Collider):
         self._motions = {}  # band [m] -> its _MotionBuffer (written once: the mesh is static)
         self._radius_bound = _RadiusBound()
 
-    def bind(self, origin) -> None:
-        super().bind(origin)
+    def bind(self, origin, device=None) -> None:
+        super().bind(origin, device)
+        self._motions = {}
+
+    def _on_device(self) -> None:
+        self._mesh = _MeshData(self.vertices - self.center, self.faces, self.device)
         self._motions = {}
 
     def view(self, time: float = 0.0, *, bounds=None):
@@ -440,7 +451,7 @@ class RigidProjectile(Collider):
         velocity, angular_velocity, gravity: ballistic motion (ignored with a path).
         path: callable t -> position or (position, quaternion), or None.
         friction: Coulomb coefficient between the body and particles, >= 0.
-        device: Warp device.
+        device: Warp device of its arrays until a solver binds it to the device the run uses.
         name: prim name in the cache (``/World/colliders/<name>``); None: ``<class name>_<index>`` in the scene.
     """
 
@@ -472,6 +483,12 @@ class RigidProjectile(Collider):
         self._table = _MotionBuffer(self.device, 1)  # the frame's steps, then a scratch row
         self._slots: dict = {}  # (end time [s], dt [s]) of each step of the frame -> its row
         self._last: tuple | None = None  # (time, position, quaternion) of the last evaluated pose
+
+    def _on_device(self) -> None:
+        self._motion = _MotionBuffer(self.device)
+        self._table = _MotionBuffer(self.device, 1)
+        self._slots = {}
+        self.__dict__.pop("_frame", None)  # the frame's table is written again on the new device
 
     def pose(self, time: float) -> tuple[np.ndarray, np.ndarray]:
         """Position of the origin [m] (shape [3]) and rotation quaternion (x, y, z, w) at ``time`` [s]."""
@@ -635,6 +652,10 @@ class MeshProjectile(RigidProjectile):
         self._body = (_rotate(q_inv, v - c), f)
         self._mesh = _MeshData(self._body[0], f, self.device)
         self._radius_bound = _RadiusBound()
+
+    def _on_device(self) -> None:
+        super()._on_device()
+        self._mesh = _MeshData(self._body[0], self._body[1], self.device)
 
     def _bounding_radius(self) -> float:
         return self._mesh.bounding_radius

@@ -15,8 +15,9 @@ A :class:`RunProfile` sums ``time.perf_counter`` intervals [s] of the main threa
 On the CPU backend every launch is synchronous, so each phase holds its own work. On CUDA, launches are
 asynchronous: the run waits for the device at the end of each frame's steps (pdsim.device.wait_for; the frame's views
 read the device right after, so the wait costs nothing), so that simulate holds the frame's steps; within the steps a
-phase's time is where the host waited (a watchdog check's host read waits for the steps launched before it). Time a worker thread spends on the run's behalf is kept apart
-(:meth:`add_worker`): it overlaps the main thread's phases and is not part of the shares.
+phase's time is where the host waited (a watchdog check's host read waits for the steps launched before it). Time a
+worker thread spends on the run's behalf is kept apart (:meth:`add_worker`): it overlaps the main thread's phases and
+is not part of the shares.
 """
 
 from __future__ import annotations

@@ -230,10 +230,12 @@ class RigidBody(Collider):
         """The RigidMotion of the current state (before the first step, after a restore)."""
         kr.write_motion(state=self.state, shape=self.shape, motion=self.motion, device=self.device)
 
-    def bind(self, origin) -> None:
+    def bind(self, origin, device=None) -> None:
         origin = np.asarray(origin, dtype=np.float64)
         if self.system is not None and not np.array_equal(origin, self.origin):
             raise ParameterError("origin", origin, f"the scene's origin {self.origin.tolist()} (rigid bodies)")
+        if self.system is not None and device is not None and wp.get_device(device) != wp.get_device(self.device):
+            raise ParameterError("device", str(device), f"the rigid bodies' device {self.device}")
         self.origin = origin
 
     # -- contact with the solvers' points ---------------------------------------------------------------------------

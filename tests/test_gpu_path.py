@@ -437,6 +437,39 @@ def test_a_frame_reads_nothing_from_the_device(method, monkeypatch):
     assert np.isfinite(solvers[0].displacements()).all()
 
 
+class _OtherDevice:
+    """Stands for a device other than the CPU (a collider made for it is rebuilt when a CPU solver binds it)."""
+
+    is_cpu = False
+    is_capturing = False
+
+
+@pytest.mark.parametrize("kind", ["sphere", "mesh projectile", "mesh collider"])
+def test_colliders_move_to_the_device_of_the_solver_that_binds_them(kind):
+    """A collider made with another device than the run's (colliders default to the CPU; a run on CUDA) has its
+    device arrays rebuilt on the solver's device when the solver binds it: the frames are the same, bit for bit,
+    as with the collider made on that device (on a GPU, test_cpu_and_cuda_agree runs such a projectile on CUDA)."""
+    out = []
+    for moved in (False, True):
+        scene = _pd_impact_scene(False)
+        if kind != "sphere":
+            scene.colliders.clear()
+            box = pdsim.box((0.012, 0.012, 0.012), center=(0.0, 0.0, 0.026))
+            if kind == "mesh projectile":
+                scene.add_collider(pdsim.MeshProjectile(box, velocity=(0.0, 0.0, -20.0), name="ball"))
+            else:
+                wall = pdsim.box((0.012, 0.012, 0.012), center=(0.0, 1.5 * H + 0.006, 0.0))  # touching the side
+                scene.add_collider(pdsim.MeshCollider(wall))
+        collider = scene.colliders[0]
+        if moved:
+            collider.device = _OtherDevice()
+        solvers = _run_frames(scene, 2, 6, None)
+        assert collider.device == wp.get_device("cpu")
+        out.append(solvers[0].displacements())
+    assert np.abs(out[0]).max() > 0.0
+    np.testing.assert_array_equal(out[1], out[0])
+
+
 # -- (d) CPU/CUDA agreement and (e) capture on CUDA -----------------------------------------------------------------
 AGREEMENT_TOLERANCE = 1.0e-4
 """|u_cuda - u_cpu| <= 1e-4 max|u_cpu| (+ 1e-9 m): float32 sums in another order (atomics) over a few dozen steps."""

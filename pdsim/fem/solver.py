@@ -164,7 +164,7 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
         self.device = wp.get_device(context.device)
         self.origin = np.asarray(context.origin, dtype=np.float64).reshape(3)
         for c in self.colliders:
-            c.bind(self.origin)  # the colliders act in this solver's local frame (world = origin + local)
+            c.bind(self.origin, self.device)  # the colliders act in this solver's local frame, on its device
         self.precision = precision
         self.dtype = wp.float64 if precision == "float64" else wp.float32
         self.np_dtype = np.float64 if precision == "float64" else np.float32

@@ -154,9 +154,9 @@ class SolverPeridynamics(PointSolver):
         if handoff:
             self.handoff = FragmentHandoff(self)
         for c in colliders:
-            c.bind(self.origin)
+            c.bind(self.origin, self.device)
         if ground is not None:
-            ground.bind(self.origin)
+            ground.bind(self.origin, self.device)
         self.colliders = colliders
         self._colliders_all = ([ground] if ground is not None else []) + colliders
         self._material_contact = material_contact_values(self.bodies)  # the points' (restitution, friction), NaN: none
