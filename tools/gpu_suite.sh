@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU checks of pdsim, in one script for a borrowed GPU machine (Python 3.12 with numpy, scipy, tqdm and pytest,
-# no registry): unpacks the site folder packed by tools/gpu_wheels.sh, puts this tree on the path beside it, then
+# no registry): unpacks the wheels packed by tools/gpu_wheels.sh into one site folder, puts this tree on the path beside it, then
 # runs each stage under a time limit so that the whole script ends within SUITE_BUDGET_S (default 480 s):
 #
 #   1. calibration: the pre-flight's cost constants measured on the GPU
@@ -44,7 +44,7 @@ stage_parts() {
     if [ -f "$WHEELS/manifest.sha256" ]; then
         cp "$WHEELS/manifest.sha256" "$STAGE/"
     fi
-    for part in "$WHEELS"/part[0-9][0-9]/site.tar.xz.[0-9][0-9]; do
+    for part in "$WHEELS"/part[0-9][0-9]/site.tar.[0-9][0-9]; do
         [ -f "$part" ] || continue
         cp "$part" "$STAGE/"
     done
@@ -71,16 +71,19 @@ stage_parts() {
 
 assemble() {
     local sum
-    sum=$(grep -v '^#' "$STAGE/manifest.sha256" | awk '$2 == "site.tar.xz" {print $1}')
-    cat "$STAGE"/site.tar.xz.[0-9][0-9] > "$STAGE/site.tar.xz"
-    if [ "$(sha256sum "$STAGE/site.tar.xz" | cut -d' ' -f1)" != "$sum" ]; then
-        log "site.tar.xz does not match its manifest sum"
+    sum=$(grep -v '^#' "$STAGE/manifest.sha256" | awk '$2 == "site.tar" {print $1}')
+    cat "$STAGE"/site.tar.[0-9][0-9] > "$STAGE/site.tar"
+    if [ "$(sha256sum "$STAGE/site.tar" | cut -d' ' -f1)" != "$sum" ]; then
+        log "site.tar does not match its manifest sum"
         return 1
     fi
-    rm -rf "$SITE" && mkdir -p "$SITE"
-    tar -xJf "$STAGE/site.tar.xz" -C "$SITE"
-    rm -f "$STAGE/site.tar.xz"
-    log "site: $(tr '\n' ' ' < "$SITE/wheels.txt")"
+    rm -rf "$SITE" "$STAGE/wheels" && mkdir -p "$SITE" "$STAGE/wheels"
+    tar -xf "$STAGE/site.tar" -C "$STAGE/wheels"
+    rm -f "$STAGE/site.tar"
+    for wheel in "$STAGE"/wheels/*.whl; do
+        "$PYTHON" -m zipfile -e "$wheel" "$SITE" || return 1
+    done
+    log "site: $(tr '\n' ' ' < "$STAGE/wheels/wheels.txt")"
 }
 
 case "$MODE" in
@@ -147,7 +150,7 @@ run_stage() { # name, limit [s], command...
 export WARP_CACHE_PATH="${WARP_CACHE_PATH:-$HOME/.cache/pdsim_warp}"
 run_stage calibration 230 "$PY" tools/preflight_calibration.py --cost --device cuda --repeats "$REPEATS" --write \
     --out "$OUT/cost_calibration_cuda.json"
-run_stage compare 90 "$PY" tools/preflight_calibration.py --compare --device cuda
+run_stage compare 150 "$PY" tools/preflight_calibration.py --compare --device cuda
 run_stage default_scene 45 bash -c "mkdir -p /tmp/pdsim_default && \"$PY\" -m pdsim.cli run --device cuda --profile \
     --out /tmp/pdsim_default/default.usdc && cat /tmp/pdsim_default/default.report.json"
 run_stage tests 80 "$PY" -m pytest -q -rs -p no:cacheprovider tests/test_gpu_path.py -k "cuda"
