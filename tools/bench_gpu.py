@@ -12,13 +12,18 @@ captured graph (pdsim/capture.py; the first frame of each mode is a warm-up and 
 a scratch folder: the scene's build (bodies, families), the wall time of each frame (steps, watchdog, the cache's
 writing; the first also holds the run's set-up: solvers, preflight, frame 0), particles, bonds and substeps per frame.
 
-Both print one JSON object (``--json-out`` also writes it to a file).
+``agree``: a gallery scene's preview frames on the CPU and on the device (``Scene.run`` on each), frame by frame: the
+displacement difference relative to the CPU's largest displacement, the fastest point of each, and where a run
+stopped.
+
+Each prints one JSON object (``--json-out`` also writes it to a file).
 
 Script use::
 
     python tools/bench_gpu.py pd --n 100 --frames 3 --substeps 20 --device cuda
     python tools/bench_gpu.py four-walls --spacing 0.0025 --frames 3 --device cuda
     python tools/bench_gpu.py pd --n 12 --frames 2 --substeps 4 --device cpu       # a smoke run
+    python tools/bench_gpu.py agree fem_slab_crack --device cuda
 """
 
 from __future__ import annotations
@@ -147,6 +152,43 @@ def bench_four_walls(spacing: float, frames: int, device: str, json_out: str | N
     return out
 
 
+def agree(name: str, frames: int | None, device: str, json_out: str | None = None) -> dict:
+    """scenes/<name>.py at its PREVIEW settings run through ``Scene.run`` on the CPU and on ``device``: per frame, the
+    largest displacement difference of the first solver relative to the CPU's largest displacement, each run's
+    fastest point [m/s] and point count; a run that stops (a divergence) records where and why."""
+    import importlib
+
+    module = importlib.import_module(name)
+    runs = {}
+    for dev in ("cpu", device):
+        frames_out = []
+
+        def on_frame(frame, solvers, frames_out=frames_out):
+            s = solvers[0]
+            u = s.displacements()
+            v = s.velocities() if hasattr(s, "velocities") else np.zeros((1, 3))
+            frames_out.append((frame, u.copy(), float(np.sqrt((v**2).sum(axis=1)).max())))
+
+        scene = module.build_scene(**module.PREVIEW)
+        error = None
+        with tempfile.TemporaryDirectory() as folder:
+            try:
+                scene.run(os.path.join(folder, f"{name}.usdc"), frames=frames, device=dev, progress=False,
+                          checkpoint_interval_s=None, on_frame=on_frame)  # fmt: skip
+            except pdsim.PdsimError as exc:
+                error = f"{type(exc).__name__}: {str(exc)[:400]}"
+        runs[dev] = (frames_out, error)
+    out = {"scene": name, "device": device, "errors": {d: runs[d][1] for d in runs}, "frames": []}
+    for (f, u_cpu, v_cpu), (_, u_dev, v_dev) in zip(runs["cpu"][0], runs[device][0]):
+        scale = float(np.abs(u_cpu).max()) or 1.0
+        same_shape = u_cpu.shape == u_dev.shape
+        diff = float(np.abs(u_dev - u_cpu).max()) / scale if same_shape else None
+        out["frames"].append({"frame": f, "relative_difference": diff, "points": [len(u_cpu), len(u_dev)],
+                              "max_speed": [v_cpu, v_dev]})  # fmt: skip
+    _write(out, json_out)
+    return out
+
+
 def _write(result: dict, path: str | None) -> None:
     if path:
         with open(path, "w") as f:
@@ -163,12 +205,17 @@ def main(argv=None) -> int:
     walls = sub.add_parser("four-walls", help="scenes/four_walls.py build and run times")
     walls.add_argument("--spacing", type=float, default=0.0025)
     walls.add_argument("--frames", type=int, default=3)
-    for p in (pd, walls):
+    same = sub.add_parser("agree", help="a gallery scene's preview frames on the CPU and on the device, compared")
+    same.add_argument("scene", help="a scene of scenes/ (e.g. fem_slab_crack)")
+    same.add_argument("--frames", type=int, default=None, help="frames to run (default: the preview's)")
+    for p in (pd, walls, same):
         p.add_argument("--device", default="cuda")
         p.add_argument("--json-out", default=None, help="also write the JSON to this file")
     args = parser.parse_args(argv)
     if args.what == "pd":
         result = bench_pd(args.n, args.frames, args.substeps, args.device, args.json_out)
+    elif args.what == "agree":
+        result = agree(args.scene, args.frames, args.device, args.json_out)
     else:
         result = bench_four_walls(args.spacing, args.frames, args.device, args.json_out)
     print(json.dumps(result, indent=2))

@@ -10,7 +10,10 @@
 #   3. default_scene: `pdsim run --device cuda --profile` (the run report beside the log);
 #   4. tests: the CUDA tests of tests/test_gpu_path.py (CPU/CUDA agreement for peridynamics, FEM and lattice, a
 #      captured CUDA graph against frames launched step by step, the device fragment labeller on CUDA);
-#   5. pd_throughput: the peridynamic throughput of an elastic block of N_PD^3 particles (tools/bench_gpu.py pd).
+#   5. agree: a gallery scene's preview frames on the CPU and on CUDA, compared frame by frame (tools/bench_gpu.py
+#      agree $AGREE);
+#   6. pd_throughput: the peridynamic throughput of an elastic block of N_PD^3 particles (tools/bench_gpu.py pd).
+# STAGES names the stages to run (default: all).
 #
 # Results go to $OUT (default ./gpu_out), at most 8 files: gpu_suite.json (each stage's exit status and seconds, the
 # device), cost_calibration_cuda.json, and each stage's log (the default scene's log ends with its run report).
@@ -33,7 +36,9 @@ PD_FRAMES="${PD_FRAMES:-3}"
 PD_SUBSTEPS="${PD_SUBSTEPS:-20}"
 REPEATS="${REPEATS:-2}"
 SITE="${SITE:-/tmp/pdsim_gpu_site}"
-STAGES="${STAGES:-calibration compare default_scene tests pd_throughput}"  # the stages to run (names below)
+STAGES="${STAGES:-calibration compare default_scene tests agree pd_throughput}"  # the stages to run (names below)
+COMPARE="${COMPARE:-}"  # the compare stage's scenes (empty: the tool's default list)
+AGREE="${AGREE:-fem_slab_crack}"  # the agree stage's scene
 START=$(date +%s)
 mkdir -p "$OUT" "$STAGE"
 
@@ -150,10 +155,12 @@ run_stage() { # name, limit [s], command...
 export WARP_CACHE_PATH="${WARP_CACHE_PATH:-$HOME/.cache/pdsim_warp}"
 run_stage calibration 230 "$PY" tools/preflight_calibration.py --cost --device cuda --repeats "$REPEATS" --write \
     --out "$OUT/cost_calibration_cuda.json"
-run_stage compare 150 "$PY" tools/preflight_calibration.py --compare --device cuda
+# shellcheck disable=SC2086  # COMPARE is a list of scene names (empty: the tool's default list)
+run_stage compare 150 "$PY" tools/preflight_calibration.py --compare $COMPARE --device cuda
 run_stage default_scene 45 bash -c "mkdir -p /tmp/pdsim_default && \"$PY\" -m pdsim.cli run --device cuda --profile \
     --out /tmp/pdsim_default/default.usdc && cat /tmp/pdsim_default/default.report.json"
 run_stage tests 80 "$PY" -m pytest -q -rs -p no:cacheprovider tests/test_gpu_path.py -k "cuda"
+run_stage agree 150 "$PY" tools/bench_gpu.py agree "$AGREE" --device cuda --json-out "$OUT/agree.json"
 run_stage pd_throughput 40 "$PY" tools/bench_gpu.py pd --n "$N_PD" --frames "$PD_FRAMES" --substeps "$PD_SUBSTEPS" \
     --device cuda
 
