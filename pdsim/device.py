@@ -28,3 +28,8 @@ def wait_for(devices) -> None:
     for device in {str(d) for d in devices}:
         if wp.get_device(device).is_cuda:
             wp.synchronize_device(device)
+
+
+def device_of(solver):
+    """The Warp device a solver runs on (its kinematics' where it has them)."""
+    return solver.kin.device if hasattr(solver, "kin") else solver.device

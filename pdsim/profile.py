@@ -13,11 +13,10 @@ A :class:`RunProfile` sums ``time.perf_counter`` intervals [s] of the main threa
 - ``other``: the rest of the run's wall time (argument checks, resume, the progress bar).
 
 On the CPU backend every launch is synchronous, so each phase holds its own work. On CUDA, launches are
-asynchronous: the run waits for the device at the end of each frame's steps (pdsim.device.wait_for; the frame's views
-read the device right after, so the wait costs nothing), so that simulate holds the frame's steps; within the steps a
-phase's time is where the host waited (a watchdog check's host read waits for the steps launched before it). Time a
-worker thread spends on the run's behalf is kept apart (:meth:`add_worker`): it overlaps the main thread's phases and
-is not part of the shares.
+asynchronous: the run waits for the device at the end of each frame's steps and before each watchdog check starts its
+clock (pdsim.device.wait_for; the views and the check read the device right after, so the waits cost nothing), so
+that simulate holds the steps' device time. Time a worker thread spends on the run's behalf is kept apart
+(:meth:`add_worker`): it overlaps the main thread's phases and is not part of the shares.
 """
 
 from __future__ import annotations

@@ -36,7 +36,7 @@ from .checkpoint import (
 from .checks import check_frames, check_range, check_time_step, format_bytes
 from .colliders import collider_names
 from .contact import MethodContact
-from .device import wait_for
+from .device import device_of, wait_for
 from .divergence import attach_watchdogs, schedule_watchdogs
 from .errors import FeatureNotAvailableError, InstabilityError, OutputWriteError, ParameterError, PdsimError
 from .frame_worker import SurfaceWorker
@@ -244,7 +244,7 @@ def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, lim
                 advance_checked(
                     run.scene, run.solvers, run.steps.dt, run.steps.substeps, coupling, limit, first=first_substep
                 )
-                wait_for(_solver_devices(run.solvers))  # the frame's steps timed here, not at the views' first read
+                wait_for([device_of(s) for s in run.solvers])  # the steps timed here, not at the first read
         except RunInterrupted as exc:
             done = getattr(exc, "in_frame", None)
             if done is None:
@@ -271,11 +271,6 @@ def _frame_loop(run: _FrameRun, start: int, first_substep: int, *, coupling, lim
             if stopping or (stop is not None and stop.requested):  # asked during the checkpoint: it is the last
                 raise RunInterrupted(stop.signal, checkpoint=written, last_frame=run.last_written)
     run.finish_frame()
-
-
-def _solver_devices(solvers) -> list:
-    """The Warp devices the solvers run on."""
-    return [s.kin.device if hasattr(s, "kin") else s.device for s in solvers]
 
 
 def _check_seconds(watchdogs) -> float:
@@ -555,7 +550,7 @@ def frame_graphs(solvers, graph_capture):
     first = solvers[0]
     cached = getattr(first, "_frame_graphs", None)
     if cached is None or len(cached[0]) != len(solvers) or any(a is not b for a, b in zip(cached[0], solvers)):
-        device = _solver_devices([first])[0]
+        device = device_of(first)
         cached = (list(solvers), FrameGraphs(device, graph_capture))
         first._frame_graphs = cached
     return cached[1]

@@ -10,6 +10,7 @@ import numpy as np
 import warp as wp
 
 from .checkpoint import RunInterrupted
+from .device import device_of, wait_for
 from .errors import InstabilityError
 from .kernels import watchdog as kw
 from .kernels.launch import by_name
@@ -376,7 +377,10 @@ class Watchdog:
 
     def check(self, speed_limit: float, where: str, hint: str = "") -> dict:
         """Raises InstabilityError (see the class) or returns the check's numbers: energy ``energy`` and its bound
-        ``bound`` [J], work put in ``work`` [J], largest speed ``vmax`` [m/s], strain range."""
+        ``bound`` [J], work put in ``work`` [J], largest speed ``vmax`` [m/s], strain range. Its time (``seconds``)
+        starts once the steps launched before it are done (on CUDA the check's host read would wait for them: that
+        wait is the steps' time, not the check's)."""
+        wait_for([device_of(self.solver)])
         t0 = time.perf_counter()
         try:
             return self._check(speed_limit, where, hint)
