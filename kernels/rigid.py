@@ -348,8 +348,10 @@ def penalty_pass(
     nm = wp.normalize(n_sum)
     arm_a = arm_sum / wp.float64(count)
     arm_b = sa.position + arm_a - sb.position
-    kn = ha.inv_mass + hb.inv_mass + wp.dot(
-        nm, wp.cross(inv_ia * wp.cross(arm_a, nm), arm_a) + wp.cross(inv_ib * wp.cross(arm_b, nm), arm_b)
+    kn = (
+        ha.inv_mass
+        + hb.inv_mass
+        + wp.dot(nm, wp.cross(inv_ia * wp.cross(arm_a, nm), arm_a) + wp.cross(inv_ib * wp.cross(arm_b, nm), arm_b))
     )
     m = wp.float32(wp.float64(1.0) / (kn * wp.float64(count)))  # each sample's share of the effective mass
     k_share = wp.float32(stiffness_rate) * m

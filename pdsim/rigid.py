@@ -135,9 +135,9 @@ class RigidBody(Collider):
     ):
         self.name = _check_name(name)
         self.friction = check_range("friction", friction, 0.0, None, lo_open=False)
-        self.restitution = (
-            None if restitution is None else check_range("restitution", restitution, 0.0, 1.0, lo_open=False)
-        )
+        self.restitution = None
+        if restitution is not None:
+            self.restitution = check_range("restitution", restitution, 0.0, 1.0, lo_open=False, hi_open=False)
         self.orientation = _quat("orientation", orientation)
         self.velocity = _vector("velocity", velocity)
         self.angular_velocity = _vector("angular_velocity", angular_velocity)
