@@ -765,6 +765,7 @@ __all__ = [
     "ContactDiagnostics",
     "MethodContact",
     "ParticleContact",
+    "SURFACE_FLOOR",
     "bond_stiffness_row_sum",
     "combine_friction",
     "combine_restitution",
