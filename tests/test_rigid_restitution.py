@@ -63,3 +63,25 @@ def test_two_rigid_spheres_meeting_head_on_part_at_their_restitution_with_moment
     v_rel = b.state_values()["velocity"][0] - a.state_values()["velocity"][0]
     print(f"two spheres e = {e}: relative speed after / before {v_rel / 2.0:.3f}")
     assert v_rel / 2.0 == pytest.approx(e, abs=0.05)
+
+
+def test_a_tilted_box_dropped_on_a_box_with_restitution_comes_to_rest_on_it():
+    """A 10 cm box released tilted (about 12 degrees) 10 cm above a 20 x 20 x 10 cm box resting on the ground, all
+    pairs of restitution 0.3 (the penalty form between boxes and with the ground): after 1 s both are at rest
+    (speeds below 0.01 m/s, spin below 0.01 rad/s: what remains is the leapfrog's g dt / 2) with the top box's centre
+    one box height above the lower one's within 2 mm (the penalty's sag: g dt^2 / CONTACT_OMEGA_DT^2 per contact)."""
+    q = np.array([0.1, 0.05, 0.0, 1.0])
+    q /= np.linalg.norm(q)
+    ground = pdsim.GroundPlane(normal=(0.0, 0.0, 1.0), offset=0.0, restitution=0.3)
+    low = RigidBody(BoxShape((0.2, 0.2, 0.1)), density=1000.0, position=(0.0, 0.0, 0.05), restitution=0.3)
+    top = RigidBody(BoxShape((0.1, 0.1, 0.1)), density=1000.0, position=(0.01, 0.0, 0.25), orientation=tuple(q),
+                    restitution=0.3)  # fmt: skip
+    stack = RigidBodies([low, top], ground=ground, colliders=[], gravity=(0.0, 0.0, -G), origin=np.zeros(3),
+                        device="cpu")  # fmt: skip
+    stack.simulate(1.0e-3, 1000)
+    s_top, s_low = top.state_values(), low.state_values()
+    for s in (s_top, s_low):
+        assert np.linalg.norm(s["velocity"]) < 0.01
+        assert np.linalg.norm(s["angular_velocity"]) < 0.01
+    assert s_top["position"][2] - s_low["position"][2] == pytest.approx(0.1, abs=2.0e-3)
+    assert s_low["position"][2] == pytest.approx(0.05, abs=2.0e-3)
