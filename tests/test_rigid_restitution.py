@@ -85,3 +85,21 @@ def test_a_tilted_box_dropped_on_a_box_with_restitution_comes_to_rest_on_it():
         assert np.linalg.norm(s["angular_velocity"]) < 0.01
     assert s_top["position"][2] - s_low["position"][2] == pytest.approx(0.1, abs=2.0e-3)
     assert s_low["position"][2] == pytest.approx(0.05, abs=2.0e-3)
+
+
+def test_a_rigid_body_starting_inside_the_ground_with_a_restitution_is_lifted_onto_it_not_thrown():
+    """A box placed 1 mm into the ground, its pair with the ground of restitution 0.6 (the penalty form), stepped at
+    10 us as beside a fine peridynamic body: it is lifted onto the ground before the first step, with a warning, and
+    stays there (speed below 0.01 m/s over 2000 steps). Left inside (the lift skipped), the spring threw it out at
+    11.8 m/s (of the order of CONTACT_OMEGA_DT x 1 mm / 10 us = 15 m/s): the test fails there."""
+    ground = pdsim.GroundPlane(normal=(0.0, 0.0, 1.0), offset=0.0, restitution=0.6)
+    box = RigidBody(BoxShape((0.2, 0.2, 0.1)), density=1000.0, position=(0.0, 0.0, 0.049), name="box")
+    with pytest.warns(UserWarning, match="1 mm inside the ground"):
+        system = RigidBodies([box], ground=ground, colliders=[], gravity=(0.0, 0.0, -G), origin=np.zeros(3),
+                             device="cpu")  # fmt: skip
+    assert box.state_values()["position"][2] == pytest.approx(0.05, abs=1e-12)
+    fastest = 0.0
+    for _ in range(20):
+        system.simulate(1.0e-5, 100)
+        fastest = max(fastest, float(np.linalg.norm(box.state_values()["velocity"])))
+    assert fastest < 0.01, fastest
