@@ -400,22 +400,23 @@ def ground_plane_force(
     mass: wp.array(dtype=float),
     force_to_newton: wp.array(dtype=float),
     normal: wp.vec3,
-    offset: float,
+    offset: wp.array(dtype=float),
     stiffness_rate: float,
     damping_ratio: wp.array(dtype=float),
     friction: wp.array(dtype=float),
     force: wp.array(dtype=wp.vec3),
 ):
-    """The ground plane n . x = offset (local frame) as a contact pair of the one law (penalty_force) for the free
-    points whose pair with the plane has a damping ratio (damping_ratio[i], NaN: none, the point is left to the
-    projection): a point (sphere of ``radius`` [m]) overlapping the plane by d = r + offset - n . x > 0 gets
+    """The ground plane n . x = offset[i] (local frame, per point [m]) as a contact pair of the one law
+    (penalty_force) for the free points whose pair with the plane has a damping ratio (damping_ratio[i], NaN: none,
+    the point is left to the projection): a point (sphere of ``radius`` [m]) overlapping the plane by
+    d = r + offset[i] - n . x > 0 gets
     F = penalty_force(n, d, v, k = stiffness_rate m, m, damping_ratio[i], friction[i]) [N] (the plane is immovable:
     the reduced mass is the point's mass m [kg]), added to force[i] as F / force_to_newton[i] (the solver's unit)."""
     i = wp.tid()
     if kind[i] != PARTICLE_FREE or wp.isnan(damping_ratio[i]):
         return
     x = rest[i] + displacements[i]
-    depth = radius[i] + offset - wp.dot(normal, x)
+    depth = radius[i] + offset[i] - wp.dot(normal, x)
     if depth > 0.0:
         m = mass[i]
         f = penalty_force(normal, depth, velocities[i], stiffness_rate * m, m, damping_ratio[i], friction[i])
@@ -434,16 +435,10 @@ def push_out_of_plane(*, normal, device, **arguments):
     launch(collide_ground_plane, arguments["rest"].shape[0], device=device, normal=wp.vec3(*normal), **arguments)
 
 
-def ground_forces(*, normal, offset, device, **arguments):
-    """The ground plane n . x = ``offset`` [m] (local frame) as a penalty contact (ground_plane_force)."""
-    launch(
-        ground_plane_force,
-        arguments["rest"].shape[0],
-        device=device,
-        normal=wp.vec3(*normal),
-        offset=float(offset),
-        **arguments,
-    )
+def ground_forces(*, normal, device, **arguments):
+    """The ground plane n . x = ``offset`` [m] (local frame, float [n] per point) as a penalty contact
+    (ground_plane_force)."""
+    launch(ground_plane_force, arguments["rest"].shape[0], device=device, normal=wp.vec3(*normal), **arguments)
 
 
 def push_out_of_sphere(*, device, **arguments):

@@ -13,17 +13,27 @@ velocity is ``R I_body^-1 R^T L``. A step is
 Contact of a body with the ground, static meshes and other bodies goes through sample spheres on its surface (body
 frame points with a radius: a sphere is one sample at its centre with its radius; boxes and meshes are points on
 their surface with radius 0) tested against the other's shape query (plane, ``box_contact_point``,
-``mesh_contact_point``, sphere). The response is the colliders' law applied to a body: the deepest penetration is
-removed by moving the body (bodies: shared by their inverse masses) and one impulse at the mean contact point of the
-penetrating samples (along their mean normal) removes the approaching normal velocity of that point (inelastic) and
-reduces its tangential velocity by Coulomb friction (at most ``friction`` times the normal impulse). One impulse
-at the mean point, not one per sample in turn, keeps a face lying on a face from twisting by the order of the
-samples.
+``mesh_contact_point``, sphere). A pair meets in one of two forms, chosen by its damping ratio (NaN: none):
+
+- inelastic (no damping ratio): the colliders' law applied to a body: the deepest penetration is removed by moving
+  the body (bodies: shared by their inverse masses) and one impulse at the mean contact point of the penetrating
+  samples (along their mean normal) removes the approaching normal velocity of that point and reduces its tangential
+  velocity by Coulomb friction (at most ``friction`` times the normal impulse);
+- penalty (a damping ratio): the one contact law (kernels/colliders.py penalty_force) at the mean contact point, on
+  the mean depth of the penetrating samples, with the pair's effective mass along the normal at that point
+  m_eff = 1 / (1/M_a + 1/M_b + n . ((I_a^-1 (r_a x n)) x r_a + (I_b^-1 (r_b x n)) x r_b)) as the reduced mass and
+  the stiffness k = stiffness_rate m_eff (stiffness_rate = (CONTACT_OMEGA_DT / dt)^2, pdsim/contact.py): the force
+  times dt is one impulse, equal and opposite on the two bodies. A sphere, or a box landing flat (its contact point
+  under its centre of mass), then rebounds at the law's restitution of that damping ratio; the body sinks into what it
+  hits by up to about v dt / CONTACT_OMEGA_DT at impact speed v, and by g dt^2 / CONTACT_OMEGA_DT^2 at rest.
+
+One force or impulse at the mean point, not one per sample in turn, keeps a face lying on a face from twisting by the
+order of the samples.
 """
 
 import warp as wp
 
-from .colliders import RigidMotion, box_contact_point, mesh_contact_point, to_vec3d
+from .colliders import RigidMotion, box_contact_point, mesh_contact_point, penalty_force, to_vec3d
 from .launch import launch
 
 SHAPE_SPHERE = wp.constant(0)
@@ -211,10 +221,23 @@ def rigid_plane_contact(
     normal: wp.vec3d,
     offset: wp.float64,
     friction: wp.float64,
+    damping_ratio: wp.float64,
+    stiffness_rate: wp.float64,
+    dt: wp.float64,
 ):
-    """A body against the static plane n . x = offset (local frame): one impulse (contact_impulse, the plane static)
-    at the mean of the penetrating samples' contact points, then the deepest sample is moved onto the plane."""
+    """A body against the static plane n . x = offset (local frame). Without a damping ratio (NaN): one impulse
+    (contact_impulse, the plane static) at the mean of the penetrating samples' contact points, then the deepest
+    sample is moved onto the plane; with one, the penalty form (penalty_pass) over the step dt [s]."""
     s = state[0]
+    if not wp.isnan(damping_ratio):
+        plane = RigidState()  # at rest, immovable (its shape's inverse mass and inertia are zero)
+        plane.orientation = wp.quatd(wp.float64(0.0), wp.float64(0.0), wp.float64(0.0), wp.float64(1.0))
+        hits, p, la, lb = penalty_pass(s, shape, samples, sample_radius, plane, RigidShape(), 1, normal, offset,
+                                       stiffness_rate, damping_ratio, friction, dt)  # fmt: skip
+        s.velocity = s.velocity + shape.inv_mass * p
+        s.angular_momentum = s.angular_momentum + la
+        state[0] = s
+        return
     r = wp.quat_to_matrix(s.orientation)
     deepest = wp.float64(0.0)
     arm_sum = wp.vec3d(wp.float64(0.0))
@@ -258,6 +281,94 @@ def shape_contact_point(shape: RigidShape, p: wp.vec3, r: float):
     return touch, sdf, n
 
 
+@wp.func
+def sample_touch(
+    sa: RigidState,
+    pk: wp.vec3,
+    rk: float,
+    sb: RigidState,
+    hb: RigidShape,
+    plane: int,
+    normal: wp.vec3d,
+    offset: wp.float64,
+):
+    """Sample sphere (pk, rk) of body a (state sa) against the plane n . x = offset (plane 1) or body b's shape
+    (state sb): (touch, depth [m], unit normal towards a, the contact point's arm from a's centre of mass [m])."""
+    arm0 = wp.quat_to_matrix(sa.orientation) * to_vec3d(pk)
+    if plane == 1:
+        depth = wp.float64(rk) + offset - wp.dot(normal, sa.position + arm0)
+        return wp.where(depth > wp.float64(0.0), 1, 0), depth, normal, arm0 - wp.float64(rk) * normal
+    qb = sb.orientation
+    rot_b = wp.quat(wp.float32(qb[0]), wp.float32(qb[1]), wp.float32(qb[2]), wp.float32(qb[3]))
+    x = to_vec3(sa.position - sb.position + arm0)
+    touch, sdf, n_local = shape_contact_point(hb, wp.quat_rotate_inv(rot_b, x), rk)
+    n = to_vec3d(wp.quat_rotate(rot_b, n_local))
+    return touch, wp.float64(rk - sdf), n, arm0 - wp.float64(rk) * n
+
+
+@wp.func
+def penalty_pass(
+    sa: RigidState,
+    ha: RigidShape,
+    samples: wp.array(dtype=wp.vec3),
+    radius: wp.array(dtype=float),
+    sb: RigidState,
+    hb: RigidShape,
+    plane: int,
+    normal: wp.vec3d,
+    offset: wp.float64,
+    stiffness_rate: wp.float64,
+    damping_ratio: wp.float64,
+    friction: wp.float64,
+    dt: wp.float64,
+):
+    """The penalty form over a step dt [s] for body a's penetrating samples against the plane (plane 1) or body b:
+    (count of penetrating samples, impulse on a [N s], angular impulse on a and on b about their centres of mass
+    [N m s]). Each penetrating sample i is a pair of the one law (penalty_force on its own depth, normal and relative
+    velocity) with 1/count of the stiffness k = stiffness_rate m_eff and of the reduced mass m_eff, the pair's
+    effective mass along the mean normal at the mean contact point; the impulses on b are the opposite."""
+    count = int(0)
+    arm_sum = wp.vec3d(wp.float64(0.0))
+    n_sum = wp.vec3d(wp.float64(0.0))
+    for k in range(samples.shape[0]):
+        touch, depth, n, arm = sample_touch(sa, samples[k], radius[k], sb, hb, plane, normal, offset)
+        if touch == 1:
+            count += 1
+            arm_sum = arm_sum + arm
+            n_sum = n_sum + n
+    p = wp.vec3d(wp.float64(0.0))
+    la = wp.vec3d(wp.float64(0.0))
+    lb = wp.vec3d(wp.float64(0.0))
+    if count == 0 or wp.length(n_sum) == wp.float64(0.0):
+        return int(0), p, la, lb
+    inv_ia = world_inverse_inertia(sa.orientation, ha.inv_inertia)
+    inv_ib = world_inverse_inertia(sb.orientation, hb.inv_inertia)
+    wa = inv_ia * sa.angular_momentum
+    wb = inv_ib * sb.angular_momentum
+    nm = wp.normalize(n_sum)
+    arm_a = arm_sum / wp.float64(count)
+    arm_b = sa.position + arm_a - sb.position
+    kn = (
+        ha.inv_mass
+        + hb.inv_mass
+        + wp.dot(nm, wp.cross(inv_ia * wp.cross(arm_a, nm), arm_a) + wp.cross(inv_ib * wp.cross(arm_b, nm), arm_b))
+    )
+    m = wp.float32(wp.float64(1.0) / (kn * wp.float64(count)))  # each sample's share of the effective mass
+    k_share = wp.float32(stiffness_rate) * m
+    for k in range(samples.shape[0]):
+        touch, depth, n, arm = sample_touch(sa, samples[k], radius[k], sb, hb, plane, normal, offset)
+        if touch == 1:
+            arm_bk = sa.position + arm - sb.position
+            v_rel = (sa.velocity + wp.cross(wa, arm)) - (sb.velocity + wp.cross(wb, arm_bk))
+            f = penalty_force(to_vec3(n), wp.float32(depth), to_vec3(v_rel), k_share, m, wp.float32(damping_ratio),
+                              wp.float32(friction))  # fmt: skip
+            dp = dt * to_vec3d(f)
+            p = p + dp
+            la = la + wp.cross(arm, dp)
+            lb = lb - wp.cross(arm_bk, dp)
+    return count, p, la, lb
+
+
 @wp.kernel
 def rigid_mesh_contact(
     state: wp.array(dtype=RigidState),
@@ -267,12 +378,26 @@ def rigid_mesh_contact(
     other: RigidShape,
     other_motion: wp.array(dtype=RigidMotion),
     friction: wp.float64,
+    damping_ratio: wp.float64,
+    stiffness_rate: wp.float64,
+    dt: wp.float64,
 ):
-    """A body against a static shape (a mesh collider) at the pose other_motion[0]: one impulse at the mean contact
-    point of the penetrating samples along their mean normal, then the deepest sample is moved out along its
-    normal."""
+    """A body against a static shape (a mesh collider) at the pose other_motion[0]. Without a damping ratio (NaN):
+    one impulse at the mean contact point of the penetrating samples along their mean normal, then the deepest sample
+    is moved out along its normal; with one, the penalty form (penalty_pass) over the step dt [s]."""
     s = state[0]
     pose = other_motion[0].pose
+    if not wp.isnan(damping_ratio):
+        sb = RigidState()  # the static shape at its pose, immovable (other's inverse mass and inertia are zero)
+        sb.position = to_vec3d(wp.transform_get_translation(pose))
+        qb = wp.transform_get_rotation(pose)
+        sb.orientation = wp.quatd(wp.float64(qb[0]), wp.float64(qb[1]), wp.float64(qb[2]), wp.float64(qb[3]))
+        hits, p, la, lb = penalty_pass(s, shape, samples, sample_radius, sb, other, 0, wp.vec3d(), wp.float64(0.0),
+                                       stiffness_rate, damping_ratio, friction, dt)  # fmt: skip
+        s.velocity = s.velocity + shape.inv_mass * p
+        s.angular_momentum = s.angular_momentum + la
+        state[0] = s
+        return
     inv_pose = wp.transform_inverse(pose)
     r = wp.quat_to_matrix(s.orientation)
     deepest = wp.float64(0.0)
@@ -317,11 +442,35 @@ def rigid_pair_contact(
     samples_b: wp.array(dtype=wp.vec3),
     radius_b: wp.array(dtype=float),
     friction: wp.float64,
+    damping_ratio: wp.float64,
+    stiffness_rate: wp.float64,
+    dt: wp.float64,
 ):
-    """Two bodies: a's samples against b's shape, then b's against a's. Each pass gives one impulse, equal and
-    opposite on the two bodies (contact_impulse), at the mean contact point of the penetrating samples along their
-    mean normal, and removes the deepest penetration by moving the bodies apart in proportion to their inverse
-    masses."""
+    """Two bodies: a's samples against b's shape, then b's against a's. Without a damping ratio (NaN) each pass gives
+    one impulse, equal and opposite on the two bodies (contact_impulse), at the mean contact point of the
+    penetrating samples along their mean normal, and removes the deepest penetration by moving the bodies apart in
+    proportion to their inverse masses. With one, both passes of the penalty form (penalty_pass) read the states at
+    the start, and each pass that finds a contact gives its impulses divided by the number of passes that found one
+    (two spheres: each pass finds the same contact)."""
+    if not wp.isnan(damping_ratio):
+        sa = state_a[0]
+        sb = state_b[0]
+        ca, pa, laa, lba = penalty_pass(sa, shape_a, samples_a, radius_a, sb, shape_b, 0, wp.vec3d(),
+                                        wp.float64(0.0), stiffness_rate, damping_ratio, friction, dt)  # fmt: skip
+        cb, pb, lbb, lab = penalty_pass(sb, shape_b, samples_b, radius_b, sa, shape_a, 0, wp.vec3d(),
+                                        wp.float64(0.0), stiffness_rate, damping_ratio, friction, dt)  # fmt: skip
+        passes = wp.where(ca > 0, 1, 0) + wp.where(cb > 0, 1, 0)
+        if passes == 0:
+            return
+        share = wp.float64(1.0) / wp.float64(passes)
+        p = share * (pa - pb)  # the impulse on a
+        sa.velocity = sa.velocity + shape_a.inv_mass * p
+        sa.angular_momentum = sa.angular_momentum + share * (laa + lab)
+        sb.velocity = sb.velocity - shape_b.inv_mass * p
+        sb.angular_momentum = sb.angular_momentum + share * (lba + lbb)
+        state_a[0] = sa
+        state_b[0] = sb
+        return
     for side in range(2):
         sa = state_a[0]
         sb = state_b[0]

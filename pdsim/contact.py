@@ -421,6 +421,12 @@ ground's penalty form leaves at 0.070 to 0.105 for e = 0.1 and 0.584 to 0.614 fo
 beyond 0.05 in some phases)."""
 
 
+SURFACE_FLOOR = 0.01
+"""Depth of the hard floor of contact between FEM surfaces (kernels/surface_contact.py) as a fraction of the contact
+band (one mean edge length): a surface vertex never stays more than 1 % of an edge inside another piece at the end of
+a step's contact; above that depth the penalty of the one law acts alone."""
+
+
 def restitution_of_damping_ratio(damping_ratio: float) -> float:
     """Normal restitution e of the contact law (kernels/colliders.py penalty_force: a linear spring-dashpot whose
     force never pulls) at damping ratio zeta >= 0.
@@ -651,6 +657,32 @@ class MethodContact:
             for a in self.mesh_solvers:
                 for b in self.mesh_solvers:
                     self._surface_pair(a, b, rate, dt)
+            for ms in self.mesh_solvers:
+                shift, kick, count = self._floor(ms)
+                ksf.apply_floor(
+                    shift=shift,
+                    kick=kick,
+                    count=count,
+                    displacements=ms.kin.u,
+                    velocities=ms.kin.v,
+                    device=ms.kin.u.device,
+                )
+
+    def _floor(self, solver):
+        """The solver's accumulators of the surface contact's hard floor (kernels/surface_contact.py): shift [m],
+        velocity change [m/s] and floor-contact count per point, zero between steps; reallocated when the point
+        count changes (FEM fracture adds vertices)."""
+        key = ("floor", id(solver))
+        entry = self._scratch.get(key)
+        n, d = solver.kin.u.shape[0], solver.kin.u.device
+        if entry is None or entry[2].shape[0] != n:
+            entry = (
+                wp.zeros(n, dtype=wp.vec3, device=d),
+                wp.zeros(n, dtype=wp.vec3, device=d),
+                wp.zeros(n, dtype=wp.int32, device=d),
+            )
+            self._scratch[key] = entry
+        return entry
 
     def _surface_pair(self, a, b, rate: float, dt: float) -> None:
         """The surface vertices of mesh solver ``a`` against the faces of ``b`` (of other pieces when a is b)."""
@@ -694,6 +726,15 @@ class MethodContact:
             dt=dt,
             v_work=self._work_account(a),
             m_work=self._work_account(b),
+            floor=SURFACE_FLOOR * min(band_a, band_b),
+            v_kind=a.kin.point_kind,
+            m_kind=b.kin.point_kind,
+            v_shift=self._floor(a)[0],
+            v_kick=self._floor(a)[1],
+            v_count=self._floor(a)[2],
+            m_shift=self._floor(b)[0],
+            m_kick=self._floor(b)[1],
+            m_count=self._floor(b)[2],
             device=a.kin.u.device,
         )
 
@@ -724,6 +765,7 @@ __all__ = [
     "ContactDiagnostics",
     "MethodContact",
     "ParticleContact",
+    "SURFACE_FLOOR",
     "bond_stiffness_row_sum",
     "combine_friction",
     "combine_restitution",

@@ -24,6 +24,7 @@ Kinematic projectiles (SphereProjectile, BoxProjectile, MeshProjectile) stay the
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,7 +43,7 @@ from .colliders import (
     _rotate,
 )
 from .colliders import _vec3 as _vector
-from .contact import combine_friction
+from .contact import CONTACT_OMEGA_DT, combine_friction, combine_restitution, damping_ratio_for_restitution
 from .errors import FeatureNotAvailableError, ParameterError
 from .kernels import colliders as kc
 from .kernels import rigid as kr
@@ -103,9 +104,15 @@ class RigidBody(Collider):
         friction: Coulomb coefficient of its contacts, >= 0 (with points: combined with their material's
             contact_friction, this one alone where it has none; with the ground, a static mesh or another body: the
             geometric mean of the two sides' coefficients, pdsim/contact.py combine_friction).
-        restitution: None or 0 (default None): its contacts are inelastic (the impulse removes the approaching
-            normal velocity); a restitution above 0 is not available (FeatureNotAvailableError), whatever the
-            other side's material brings.
+        restitution: its normal restitution e in [0, 1] against the ground, static meshes and other rigid bodies,
+            or None (default): the pair takes the larger of the two sides' (pdsim/contact.py combine_restitution;
+            the ground's ``restitution``, None for a static mesh) and meets in the penalty form of the one contact
+            law (kernels/rigid.py), whose dashpot gives e (damping_ratio_for_restitution); a pair where neither
+            side brings one, or whose e is 0, meets inelastically (an impulse removes the approaching normal
+            velocity). Against the points of peridynamic and FEM bodies the contact is the inelastic impulse
+            whatever e is: the rebound there is the deformable body's (the elastic energy its impact stores). A body
+            whose pair with the ground takes the penalty form and that starts inside the ground is lifted onto it
+            before the first step, with a warning (RigidBodies).
         band: detection depth below a mesh's surface [m] (> 0; meshes only), default a tenth of its bounding radius.
         name: prim name in the cache (``/World/colliders/<name>``); None: ``RigidBody_<index>`` in the scene.
 
@@ -131,12 +138,9 @@ class RigidBody(Collider):
     ):
         self.name = _check_name(name)
         self.friction = check_range("friction", friction, 0.0, None, lo_open=False)
-        if restitution is not None and check_range("restitution", restitution, 0.0, 1.0, lo_open=False) != 0.0:
-            raise FeatureNotAvailableError(
-                f"rigid body {name!r}: restitution={restitution!r} is not available (a rigid body's contacts are "
-                "inelastic); leave restitution None or 0, or make the body a PeridynamicBody with a material's "
-                "contact_restitution"
-            )
+        self.restitution = None
+        if restitution is not None:
+            self.restitution = check_range("restitution", restitution, 0.0, 1.0, lo_open=False, hi_open=False)
         self.orientation = _quat("orientation", orientation)
         self.velocity = _vector("velocity", velocity)
         self.angular_velocity = _vector("angular_velocity", angular_velocity)
@@ -367,6 +371,8 @@ class RigidBodies:
         self.origin = np.asarray(origin, dtype=np.float64)
         self.device = wp.get_device(device)
         for b in self.bodies:
+            if ground is not None and not math.isnan(float(pair_damping_ratio(b.restitution, ground.restitution))):
+                _place_on_ground(b, ground)
             b.setup(self.device, self.origin, self)
         self._static_shapes = []
         for c in self.statics:
@@ -398,12 +404,14 @@ class RigidBodies:
             )
 
     def end_step(self, dt: float) -> None:
-        """Second half kick with the points' reaction, then contact with the ground, static meshes and each other."""
+        """Second half kick with the points' reaction, then contact with the ground, static meshes and each other
+        (each pair in the form its restitution gives: pair_damping_ratio)."""
         d = self.device
         for b in self.bodies:
             kr.kick(
                 state=b.state, shape=b.shape, gravity=self._gravity, dt=wp.float64(dt), reaction=b.reaction, device=d
             )
+        law = {"stiffness_rate": wp.float64((CONTACT_OMEGA_DT / float(dt)) ** 2), "dt": wp.float64(dt), "device": d}
         for b in self.bodies:
             if self.ground is not None:
                 n = np.asarray(self.ground.normal, dtype=np.float64)
@@ -416,7 +424,8 @@ class RigidBodies:
                     normal=wp.vec3d(*n),
                     offset=wp.float64(float(self.ground.offset) - float(n @ self.origin)),
                     friction=wp.float64(float(combine_friction(b.friction, self.ground.friction))),
-                    device=d,
+                    damping_ratio=pair_damping_ratio(b.restitution, self.ground.restitution),
+                    **law,
                 )
             for c, shape, motion in self._static_shapes:
                 kr.mesh_contact(
@@ -427,7 +436,8 @@ class RigidBodies:
                     other=shape,
                     other_motion=motion,
                     friction=wp.float64(float(combine_friction(b.friction, c.friction))),
-                    device=d,
+                    damping_ratio=pair_damping_ratio(b.restitution, None),
+                    **law,
                 )
         for i, a in enumerate(self.bodies):
             for b in self.bodies[i + 1 :]:
@@ -441,7 +451,8 @@ class RigidBodies:
                     samples_b=b.samples_array,
                     radius_b=b.radius_array,
                     friction=wp.float64(float(combine_friction(a.friction, b.friction))),
-                    device=d,
+                    damping_ratio=pair_damping_ratio(a.restitution, b.restitution),
+                    **law,
                 )
 
     def simulate(self, dt: float, steps: int) -> None:
@@ -455,6 +466,33 @@ class RigidBodies:
 
     def angular_momentum(self, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
         return np.sum([b.angular_momentum(origin) for b in self.bodies], axis=0)
+
+
+def pair_damping_ratio(restitution_a, restitution_b) -> wp.float64:
+    """The damping ratio of the penalty form for a rigid body's pair whose sides bring ``restitution_a`` and
+    ``restitution_b`` (None: none): that of their combined restitution (pdsim/contact.py combine_restitution,
+    damping_ratio_for_restitution), NaN (the inelastic form) where neither brings one or the pair's is 0."""
+    e = float(combine_restitution(np.nan if restitution_a is None else restitution_a,
+                                  np.nan if restitution_b is None else restitution_b))  # fmt: skip
+    return wp.float64(math.nan if math.isnan(e) or e == 0.0 else damping_ratio_for_restitution(e))
+
+
+def _place_on_ground(body: RigidBody, ground) -> None:
+    """Lifts a body that starts inside the ground along its normal until its deepest surface sample touches it,
+    with a warning: in the penalty form the contact's spring would throw it out at CONTACT_OMEGA_DT times its
+    overlap per step (15 m/s for 1 mm at a step of 10 us). Before any step, so a resume (which restores the state)
+    sees the same start."""
+    n = np.asarray(ground.normal, dtype=np.float64)
+    n = n / np.linalg.norm(n)
+    points = body.position + _rotate(body.orientation, np.asarray(body.samples, dtype=np.float64))
+    overlap = float(np.max(np.asarray(body.sample_radius) + float(ground.offset) - points @ n))
+    if overlap > 0.0:
+        body.position = body.position + overlap * n
+        warnings.warn(
+            f"rigid body {body.name!r} starts {overlap * 1e3:.3g} mm inside the ground: lifted onto it (its contact "
+            "with the ground has a restitution, whose spring would throw it out)",
+            stacklevel=3,
+        )
 
 
 def rigid_bodies_of(solvers) -> RigidBodies | None:

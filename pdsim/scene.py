@@ -183,10 +183,12 @@ class Scene:
         """A dynamic rigid body (pdsim.rigid.RigidBody): ``shape`` a pdsim.rigid.SphereShape(radius),
         BoxShape(size) or a closed mesh (SolidShape, ``load_mesh``); ``density`` [kg/m^3] or ``mass`` [kg]; its
         centre of mass ``position`` [m], ``orientation`` (x, y, z, w), ``velocity`` [m/s] and ``angular_velocity``
-        [rad/s] at time 0; Coulomb ``friction``; ``restitution`` None or 0 (its contacts are inelastic: a higher
-        value raises FeatureNotAvailableError). It falls under the scene's gravity and is in two-way contact with
-        peridynamic and FEM bodies, the ground, static mesh colliders and the other rigid bodies; written to the cache
-        as ``/World/colliders/<name>`` (a transform over its rest mesh, with its velocity and angular velocity)."""
+        [rad/s] at time 0; Coulomb ``friction``; ``restitution`` e in [0, 1] or None against the ground, static
+        meshes and other rigid bodies (pdsim.rigid.RigidBody: the penalty form of the one contact law; inelastic
+        where neither side brings one; against particles and FEM vertices inelastic). It falls under the scene's
+        gravity and is in two-way contact with peridynamic and FEM bodies, the ground, static mesh colliders and the
+        other rigid bodies; written to the cache as ``/World/colliders/<name>`` (a transform over its rest mesh, with
+        its velocity and angular velocity)."""
         body = RigidBody(
             shape,
             density=density,

@@ -151,10 +151,16 @@ class Case:
 
 
 def kalthoff_winkler(
-    spacing: float = 4.0e-3, *, device: str = "cpu", time_step_safety: float = 0.7, contact: bool = True
+    spacing: float = 4.0e-3,
+    *,
+    device: str = "cpu",
+    time_step_safety: float = 0.7,
+    contact: bool = True,
+    projectile_height: float = 0.05,
 ) -> Case:
     """The Kalthoff-Winkler-like steel plate of the module docstring at particle spacing ``spacing`` [m]; ``contact``
-    False switches the scene's contact off (Scene.enable_contact(False))."""
+    False switches the scene's contact off (Scene.enable_contact(False)); ``projectile_height`` [m]: the box's extent
+    across the notches (default 50 mm, the notches' spacing: its edges lie on the notches)."""
     h = spacing
     lx, ly, lz = 0.1, 0.2, 2.0 * h
     body = pdsim.PeridynamicBody(pdsim.box((lx, ly, lz)), STEEL, h, name="plate")
@@ -169,7 +175,10 @@ def kalthoff_winkler(
     # a 20 x 50 x 50 mm box 0.1 mm off the impacted face x = -lx / 2
     velocity = (IMPACT_SPEED, 0.0, 0.0)
     projectile = pdsim.BoxProjectile(
-        (0.02, 0.05, 0.05), center=(-0.5 * lx - 0.01 - 1.0e-4, 0.0, 0.0), velocity=velocity, device=device
+        (0.02, projectile_height, 0.05),
+        center=(-0.5 * lx - 0.01 - 1.0e-4, 0.0, 0.0),
+        velocity=velocity,
+        device=device,
     )
     scene.add_collider(projectile)
     solvers = scene.build_solvers(device=device)

@@ -595,11 +595,10 @@ def _(ws):
     _scene().add_rigid_body(pdsim.SphereShape(0.03), density=7850.0, mass=1.0)
 
 
-@case("rigid_body_restitution", A_SCENE, "Scene.add_rigid_body(..., restitution=0.5)",
-      "restitution None or 0 (a rigid body's contacts are inelastic)", pdsim.FeatureNotAvailableError,
-      "restitution=0.5", "inelastic")  # fmt: skip
+@case("rigid_body_restitution", A_SCENE, "Scene.add_rigid_body(..., restitution=1.5)",
+      "restitution None or in [0, 1]", pdsim.ParameterError, "restitution=1.5", "restitution")  # fmt: skip
 def _(ws):
-    _scene().add_rigid_body(pdsim.SphereShape(0.03), density=7850.0, restitution=0.5, name="ball")
+    _scene().add_rigid_body(pdsim.SphereShape(0.03), density=7850.0, restitution=1.5, name="ball")
 
 
 @case("rigid_body_with_projectile", A_SCENE, "a rigid body and a kinematic projectile in one scene (they do not "
