@@ -18,8 +18,10 @@ From the hand-off on (kernels/peridynamics/handoff.py):
   impulse (particle contact, colliders, the ground, dynamic rigid bodies, contact with other methods, loads, gravity),
   then their motion is projected onto the rigid motion of the same linear and angular momentum, and they are posed
   on it (after the drift and after the second half kick);
-- its bonds are no longer visited (the dilatation and force passes return at once for its particles,
-  kernels/peridynamics/step.py), and the CPU threads' particle ranges are rebalanced on the remaining bonds;
+- its bonds are no longer visited: the dilatation, force and debris-damping passes run over the compacted list of
+  the particles outside rigid fragments (``live``, rebuilt at each hand-off; kernels/peridynamics/step.py), split
+  into CPU threads' ranges of equal bond count over that list, so their cost drops with the rigid share of the bonds;
+- its rigid motion is updated on the device every step (two launches, no host round trip);
 - its render surface, embedded in its particles (pdsim/fragment_surfaces/), rides its rigid motion.
 
 At the hand-off the fragment keeps its linear and angular momentum exactly; the energy K_int + E_el (at most
@@ -101,7 +103,8 @@ class FragmentHandoff:
         self.wave_speed = np.asarray(speed, dtype=np.float64)[body_of]
         self.quiet = np.zeros(n, dtype=np.int64)  # consecutive frames each particle's fragment stayed quiet
         self.fragment_of = np.full(n, -1, dtype=np.int32)  # rigid fragment per particle, -1: deformable
-        self.rigid_body = wp.array(self.fragment_of, dtype=wp.int32, device=d)
+        self.live_host = np.arange(n, dtype=np.int32)  # particles not in a rigid fragment, ascending
+        self.live = wp.array(self.live_host, dtype=wp.int32, device=d)
         self.released = {"internal_kinetic": 0.0, "elastic": 0.0}  # energy dropped at hand-offs [J]
         self._set_state(
             np.zeros(1, dtype=np.int32), np.zeros(0, dtype=np.int32), np.zeros((0, 3)), np.zeros((0, 3, 3)),
@@ -125,7 +128,8 @@ class FragmentHandoff:
         self.angular_velocity = wp.array(angular, dtype=wp.vec3d, device=d)
         self.fragment_of = np.full(self.solver.model.particle_count, -1, dtype=np.int32)
         self.fragment_of[members] = fragment
-        self.rigid_body = wp.array(self.fragment_of, dtype=wp.int32, device=d)
+        self.live_host = np.flatnonzero(self.fragment_of < 0).astype(np.int32)
+        self.live = wp.array(self.live_host, dtype=wp.int32, device=d)
         self._commands = {}  # (rotate_dt, ids of u and v) -> the recorded launches of project
 
     def _host_state(self) -> list:
@@ -179,6 +183,7 @@ class FragmentHandoff:
                 centre=self.centre,
                 velocity=self.velocity,
                 angular_velocity=self.angular_velocity,
+                force_density=s.state.force_density,
             )
             self._commands[key] = (commands, s.kin.u, s.kin.v)  # the arrays kept alive: their ids stay theirs
         else:
@@ -266,7 +271,7 @@ class FragmentHandoff:
             member_fragment=self.member_fragment, members=self.members, body_offset=self.body_offset,
             rest=s.model.rest_positions, orientation=self.orientation, centre=self.centre, velocity=self.velocity,
             angular_velocity=self.angular_velocity, displacements=s.kin.u, velocities=s.kin.v,
-            count=self.member_count, device=s.device,
+            force_density=s.state.force_density, count=self.member_count, device=s.device,
         )  # fmt: skip
         self.quiet[new_members] = 0
         s.rebalance_ranges()

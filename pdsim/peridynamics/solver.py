@@ -148,7 +148,9 @@ class SolverPeridynamics(PointSolver):
         handoff = m.fracture and any(b.rigid_handoff is not None and b.material.breaks for b in self.bodies)
         self._kernels = pd_step.make_step_kernels(m.fracture, m.plastic, handoff)
         self._offsets_host = m.family_offsets.numpy()[: n + 1].astype(np.int64)
-        self._ranges = None
+        self._ranges = None  # ranges over every particle (energy, damage)
+        self._bond_ranges = None  # ranges of the dilatation and force passes: over the live list with a hand-off
+        self._all_particles = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=d)
         self.handoff = None  # FragmentHandoff (pdsim/peridynamics/handoff.py) when a body has rigid_handoff on
         self.threads = threads
         if handoff:
@@ -204,16 +206,19 @@ class SolverPeridynamics(PointSolver):
     def threads(self, value: int | None):
         count = resolve_threads(value, self.device, self.model.bond_count)
         self._ranges = ParticleRanges(self._offsets_host, count, self.device)
+        self._bond_ranges = self._ranges
         self.rebalance_ranges()
 
     def rebalance_ranges(self) -> None:
-        """Splits the bond passes' particle ranges on the bonds they visit (the particles of rigid fragments visit
-        none), keeping the thread count."""
+        """Splits the dilatation and force passes into ranges of the live list (the particles outside rigid
+        fragments, pdsim/peridynamics/handoff.py) of equal bond count, keeping the thread count; while no fragment
+        is rigid they are the ranges over every particle."""
         if self.handoff is None or not self.handoff.active:
+            self._bond_ranges = self._ranges
             return
-        sizes = np.diff(self._offsets_host) * (self.handoff.fragment_of < 0)
+        sizes = np.diff(self._offsets_host)[self.handoff.live_host]
         cost = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        self._ranges = ParticleRanges(cost, len(self._ranges.ranges), self.device)
+        self._bond_ranges = ParticleRanges(cost, len(self._ranges.ranges), self.device)
 
     # -- time step -----------------------------------------------------------------------------------------------
     def stable_time_step(self) -> float:
@@ -282,7 +287,8 @@ class SolverPeridynamics(PointSolver):
             if m.plastic
             else pd_step.plastic_placeholders(f1, reverse)
         )
-        launch = self._ranges.launch
+        launch = self._bond_ranges.launch
+        live = self.handoff.live if self.handoff is not None else self._dummy_i
         pd_step.dilatation(
             launch,
             ks,
@@ -299,7 +305,7 @@ class SolverPeridynamics(PointSolver):
             bp=s.bp,
             bond_ne=s.bond_ne,
             stretch_min=s.stretch_min if frac else f1,
-            rigid_body=self.handoff.rigid_body if self.handoff is not None else self._dummy_i,
+            live_particles=live,
             **plastic_args,
         )
         pd_step.bond_forces(
@@ -322,12 +328,14 @@ class SolverPeridynamics(PointSolver):
             plastic_bond_count=m.plastic_bond_count,
             bond_plastic=plastic,
             bond_plastic_reverse=s.bond_plastic_reverse if m.plastic else f1,
-            rigid_body=self.handoff.rigid_body if self.handoff is not None else self._dummy_i,
+            live_particles=live,
             force_density=s.force_density,
         )
         if m.debris_rate is not None:  # Material.debris_damping (kernels/peridynamics/damping.py)
+            particles = self._all_particles if self.handoff is None else self.handoff.live
             pd_damping.debris_damping(
-                m.particle_count,
+                len(self.handoff.live_host) if self.handoff is not None else m.particle_count,
+                particles=particles,
                 family_offsets=m.family_offsets,
                 family_neighbors=m.family_neighbors,
                 bond_wv=m.bond_wv,
@@ -380,7 +388,7 @@ class SolverPeridynamics(PointSolver):
         """The shared parts (pdsim.solver.PointSolver.graph_key) and the rigid fragments' arrays."""
         key = super().graph_key()
         if self.handoff is not None:
-            key += (self.handoff.rigid_body, self.handoff.members, self._ranges)
+            key += (self.handoff.live, self.handoff.members, self._bond_ranges)
         return key
 
     def _refresh_accelerations(self):
