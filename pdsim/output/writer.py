@@ -738,6 +738,9 @@ class ViewWriter:
                 handle, points, faces, normals=shading.normals(points), velocities=np.zeros_like(points)
             )
             self._rigid[key] = handle
+            if frame > self.cache.start_frame:  # a piece that appears mid-run: hidden before it
+                self.cache.write_visibility(handle, self.cache.start_frame, False)
+                self.cache.write_visibility(handle, frame, True)
             if view.static:
                 self.cache.write_transform(handle, None, view.translation, view.orientation)
         if not view.static:

@@ -48,7 +48,7 @@ from ..output.views import DeferredView, PointsView, resolve_views
 from ..solver import PointSolver, SolverContext, array_state, assign_state, register_solver
 from .body import PeridynamicBody
 from .events import CrackEvents
-from .handoff import FragmentHandoff
+from .handoff import FragmentHandoff, RigidPieces
 from .model import PeridynamicState, build_model
 from .ranges import ParticleRanges, resolve_threads
 
@@ -176,6 +176,7 @@ class SolverPeridynamics(PointSolver):
         self.write_surfaces = bool(surfaces)
         self._surfaces = None  # FragmentSurfaces per body, built on the first views() call
         self._fragments = None  # FragmentTracker, created on first use when some body can break
+        self._pieces = None  # RigidPieces per body (the rigid fragments in the output), made by the first views
         self.features = {"elastic"} | self.kin.features
         if ground is not None:
             self.features.add("ground_plane")
@@ -466,6 +467,7 @@ class SolverPeridynamics(PointSolver):
             assign_state(self.contact._scale_next, c["scale_next"], "contact scale")
             assign_state(self.contact.exposed, c["exposed"], "contact exposure")
         self._fragments = None
+        self._pieces = None
 
     # -- scene integration --------------------------------------------------------------------------------------------
     @property
@@ -532,7 +534,8 @@ class SolverPeridynamics(PointSolver):
         renderable surface ``<body>_surface`` (a closed shell per fragment and per particle whose damage reached the
         surfaces' threshold, pdsim/fragment_surfaces.py; vertex velocities [m/s]; face attributes fragment and
         crack; its topology changes only on frames where those regions change), as a DeferredView that holds copies
-        of the state it needs."""
+        of the state it needs; with rigid fragments (``rigid_handoff``) it also builds their rigid pieces, cut from
+        the surface (pdsim/peridynamics/handoff.py, RigidPieces)."""
         x = self.positions()
         v = self.velocities()
         u = self.kin.displacements()
@@ -565,7 +568,12 @@ class SolverPeridynamics(PointSolver):
                 broken = {}
                 if self.model.fracture:
                     broken = {"labels": values["fragment"][sl], "damage": values["damage"][sl]}
-                out.append(DeferredView(f"{b.name}_surface", self._surfaces[i].deferred_view(x[sl], v[sl], **broken)))
+                surface = DeferredView(f"{b.name}_surface", self._surfaces[i].deferred_view(x[sl], v[sl], **broken))
+                if self.handoff is not None and self.handoff.active:  # rigid fragments: pieces cut from the surface
+                    if self._pieces is None:
+                        self._pieces = [RigidPieces(body.name) for body in self.bodies]
+                    surface = self._pieces[i].deferred(surface, self.handoff.pieces(i, values["fragment"][sl]))
+                out.append(surface)
         return out
 
     # -- host-side views and diagnostics (vectorised numpy) ---------------------------------------------------------
