@@ -109,6 +109,7 @@ class FragmentHandoff:
         self.live_host = np.arange(n, dtype=np.int32)  # particles not in a rigid fragment, ascending
         self.live = wp.array(self.live_host, dtype=wp.int32, device=d)
         self.released = {"internal_kinetic": 0.0, "elastic": 0.0}  # energy dropped at hand-offs [J]
+        self._pieces = None  # RigidPieces per body (the rigid fragments in the output), made by the first views
         self._set_state(
             np.zeros(1, dtype=np.int32), np.zeros(0, dtype=np.int32), np.zeros((0, 3)), np.zeros((0, 3, 3)),
             np.zeros((0, 4)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)),
@@ -172,6 +173,15 @@ class FragmentHandoff:
             "velocity": velocity[mine],
             "angular_velocity": angular[mine],
         }
+
+    def cut_surface(self, body: int, surface: DeferredView, labels: np.ndarray) -> DeferredView:
+        """The solver's body ``body``'s ``surface`` view (labels: the body's fragment ids now), with its rigid pieces
+        cut from it once a fragment is rigid (RigidPieces)."""
+        if not self.active:
+            return surface
+        if self._pieces is None:
+            self._pieces = [RigidPieces(b.name) for b in self.solver.bodies]
+        return self._pieces[body].deferred(surface, self.pieces(body, labels))
 
     # -- the step ---------------------------------------------------------------------------------------------------
     def project(self, rotate_dt: float) -> None:
@@ -310,6 +320,7 @@ class FragmentHandoff:
         self.quiet = np.array(state["quiet"], dtype=np.int64, copy=True)
         released = np.asarray(state["released"], dtype=np.float64)
         self.released = {"internal_kinetic": float(released[0]), "elastic": float(released[1])}
+        self._pieces = None  # their meshes are cut again from the restored surface
         self.solver.rebalance_ranges()
 
 

@@ -48,7 +48,7 @@ from ..output.views import DeferredView, PointsView, resolve_views
 from ..solver import PointSolver, SolverContext, array_state, assign_state, register_solver
 from .body import PeridynamicBody
 from .events import CrackEvents
-from .handoff import FragmentHandoff, RigidPieces
+from .handoff import FragmentHandoff
 from .model import PeridynamicState, build_model
 from .ranges import ParticleRanges, resolve_threads
 
@@ -148,8 +148,7 @@ class SolverPeridynamics(PointSolver):
         handoff = m.fracture and any(b.rigid_handoff is not None and b.material.breaks for b in self.bodies)
         self._kernels = pd_step.make_step_kernels(m.fracture, m.plastic, handoff)
         self._offsets_host = m.family_offsets.numpy()[: n + 1].astype(np.int64)
-        self._ranges = None  # ranges over every particle (energy, damage)
-        self._bond_ranges = None  # ranges of the dilatation and force passes: over the live list with a hand-off
+        self._ranges = None  # ranges over every particle (energy, damage); _bond_ranges: the bond passes'
         self._all_particles = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=d)
         self.handoff = None  # FragmentHandoff (pdsim/peridynamics/handoff.py) when a body has rigid_handoff on
         self.threads = threads
@@ -176,7 +175,6 @@ class SolverPeridynamics(PointSolver):
         self.write_surfaces = bool(surfaces)
         self._surfaces = None  # FragmentSurfaces per body, built on the first views() call
         self._fragments = None  # FragmentTracker, created on first use when some body can break
-        self._pieces = None  # RigidPieces per body (the rigid fragments in the output), made by the first views
         self.features = {"elastic"} | self.kin.features
         if ground is not None:
             self.features.add("ground_plane")
@@ -207,19 +205,15 @@ class SolverPeridynamics(PointSolver):
     def threads(self, value: int | None):
         count = resolve_threads(value, self.device, self.model.bond_count)
         self._ranges = ParticleRanges(self._offsets_host, count, self.device)
-        self._bond_ranges = self._ranges
         self.rebalance_ranges()
 
     def rebalance_ranges(self) -> None:
-        """Splits the dilatation and force passes into ranges of the live list (the particles outside rigid
-        fragments, pdsim/peridynamics/handoff.py) of equal bond count, keeping the thread count; while no fragment
-        is rigid they are the ranges over every particle."""
-        if self.handoff is None or not self.handoff.active:
-            self._bond_ranges = self._ranges
-            return
-        sizes = np.diff(self._offsets_host)[self.handoff.live_host]
-        cost = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        self._bond_ranges = ParticleRanges(cost, len(self._ranges.ranges), self.device)
+        """Splits the dilatation and force passes into ranges of equal bond count of the live list (the particles
+        outside rigid fragments, pdsim/peridynamics/handoff.py), or of every particle while none is rigid."""
+        self._bond_ranges = self._ranges
+        if self.handoff is not None and self.handoff.active:
+            cost = np.concatenate([[0], np.cumsum(np.diff(self._offsets_host)[self.handoff.live_host])])
+            self._bond_ranges = ParticleRanges(cost.astype(np.int64), len(self._ranges.ranges), self.device)
 
     # -- time step -----------------------------------------------------------------------------------------------
     def stable_time_step(self) -> float:
@@ -467,7 +461,6 @@ class SolverPeridynamics(PointSolver):
             assign_state(self.contact._scale_next, c["scale_next"], "contact scale")
             assign_state(self.contact.exposed, c["exposed"], "contact exposure")
         self._fragments = None
-        self._pieces = None
 
     # -- scene integration --------------------------------------------------------------------------------------------
     @property
@@ -534,8 +527,7 @@ class SolverPeridynamics(PointSolver):
         renderable surface ``<body>_surface`` (a closed shell per fragment and per particle whose damage reached the
         surfaces' threshold, pdsim/fragment_surfaces.py; vertex velocities [m/s]; face attributes fragment and
         crack; its topology changes only on frames where those regions change), as a DeferredView that holds copies
-        of the state it needs; with rigid fragments (``rigid_handoff``) it also builds their rigid pieces, cut from
-        the surface (pdsim/peridynamics/handoff.py, RigidPieces)."""
+        of the state it needs (with rigid fragments, also their pieces cut from it: handoff.py, RigidPieces)."""
         x = self.positions()
         v = self.velocities()
         u = self.kin.displacements()
@@ -569,11 +561,7 @@ class SolverPeridynamics(PointSolver):
                 if self.model.fracture:
                     broken = {"labels": values["fragment"][sl], "damage": values["damage"][sl]}
                 surface = DeferredView(f"{b.name}_surface", self._surfaces[i].deferred_view(x[sl], v[sl], **broken))
-                if self.handoff is not None and self.handoff.active:  # rigid fragments: pieces cut from the surface
-                    if self._pieces is None:
-                        self._pieces = [RigidPieces(body.name) for body in self.bodies]
-                    surface = self._pieces[i].deferred(surface, self.handoff.pieces(i, values["fragment"][sl]))
-                out.append(surface)
+                out.append(surface if self.handoff is None else self.handoff.cut_surface(i, surface, broken["labels"]))
         return out
 
     # -- host-side views and diagnostics (vectorised numpy) ---------------------------------------------------------
