@@ -48,9 +48,12 @@ def _read(path) -> dict:
             "visible": [UsdGeom.Imageable(prim).ComputeVisibility(f) != UsdGeom.Tokens.invisible for f in frames],
             "points": np.array(UsdGeom.Mesh(prim).GetPointsAttr().Get(), dtype=np.float64),
             "faces": len(UsdGeom.Mesh(prim).GetFaceVertexCountsAttr().Get()),
+            "crack": len(prim.GetChild("crack").GetAttribute("indices").Get()),
         }
     surface = UsdGeom.Mesh(stage.GetPrimAtPath("/World/block_surface"))
     out["surface_faces"] = [len(surface.GetFaceVertexCountsAttr().Get(f) or []) for f in frames]
+    crack = stage.GetPrimAtPath("/World/block_surface/crack").GetAttribute("indices")
+    out["surface_crack"] = [len(crack.Get(f) or []) for f in frames]
     block = stage.GetPrimAtPath("/World/block")
     xf = UsdGeom.XformCache()
     out["particles"], out["fragment"] = [], []
@@ -77,7 +80,8 @@ def _rotation_angle(qa, qb) -> float:
 
 def test_rigid_fragments_are_written_as_pieces_with_transforms_and_velocities(pieces_cache):
     """Two pieces (the halves), hidden before the hand-off frame and shown from it on; they take every face of the
-    surface (the surface's face count before equals the pieces' total, and the surface has none left); from the
+    surface (the surface's face count before equals the pieces' total, and the surface has none left), their crack
+    faces in their ``crack`` subset (as many as the surface had); from the
     hand-off on, pdsim:velocity equals the central difference of the translation (per played second, 1 % of the
     speed) and |pdsim:angularVelocity| the rate of turn of the orientation (degrees per played second, 2 %), over
     the frames in flight."""
@@ -91,6 +95,7 @@ def test_rigid_fragments_are_written_as_pieces_with_transforms_and_velocities(pi
         assert not any(p["visible"][:hand]) and all(p["visible"][hand:])
     assert c["surface_faces"][hand - 1] == sum(p["faces"] for p in c["pieces"].values()) > 0
     assert c["surface_faces"][hand:] == [0] * (FRAMES + 1 - hand)
+    assert c["surface_crack"][hand - 1] == sum(p["crack"] for p in c["pieces"].values()) > 0
     fps = c["fps"]
     for p in c["pieces"].values():
         for f in (hand + 1, hand + 2):

@@ -106,7 +106,8 @@ class RigidView:
     of a body), or None for ``/World`` itself (the ground). The geometry (points, faces) must be the same on every
     frame; a body first seen after the cache's first frame is hidden before it. velocity [m/s] of the body frame's
     origin and angular_velocity [rad/s] (world axes), float64 [3] each: a dynamic rigid body's or a rigid piece's
-    (written as ``pdsim:velocity`` and ``pdsim:angularVelocity``), None for the others."""
+    (written as ``pdsim:velocity`` and ``pdsim:angularVelocity``), None for the others. face_attributes: {shared
+    name: [f]}, static (a rigid piece's ``crack`` and ``fragment``, written with the mesh as for a surface)."""
 
     name: str
     points: np.ndarray
@@ -117,6 +118,7 @@ class RigidView:
     group: str | None = "colliders"
     velocity: np.ndarray | None = None
     angular_velocity: np.ndarray | None = None
+    face_attributes: dict = field(default_factory=dict)
 
 
 @dataclass

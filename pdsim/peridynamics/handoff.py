@@ -328,7 +328,8 @@ class RigidPieces:
     """The rigid pieces of one peridynamic body in the output: the render surface of each rigid fragment, cut out of
     the body's surface mesh (its faces whose ``fragment`` is the fragment's id, chips included) at the first frame the
     fragment is rigid, kept as a static mesh in the fragment's body frame (R^T (x - c) at that frame), and written from
-    then on as a RigidView ``piece_<id>`` under ``<body>_pieces`` posed by the fragment's rigid motion; the body's
+    then on as a RigidView ``piece_<id>`` (with the faces' attributes: crack, fragment) under ``<body>_pieces``
+    posed by the fragment's rigid motion; the body's
     surface loses those faces (and the vertices only they use). A fragment whose surface has no face yet stays in
     no piece until it has. After a restart the meshes are cut again from the restored surface (the writer keeps the
     pieces it wrote and only adds their poses)."""
@@ -365,7 +366,8 @@ class RigidPieces:
             verts, local = np.unique(faces[rows], return_inverse=True)
             rot = quat_matrix(pieces["orientation"][i])
             body_points = (points[verts] - pieces["centre"][i]) @ rot  # R^T (x - c), row by row
-            self.rest[int(labels[i])] = (body_points, local.reshape(-1, 3))
+            attributes = {k: np.asarray(a)[rows] for k, a in mesh.face_attributes.items()}
+            self.rest[int(labels[i])] = (body_points, local.reshape(-1, 3), attributes)
         cut = np.array(sorted(set(labels.tolist()) & set(self.rest)), dtype=np.int64)
         keep = ~np.isin(frag, cut)
         used = np.zeros(len(points), dtype=bool)
@@ -386,11 +388,12 @@ class RigidPieces:
         )
         out = [surface]
         for i in np.flatnonzero(np.isin(labels, cut)):
-            body_points, local = self.rest[int(labels[i])]
+            body_points, local, attributes = self.rest[int(labels[i])]
             out.append(
                 RigidView(
                     f"piece_{int(labels[i])}", body_points, local, pieces["centre"][i], pieces["orientation"][i],
                     group=self.group, velocity=pieces["velocity"][i], angular_velocity=pieces["angular_velocity"][i],
+                    face_attributes=attributes,
                 )
             )  # fmt: skip
         return out
