@@ -18,9 +18,12 @@ From the hand-off on (kernels/peridynamics/handoff.py):
   impulse (particle contact, colliders, the ground, dynamic rigid bodies, contact with other methods, loads, gravity),
   then their motion is projected onto the rigid motion of the same linear and angular momentum, and they are posed
   on it (after the drift and after the second half kick);
-- its bonds are no longer visited: the dilatation, force and debris-damping passes run over the compacted list of
-  the particles outside rigid fragments (``live``, rebuilt at each hand-off; kernels/peridynamics/step.py), split
-  into CPU threads' ranges of equal bond count over that list, so their cost drops with the rigid share of the bonds;
+- its bonds are no longer visited: the dilatation and force passes run over the compacted list of the particles
+  outside rigid fragments (``live``, rebuilt at each hand-off; kernels/peridynamics/step.py), split into CPU
+  threads' ranges of equal bond count over that list, so their cost drops with the rigid share of the bonds; the
+  debris-damping pass (Material.debris_damping) runs over those and the fragment's particles whose damage is above
+  the material's threshold (``damped``: the drag still acts on them, as without the hand-off, and is projected with
+  the other forces);
 - its rigid motion is updated on the device every step (two launches, no host round trip);
 - its render surface is cut out of the body's surface mesh at the first frame it is rigid and written from then on as
   a rigid piece: that surface as a static mesh in the fragment's body frame, under the transform of its rigid
@@ -85,7 +88,6 @@ class FragmentHandoff:
     def __init__(self, solver):
         self.solver = solver
         m = solver.model
-        d = solver.device
         n = m.particle_count
         body_of = np.repeat(np.arange(len(solver.bodies)), np.diff(np.asarray(m.body_offsets)))
         self.body_of = body_of
@@ -106,8 +108,6 @@ class FragmentHandoff:
         self.wave_speed = np.asarray(speed, dtype=np.float64)[body_of]
         self.quiet = np.zeros(n, dtype=np.int64)  # consecutive frames each particle's fragment stayed quiet
         self.fragment_of = np.full(n, -1, dtype=np.int32)  # rigid fragment per particle, -1: deformable
-        self.live_host = np.arange(n, dtype=np.int32)  # particles not in a rigid fragment, ascending
-        self.live = wp.array(self.live_host, dtype=wp.int32, device=d)
         self.released = {"internal_kinetic": 0.0, "elastic": 0.0}  # energy dropped at hand-offs [J]
         self._pieces = None  # RigidPieces per body (the rigid fragments in the output), made by the first views
         self._set_state(
@@ -134,6 +134,11 @@ class FragmentHandoff:
         self.fragment_of[members] = fragment
         self.live_host = np.flatnonzero(self.fragment_of < 0).astype(np.int32)
         self.live = wp.array(self.live_host, dtype=wp.int32, device=d)
+        damped = self.fragment_of < 0  # the debris-damping pass: the live particles and the rigid ones it acts on
+        m = self.solver.model
+        if m.debris_rate is not None and len(members):  # a rigid particle's damage no longer changes
+            damped |= (m.debris_rate.numpy() > 0.0) & (self.solver.damage() > m.debris_damage.numpy())
+        self.damped = wp.array(np.flatnonzero(damped).astype(np.int32), dtype=wp.int32, device=d)
         self._commands = {}  # (rotate_dt, ids of u and v) -> the recorded launches of project
 
     def _host_state(self) -> list:

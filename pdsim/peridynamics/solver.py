@@ -327,9 +327,9 @@ class SolverPeridynamics(PointSolver):
             force_density=s.force_density,
         )
         if m.debris_rate is not None:  # Material.debris_damping (kernels/peridynamics/damping.py)
-            particles = self._all_particles if self.handoff is None else self.handoff.live
+            particles = self._all_particles if self.handoff is None else self.handoff.damped
             pd_damping.debris_damping(
-                len(self.handoff.live_host) if self.handoff is not None else m.particle_count,
+                particles.shape[0],
                 particles=particles,
                 family_offsets=m.family_offsets,
                 family_neighbors=m.family_neighbors,
@@ -383,7 +383,7 @@ class SolverPeridynamics(PointSolver):
         """The shared parts (pdsim.solver.PointSolver.graph_key) and the rigid fragments' arrays."""
         key = super().graph_key()
         if self.handoff is not None:
-            key += (self.handoff.live, self.handoff.members, self._bond_ranges)
+            key += (self.handoff.live, self.handoff.damped, self.handoff.members, self._bond_ranges)
         return key
 
     def _refresh_accelerations(self):
