@@ -186,3 +186,44 @@ def test_one_rigid_half_is_bit_identical_on_one_and_three_threads():
         s.simulate(0.5 * s.stable_time_step(), 100)
         out.append((s.kin.u.numpy().copy(), s.kin.v.numpy().copy()))
     assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
+
+
+def test_debris_damping_still_acts_on_rigid_particles_above_the_threshold():
+    """Both halves rigid, with debris damping (c = 1e4 / s, threshold 0.2): after a force pass the force density of
+    every rigid particle is the debris drag rho c (v_bar - v_k) computed here from the bonds (mean velocity over the
+    live bonds, else over the whole family) where its damage is above the threshold (the notch faces), within 1e-4 of
+    the largest, and exactly zero elsewhere (the bond passes skip them)."""
+    glass = pdsim.Material(
+        density=2500.0, youngs_modulus=5.0e9, poisson_ratio=0.25, critical_stretch=2.0e-3, debris_damping=1.0e4,
+        debris_damage=0.2,
+    )  # fmt: skip
+    body = _notched_block((0.0, 0.0, 0.0), pdsim.RigidHandoff(strain=1.0, frames=1))
+    body.material = glass
+    s = SolverPeridynamics([body], threads=1)
+    x = s.positions()
+    s.set_velocities(np.cross([0.0, 2.0, 30.0], x - x.mean(0)) + np.random.default_rng(1).standard_normal(x.shape))
+    assert s.handoff.update() == 2 and s.handoff.rigid_particles().all()
+    s.compute_forces()
+    got = s.force_density()
+    m = s.model
+    offsets = m.family_offsets.numpy()[: s.particle_count + 1]
+    row = np.repeat(np.arange(s.particle_count), np.diff(offsets))
+    nb = m.family_neighbors.numpy()[: s.bond_count]
+    wv = m.bond_wv.numpy()[: s.bond_count].astype(np.float64)
+    alive = s.bond_alive()
+    v = s.kin.v.numpy().astype(np.float64)
+
+    def wsum(w, values):
+        return np.stack([np.bincount(row, weights=w * values[:, i], minlength=s.particle_count) for i in range(3)], 1)
+
+    total = np.bincount(row, weights=wv, minlength=s.particle_count)
+    live = np.bincount(row, weights=wv * alive, minlength=s.particle_count)
+    v_bar = np.where((live > 0)[:, None], wsum(wv * alive, v[nb]) / np.maximum(live, 1e-300)[:, None],
+                     wsum(wv, v[nb]) / total[:, None])  # fmt: skip
+    damped = 1.0 - live / total > 0.2
+    rho = 1.0 / m.inv_density.numpy().astype(np.float64)
+    expected = np.where(damped[:, None], (1.0e4 * rho)[:, None] * (v_bar - v), 0.0)
+    assert 0 < damped.sum() < s.particle_count
+    assert np.all(got[~damped] == 0.0)
+    scale = np.abs(expected).max()
+    assert scale > 0.0 and np.abs(got - expected).max() < 1e-4 * scale

@@ -301,12 +301,12 @@ def stripped_check(n: int, device: str, launches: int = 20, rounds: int = 8) -> 
             launch, ks, displacements=u, family_offsets=m.family_offsets, family_neighbors=m.family_neighbors,
             bond_geom=m.bond_geom, bond_wv_dil=m.bond_wv_dil, dil_d=m.dil_d, dil_coef=m.dil_coef, dev_b=m.dev_b,
             bond_alive=u8, theta=theta, bp=bp, bond_ne=ne, stretch_min=f1,
-            **pd_step.plastic_placeholders(f1, i1), rigid_body=i1)  # fmt: skip
+            **pd_step.plastic_placeholders(f1, i1), live_particles=i1)  # fmt: skip
         pd_step.bond_forces(
             launch, ks, family_offsets=m.family_offsets, family_neighbors=m.family_neighbors, bond_geom=m.bond_geom,
             bond_ne=ne, bond_wv_dil=m.bond_wv_dil, bond_wv_dev=m.bond_wv_dev, bp=bp, bond_alive=u8,
             bond_critical_stretch=f1, compressive_bonus=f1, compressive_stretch_floor=f1, stretch_min=f1, eqps=f1,
-            failure_eqps=f1, plastic_bond_count=0, bond_plastic=f1, bond_plastic_reverse=f1, rigid_body=i1,
+            failure_eqps=f1, plastic_bond_count=0, bond_plastic=f1, bond_plastic_reverse=f1, live_particles=i1,
             force_density=force)  # fmt: skip
 
     def stripped(o):

@@ -24,6 +24,7 @@ import time
 import numpy as np
 import warp as wp
 
+import pdsim
 import pdsim.run as pdrun
 from pdsim.peridynamics import PeridynamicBody, RigidHandoff, SolverPeridynamics
 
@@ -87,7 +88,9 @@ def run(name: str, handoff: bool, cache: str, frames: int | None) -> dict:
                 out = broken_out(s)
                 rigid = s.handoff.rigid_particles() if s.handoff is not None else np.zeros_like(out)
                 rows_visited = s.handoff.live_bond_rows() if s.handoff is not None else s.bond_count
-                rows.append((frame, int(out.sum()), int((out & rigid).sum()), int(rigid.sum()), rows_visited))
+                rows.append(
+                    (frame, int(out.sum()), int((out & rigid).sum()), int(rigid.sum()), rows_visited, s.particle_count)
+                )
 
     os.environ["PDSIM_THREADS"] = "1"
     pdrun.advance_frame = timed
@@ -132,6 +135,73 @@ def interleaved(name: str, cache: str, frames: int | None, rounds: int = 7, step
     out = {k: float(np.median(v)) for k, v in times.items()}
     out["rows"] = on.handoff.live_bond_rows() / max(on.bond_count, 1)
     return out
+
+
+TILES = 4  # the scaling slab is cut into TILES x TILES tiles
+
+
+def tiled_slab(handoff: bool, spacing: float = 0.01) -> pdsim.Scene:
+    """The scaling case: a free glass slab (0.24 m x 0.24 m x 0.03 m, the glass pane's material and break pattern,
+    particle contact on as for any breakable body) cut by notches into TILES x TILES tiles, in space (no gravity, no
+    ground); with ``handoff``, ``RigidHandoff(strain=1e-5, frames=1)``."""
+    size, thick = 0.24, 0.03
+    scene = pdsim.Scene(fps=24, frames=1, frame_time=1.0e-4, gravity=(0.0, 0.0, 0.0), name="tiled_slab")
+    glass = pdsim.Material(
+        density=2500.0, youngs_modulus=72.0e9, poisson_ratio=0.22, critical_stretch=1.0e-3,
+        compressive_bonus=1.0, compressive_bonus_cap=3.0, debris_damping=2.5e4, name="glass",
+    )  # fmt: skip
+    body = scene.add_peridynamic_body(
+        pdsim.box((size, size, thick), center=(0.0, 0.0, 0.0), name="slab"), glass, spacing,
+        rigid_handoff=RigidHandoff(strain=1.0e-5, frames=1) if handoff else None,
+    )  # fmt: skip
+    for i in range(1, TILES):
+        c = -0.5 * size + i * size / TILES
+        body.add_notch(pdsim.BoxRegion(lo=(c - 1e-4, -1.0, -1.0), hi=(c + 1e-4, 1.0, 1.0)))
+        body.add_notch(pdsim.BoxRegion(lo=(-1.0, c - 1e-4, -1.0), hi=(1.0, c + 1e-4, 1.0)))
+    return scene
+
+
+def scaling(rounds: int = 5, steps: int = 40) -> list[dict]:
+    """The step cost against the rigid share: the tiled slab (``tiled_slab``) with its tiles drifting apart and
+    spinning; for r = 0 .. TILES^2 in steps of TILES, r tiles are quiet and the others vibrate (a random velocity of
+    0.2 m/s per component and particle, an equivalent strain of about 6e-5, above the threshold 1e-5), the
+    hand-off's frame-end test makes the r quiet tiles rigid, then the solver and one without the hand-off from the
+    same state step ``steps`` steps each in turn over ``rounds`` rounds (one thread, process CPU time, medians)."""
+    rows = []
+    for rigid_tiles in range(0, TILES * TILES + 1, TILES):
+        on = tiled_slab(True).build_solvers(device="cpu", check=False)[0]
+        off = tiled_slab(False).build_solvers(device="cpu", check=False)[0]
+        x = on.positions()
+        cell = np.clip(((x[:, :2] + 0.12) / (0.24 / TILES)).astype(int), 0, TILES - 1)
+        tile = cell[:, 0] * TILES + cell[:, 1]
+        centre = (cell + 0.5) * (0.24 / TILES) - 0.12
+        rng = np.random.default_rng(5)
+        order = rng.permutation(TILES * TILES)
+        quiet = np.isin(tile, order[:rigid_tiles])
+        v = np.zeros_like(x)
+        v[:, :2] = 0.5 * centre  # drifting apart at 0.5 / s (a few cm/s)
+        v += np.cross([0.0, 0.0, 20.0], np.c_[x[:, :2] - centre, np.zeros(len(x))])  # each tile spinning
+        v[~quiet] += 0.2 * rng.standard_normal((int((~quiet).sum()), 3))
+        on.set_velocities(v)
+        handed = on.handoff.update()
+        if handed != rigid_tiles:
+            raise RuntimeError(f"{handed} tiles handed off, {rigid_tiles} expected")
+        off.restore(on.checkpoint())
+        off.threads = on.threads = 1
+        dt = 0.5 * off.stable_time_step()
+        times = {"on": [], "off": []}
+        for _ in range(rounds):
+            for key, solver in (("on", on), ("off", off)):
+                t0 = time.process_time()
+                solver.simulate(dt, steps)
+                times[key].append((time.process_time() - t0) / steps)
+        row = {k: float(np.median(t)) for k, t in times.items()}
+        row["rigid"] = float(on.handoff.rigid_particles().mean())
+        row["rows"] = on.handoff.live_bond_rows() / on.bond_count
+        row["particles"], row["bonds"] = on.particle_count, on.bond_count
+        rows.append(row)
+        print(row, flush=True)
+    return rows
 
 
 def last_third(values: np.ndarray) -> float:
@@ -180,7 +250,44 @@ def main(argv=None) -> None:
         action="store_true",
         help="only the step cost at the last frame with and without the hand-off, alternated (printed)",
     )
+    parser.add_argument(
+        "--scaling",
+        action="store_true",
+        help="only the step cost against the rigid share on a slab cut into tiles (docs/rigid_handoff_scaling.md)",
+    )
     args = parser.parse_args(argv)
+    if args.scaling:
+        wp.config.quiet = True
+        os.environ["PDSIM_THREADS"] = "1"
+        rows = scaling()
+        when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+        load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
+        lines = [
+            "# Rigid hand-off: the step cost against the rigid share",
+            "",
+            f"`python tools/rigid_handoff.py --scaling` on {when} ({platform.machine()}, {os.cpu_count()} cores, Warp"
+            f" {wp.__version__} CPU, one bond thread, load average {load} at the end): a free glass slab of"
+            f" {rows[0]['particles']} particles and {rows[0]['bonds']} bonds (0.24 m x 0.24 m x 0.03 m at 1 cm, the"
+            f" glass pane's material, particle contact on) cut into {TILES * TILES} tiles, drifting apart and spinning"
+            " in space; some tiles quiet and handed off, the others vibrating; then 40 steps with the hand-off and"
+            " 40 without from the same state, in turn, 5 rounds; medians of the process CPU time per step"
+            " (`rigid_handoff.py: scaling`). Bound: one over the share of the bond rows still visited (the bond"
+            " passes' speed-up; the step also holds contact, the kick-drift and the hand-off's projection).",
+            "",
+            "| rigid particles | bond rows visited | without [ms/step] | with the hand-off [ms/step] | speed-up |"
+            " bond-pass bound |",
+            "|---|---|---|---|---|---|",
+        ]
+        for r in rows:
+            bound = f"{1.0 / r['rows']:.2f}x" if r["rows"] > 0 else "-"
+            lines.append(
+                f"| {100 * r['rigid']:.0f} % | {100 * r['rows']:.0f} % | {1e3 * r['off']:.3f} | {1e3 * r['on']:.3f} |"
+                f" {r['off'] / r['on']:.2f}x | {bound} |"
+            )
+        with open(os.path.join(DOCS, "rigid_handoff_scaling.md"), "w") as f:
+            f.write("\n".join(lines) + "\n")
+        print("\n".join(lines))
+        return
     if args.interleaved:
         wp.config.quiet = True
         os.environ["PDSIM_THREADS"] = "1"
@@ -236,13 +343,18 @@ def main(argv=None) -> None:
             "of a frame's steps (`advance_frame`); frame: with the frame-end hand-off test and the output. Times "
             "are means over the last third of the frames.",
             "",
-            "| scene | frames | broken-out (off / on) | in rigid fragments (on) | bond rows visited (on) |"
-            " step off [s] | step on [s] | step speed-up | frame off [s] | frame on [s] | frame speed-up |",
-            "|---|---|---|---|---|---|---|---|---|---|---|",
+            "| scene | frames | particles | broken-out (off / on) | in rigid fragments (on) | bond rows visited (on) |"
+            " step off [s] | step on [s] | step speed-up | frame off [s] | frame on [s] | frame speed-up |"
+            " pixels differing |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
             *rows,
             "",
             "Bond rows visited: the share of the bonds the dilatation and force passes still visit at the last frame"
-            " (the rest belong to rigid fragments); one over it bounds the speed-up of those passes.",
+            " (the rest belong to rigid fragments); one over it bounds the speed-up of those passes, and the step"
+            " also holds particle contact, the kick-drift, colliders and the ground for every particle. Where the"
+            " broken-out particles are a few per cent of the scene's, no hand-off of them can make the step much"
+            " faster: docs/rigid_handoff_scaling.md measures the step against the rigid share. Pixels differing:"
+            " the share of the stills' pixels whose largest channel differs by more than 25/255.",
             "",
             "Rigid / broken-out particles by frame (hand-off on):",
         ]
@@ -270,12 +382,15 @@ def main(argv=None) -> None:
             s_off, s_on = last_third(off["steps"]), last_third(on["steps"])
             f_off, f_on = last_third(off["frames"]), last_third(on["frames"])
             frames = on["report"].frames_written - 1
+            png = stills(name, caches, frames, folder)
+            diff = pixel_difference(*(os.path.join(folder, f"{name}_{m}.png") for m in ("off", "on")))
             rows.append(
-                f"| {name} | {frames} | {off['rows'][-1][1]} / {last[1]} | {last[2]} ({100 * share:.0f} %) |"
-                f" {100 * last[4] / on['bonds']:.0f} % |"
+                f"| {name} | {frames} | {last[5]} | {off['rows'][-1][1]} / {last[1]} | {last[2]} ({100 * share:.0f} %)"
+                f" | {100 * last[4] / on['bonds']:.0f} % |"
                 f" {s_off:.3f} | {s_on:.3f} | {s_off / s_on:.2f}x | {f_off:.3f} | {f_on:.3f} | {f_off / f_on:.2f}x |"
+                f" {100 * diff:.2f} % |"
             )
-            pictures.append((name, stills(name, caches, frames, folder), frames))
+            pictures.append((name, png, frames))
             series = ", ".join(f"{r[0]}: {r[2]}/{r[1]}" for r in on["rows"][:: max(1, len(on["rows"]) // 10)])
             pictures.append((name, None, series))
             write()

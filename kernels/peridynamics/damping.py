@@ -26,6 +26,7 @@ from ..launch import launch
 # pass over the family.
 @wp.kernel
 def add_debris_damping(
+    particles: wp.array(dtype=wp.int32),
     family_offsets: wp.array(dtype=wp.int32),
     family_neighbors: wp.array(dtype=wp.int32),
     bond_wv: wp.array(dtype=float),
@@ -36,9 +37,10 @@ def add_debris_damping(
     damage_threshold: wp.array(dtype=float),
     force_density: wp.array(dtype=wp.vec3),
 ):
-    """Adds rho_k c_k (v_bar_k - v_k) to the force density [N/m^3] of each particle whose damage exceeds its
-    threshold (module docstring); one thread per particle, a gather over its family."""
-    k = wp.tid()
+    """Adds rho_k c_k (v_bar_k - v_k) to the force density [N/m^3] of each particle k = particles[tid] whose damage
+    exceeds its threshold (module docstring); one thread per listed particle, a gather over its family. The list
+    holds every particle, or those not in a rigid fragment (pdsim/peridynamics/handoff.py)."""
+    k = particles[wp.tid()]
     c = rate[k]
     if c <= 0.0:
         return
@@ -64,5 +66,6 @@ def add_debris_damping(
 
 
 def debris_damping(count, *, device, **arguments):
-    """Adds the debris drag to force_density [N/m^3] of the ``count`` particles (add_debris_damping)."""
+    """Adds the debris drag to force_density [N/m^3] of the first ``count`` particles of the list ``particles``
+    (add_debris_damping)."""
     launch(add_debris_damping, count, device=device, **arguments)

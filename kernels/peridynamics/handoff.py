@@ -82,9 +82,12 @@ def pose_members(
     angular_velocity: wp.array(dtype=wp.vec3d),
     displacements: wp.array(dtype=wp.vec3),
     velocities: wp.array(dtype=wp.vec3),
+    force_density: wp.array(dtype=wp.vec3),
 ):
     """Member i (particle members[i] of fragment member_fragment[i]) on its fragment's rigid motion: position
-    c + R r_i (displacement from its rest position [m]) and velocity v + w x R r_i [m/s]."""
+    c + R r_i (displacement from its rest position [m]) and velocity v + w x R r_i [m/s]; its force density is
+    cleared [N/m^3] (the bond passes do not visit it: what the next force phase adds to it is contact, the ground,
+    colliders and loads alone)."""
     i = wp.tid()
     g = member_fragment[i]
     k = members[i]
@@ -94,6 +97,7 @@ def pose_members(
     displacements[k] = wp.vec3(wp.float32(u[0]), wp.float32(u[1]), wp.float32(u[2]))
     v = velocity[g] + wp.cross(angular_velocity[g], arm)
     velocities[k] = wp.vec3(wp.float32(v[0]), wp.float32(v[1]), wp.float32(v[2]))
+    force_density[k] = wp.vec3(0.0)
 
 
 def project(*, fragment_count: int, member_count: int, device, record_cmd: bool = False, **arguments) -> list:
@@ -119,5 +123,5 @@ _PROJECT_NAMES = (
 )  # fmt: skip
 _POSE_NAMES = (
     "member_fragment", "members", "body_offset", "rest", "orientation", "centre", "velocity", "angular_velocity",
-    "displacements", "velocities",
+    "displacements", "velocities", "force_density",
 )  # fmt: skip

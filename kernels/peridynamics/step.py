@@ -45,13 +45,15 @@ _cache = {}
 
 def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
     """Kernels (dilatation with the fused plastic update, force, energy) for the given feature set, built once and
-    cached. With ``handoff`` the dilatation and force passes skip every particle k with ``rigid_body[k] >= 0`` (a
-    collision proxy of a rigid fragment, pdsim/peridynamics/handoff.py): none of its bonds is visited, its force
-    density is zero and its dilatation and bond cache keep their last values; without it ``rigid_body`` is a
-    placeholder the kernels never read. Every kernel takes the first particle of its launch (``first``): a launch
-    covers the particles first .. first + dim - 1, and each writes only its particles' rows and their bonds' rows
-    (bonds are stored per particle family; the plastic mirror is the one exception, module docstring), so launches
-    over disjoint particle ranges of one pass can run at the same time."""
+    cached. With ``handoff`` the dilatation and force passes run over a compacted list of particles,
+    ``live_particles`` (ascending indices): thread t of a launch computes particle live_particles[first + t], so the
+    particles of rigid fragments (collision proxies, pdsim/peridynamics/handoff.py), which the list leaves out, cost
+    nothing: none of their bonds is visited and their dilatation, bond cache and force density are not written
+    (kernels/peridynamics/handoff.py clears their force density); without it ``live_particles`` is a placeholder
+    the kernels never read and thread t computes particle first + t. Every kernel takes the first entry of its launch
+    (``first``): a launch covers the particles (or list entries) first .. first + dim - 1, and each writes only its
+    particles' rows and their bonds' rows (bonds are stored per particle family; the plastic mirror is the one
+    exception, module docstring), so launches over disjoint ranges of one pass can run at the same time."""
     key = (bool(fracture), bool(plastic), bool(handoff))
     if key in _cache:
         return _cache[key]
@@ -89,7 +91,7 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
         eqps: wp.array(dtype=float),
         bond_reverse: wp.array(dtype=wp.int32),
         bond_plastic_reverse: wp.array(dtype=float),
-        rigid_body: wp.array(dtype=wp.int32),
+        live_particles: wp.array(dtype=wp.int32),
     ):
         """theta_k = d_k sum_live w e V beta G^dil for particle k = first + tid; caches each live bond's (n, e)
         for the later passes and, with fracture, the particle's most compressive live stretch (for the
@@ -105,8 +107,7 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
         reads its cache."""
         k = first + wp.tid()
         if wp.static(HANDOFF):
-            if rigid_body[k] >= 0:
-                return
+            k = live_particles[k]
         uk = displacements[k]
         acc = float(0.0)
         smin = float(0.0)
@@ -208,7 +209,7 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
         plastic_bond_count: int,
         bond_plastic: wp.array(dtype=float),
         bond_plastic_reverse: wp.array(dtype=float),
-        rigid_body: wp.array(dtype=wp.int32),
+        live_particles: wp.array(dtype=wp.int32),
         force_density: wp.array(dtype=wp.vec3),
     ):
         """Force density [N/m^3] at particle k = first + tid over live bonds, with plastic extensions where the
@@ -217,9 +218,7 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
         It compares extensions, e - (e^p_kj + e^p_jk) / 2 > s_c L, rather than stretches (no division per bond)."""
         k = first + wp.tid()
         if wp.static(HANDOFF):
-            if rigid_body[k] >= 0:
-                force_density[k] = wp.vec3(0.0)
-                return
+            k = live_particles[k]
         bpk = bp[k]
         f = wp.vec3(0.0)
         smin_k = float(0.0)

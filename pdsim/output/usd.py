@@ -517,18 +517,21 @@ class UsdCache(SparsePrims):
         *,
         normals: np.ndarray | None = None,
         velocities: np.ndarray | None = None,
+        face_primvars: dict[str, np.ndarray] | None = None,
+        subsets: dict[str, np.ndarray] | None = None,
     ) -> None:
-        """Write a static mesh (a collider's geometry) once, as default values of the top-level layer (no time
-        samples). Arguments as :meth:`write_mesh`."""
+        """Write a static mesh (a collider's or a rigid piece's geometry) once, as default values of the top-level
+        layer (no time samples). Arguments as :meth:`write_mesh`."""
         self._check_handle(handle, MeshHandle)
         if handle._has_topology:
             raise ValueError(f"mesh {handle.path} already has geometry")
-        samples, topology, nv, nf = mesh_samples(handle, points, faces, velocities, normals, None, None)
+        samples, topology, nv, nf = mesh_samples(handle, points, faces, velocities, normals, face_primvars, None)
+        topology += subset_samples(handle, subsets, nf) if handle.subsets else []
         prim = self._stage.GetPrimAtPath(handle.path)
         for attr, _kind, value in samples:
             prim.GetAttribute(attr).Set(value)
-        for _path, attr, _kind, value in topology:
-            prim.GetAttribute(attr).Set(value)
+        for path, attr, _kind, value in topology:
+            self._stage.GetPrimAtPath(path).GetAttribute(attr).Set(value)
         self._stream.manifests.pop(handle.topology_set, None)
         handle._has_topology = True
         handle.vertex_count, handle._face_count = nv, nf

@@ -95,16 +95,19 @@ class EventsView:
 
 @dataclass
 class RigidView:
-    """A rigid body of the scene (ground plane, static mesh collider, projectile) at one frame.
+    """A rigid body of the scene (ground plane, static mesh collider, projectile, dynamic rigid body, a rigid piece of
+    a peridynamic body) at one frame.
 
     name: prim name. points: vertices in the body frame [m], float64 [v, 3]. faces: triangles, int [f, 3], wound
     counter-clockwise seen from outside. translation: world position of the body frame's origin [m], float64 [3].
     orientation: rotation of the body frame, unit quaternion (x, y, z, w), float64 [4]; a world point is
     ``translation + rotate(orientation, point)``. static: True when the pose never changes (written once).
-    group: the prim under ``/World`` that holds the body (``"colliders"``), or None for ``/World`` itself (the
-    ground). The geometry (points, faces) must be the same on every frame. velocity [m/s] of the body frame's origin
-    and angular_velocity [rad/s] (world axes), float64 [3] each: a dynamic rigid body's (written as
-    ``pdsim:velocity`` and ``pdsim:angularVelocity``), None for the others."""
+    group: the prim under ``/World`` that holds the body (``"colliders"``; ``"<body>_pieces"`` for the rigid pieces
+    of a body), or None for ``/World`` itself (the ground). The geometry (points, faces) must be the same on every
+    frame; a body first seen after the cache's first frame is hidden before it. velocity [m/s] of the body frame's
+    origin and angular_velocity [rad/s] (world axes), float64 [3] each: a dynamic rigid body's or a rigid piece's
+    (written as ``pdsim:velocity`` and ``pdsim:angularVelocity``), None for the others. face_attributes: {shared
+    name: [f]}, static (a rigid piece's ``crack`` and ``fragment``, written with the mesh as for a surface)."""
 
     name: str
     points: np.ndarray
@@ -115,13 +118,15 @@ class RigidView:
     group: str | None = "colliders"
     velocity: np.ndarray | None = None
     angular_velocity: np.ndarray | None = None
+    face_attributes: dict = field(default_factory=dict)
 
 
 @dataclass
 class DeferredView:
     """A view whose values are computed later, possibly on another thread: ``build()`` returns it (a
-    :class:`MeshView`). ``build`` holds copies of the state it needs, never the solver's live arrays, so the solver may
-    advance before it runs. name: the prim name of the view it builds."""
+    :class:`MeshView`), or a list of views (a body's surface and the rigid pieces cut from it). ``build`` holds
+    copies of the state it needs, never the solver's live arrays, so the solver may advance before it runs. name: the
+    prim name of the view it builds (the first one of a list)."""
 
     name: str
     build: Callable[[], MeshView]
@@ -146,8 +151,13 @@ def copied_view(view):
 
 
 def resolve_views(views) -> list:
-    """``views`` with every :class:`DeferredView` replaced by the view it builds (in the calling thread)."""
-    return [v.build() if isinstance(v, DeferredView) else v for v in views]
+    """``views`` with every :class:`DeferredView` replaced by the view (or, in order, the views) it builds, in the
+    calling thread."""
+    out = []
+    for v in views:
+        built = v.build() if isinstance(v, DeferredView) else v
+        out.extend(built if isinstance(built, list) else [built])
+    return out
 
 
 __all__ = [

@@ -729,15 +729,27 @@ class ViewWriter:
                 if parent is None:
                     parent = self._groups[view.group] = self.cache.add_xform(view.group)
             faces = np.asarray(view.faces, dtype=np.int64).reshape(-1, 3)
-            shading = _Shading(view.points, faces, self.sharp_angle, None)
+            crack = view.face_attributes.get("crack")
+            shading = _Shading(view.points, faces, self.sharp_angle, None if crack is None else "faceVarying")
+            kinds = {k: _kind_of(k, a) for k, a in view.face_attributes.items()}
+            values = {k: _typed(kinds[k], np.asarray(a)) for k, a in view.face_attributes.items()}
+            if crack is not None:  # the surface's material hooks: subsets, bound materials, material index
+                kinds[MATERIAL_INDEX] = "int"
+                values[MATERIAL_INDEX] = material_index(np.asarray(crack))
             handle = self.cache.add_mesh(
-                view.name, normals=shading.interpolation, parent=parent, animated_transform=True
-            )
+                view.name, face_primvars=kinds, normals=shading.interpolation, parent=parent, animated_transform=True,
+                subsets=_SUBSETS if crack is not None else (),
+            )  # fmt: skip
             points = np.asarray(view.points, dtype=np.float64)
             self.cache.set_mesh(
-                handle, points, faces, normals=shading.normals(points), velocities=np.zeros_like(points)
-            )
+                handle, points, faces, normals=shading.normals(points), velocities=np.zeros_like(points),
+                face_primvars=values, subsets=None if crack is None else _crack_subsets(crack),
+            )  # fmt: skip
+            self._bind_subsets(handle)
             self._rigid[key] = handle
+            if frame > self.cache.start_frame:  # a piece that appears mid-run: hidden before it
+                self.cache.write_visibility(handle, self.cache.start_frame, False)
+                self.cache.write_visibility(handle, frame, True)
             if view.static:
                 self.cache.write_transform(handle, None, view.translation, view.orientation)
         if not view.static:

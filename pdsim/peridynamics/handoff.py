@@ -18,9 +18,16 @@ From the hand-off on (kernels/peridynamics/handoff.py):
   impulse (particle contact, colliders, the ground, dynamic rigid bodies, contact with other methods, loads, gravity),
   then their motion is projected onto the rigid motion of the same linear and angular momentum, and they are posed
   on it (after the drift and after the second half kick);
-- its bonds are no longer visited (the dilatation and force passes return at once for its particles,
-  kernels/peridynamics/step.py), and the CPU threads' particle ranges are rebalanced on the remaining bonds;
-- its render surface, embedded in its particles (pdsim/fragment_surfaces/), rides its rigid motion.
+- its bonds are no longer visited: the dilatation and force passes run over the compacted list of the particles
+  outside rigid fragments (``live``, rebuilt at each hand-off; kernels/peridynamics/step.py), split into CPU
+  threads' ranges of equal bond count over that list, so their cost drops with the rigid share of the bonds; the
+  debris-damping pass (Material.debris_damping) runs over those and the fragment's particles whose damage is above
+  the material's threshold (``damped``: the drag still acts on them, as without the hand-off, and is projected with
+  the other forces);
+- its rigid motion is updated on the device every step (two launches, no host round trip);
+- its render surface is cut out of the body's surface mesh at the first frame it is rigid and written from then on as
+  a rigid piece: that surface as a static mesh in the fragment's body frame, under the transform of its rigid
+  motion, with its velocity and angular velocity (``RigidPieces``; docs/cache_format.md).
 
 At the hand-off the fragment keeps its linear and angular momentum exactly; the energy K_int + E_el (at most
 1/2 M c_p^2 strain^2) is dropped (``released``). The fragment no longer breaks further, and its internal vibration is
@@ -38,6 +45,7 @@ from ..bodies import PointKind
 from ..checks import check_range
 from ..errors import ParameterError
 from ..kernels.peridynamics import handoff as kh
+from ..output.views import DeferredView, MeshView, RigidView
 
 DEFAULT_STRAIN_FRACTION = 0.1  # default threshold: this fraction of the material's critical stretch
 
@@ -80,7 +88,6 @@ class FragmentHandoff:
     def __init__(self, solver):
         self.solver = solver
         m = solver.model
-        d = solver.device
         n = m.particle_count
         body_of = np.repeat(np.arange(len(solver.bodies)), np.diff(np.asarray(m.body_offsets)))
         self.body_of = body_of
@@ -101,8 +108,8 @@ class FragmentHandoff:
         self.wave_speed = np.asarray(speed, dtype=np.float64)[body_of]
         self.quiet = np.zeros(n, dtype=np.int64)  # consecutive frames each particle's fragment stayed quiet
         self.fragment_of = np.full(n, -1, dtype=np.int32)  # rigid fragment per particle, -1: deformable
-        self.rigid_body = wp.array(self.fragment_of, dtype=wp.int32, device=d)
         self.released = {"internal_kinetic": 0.0, "elastic": 0.0}  # energy dropped at hand-offs [J]
+        self._pieces = None  # RigidPieces per body (the rigid fragments in the output), made by the first views
         self._set_state(
             np.zeros(1, dtype=np.int32), np.zeros(0, dtype=np.int32), np.zeros((0, 3)), np.zeros((0, 3, 3)),
             np.zeros((0, 4)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)),
@@ -125,7 +132,13 @@ class FragmentHandoff:
         self.angular_velocity = wp.array(angular, dtype=wp.vec3d, device=d)
         self.fragment_of = np.full(self.solver.model.particle_count, -1, dtype=np.int32)
         self.fragment_of[members] = fragment
-        self.rigid_body = wp.array(self.fragment_of, dtype=wp.int32, device=d)
+        self.live_host = np.flatnonzero(self.fragment_of < 0).astype(np.int32)
+        self.live = wp.array(self.live_host, dtype=wp.int32, device=d)
+        damped = self.fragment_of < 0  # the debris-damping pass: the live particles and the rigid ones it acts on
+        m = self.solver.model
+        if m.debris_rate is not None and len(members):  # a rigid particle's damage no longer changes
+            damped |= (m.debris_rate.numpy() > 0.0) & (self.solver.damage() > m.debris_damage.numpy())
+        self.damped = wp.array(np.flatnonzero(damped).astype(np.int32), dtype=wp.int32, device=d)
         self._commands = {}  # (rotate_dt, ids of u and v) -> the recorded launches of project
 
     def _host_state(self) -> list:
@@ -149,6 +162,31 @@ class FragmentHandoff:
         """Bond rows the dilatation and force passes visit per pass: those of particles not in a rigid fragment."""
         sizes = np.diff(self.solver._offsets_host)
         return int(sizes[self.fragment_of < 0].sum())
+
+    def pieces(self, body: int, labels: np.ndarray) -> dict:
+        """The rigid fragments of the solver's body ``body`` now, for the output (copies): ``label``, each one's
+        fragment id (its particles' entry of ``labels``, the body's fragment ids), ``centre`` [m] (world),
+        ``orientation`` (unit quaternion x, y, z, w), ``velocity`` [m/s] and ``angular_velocity`` [rad/s], float64."""
+        offsets, members, _, _, orientation, centre, velocity, angular = self._host_state()
+        first = members[offsets[:-1]] if len(members) else np.zeros(0, dtype=np.int64)
+        mine = self.body_of[first] == body
+        start = int(self.solver.model.body_offsets[body])
+        return {
+            "label": np.asarray(labels)[first[mine] - start].astype(np.int64),
+            "centre": centre[mine] + self.solver.origin,
+            "orientation": orientation[mine],
+            "velocity": velocity[mine],
+            "angular_velocity": angular[mine],
+        }
+
+    def cut_surface(self, body: int, surface: DeferredView, labels: np.ndarray) -> DeferredView:
+        """The solver's body ``body``'s ``surface`` view (labels: the body's fragment ids now), with its rigid pieces
+        cut from it once a fragment is rigid (RigidPieces)."""
+        if not self.active:
+            return surface
+        if self._pieces is None:
+            self._pieces = [RigidPieces(b.name) for b in self.solver.bodies]
+        return self._pieces[body].deferred(surface, self.pieces(body, labels))
 
     # -- the step ---------------------------------------------------------------------------------------------------
     def project(self, rotate_dt: float) -> None:
@@ -179,6 +217,7 @@ class FragmentHandoff:
                 centre=self.centre,
                 velocity=self.velocity,
                 angular_velocity=self.angular_velocity,
+                force_density=s.state.force_density,
             )
             self._commands[key] = (commands, s.kin.u, s.kin.v)  # the arrays kept alive: their ids stay theirs
         else:
@@ -266,7 +305,7 @@ class FragmentHandoff:
             member_fragment=self.member_fragment, members=self.members, body_offset=self.body_offset,
             rest=s.model.rest_positions, orientation=self.orientation, centre=self.centre, velocity=self.velocity,
             angular_velocity=self.angular_velocity, displacements=s.kin.u, velocities=s.kin.v,
-            count=self.member_count, device=s.device,
+            force_density=s.state.force_density, count=self.member_count, device=s.device,
         )  # fmt: skip
         self.quiet[new_members] = 0
         s.rebalance_ranges()
@@ -286,7 +325,95 @@ class FragmentHandoff:
         self.quiet = np.array(state["quiet"], dtype=np.int64, copy=True)
         released = np.asarray(state["released"], dtype=np.float64)
         self.released = {"internal_kinetic": float(released[0]), "elastic": float(released[1])}
+        self._pieces = None  # their meshes are cut again from the restored surface
         self.solver.rebalance_ranges()
+
+
+class RigidPieces:
+    """The rigid pieces of one peridynamic body in the output: the render surface of each rigid fragment, cut out of
+    the body's surface mesh (its faces whose ``fragment`` is the fragment's id, chips included) at the first frame the
+    fragment is rigid, kept as a static mesh in the fragment's body frame (R^T (x - c) at that frame), and written from
+    then on as a RigidView ``piece_<id>`` (with the faces' attributes: crack, fragment) under ``<body>_pieces``
+    posed by the fragment's rigid motion; the body's
+    surface loses those faces (and the vertices only they use). A fragment whose surface has no face yet stays in
+    no piece until it has. After a restart the meshes are cut again from the restored surface (the writer keeps the
+    pieces it wrote and only adds their poses)."""
+
+    def __init__(self, body_name: str):
+        self.body_name = body_name
+        self.group = f"{body_name}_pieces"
+        self.rest = {}  # fragment id -> (points [v, 3] in the body frame [m], faces [f, 3])
+        self._version = None  # (surface topology version, ids cut) of the last surface built
+        self._count = 0  # minus the cut surface's topology version (negative: apart from the uncut surface's)
+
+    def deferred(self, surface: DeferredView, pieces: dict) -> DeferredView:
+        """The body's ``surface`` (a DeferredView of its MeshView) and its rigid pieces now (``pieces``: from
+        FragmentHandoff.pieces), built together, in that order, on the thread that builds the surface."""
+
+        def build():
+            return self.views(surface.build(), pieces)
+
+        return DeferredView(surface.name, build)
+
+    def views(self, mesh: MeshView, pieces: dict) -> list:
+        """[the surface ``mesh`` without the rigid pieces' faces, one RigidView per piece with a surface]."""
+        labels = pieces["label"]
+        frag = mesh.face_attributes.get("fragment")
+        if frag is None or len(labels) == 0:
+            return [mesh]
+        frag = np.asarray(frag, dtype=np.int64)
+        faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
+        points = np.asarray(mesh.points, dtype=np.float64)
+        for i in np.flatnonzero(~np.isin(labels, list(self.rest))):  # new pieces (a loop over fragments)
+            rows = frag == labels[i]
+            if not rows.any():
+                continue
+            verts, local = np.unique(faces[rows], return_inverse=True)
+            rot = quat_matrix(pieces["orientation"][i])
+            body_points = (points[verts] - pieces["centre"][i]) @ rot  # R^T (x - c), row by row
+            attributes = {k: np.asarray(a)[rows] for k, a in mesh.face_attributes.items()}
+            self.rest[int(labels[i])] = (body_points, local.reshape(-1, 3), attributes)
+        cut = np.array(sorted(set(labels.tolist()) & set(self.rest)), dtype=np.int64)
+        keep = ~np.isin(frag, cut)
+        used = np.zeros(len(points), dtype=bool)
+        used[faces[keep].ravel()] = True
+        renumber = np.cumsum(used) - 1
+        key = (mesh.topology_version, tuple(cut.tolist()))
+        if key != self._version:
+            self._version = key
+            self._count += 1
+        surface = MeshView(
+            mesh.name,
+            points[used],
+            None if mesh.velocities is None else np.asarray(mesh.velocities)[used],
+            -self._count,
+            renumber[faces[keep]],
+            {k: np.asarray(a)[keep] for k, a in mesh.face_attributes.items()},
+            {k: np.asarray(a)[used] for k, a in mesh.vertex_attributes.items()},
+        )
+        out = [surface]
+        for i in np.flatnonzero(np.isin(labels, cut)):
+            body_points, local, attributes = self.rest[int(labels[i])]
+            out.append(
+                RigidView(
+                    f"piece_{int(labels[i])}", body_points, local, pieces["centre"][i], pieces["orientation"][i],
+                    group=self.group, velocity=pieces["velocity"][i], angular_velocity=pieces["angular_velocity"][i],
+                    face_attributes=attributes,
+                )
+            )  # fmt: skip
+        return out
+
+
+def quat_matrix(q) -> np.ndarray:
+    """The rotation matrix [3, 3] of a unit quaternion (x, y, z, w), float64."""
+    x, y, z, w = (float(c) for c in q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def rigid_properties(x, v, mass, group, count: int) -> dict:

@@ -135,7 +135,7 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
             bond_ne=bond_ne,
             stretch_min=f1,
             **pd_step.plastic_placeholders(f1, i1),
-            rigid_body=i1,
+            live_particles=i1,
         )
 
     for axis in range(3):

@@ -148,7 +148,8 @@ class SolverPeridynamics(PointSolver):
         handoff = m.fracture and any(b.rigid_handoff is not None and b.material.breaks for b in self.bodies)
         self._kernels = pd_step.make_step_kernels(m.fracture, m.plastic, handoff)
         self._offsets_host = m.family_offsets.numpy()[: n + 1].astype(np.int64)
-        self._ranges = None
+        self._ranges = None  # ranges over every particle (energy, damage); _bond_ranges: the bond passes'
+        self._all_particles = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=d)
         self.handoff = None  # FragmentHandoff (pdsim/peridynamics/handoff.py) when a body has rigid_handoff on
         self.threads = threads
         if handoff:
@@ -207,13 +208,12 @@ class SolverPeridynamics(PointSolver):
         self.rebalance_ranges()
 
     def rebalance_ranges(self) -> None:
-        """Splits the bond passes' particle ranges on the bonds they visit (the particles of rigid fragments visit
-        none), keeping the thread count."""
-        if self.handoff is None or not self.handoff.active:
-            return
-        sizes = np.diff(self._offsets_host) * (self.handoff.fragment_of < 0)
-        cost = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        self._ranges = ParticleRanges(cost, len(self._ranges.ranges), self.device)
+        """Splits the dilatation and force passes into ranges of equal bond count of the live list (the particles
+        outside rigid fragments, pdsim/peridynamics/handoff.py), or of every particle while none is rigid."""
+        self._bond_ranges = self._ranges
+        if self.handoff is not None and self.handoff.active:
+            cost = np.concatenate([[0], np.cumsum(np.diff(self._offsets_host)[self.handoff.live_host])])
+            self._bond_ranges = ParticleRanges(cost.astype(np.int64), len(self._ranges.ranges), self.device)
 
     # -- time step -----------------------------------------------------------------------------------------------
     def stable_time_step(self) -> float:
@@ -282,7 +282,8 @@ class SolverPeridynamics(PointSolver):
             if m.plastic
             else pd_step.plastic_placeholders(f1, reverse)
         )
-        launch = self._ranges.launch
+        launch = self._bond_ranges.launch
+        live = self.handoff.live if self.handoff is not None else self._dummy_i
         pd_step.dilatation(
             launch,
             ks,
@@ -299,7 +300,7 @@ class SolverPeridynamics(PointSolver):
             bp=s.bp,
             bond_ne=s.bond_ne,
             stretch_min=s.stretch_min if frac else f1,
-            rigid_body=self.handoff.rigid_body if self.handoff is not None else self._dummy_i,
+            live_particles=live,
             **plastic_args,
         )
         pd_step.bond_forces(
@@ -322,12 +323,14 @@ class SolverPeridynamics(PointSolver):
             plastic_bond_count=m.plastic_bond_count,
             bond_plastic=plastic,
             bond_plastic_reverse=s.bond_plastic_reverse if m.plastic else f1,
-            rigid_body=self.handoff.rigid_body if self.handoff is not None else self._dummy_i,
+            live_particles=live,
             force_density=s.force_density,
         )
         if m.debris_rate is not None:  # Material.debris_damping (kernels/peridynamics/damping.py)
+            particles = self._all_particles if self.handoff is None else self.handoff.damped
             pd_damping.debris_damping(
-                m.particle_count,
+                particles.shape[0],
+                particles=particles,
                 family_offsets=m.family_offsets,
                 family_neighbors=m.family_neighbors,
                 bond_wv=m.bond_wv,
@@ -380,7 +383,7 @@ class SolverPeridynamics(PointSolver):
         """The shared parts (pdsim.solver.PointSolver.graph_key) and the rigid fragments' arrays."""
         key = super().graph_key()
         if self.handoff is not None:
-            key += (self.handoff.rigid_body, self.handoff.members, self._ranges)
+            key += (self.handoff.live, self.handoff.damped, self.handoff.members, self._bond_ranges)
         return key
 
     def _refresh_accelerations(self):
@@ -524,7 +527,7 @@ class SolverPeridynamics(PointSolver):
         renderable surface ``<body>_surface`` (a closed shell per fragment and per particle whose damage reached the
         surfaces' threshold, pdsim/fragment_surfaces.py; vertex velocities [m/s]; face attributes fragment and
         crack; its topology changes only on frames where those regions change), as a DeferredView that holds copies
-        of the state it needs."""
+        of the state it needs (with rigid fragments, also their pieces cut from it: handoff.py, RigidPieces)."""
         x = self.positions()
         v = self.velocities()
         u = self.kin.displacements()
@@ -557,7 +560,8 @@ class SolverPeridynamics(PointSolver):
                 broken = {}
                 if self.model.fracture:
                     broken = {"labels": values["fragment"][sl], "damage": values["damage"][sl]}
-                out.append(DeferredView(f"{b.name}_surface", self._surfaces[i].deferred_view(x[sl], v[sl], **broken)))
+                surface = DeferredView(f"{b.name}_surface", self._surfaces[i].deferred_view(x[sl], v[sl], **broken))
+                out.append(surface if self.handoff is None else self.handoff.cut_surface(i, surface, broken["labels"]))
         return out
 
     # -- host-side views and diagnostics (vectorised numpy) ---------------------------------------------------------
