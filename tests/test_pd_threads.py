@@ -13,8 +13,8 @@ CENTER = (150.0, -40.0, 20.0)  # far from the origin: the local frame must not d
 
 
 def _block(threads):
-    """A 7^3 block (h = 1 mm, E = 1 GPa) that yields (sigma_Y = 1 MPa, linear hardening) and breaks (s_c = 1e-3),
-    pulled apart by a stretch-rate field of 1500 1/s along x (-450 along y, 300 along z) at (150, -40, 20) m."""
+    """A 7^3 block (h = 1 mm, E = 1 GPa) that yields (sigma_Y = 1 MPa, linear hardening), breaks (s_c = 1e-3) and
+    damps its debris (1e5 1/s above a damage of 0.5), pulled apart by a stretch-rate field of 1500 1/s along x (-450 along y, 300 along z) at (150, -40, 20) m."""
     h = 1.0e-3
     mat = pdsim.Material(
         density=1000.0,
@@ -23,6 +23,8 @@ def _block(threads):
         yield_stress=1.0e6,
         hardening_modulus=1.0e8,
         critical_stretch=1.0e-3,
+        debris_damping=1.0e5,
+        debris_damage=0.5,
     )
     body = pdsim.PeridynamicBody(pdsim.box((7 * h, 7 * h, 7 * h), center=CENTER), mat, h)
     solver = pdsim.SolverPeridynamics([body], threads=threads)
@@ -34,8 +36,9 @@ def _block(threads):
 def test_thread_count_does_not_change_the_result():
     """1, 2 and 3 threads: after 40 steps of a block that yields and breaks, the displacements, live bonds,
     equivalent plastic strains, dilatations and energy densities are bit-identical (each particle's arithmetic is the
-    same whatever range it falls in), and the run did yield and break bonds (so the comparison covers those branches:
-    between 5 % and 95 % of the bonds broken, plastic strain > 1e-5)."""
+    same whatever range it falls in), and the run did yield, break bonds and damp debris (so the comparison covers
+    those branches: between 5 % and 95 % of the bonds broken, plastic strain > 1e-5, some damage above the debris
+    threshold)."""
     results = []
     for threads in (1, 2, 3):
         solver = _block(threads)
@@ -55,6 +58,7 @@ def test_thread_count_does_not_change_the_result():
     alive = results[0][1]
     assert 0.05 < 1.0 - alive.mean() < 0.95
     assert results[0][2].max() > 1.0e-5
+    assert results[0][5].max() > 0.5
     assert np.all(np.isfinite(results[0][0]))
     for other in results[1:]:
         for a, b in zip(results[0], other, strict=True):

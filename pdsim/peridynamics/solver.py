@@ -69,8 +69,8 @@ class SolverPeridynamics(PointSolver):
             plastic update, force with the breaking test, energy, damage) is split into that many contiguous particle
             ranges of about equal bond count, launched at once (Warp releases the GIL while a CPU kernel runs) and
             joined before the next pass; every particle is computed exactly as in one launch, so results are
-            bit-identical for any thread count. On a CUDA device each pass is one launch and ``threads`` must be None
-            or 1. The kick and drift of the shared kinematics run as one launch.
+            bit-identical for any thread count. The debris damping and the kick and drift of the shared kinematics
+            run on the same ranges. On a CUDA device each pass is one launch and ``threads`` must be None or 1.
 
     State: displacements from the rest configuration, velocities and accelerations (pdsim/kinematics.py), so bond
     deformation is computed from displacement differences and does not depend on where the body sits. The step
@@ -203,8 +203,13 @@ class SolverPeridynamics(PointSolver):
     @threads.setter
     def threads(self, value: int | None):
         count = resolve_threads(value, self.device, self.model.bond_count)
-        self._ranges = ParticleRanges(self._offsets_host, count, self.device)
+        self._set_ranges(ParticleRanges(self._offsets_host, count, self.device))
         self.rebalance_ranges()
+
+    def _set_ranges(self, ranges: ParticleRanges) -> None:
+        """The particle ranges of the bond passes, the debris damping and the kinematics' kick and drift."""
+        self._ranges = ranges
+        self.kin.ranges = ranges.launch
 
     def rebalance_ranges(self) -> None:
         """Splits the bond passes' particle ranges on the bonds they visit (the particles of rigid fragments visit
@@ -213,7 +218,7 @@ class SolverPeridynamics(PointSolver):
             return
         sizes = np.diff(self._offsets_host) * (self.handoff.fragment_of < 0)
         cost = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        self._ranges = ParticleRanges(cost, len(self._ranges.ranges), self.device)
+        self._set_ranges(ParticleRanges(cost, len(self._ranges.ranges), self.device))
 
     # -- time step -----------------------------------------------------------------------------------------------
     def stable_time_step(self) -> float:
@@ -327,7 +332,7 @@ class SolverPeridynamics(PointSolver):
         )
         if m.debris_rate is not None:  # Material.debris_damping (kernels/peridynamics/damping.py)
             pd_damping.debris_damping(
-                m.particle_count,
+                launch,
                 family_offsets=m.family_offsets,
                 family_neighbors=m.family_neighbors,
                 bond_wv=m.bond_wv,
@@ -337,7 +342,6 @@ class SolverPeridynamics(PointSolver):
                 rate=m.debris_rate,
                 damage_threshold=m.debris_damage,
                 force_density=s.force_density,
-                device=self.device,
             )
         if self.contact is not None:
             pd_step.deformed_positions(m.particle_count, m.rest_positions, self.kin.u, self._positions, self.device)
