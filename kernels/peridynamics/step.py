@@ -34,9 +34,6 @@ A step is two passes over the particles, dilatation (with the plastic update) th
 contiguous particle ranges (pdsim/peridynamics/ranges.py, ParticleRanges): a kernel writes only its particles' rows
 and their own bonds' rows (and, for the mirror of the plastic extensions, the one slot each of its bonds owns at the
 reverse bond, read only by the next pass), and reads other particles' rows only from what an earlier pass wrote.
-On the CPU a third pass comes first, the pair pass (``pair_geometry``), which computes each bond pair's deformed
-geometry once and writes it to both directed bonds' (n, e) cache (each slot written by the pair's lower particle
-only), so the dilatation pass only sums.
 """
 
 import warp as wp
@@ -46,82 +43,21 @@ from ..launch import range_inputs
 _cache = {}
 
 
-def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False, pairs: bool = False):
-    """Kernels (dilatation with the fused plastic update, force, energy and, with ``pairs``, the pair pass) for the
-    given feature set, built once and cached. With ``pairs`` (CPU) each bond pair's deformed geometry is computed once,
-    by the pair pass, which writes both directed copies' (n, e) cache before the dilatation pass, and the dilatation
-    pass reads the cache instead of computing it; without it (the form a GPU runs: the pair pass would need a second
-    writer per slot's owner) the dilatation pass computes each directed bond's geometry itself. Both forms write the
-    same bits (the reverse bond's geometry is the exact negation of the forward one's, and every sum runs in the same
-    order). With ``handoff`` the dilatation and force passes skip every particle k with ``rigid_body[k] >= 0`` (a
+def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
+    """Kernels (dilatation with the fused plastic update, force, energy) for the given feature set, built once and
+    cached. With ``handoff`` the dilatation and force passes skip every particle k with ``rigid_body[k] >= 0`` (a
     collision proxy of a rigid fragment, pdsim/peridynamics/handoff.py): none of its bonds is visited, its force
     density is zero and its dilatation and bond cache keep their last values; without it ``rigid_body`` is a
     placeholder the kernels never read. Every kernel takes the first particle of its launch (``first``): a launch
     covers the particles first .. first + dim - 1, and each writes only its particles' rows and their bonds' rows
     (bonds are stored per particle family; the plastic mirror is the one exception, module docstring), so launches
     over disjoint particle ranges of one pass can run at the same time."""
-    key = (bool(fracture), bool(plastic), bool(handoff), bool(pairs))
+    key = (bool(fracture), bool(plastic), bool(handoff))
     if key in _cache:
         return _cache[key]
     FRACTURE = key[0]
     PLASTIC = key[1]
     HANDOFF = key[2]
-    PAIRS = key[3]
-
-    @wp.kernel(module="unique")
-    def pair_geometry(
-        first: int,
-        displacements: wp.array(dtype=wp.vec3),
-        pair_offsets: wp.array(dtype=wp.int32),
-        pair_bond: wp.array(dtype=wp.int32),
-        pair_reverse: wp.array(dtype=wp.int32),
-        family_neighbors: wp.array(dtype=wp.int32),
-        bond_geom: wp.array(dtype=wp.vec4),
-        bond_alive: wp.array(dtype=wp.uint8),
-        rigid_body: wp.array(dtype=wp.int32),
-        bond_ne: wp.array(dtype=wp.vec4),
-    ):
-        """The (n, e) cache of both directed copies of each bond pair k -> j with j > k, for particle k = first + tid:
-        the pair's deformed geometry is computed once (the arithmetic of the dilatation kernel's directed form) and
-        written to bond q = k -> j as (n, e) and to its reverse r = j -> k as (-n, e), the exact values the directed
-        form computes there. A copy is written only where the directed form would write it: a live bond (with
-        fracture) of a particle that is not a rigid fragment's proxy (with the hand-off). Every slot has one writer
-        (the pair's lower particle), so launches over disjoint particle ranges can run at the same time."""
-        k = first + wp.tid()
-        uk = displacements[k]
-        own = int(1)
-        if wp.static(HANDOFF):
-            if rigid_body[k] >= 0:
-                own = 0
-        for p in range(pair_offsets[k], pair_offsets[k + 1]):
-            q = pair_bond[p]
-            r = pair_reverse[p]
-            j = family_neighbors[q]
-            live_q = own
-            live_r = int(1)
-            if wp.static(FRACTURE):
-                if bond_alive[q] == wp.uint8(0):
-                    live_q = 0
-                if bond_alive[r] == wp.uint8(0):
-                    live_r = 0
-            if wp.static(HANDOFF):
-                if rigid_body[j] >= 0:
-                    live_r = 0
-            if live_q != 0 or live_r != 0:
-                g = bond_geom[q]
-                L = g[3]
-                xh = wp.vec3(g[0], g[1], g[2])
-                xi = xh * L
-                du = displacements[j] - uk
-                eta = xi + du
-                length = wp.length(eta)
-                inv = 1.0 / length
-                n = eta * inv
-                e = (2.0 * wp.dot(xi, du) + wp.dot(du, du)) / (length + L)
-                if live_q != 0:
-                    bond_ne[q] = wp.vec4(n[0], n[1], n[2], e)
-                if live_r != 0:
-                    bond_ne[r] = wp.vec4(-n[0], -n[1], -n[2], e)
 
     # tools/feature_cost.py holds a deliberate stripped copy of the elastic dilatation and force below (it measures
     # what the feature branches cost an elastic scene): keep it in step (tests/test_bench_tools.py checks the bits).
@@ -156,7 +92,7 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False, pair
         rigid_body: wp.array(dtype=wp.int32),
     ):
         """theta_k = d_k sum_live w e V beta G^dil for particle k = first + tid; caches each live bond's (n, e)
-        for the later passes (with ``pairs``: reads the cache the pair pass wrote) and, with fracture, the particle's most compressive live stretch (for the
+        for the later passes and, with fracture, the particle's most compressive live stretch (for the
         compressive bonus). With plasticity, a yielding particle (k < plastic_particle_count) then runs the return
         mapping of its deviatoric force state on the bonds it just cached (the plastic update: it writes its own
         bonds' plastic extensions and its own equivalent plastic strain, and mirrors each new extension e^p_kj into
@@ -184,24 +120,17 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False, pair
             if wp.static(FRACTURE):
                 if bond_alive[q] == wp.uint8(0):
                     continue
-            L = float(0.0)
-            e = float(0.0)
-            if wp.static(PAIRS):  # the pair pass wrote this bond's (n, e)
-                e = bond_ne[q][3]
-                if wp.static(FRACTURE or PLASTIC):
-                    L = bond_geom[q][3]
-            else:
-                g = bond_geom[q]
-                L = g[3]
-                xh = wp.vec3(g[0], g[1], g[2])
-                xi = xh * L
-                du = displacements[family_neighbors[q]] - uk
-                eta = xi + du
-                length = wp.length(eta)
-                inv = 1.0 / length
-                n = eta * inv
-                e = (2.0 * wp.dot(xi, du) + wp.dot(du, du)) / (length + L)
-                bond_ne[q] = wp.vec4(n[0], n[1], n[2], e)
+            g = bond_geom[q]
+            L = g[3]
+            xh = wp.vec3(g[0], g[1], g[2])
+            xi = xh * L
+            du = displacements[family_neighbors[q]] - uk
+            eta = xi + du
+            length = wp.length(eta)
+            inv = 1.0 / length
+            n = eta * inv
+            e = (2.0 * wp.dot(xi, du) + wp.dot(du, du)) / (length + L)
+            bond_ne[q] = wp.vec4(n[0], n[1], n[2], e)
             if wp.static(FRACTURE):
                 smin = wp.min(smin, e / L)
             acc += bond_wv_dil[q] * e
@@ -372,7 +301,6 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False, pair
 
     ks = StepKernels()
     ks.dilatation, ks.force, ks.energy = dilatation, force, energy
-    ks.pair_geometry = pair_geometry if PAIRS else None
     _cache[key] = ks
     return ks
 
@@ -539,12 +467,6 @@ def plastic_placeholders(f1, i1) -> dict:
         "bond_reverse": i1,
         "bond_plastic_reverse": f1,
     }
-
-
-def pair_geometry(launch, ks, **arguments):
-    """The pair pass of the kernels ``ks`` (made with ``pairs``) through ``launch(kernel, inputs)``: the (n, e) cache
-    of both directed copies of every bond pair, each pair's geometry computed once."""
-    launch(ks.pair_geometry, range_inputs(ks.pair_geometry, arguments))
 
 
 def dilatation(launch, ks, **arguments):
