@@ -7,6 +7,7 @@ import pytest
 
 import pdsim
 from pdsim.errors import ParameterError
+from pdsim.peridynamics import solver as pd_solver
 from pdsim.peridynamics.ranges import MIN_BONDS_PER_THREAD, ParticleRanges, available_cores
 
 CENTER = (150.0, -40.0, 20.0)  # far from the origin: the local frame must not depend on the thread count either
@@ -33,16 +34,18 @@ def _block(threads):
     return solver
 
 
-def test_thread_count_does_not_change_the_result():
+def test_thread_count_does_not_change_the_result(monkeypatch):
     """1, 2 and 3 threads: after 40 steps of a block that yields and breaks, the displacements, live bonds,
     equivalent plastic strains, dilatations and energy densities are bit-identical (each particle's arithmetic is the
     same whatever range it falls in), and the run did yield, break bonds and damp debris (so the comparison covers
     those branches: between 5 % and 95 % of the bonds broken, plastic strain > 1e-5, some damage above the debris
-    threshold)."""
+    threshold). The kick and drift run on the ranges too (at any particle count here, to cover that path)."""
+    monkeypatch.setattr(pd_solver, "MIN_POINTS_PER_THREAD", 1)
     results = []
     for threads in (1, 2, 3):
         solver = _block(threads)
         assert solver.threads == threads
+        assert (solver.kin.ranges is None) == (threads == 1)
         dt = 0.5 * solver.stable_time_step()
         solver.simulate(dt, 40)
         results.append(
@@ -88,7 +91,8 @@ def test_ranges_cover_every_particle_once_with_equal_bond_counts():
 
 def test_thread_setting(monkeypatch):
     """threads: an integer >= 1, else PDSIM_THREADS, else every core of the process's affinity with at least
-    MIN_BONDS_PER_THREAD bonds per thread; bad values raise ParameterError naming the field."""
+    MIN_BONDS_PER_THREAD bonds per thread; the kick and drift split only with MIN_POINTS_PER_THREAD particles per
+    thread; bad values raise ParameterError naming the field."""
     monkeypatch.delenv("PDSIM_THREADS", raising=False)
     solver = _block(None)
     assert solver.threads == max(1, min(available_cores(), solver.bond_count // MIN_BONDS_PER_THREAD))
@@ -96,6 +100,10 @@ def test_thread_setting(monkeypatch):
     assert _block(None).threads == 2
     solver.threads = 3
     assert solver.threads == 3
+    assert solver.kin.ranges is None  # 343 particles: the kick and drift stay one launch (MIN_POINTS_PER_THREAD)
+    monkeypatch.setattr(pd_solver, "MIN_POINTS_PER_THREAD", solver.particle_count // 3)
+    solver.threads = 3
+    assert solver.kin.ranges is not None
     for bad in ("0", "two"):
         monkeypatch.setenv("PDSIM_THREADS", bad)
         with pytest.raises(ParameterError, match="PDSIM_THREADS"):

@@ -50,7 +50,7 @@ from .body import PeridynamicBody
 from .events import CrackEvents
 from .handoff import FragmentHandoff
 from .model import PeridynamicState, build_model
-from .ranges import ParticleRanges, resolve_threads
+from .ranges import MIN_POINTS_PER_THREAD, ParticleRanges, resolve_threads
 
 
 @register_solver
@@ -69,8 +69,9 @@ class SolverPeridynamics(PointSolver):
             plastic update, force with the breaking test, energy, damage) is split into that many contiguous particle
             ranges of about equal bond count, launched at once (Warp releases the GIL while a CPU kernel runs) and
             joined before the next pass; every particle is computed exactly as in one launch, so results are
-            bit-identical for any thread count. The debris damping and the kick and drift of the shared kinematics
-            run on the same ranges. On a CUDA device each pass is one launch and ``threads`` must be None or 1.
+            bit-identical for any thread count. The debris damping runs on the same ranges, and so do the kick and
+            drift of the shared kinematics where the ranges average at least MIN_POINTS_PER_THREAD (ranges.py)
+            particles. On a CUDA device each pass is one launch and ``threads`` must be None or 1.
 
     State: displacements from the rest configuration, velocities and accelerations (pdsim/kinematics.py), so bond
     deformation is computed from displacement differences and does not depend on where the body sits. The step
@@ -207,9 +208,12 @@ class SolverPeridynamics(PointSolver):
         self.rebalance_ranges()
 
     def _set_ranges(self, ranges: ParticleRanges) -> None:
-        """The particle ranges of the bond passes, the debris damping and the kinematics' kick and drift."""
+        """The particle ranges of the bond passes and the debris damping, and of the kinematics' kick and drift where
+        the ranges average MIN_POINTS_PER_THREAD points or more (one launch each below that)."""
         self._ranges = ranges
-        self.kin.ranges = ranges.launch
+        count = len(ranges.ranges)
+        split = count > 1 and self.model.particle_count >= MIN_POINTS_PER_THREAD * count
+        self.kin.ranges = ranges.launch if split else None
 
     def rebalance_ranges(self) -> None:
         """Splits the bond passes' particle ranges on the bonds they visit (the particles of rigid fragments visit
