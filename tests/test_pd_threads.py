@@ -7,7 +7,7 @@ import pytest
 
 import pdsim
 from pdsim.errors import ParameterError
-from pdsim.peridynamics import solver as pd_solver
+from pdsim.peridynamics import ranges as pd_ranges
 from pdsim.peridynamics.ranges import MIN_BONDS_PER_THREAD, ParticleRanges, available_cores
 
 CENTER = (150.0, -40.0, 20.0)  # far from the origin: the local frame must not depend on the thread count either
@@ -40,7 +40,7 @@ def test_thread_count_does_not_change_the_result(monkeypatch):
     same whatever range it falls in), and the run did yield, break bonds and damp debris (so the comparison covers
     those branches: between 5 % and 95 % of the bonds broken, plastic strain > 1e-5, some damage above the debris
     threshold). The kick and drift run on the ranges too (at any particle count here, to cover that path)."""
-    monkeypatch.setattr(pd_solver, "MIN_POINTS_PER_THREAD", 1)
+    monkeypatch.setattr(pd_ranges, "MIN_POINTS_PER_THREAD", 1)
     results = []
     for threads in (1, 2, 3):
         solver = _block(threads)
@@ -101,7 +101,7 @@ def test_thread_setting(monkeypatch):
     solver.threads = 3
     assert solver.threads == 3
     assert solver.kin.ranges is None  # 343 particles: the kick and drift stay one launch (MIN_POINTS_PER_THREAD)
-    monkeypatch.setattr(pd_solver, "MIN_POINTS_PER_THREAD", solver.particle_count // 3)
+    monkeypatch.setattr(pd_ranges, "MIN_POINTS_PER_THREAD", solver.particle_count // 3)
     solver.threads = 3
     assert solver.kin.ranges is not None
     for bad in ("0", "two"):

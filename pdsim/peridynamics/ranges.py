@@ -123,6 +123,12 @@ class ParticleRanges:
         self._loaded = set()
         self._commands = {}  # kernel key -> (inputs key, recorded launches, inputs)
 
+    def point_launch(self):
+        """:meth:`launch` where the ranges average MIN_POINTS_PER_THREAD particles or more (the shared kinematics'
+        kick and drift split over them), else None (one launch each)."""
+        count = len(self.ranges)
+        return self.launch if count > 1 and self.particle_count >= MIN_POINTS_PER_THREAD * count else None
+
     def _load(self, kernel) -> None:
         module = kernel.module
         if id(module) not in self._loaded:

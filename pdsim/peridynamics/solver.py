@@ -50,7 +50,7 @@ from .body import PeridynamicBody
 from .events import CrackEvents
 from .handoff import FragmentHandoff
 from .model import PeridynamicState, build_model
-from .ranges import MIN_POINTS_PER_THREAD, ParticleRanges, resolve_threads
+from .ranges import ParticleRanges, resolve_threads
 
 
 @register_solver
@@ -204,16 +204,9 @@ class SolverPeridynamics(PointSolver):
     @threads.setter
     def threads(self, value: int | None):
         count = resolve_threads(value, self.device, self.model.bond_count)
-        self._set_ranges(ParticleRanges(self._offsets_host, count, self.device))
+        self._ranges = ParticleRanges(self._offsets_host, count, self.device)
+        self.kin.ranges = self._ranges.point_launch()  # the kick and drift: on the ranges or one launch
         self.rebalance_ranges()
-
-    def _set_ranges(self, ranges: ParticleRanges) -> None:
-        """The particle ranges of the bond passes and the debris damping, and of the kinematics' kick and drift where
-        the ranges average MIN_POINTS_PER_THREAD points or more (one launch each below that)."""
-        self._ranges = ranges
-        count = len(ranges.ranges)
-        split = count > 1 and self.model.particle_count >= MIN_POINTS_PER_THREAD * count
-        self.kin.ranges = ranges.launch if split else None
 
     def rebalance_ranges(self) -> None:
         """Splits the bond passes' particle ranges on the bonds they visit (the particles of rigid fragments visit
@@ -222,7 +215,8 @@ class SolverPeridynamics(PointSolver):
             return
         sizes = np.diff(self._offsets_host) * (self.handoff.fragment_of < 0)
         cost = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        self._set_ranges(ParticleRanges(cost, len(self._ranges.ranges), self.device))
+        self._ranges = ParticleRanges(cost, len(self._ranges.ranges), self.device)
+        self.kin.ranges = self._ranges.point_launch()
 
     # -- time step -----------------------------------------------------------------------------------------------
     def stable_time_step(self) -> float:
