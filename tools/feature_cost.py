@@ -301,7 +301,7 @@ def stripped_check(n: int, device: str, launches: int = 20, rounds: int = 8) -> 
             launch, ks, displacements=u, family_offsets=m.family_offsets, family_neighbors=m.family_neighbors,
             bond_geom=m.bond_geom, bond_wv_dil=m.bond_wv_dil, dil_d=m.dil_d, dil_coef=m.dil_coef, dev_b=m.dev_b,
             bond_alive=u8, theta=theta, bp=bp, bond_ne=ne, stretch_min=f1,
-            **pd_step.plastic_placeholders(f1, i1), rigid_body=i1, bond_pair=i1, pair_ne=ne)  # fmt: skip
+            **pd_step.plastic_placeholders(f1, i1), rigid_body=i1)  # fmt: skip
         pd_step.bond_forces(
             launch, ks, family_offsets=m.family_offsets, family_neighbors=m.family_neighbors, bond_geom=m.bond_geom,
             bond_ne=ne, bond_wv_dil=m.bond_wv_dil, bond_wv_dev=m.bond_wv_dev, bp=bp, bond_alive=u8,

@@ -34,9 +34,6 @@ A step is two passes over the particles, dilatation (with the plastic update) th
 contiguous particle ranges (pdsim/peridynamics/ranges.py, ParticleRanges): a kernel writes only its particles' rows
 and their own bonds' rows (and, for the mirror of the plastic extensions, the one slot each of its bonds owns at the
 reverse bond, read only by the next pass), and reads other particles' rows only from what an earlier pass wrote.
-On the CPU a third pass comes first, the pair pass (``pair_geometry``), which computes each bond pair's deformed
-geometry once and writes it to both directed bonds' (n, e) cache (each slot written by the pair's lower particle
-only), so the dilatation pass only sums.
 """
 
 import warp as wp
@@ -46,58 +43,21 @@ from ..launch import range_inputs
 _cache = {}
 
 
-def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False, pairs: bool = False):
-    """Kernels (dilatation with the fused plastic update, force, energy and, with ``pairs``, the pair pass) for the
-    given feature set, built once and cached. With ``pairs`` (CPU) each bond pair's deformed geometry is computed once,
-    by the pair pass, which writes both directed copies' (n, e) cache before the dilatation pass, and the dilatation
-    pass reads the cache instead of computing it; without it (the form a GPU runs: the pair pass would need a second
-    writer per slot's owner) the dilatation pass computes each directed bond's geometry itself. Both forms write the
-    same bits (the reverse bond's geometry is the exact negation of the forward one's, and every sum runs in the same
-    order). With ``handoff`` the dilatation and force passes skip every particle k with ``rigid_body[k] >= 0`` (a
+def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
+    """Kernels (dilatation with the fused plastic update, force, energy) for the given feature set, built once and
+    cached. With ``handoff`` the dilatation and force passes skip every particle k with ``rigid_body[k] >= 0`` (a
     collision proxy of a rigid fragment, pdsim/peridynamics/handoff.py): none of its bonds is visited, its force
     density is zero and its dilatation and bond cache keep their last values; without it ``rigid_body`` is a
     placeholder the kernels never read. Every kernel takes the first particle of its launch (``first``): a launch
     covers the particles first .. first + dim - 1, and each writes only its particles' rows and their bonds' rows
     (bonds are stored per particle family; the plastic mirror is the one exception, module docstring), so launches
     over disjoint particle ranges of one pass can run at the same time."""
-    key = (bool(fracture), bool(plastic), bool(handoff), bool(pairs))
+    key = (bool(fracture), bool(plastic), bool(handoff))
     if key in _cache:
         return _cache[key]
     FRACTURE = key[0]
     PLASTIC = key[1]
     HANDOFF = key[2]
-    PAIRS = key[3]
-
-    @wp.kernel(module="unique")
-    def pair_geometry(
-        first: int,
-        displacements: wp.array(dtype=wp.vec3),
-        pair_offsets: wp.array(dtype=wp.int32),
-        pair_bond: wp.array(dtype=wp.int32),
-        family_neighbors: wp.array(dtype=wp.int32),
-        bond_geom: wp.array(dtype=wp.vec4),
-        pair_ne: wp.array(dtype=wp.vec4),
-    ):
-        """The deformed geometry (n, e) of each bond pair k -> j with j > k listed under particle k = first + tid,
-        computed once with the arithmetic of the dilatation kernel's directed form, into ``pair_ne`` (one row per
-        pair, written in order). The directed bond j -> k's values are (-n, e) exactly. Every pair is computed, live
-        or not (a broken bond's row is never read), so each row has one writer and launches over disjoint particle
-        ranges can run at the same time."""
-        k = first + wp.tid()
-        uk = displacements[k]
-        for p in range(pair_offsets[k], pair_offsets[k + 1]):
-            q = pair_bond[p]
-            g = bond_geom[q]
-            L = g[3]
-            xh = wp.vec3(g[0], g[1], g[2])
-            xi = xh * L
-            du = displacements[family_neighbors[q]] - uk
-            eta = xi + du
-            length = wp.length(eta)
-            inv = 1.0 / length
-            n = eta * inv
-            e = (2.0 * wp.dot(xi, du) + wp.dot(du, du)) / (length + L)
-            pair_ne[p] = wp.vec4(n[0], n[1], n[2], e)
 
     # tools/feature_cost.py holds a deliberate stripped copy of the elastic dilatation and force below (it measures
     # what the feature branches cost an elastic scene): keep it in step (tests/test_bench_tools.py checks the bits).
@@ -130,11 +90,9 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False, pair
         bond_reverse: wp.array(dtype=wp.int32),
         bond_plastic_reverse: wp.array(dtype=float),
         rigid_body: wp.array(dtype=wp.int32),
-        bond_pair: wp.array(dtype=wp.int32),
-        pair_ne: wp.array(dtype=wp.vec4),
     ):
         """theta_k = d_k sum_live w e V beta G^dil for particle k = first + tid; caches each live bond's (n, e)
-        for the later passes (with ``pairs``: reads the cache the pair pass wrote) and, with fracture, the particle's most compressive live stretch (for the
+        for the later passes and, with fracture, the particle's most compressive live stretch (for the
         compressive bonus). With plasticity, a yielding particle (k < plastic_particle_count) then runs the return
         mapping of its deviatoric force state on the bonds it just cached (the plastic update: it writes its own
         bonds' plastic extensions and its own equivalent plastic strain, and mirrors each new extension e^p_kj into
@@ -162,32 +120,17 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False, pair
             if wp.static(FRACTURE):
                 if bond_alive[q] == wp.uint8(0):
                     continue
-            L = float(0.0)
-            e = float(0.0)
-            if wp.static(PAIRS):  # the pair pass computed this bond's pair: p for k -> j with j > k, -1 - p else
-                p = bond_pair[q]
-                c = wp.vec4()
-                if p >= 0:
-                    c = pair_ne[p]
-                else:
-                    c = pair_ne[-1 - p]
-                    c = wp.vec4(-c[0], -c[1], -c[2], c[3])
-                e = c[3]
-                bond_ne[q] = c
-                if wp.static(FRACTURE or PLASTIC):
-                    L = bond_geom[q][3]
-            else:
-                g = bond_geom[q]
-                L = g[3]
-                xh = wp.vec3(g[0], g[1], g[2])
-                xi = xh * L
-                du = displacements[family_neighbors[q]] - uk
-                eta = xi + du
-                length = wp.length(eta)
-                inv = 1.0 / length
-                n = eta * inv
-                e = (2.0 * wp.dot(xi, du) + wp.dot(du, du)) / (length + L)
-                bond_ne[q] = wp.vec4(n[0], n[1], n[2], e)
+            g = bond_geom[q]
+            L = g[3]
+            xh = wp.vec3(g[0], g[1], g[2])
+            xi = xh * L
+            du = displacements[family_neighbors[q]] - uk
+            eta = xi + du
+            length = wp.length(eta)
+            inv = 1.0 / length
+            n = eta * inv
+            e = (2.0 * wp.dot(xi, du) + wp.dot(du, du)) / (length + L)
+            bond_ne[q] = wp.vec4(n[0], n[1], n[2], e)
             if wp.static(FRACTURE):
                 smin = wp.min(smin, e / L)
             acc += bond_wv_dil[q] * e
@@ -358,7 +301,6 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False, pair
 
     ks = StepKernels()
     ks.dilatation, ks.force, ks.energy = dilatation, force, energy
-    ks.pair_geometry = pair_geometry if PAIRS else None
     _cache[key] = ks
     return ks
 
@@ -525,12 +467,6 @@ def plastic_placeholders(f1, i1) -> dict:
         "bond_reverse": i1,
         "bond_plastic_reverse": f1,
     }
-
-
-def pair_geometry(launch, ks, **arguments):
-    """The pair pass of the kernels ``ks`` (made with ``pairs``) through ``launch(kernel, inputs)``: the (n, e) cache
-    of both directed copies of every bond pair, each pair's geometry computed once."""
-    launch(ks.pair_geometry, range_inputs(ks.pair_geometry, arguments))
 
 
 def dilatation(launch, ks, **arguments):

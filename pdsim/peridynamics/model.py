@@ -136,8 +136,6 @@ def _directional_factors(rest_h, delta_h, nu_h, offsets, neighbors, bond_geom, b
             stretch_min=f1,
             **pd_step.plastic_placeholders(f1, i1),
             rigid_body=i1,
-            bond_pair=i1,
-            pair_ne=bond_ne,
         )
 
     for axis in range(3):
@@ -444,45 +442,3 @@ def compressive_stretch_floor(material) -> float:
     cap or a bonus, which leaves the plain rule's arithmetic unchanged."""
     cap, alpha = material.compressive_bonus_cap, material.compressive_bonus
     return 1.0e30 if cap is None or alpha <= 0.0 else min(cap / alpha, 1.0e30)
-
-
-@dataclass
-class BondPairs:
-    """Each bond pair once, listed under its lower particle (the CPU's pair pass, kernels/peridynamics/step.py):
-    particle k's pairs are pair_offsets[k] .. pair_offsets[k + 1] - 1, pair p being the directed bond
-    ``pair_bond[p]`` = k -> j (j > k, in family order); ``bond_pair[q]`` is the pair of each directed bond q, p for
-    k -> j with j > k and -1 - p for its reverse. Warp int32 arrays; ``offsets_host`` is pair_offsets as int64 numpy
-    (the thread ranges of the pair pass split on it); ``count`` the number of pairs."""
-
-    pair_offsets: object
-    pair_bond: object
-    bond_pair: object
-    offsets_host: np.ndarray
-    count: int
-
-
-def bond_pairs(offsets_host: np.ndarray, neighbors_host: np.ndarray, device) -> BondPairs:
-    """The BondPairs of the families ``offsets_host`` (int [n + 1]) / ``neighbors_host`` (int [bond_count]), whose
-    bonds come in directed pairs k -> j, j -> k (families are symmetric); built with numpy sorts (no Python loop over
-    bonds)."""
-    n = len(offsets_host) - 1
-    counts = np.diff(offsets_host).astype(np.int64)
-    owner = np.repeat(np.arange(n, dtype=np.int64), counts)
-    nb = np.asarray(neighbors_host[: len(owner)], dtype=np.int64)
-    key = owner * n + nb  # bond k -> j
-    order = np.argsort(key, kind="stable")
-    upper = np.flatnonzero(nb > owner)  # bonds in particle order, then family order
-    wanted = nb[upper] * n + owner[upper]
-    reverse = order[np.minimum(np.searchsorted(key[order], wanted), max(len(key) - 1, 0))]
-    if not np.array_equal(key[reverse], wanted) or 2 * len(upper) != len(key):
-        raise ValueError("bond_pairs: a bond k -> j has no reverse bond j -> k (the families are not symmetric)")
-    pair_of = np.zeros(len(key), dtype=np.int64)
-    pair_of[upper] = np.arange(len(upper))
-    pair_of[reverse] = -1 - np.arange(len(upper))
-    offsets = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(owner[upper], minlength=n), out=offsets[1:])
-
-    def ints(a):
-        return wp.array(np.asarray(a, dtype=np.int32) if len(a) else np.zeros(1, np.int32), dtype=wp.int32, device=device)
-
-    return BondPairs(ints(offsets), ints(upper), ints(pair_of), offsets, len(upper))

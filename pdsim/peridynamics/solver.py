@@ -49,7 +49,7 @@ from ..solver import PointSolver, SolverContext, array_state, assign_state, regi
 from .body import PeridynamicBody
 from .events import CrackEvents
 from .handoff import FragmentHandoff
-from .model import PeridynamicState, bond_pairs, build_model
+from .model import PeridynamicState, build_model
 from .ranges import ParticleRanges, resolve_threads
 
 
@@ -72,9 +72,6 @@ class SolverPeridynamics(PointSolver):
             bit-identical for any thread count. The debris damping runs on the same ranges, and so do the kick and
             drift of the shared kinematics where the ranges average at least MIN_POINTS_PER_THREAD (ranges.py)
             particles. On a CUDA device each pass is one launch and ``threads`` must be None or 1.
-        pairs: evaluate each bond pair's deformed geometry once, in a pair pass before the dilatation pass (``None``:
-            on the CPU, not on a GPU, where each directed bond computes its own and True is refused). Both forms give
-            the same bits (kernels/peridynamics/step.py).
 
     State: displacements from the rest configuration, velocities and accelerations (pdsim/kinematics.py), so bond
     deformation is computed from displacement differences and does not depend on where the body sits. The step
@@ -99,7 +96,6 @@ class SolverPeridynamics(PointSolver):
         origin=None,
         surfaces: bool = True,
         threads: int | None = None,
-        pairs: bool | None = None,
     ):
         if not bodies or not all(isinstance(b, PeridynamicBody) for b in bodies):
             raise ParameterError("bodies", bodies, "at least one PeridynamicBody")
@@ -116,10 +112,6 @@ class SolverPeridynamics(PointSolver):
         self.bodies = sorted(bodies, key=lambda b: not b.material.yields)
         self.device = wp.get_device(device)
         resolve_threads(threads, self.device)  # a bad setting fails before anything is built
-        if pairs is None:
-            pairs = not self.device.is_cuda
-        elif not isinstance(pairs, bool) or (pairs and self.device.is_cuda):
-            raise ParameterError("pairs", pairs, "None, False, or True on a CPU device (the GPU runs directed bonds)")
         self.ground = ground
         self.model = build_model(self.bodies, self.device, self.origin)
         m = self.model
@@ -155,12 +147,8 @@ class SolverPeridynamics(PointSolver):
             self.state.bond_plastic_reverse = wp.zeros(max(m.plastic_bond_count, 1), dtype=float, device=d)
             self.state.eqps = wp.zeros(n, dtype=float, device=d)
         handoff = m.fracture and any(b.rigid_handoff is not None and b.material.breaks for b in self.bodies)
-        self._kernels = pd_step.make_step_kernels(m.fracture, m.plastic, handoff, pairs)
+        self._kernels = pd_step.make_step_kernels(m.fracture, m.plastic, handoff)
         self._offsets_host = m.family_offsets.numpy()[: n + 1].astype(np.int64)
-        self._pairs = None  # BondPairs of the pair pass (CPU), with their own thread ranges
-        if pairs:
-            self._pairs = bond_pairs(self._offsets_host, m.family_neighbors.numpy(), d)
-        self._pair_ne = wp.zeros(max(self._pairs.count if pairs else 1, 1), dtype=wp.vec4, device=d)
         self._ranges = None
         self.handoff = None  # FragmentHandoff (pdsim/peridynamics/handoff.py) when a body has rigid_handoff on
         self.threads = threads
@@ -216,8 +204,6 @@ class SolverPeridynamics(PointSolver):
     @threads.setter
     def threads(self, value: int | None):
         count = resolve_threads(value, self.device, self.model.bond_count)
-        if self._pairs is not None:  # split on the pairs each particle lists
-            self._pair_ranges = ParticleRanges(self._pairs.offsets_host, count, self.device)
         self._ranges = ParticleRanges(self._offsets_host, count, self.device)
         self.kin.ranges = self._ranges.point_launch()  # the kick and drift: on the ranges or one launch
         self.rebalance_ranges()
@@ -300,18 +286,6 @@ class SolverPeridynamics(PointSolver):
             else pd_step.plastic_placeholders(f1, reverse)
         )
         launch = self._ranges.launch
-        rigid = self.handoff.rigid_body if self.handoff is not None else self._dummy_i
-        if self._pairs is not None:
-            pd_step.pair_geometry(
-                self._pair_ranges.launch,
-                ks,
-                displacements=self.kin.u,
-                pair_offsets=self._pairs.pair_offsets,
-                pair_bond=self._pairs.pair_bond,
-                family_neighbors=m.family_neighbors,
-                bond_geom=m.bond_geom,
-                pair_ne=self._pair_ne,
-            )
         pd_step.dilatation(
             launch,
             ks,
@@ -328,9 +302,7 @@ class SolverPeridynamics(PointSolver):
             bp=s.bp,
             bond_ne=s.bond_ne,
             stretch_min=s.stretch_min if frac else f1,
-            rigid_body=rigid,
-            bond_pair=self._pairs.bond_pair if self._pairs is not None else self._dummy_i,
-            pair_ne=self._pair_ne,
+            rigid_body=self.handoff.rigid_body if self.handoff is not None else self._dummy_i,
             **plastic_args,
         )
         pd_step.bond_forces(
@@ -353,7 +325,7 @@ class SolverPeridynamics(PointSolver):
             plastic_bond_count=m.plastic_bond_count,
             bond_plastic=plastic,
             bond_plastic_reverse=s.bond_plastic_reverse if m.plastic else f1,
-            rigid_body=rigid,
+            rigid_body=self.handoff.rigid_body if self.handoff is not None else self._dummy_i,
             force_density=s.force_density,
         )
         if m.debris_rate is not None:  # Material.debris_damping (kernels/peridynamics/damping.py)
