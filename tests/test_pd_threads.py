@@ -15,7 +15,8 @@ CENTER = (150.0, -40.0, 20.0)  # far from the origin: the local frame must not d
 
 def _block(threads):
     """A 7^3 block (h = 1 mm, E = 1 GPa) that yields (sigma_Y = 1 MPa, linear hardening), breaks (s_c = 1e-3) and
-    damps its debris (1e5 1/s above a damage of 0.5), pulled apart by a stretch-rate field of 1500 1/s along x (-450 along y, 300 along z) at (150, -40, 20) m."""
+    damps its debris (1e5 1/s above a damage of 0.5), pulled apart by a stretch-rate field of 1500 1/s along x (-450
+    along y, 300 along z) at (150, -40, 20) m."""
     h = 1.0e-3
     mat = pdsim.Material(
         density=1000.0,
