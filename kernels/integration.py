@@ -33,7 +33,7 @@ import functools
 
 import warp as wp
 
-from .launch import launch
+from .launch import launch, range_inputs
 
 POINT_FREE = wp.constant(0)
 POINT_FIXED = wp.constant(1)
@@ -141,6 +141,7 @@ def integration_kernels(dtype=wp.float32):
 
     @wp.kernel(module="unique")
     def kick_drift(
+        first: int,
         displacements: wp.array(dtype=vec3),
         velocities: wp.array(dtype=vec3),
         accelerations: wp.array(dtype=vec3),
@@ -151,9 +152,10 @@ def integration_kernels(dtype=wp.float32):
         dt: dtype,
         point_kind: wp.array(dtype=wp.int32),
     ):
-        """First half kick and drift. A fixed point keeps its displacement on the constrained axes (zero velocity
-        there); a prescribed one moves at the condition's mid-step velocity; free axes follow the half kick."""
-        i = wp.tid()
+        """First half kick and drift of point i = first + tid. A fixed point keeps its displacement on the constrained
+        axes (zero velocity there); a prescribed one moves at the condition's mid-step velocity; free axes follow the
+        half kick."""
+        i = first + wp.tid()
         v = velocities[i] + (dtype(0.5) * dt) * accelerations[i]
         kind = POINT_FREE
         c = point_condition[i]
@@ -191,6 +193,7 @@ def integration_kernels(dtype=wp.float32):
 
     @wp.kernel(module="unique")
     def kick(
+        first: int,
         force: wp.array(dtype=vec3),
         inv_mass: wp.array(dtype=dtype),
         gravity: vec3,
@@ -202,8 +205,8 @@ def integration_kernels(dtype=wp.float32):
         velocities: wp.array(dtype=vec3),
         accelerations: wp.array(dtype=vec3),
     ):
-        """Second half kick from the force of this step (see kick_point)."""
-        i = wp.tid()
+        """Second half kick of point i = first + tid from the force of this step (see kick_point)."""
+        i = first + wp.tid()
         kick_point(
             i,
             force[i],
@@ -305,6 +308,9 @@ def integration_kernels(dtype=wp.float32):
 
 # -- launches (pdsim/kinematics.py) -----------------------------------------------------------------------------------
 # ``k`` is the namespace of integration_kernels for the state's scalar type; ``count`` the launch's thread count.
+# ``ranges``: None (one launch over the points 0 .. count - 1) or a ``ranges(kernel, inputs)`` that runs a range kernel
+# (first parameter: the first point of the launch) over every point, split into ranges launched at once (the
+# peridynamic solver's ParticleRanges.launch); each point's arithmetic is the same either way.
 
 
 def begin_clock_step(clock, dt: float, device):
@@ -327,14 +333,22 @@ def curves_at(count: int, span, curve_time, curve_data, clock, slot: int, value,
     wp.launch(evaluate_curves, dim=count, inputs=[span, curve_time, curve_data, clock, slot, value], device=device)
 
 
-def kick_drift(k, count: int, *, dt: float, device, **arguments):
+def _points_launch(kernel, count: int, ranges, device, arguments: dict) -> None:
+    """``kernel`` (a range kernel) over the points 0 .. count - 1: one launch, or through ``ranges``."""
+    if ranges is None:
+        launch(kernel, count, device=device, first=0, **arguments)
+    else:
+        ranges(kernel, range_inputs(kernel, arguments))
+
+
+def kick_drift(k, count: int, *, dt: float, device, ranges=None, **arguments):
     """First half kick and drift of ``count`` points over ``dt`` [s] (``k.kick_drift``)."""
-    launch(k.kick_drift, count, device=device, dt=k.dtype(dt), **arguments)
+    _points_launch(k.kick_drift, count, ranges, device, dict(arguments, dt=k.dtype(dt)))
 
 
-def kick(k, count: int, *, dt: float, device, **arguments):
+def kick(k, count: int, *, dt: float, device, ranges=None, **arguments):
     """Second half kick of ``count`` points over ``dt`` [s] (``k.kick``)."""
-    launch(k.kick, count, device=device, dt=k.dtype(dt), **arguments)
+    _points_launch(k.kick, count, ranges, device, dict(arguments, dt=k.dtype(dt)))
 
 
 def apply_loads(k, count: int, load_point, load_index, load_force, load_scale, force, device):

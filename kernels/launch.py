@@ -30,6 +30,16 @@ def launch(kernel, dim, *, device, record_cmd: bool = False, **arguments):
     return wp.launch(kernel, dim=dim, inputs=[arguments[n] for n in names], device=device, record_cmd=record_cmd)
 
 
+def range_inputs(kernel, arguments: dict) -> list:
+    """The inputs of a range kernel (one whose first parameter, ``first``, is the first point of its launch) after
+    ``first``, in the order the kernel declares them, from ``arguments`` given by parameter name (each exactly once; a
+    TypeError names what is missing or unknown)."""
+    names = argument_names(kernel)[1:]
+    if sorted(arguments) != sorted(names):
+        raise TypeError(f"kernel {kernel.key}: arguments missing or unknown: {sorted(set(names) ^ set(arguments))}")
+    return [arguments[n] for n in names]
+
+
 def by_name(source, *names: str) -> dict:
     """{name: source.name} for each of ``names``: the arrays and settings that ``source`` holds under the names of the
     kernel parameters they go to, as keyword arguments of :func:`launch`."""

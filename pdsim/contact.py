@@ -762,10 +762,10 @@ class MethodContact:
 
 __all__ = [
     "CONTACT_OMEGA_DT",
+    "SURFACE_FLOOR",
     "ContactDiagnostics",
     "MethodContact",
     "ParticleContact",
-    "SURFACE_FLOOR",
     "bond_stiffness_row_sum",
     "combine_friction",
     "combine_restitution",

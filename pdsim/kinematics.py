@@ -30,7 +30,9 @@ class PointKinematics:
     loads.
 
     ``watchdog`` (a :class:`pdsim.watchdog.Watchdog`, set by it) is told of every step, kick and load evaluation so
-    that it can account for the energy put in; None (default) costs nothing.
+    that it can account for the energy put in; None (default) costs nothing. ``ranges`` (set by a solver that splits
+    its passes over CPU threads: the peridynamic solver's ``ParticleRanges.launch``) runs the kick and drift as range
+    launches on those threads, every point computed as in one launch; None (default): one launch each.
 
     Args:
         bodies: the solver's PointBody instances, in the order of their points.
@@ -47,6 +49,7 @@ class PointKinematics:
     """
 
     watchdog = None  # the Watchdog accounting this state's energy, if any (Watchdog.bind sets it)
+    ranges = None  # None: kick and drift as one launch; else ranges(kernel, inputs) running them on a solver's threads
 
     def __init__(
         self, bodies, body_offsets, rest_world, origin, mass, force_to_newton, damping, gravity, device, dtype
@@ -231,6 +234,7 @@ class PointKinematics:
             accelerations=self.a,
             dt=dt,
             device=d,
+            ranges=self.ranges,
             **by_name(self, "point_condition", "active_kind", "cond_axes", "active_velocity", "point_kind"),
         )
         if self.watchdog is not None:
@@ -309,6 +313,7 @@ class PointKinematics:
             velocities=self.v,
             accelerations=self.a,
             device=self.device,
+            ranges=self.ranges,
             **by_name(self, "gravity", "damping", "point_condition", "point_kind", "cond_axes"),
         )
         self.end_clock_step()

@@ -7,14 +7,16 @@ import pytest
 
 import pdsim
 from pdsim.errors import ParameterError
+from pdsim.peridynamics import ranges as pd_ranges
 from pdsim.peridynamics.ranges import MIN_BONDS_PER_THREAD, ParticleRanges, available_cores
 
 CENTER = (150.0, -40.0, 20.0)  # far from the origin: the local frame must not depend on the thread count either
 
 
 def _block(threads):
-    """A 7^3 block (h = 1 mm, E = 1 GPa) that yields (sigma_Y = 1 MPa, linear hardening) and breaks (s_c = 1e-3),
-    pulled apart by a stretch-rate field of 1500 1/s along x (-450 along y, 300 along z) at (150, -40, 20) m."""
+    """A 7^3 block (h = 1 mm, E = 1 GPa) that yields (sigma_Y = 1 MPa, linear hardening), breaks (s_c = 1e-3) and
+    damps its debris (1e5 1/s above a damage of 0.5), pulled apart by a stretch-rate field of 1500 1/s along x (-450
+    along y, 300 along z) at (150, -40, 20) m."""
     h = 1.0e-3
     mat = pdsim.Material(
         density=1000.0,
@@ -23,6 +25,8 @@ def _block(threads):
         yield_stress=1.0e6,
         hardening_modulus=1.0e8,
         critical_stretch=1.0e-3,
+        debris_damping=1.0e5,
+        debris_damage=0.5,
     )
     body = pdsim.PeridynamicBody(pdsim.box((7 * h, 7 * h, 7 * h), center=CENTER), mat, h)
     solver = pdsim.SolverPeridynamics([body], threads=threads)
@@ -31,15 +35,18 @@ def _block(threads):
     return solver
 
 
-def test_thread_count_does_not_change_the_result():
+def test_thread_count_does_not_change_the_result(monkeypatch):
     """1, 2 and 3 threads: after 40 steps of a block that yields and breaks, the displacements, live bonds,
     equivalent plastic strains, dilatations and energy densities are bit-identical (each particle's arithmetic is the
-    same whatever range it falls in), and the run did yield and break bonds (so the comparison covers those branches:
-    between 5 % and 95 % of the bonds broken, plastic strain > 1e-5)."""
+    same whatever range it falls in), and the run did yield, break bonds and damp debris (so the comparison covers
+    those branches: between 5 % and 95 % of the bonds broken, plastic strain > 1e-5, some damage above the debris
+    threshold). The kick and drift run on the ranges too (at any particle count here, to cover that path)."""
+    monkeypatch.setattr(pd_ranges, "MIN_POINTS_PER_THREAD", 1)
     results = []
     for threads in (1, 2, 3):
         solver = _block(threads)
         assert solver.threads == threads
+        assert (solver.kin.ranges is None) == (threads == 1)
         dt = 0.5 * solver.stable_time_step()
         solver.simulate(dt, 40)
         results.append(
@@ -55,6 +62,7 @@ def test_thread_count_does_not_change_the_result():
     alive = results[0][1]
     assert 0.05 < 1.0 - alive.mean() < 0.95
     assert results[0][2].max() > 1.0e-5
+    assert results[0][5].max() > 0.5
     assert np.all(np.isfinite(results[0][0]))
     for other in results[1:]:
         for a, b in zip(results[0], other, strict=True):
@@ -84,7 +92,8 @@ def test_ranges_cover_every_particle_once_with_equal_bond_counts():
 
 def test_thread_setting(monkeypatch):
     """threads: an integer >= 1, else PDSIM_THREADS, else every core of the process's affinity with at least
-    MIN_BONDS_PER_THREAD bonds per thread; bad values raise ParameterError naming the field."""
+    MIN_BONDS_PER_THREAD bonds per thread; the kick and drift split only with MIN_POINTS_PER_THREAD particles per
+    thread; bad values raise ParameterError naming the field."""
     monkeypatch.delenv("PDSIM_THREADS", raising=False)
     solver = _block(None)
     assert solver.threads == max(1, min(available_cores(), solver.bond_count // MIN_BONDS_PER_THREAD))
@@ -92,6 +101,10 @@ def test_thread_setting(monkeypatch):
     assert _block(None).threads == 2
     solver.threads = 3
     assert solver.threads == 3
+    assert solver.kin.ranges is None  # 343 particles: the kick and drift stay one launch (MIN_POINTS_PER_THREAD)
+    monkeypatch.setattr(pd_ranges, "MIN_POINTS_PER_THREAD", solver.particle_count // 3)
+    solver.threads = 3
+    assert solver.kin.ranges is not None
     for bad in ("0", "two"):
         monkeypatch.setenv("PDSIM_THREADS", bad)
         with pytest.raises(ParameterError, match="PDSIM_THREADS"):

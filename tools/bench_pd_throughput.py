@@ -28,7 +28,7 @@ pdsim runs its bond passes on one thread (``SolverPeridynamics(threads=1)``) and
 ``OMP_NUM_THREADS=1``. ``ratio_all_cores`` compares pdsim on ``--threads`` threads (default: ``--ranks``; each bond pass
 split into that many particle ranges launched at once) with LAMMPS on ``--ranks`` MPI ranks (default: every core;
 ``mpirun -np <ranks>``), which is what a user of each code gets from the machine; the all-thread pdsim figures are
-reported under ``pdsim_threads``. The kick and drift of the shared kinematics stay on one thread.
+reported under ``pdsim_threads`` (the kick and drift run on the same threads as the bond passes).
 
 Clocks: both codes are timed by wall clock (pdsim around the steps, LAMMPS its ``Loop time``) and by CPU time (pdsim:
 the process's CPU time over the steps, all its threads together; LAMMPS: ``Loop time`` times its

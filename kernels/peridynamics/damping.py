@@ -18,7 +18,7 @@ effect). Stability of the explicit step needs c dt < 1.
 
 import warp as wp
 
-from ..launch import launch
+from ..launch import range_inputs
 
 
 # add_debris_damping repeats compute_damage's sums of live and total bond weight (kernels/peridynamics/step.py) on
@@ -26,6 +26,7 @@ from ..launch import launch
 # pass over the family.
 @wp.kernel
 def add_debris_damping(
+    first: int,
     particles: wp.array(dtype=wp.int32),
     family_offsets: wp.array(dtype=wp.int32),
     family_neighbors: wp.array(dtype=wp.int32),
@@ -37,10 +38,11 @@ def add_debris_damping(
     damage_threshold: wp.array(dtype=float),
     force_density: wp.array(dtype=wp.vec3),
 ):
-    """Adds rho_k c_k (v_bar_k - v_k) to the force density [N/m^3] of each particle k = particles[tid] whose damage
-    exceeds its threshold (module docstring); one thread per listed particle, a gather over its family. The list
-    holds every particle, or those not in a rigid fragment (pdsim/peridynamics/handoff.py)."""
-    k = particles[wp.tid()]
+    """Adds rho_k c_k (v_bar_k - v_k) to the force density [N/m^3] of each listed particle whose damage exceeds its
+    threshold (module docstring): particle k = particles[first + tid], a gather over its family (it writes only its
+    own row, so launches over disjoint ranges of the list can run at the same time). The list holds every particle,
+    or those not in a rigid fragment and the rigid ones above the threshold (pdsim/peridynamics/handoff.py)."""
+    k = particles[first + wp.tid()]
     c = rate[k]
     if c <= 0.0:
         return
@@ -65,7 +67,8 @@ def add_debris_damping(
         force_density[k] = force_density[k] + (c / inv_density[k]) * (v_bar - velocities[k])
 
 
-def debris_damping(count, *, device, **arguments):
-    """Adds the debris drag to force_density [N/m^3] of the first ``count`` particles of the list ``particles``
-    (add_debris_damping)."""
-    launch(add_debris_damping, count, device=device, **arguments)
+def debris_damping(launch, **arguments):
+    """Adds the debris drag to force_density [N/m^3] of the particles of the list ``particles`` through
+    ``launch(kernel, inputs)`` over the list's positions (a range launch: pdsim/peridynamics/ranges.py,
+    ParticleRanges.launch, or kernels/peridynamics/step.py, single_launch) (add_debris_damping)."""
+    launch(add_debris_damping, range_inputs(add_debris_damping, arguments))

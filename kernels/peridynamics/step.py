@@ -38,7 +38,7 @@ reverse bond, read only by the next pass), and reads other particles' rows only 
 
 import warp as wp
 
-from ..launch import argument_names
+from ..launch import range_inputs
 
 _cache = {}
 
@@ -466,15 +466,6 @@ def plastic_placeholders(f1, i1) -> dict:
         "bond_reverse": i1,
         "bond_plastic_reverse": f1,
     }
-
-
-def range_inputs(kernel, arguments: dict) -> list:
-    """The inputs of a range kernel after its ``first`` argument, in the order the kernel declares them, from
-    ``arguments`` given by parameter name (each exactly once; a TypeError names what is missing or unknown)."""
-    names = argument_names(kernel)[1:]
-    if sorted(arguments) != sorted(names):
-        raise TypeError(f"kernel {kernel.key}: arguments missing or unknown: {sorted(set(names) ^ set(arguments))}")
-    return [arguments[n] for n in names]
 
 
 def dilatation(launch, ks, **arguments):

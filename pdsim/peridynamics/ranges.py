@@ -21,6 +21,12 @@ MIN_BONDS_PER_THREAD = 50_000
 """The default thread count gives each thread at least this many bonds: starting and joining a pass on a pool thread
 costs some 50 us, about what one thread spends on 5,000 bonds in one pass."""
 
+MIN_POINTS_PER_THREAD = 10_000
+"""The kick and drift (a few nanoseconds per point: 557 us for 64,000 points in one launch) run on the bond passes'
+ranges only when each range holds at least this many points on average: handing a launch to a pool thread and joining
+it costs some 40 us (one launch over 1,000 points: 14 us; over two ranges: 53 us; tools/bench_kick_ranges.py), so the
+split pays from about 5,000 points per range; twice that leaves a margin on a loaded machine."""
+
 RANGE_PARTICLE_COST = 4
 """Cost of a particle's own work (reads, the per-particle arithmetic, its writes) in bond visits, added to its bond
 count when the particles are split into ranges of equal cost."""
@@ -116,6 +122,12 @@ class ParticleRanges:
         self.ranges = [(int(a), int(b - a)) for a, b in itertools.pairwise(bounds)]
         self._loaded = set()
         self._commands = {}  # kernel key -> (inputs key, recorded launches, inputs)
+
+    def point_launch(self):
+        """:meth:`launch` where the ranges average MIN_POINTS_PER_THREAD particles or more (the shared kinematics'
+        kick and drift split over them), else None (one launch each)."""
+        count = len(self.ranges)
+        return self.launch if count > 1 and self.particle_count >= MIN_POINTS_PER_THREAD * count else None
 
     def _load(self, kernel) -> None:
         module = kernel.module

@@ -69,8 +69,9 @@ class SolverPeridynamics(PointSolver):
             plastic update, force with the breaking test, energy, damage) is split into that many contiguous particle
             ranges of about equal bond count, launched at once (Warp releases the GIL while a CPU kernel runs) and
             joined before the next pass; every particle is computed exactly as in one launch, so results are
-            bit-identical for any thread count. On a CUDA device each pass is one launch and ``threads`` must be None
-            or 1. The kick and drift of the shared kinematics run as one launch.
+            bit-identical for any thread count. The debris damping runs on the same ranges, and so do the kick and
+            drift of the shared kinematics where the ranges average at least MIN_POINTS_PER_THREAD (ranges.py)
+            particles. On a CUDA device each pass is one launch and ``threads`` must be None or 1.
 
     State: displacements from the rest configuration, velocities and accelerations (pdsim/kinematics.py), so bond
     deformation is computed from displacement differences and does not depend on where the body sits. The step
@@ -205,11 +206,11 @@ class SolverPeridynamics(PointSolver):
     def threads(self, value: int | None):
         count = resolve_threads(value, self.device, self.model.bond_count)
         self._ranges = ParticleRanges(self._offsets_host, count, self.device)
+        self.kin.ranges = self._ranges.point_launch()  # the kick and drift: on the ranges or one launch
         self.rebalance_ranges()
 
     def rebalance_ranges(self) -> None:
-        """Splits the dilatation and force passes into ranges of equal bond count of the live list (the particles
-        outside rigid fragments, pdsim/peridynamics/handoff.py), or of every particle while none is rigid."""
+        """The bond passes' ranges: of equal bond count over the hand-off's live list, or the particles' ranges."""
         self._bond_ranges = self._ranges
         if self.handoff is not None and self.handoff.active:
             cost = np.concatenate([[0], np.cumsum(np.diff(self._offsets_host)[self.handoff.live_host])])
@@ -326,11 +327,11 @@ class SolverPeridynamics(PointSolver):
             live_particles=live,
             force_density=s.force_density,
         )
-        if m.debris_rate is not None:  # Material.debris_damping (kernels/peridynamics/damping.py)
-            particles = self._all_particles if self.handoff is None else self.handoff.damped
+        if m.debris_rate is not None:  # Material.debris_damping: all particles on the ranges, or the hand-off's list
+            damped = self._all_particles if self.handoff is None else self.handoff.damped
             pd_damping.debris_damping(
-                particles.shape[0],
-                particles=particles,
+                self._ranges.launch if self.handoff is None else pd_step.single_launch(damped.shape[0], self.device),
+                particles=damped,
                 family_offsets=m.family_offsets,
                 family_neighbors=m.family_neighbors,
                 bond_wv=m.bond_wv,
@@ -340,7 +341,6 @@ class SolverPeridynamics(PointSolver):
                 rate=m.debris_rate,
                 damage_threshold=m.debris_damage,
                 force_density=s.force_density,
-                device=self.device,
             )
         if self.contact is not None:
             pd_step.deformed_positions(m.particle_count, m.rest_positions, self.kin.u, self._positions, self.device)
