@@ -139,6 +139,11 @@ class ParticleContact:
         point_friction: each particle's side of a pair's Coulomb coefficient, float64 [n] >= 0, NaN where it brings
             none (its material's contact_friction). A pair takes sqrt(mu_k mu_j) (combine_friction), the one side's
             where the other brings none, and ``friction`` where neither does. None: all NaN.
+
+    The particles' values (``point_restitution``, ``point_friction``) act between separate surfaces: particles of
+    different bodies and, once ``track_bonds`` is called, particles of one body across a crack (their bond broke or a
+    notch cut it; with no bond between them, either particle's damage is at least 0.25,
+    kernels/contact.py CRACK_FACE_DAMAGE). Intact neighbours of one body take ``damping_ratio`` and ``friction``.
     """
 
     def __init__(

@@ -116,6 +116,50 @@ def test_particle_pair_takes_the_combined_friction_and_damping():
     assert abs(f_material[0, 0] - f_scene[0, 0]) > 0.01 * abs(f_material[0, 0])
 
 
+def test_material_values_act_across_crack_faces_within_one_body():
+    """Two particles of one body (rest 2 cm apart, pressed to 9 mm, sliding past each other) with their bonds handed
+    over (track_bonds): with their bond alive (intact neighbours) the pair's force is the scene's law alone; with it
+    broken (a crack face) the combined material values, as between two bodies. With no bond between them (beyond
+    each other's horizon), a particle that has lost all its bonds (damage 1 >= 0.25) makes the pair a crack face, an
+    undamaged pair (damage 0) keeps the scene's law. Forces equal to 1e-5 (relative) to the contact built with the
+    scene's or the combined values alone, and the two differ by over half the tangential force."""
+    import warp as wp
+
+    rest = np.array([[0.0, 0.0, 0.0], [0.02, 0.0, 0.0], [-0.05, 0.0, 0.0], [0.07, 0.0, 0.0]])
+    x = rest.copy()
+    x[1, 0] = 0.009
+    v = np.array([[-0.5, 0.3, 0.0], [0.5, -0.3, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]], dtype=np.float32)
+    common = {"body_id": [0, 0, 0, 0], "radius": 0.005, "volume": 1.0e-6, "density": 1000.0, "bulk_modulus": 1.0e6,
+              "shear_modulus": 6.0e5, "horizon": 0.03, "shield_interior": False, "floor_factor": 0.0}  # fmt: skip
+
+    def force(neighbors, alive, **values):
+        contact = ParticleContact(rest, **common, **values)
+        counts = np.array([1, 1, 1, 1])
+        offsets = wp.array(np.concatenate([[0], np.cumsum(counts)]).astype(np.int32), dtype=wp.int32)
+        contact.track_bonds(
+            offsets,
+            wp.array(np.asarray(neighbors, dtype=np.int32), dtype=wp.int32),
+            wp.array(np.asarray(alive, dtype=np.uint8), dtype=wp.uint8),
+            wp.ones(4, dtype=wp.uint8),
+        )
+        f = wp.zeros(4, dtype=wp.vec3)
+        contact.apply(wp.array(x.astype(np.float32), dtype=wp.vec3), wp.zeros(4, dtype=wp.vec3),
+                      wp.array(v, dtype=wp.vec3), f)  # fmt: skip
+        return f.numpy()[:2]
+
+    material = {"restitution": 0.9, "friction": 0.05, "point_restitution": [0.2, 0.5, 0.2, 0.5],
+                "point_friction": [0.25, 0.64, 0.25, 0.64]}  # fmt: skip
+    bonded = [1, 0, 3, 2]  # families: 0-1 and 2-3 bonded
+    unbonded = [2, 3, 0, 1]  # 0-2 and 1-3 bonded: no bond between 0 and 1
+    combined = force(bonded, [1, 1, 1, 1], restitution=0.5, friction=0.4)
+    scene = force(bonded, [1, 1, 1, 1], restitution=0.9, friction=0.05)
+    assert abs(combined[0, 1] - scene[0, 1]) > 0.5 * abs(combined[0, 1])
+    np.testing.assert_allclose(force(bonded, [1, 1, 1, 1], **material), scene, rtol=1e-5)  # intact
+    np.testing.assert_allclose(force(bonded, [0, 0, 1, 1], **material), combined, rtol=1e-5)  # broken
+    np.testing.assert_allclose(force(unbonded, [0, 1, 0, 1], **material), combined, rtol=1e-5)  # damage 1
+    np.testing.assert_allclose(force(unbonded, [1, 1, 1, 1], **material), scene, rtol=1e-5)  # damage 0
+
+
 def _preset_rebound(material) -> float:
     """Centre-of-mass rebound over impact speed of a 2 x 2 x 2 h block of ``material`` (the preset's animation
     values, plain pattern) thrown at 1 m/s at the default ground plane (friction 0.5, no restitution of its own),
