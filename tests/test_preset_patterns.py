@@ -40,6 +40,22 @@ def test_brittle_preset_breaks_into_shards_at_preview_spacing(preset, case):
     assert r["big"] >= 3, r
 
 
+def test_brittle_presets_share_glass_impact_strain_ratio():
+    """Glass, porcelain, ceramic, stone and plaster (animation values) take the critical stretch that gives a 6 m/s
+    impact the same strain over breaking strain, v / (c s_c) with c = sqrt(E / rho), as glass: within 5 % of
+    pdsim.presets.IMPACT_STRAIN_RATIO (23; porcelain 22.2), where the former ceramic, stone and plaster strains gave 35, 46 and 73;
+    and their breaking stresses E s_c keep the real materials' order (glass, porcelain > stone > ceramic > plaster)."""
+    ratio = {}
+    stress = {}
+    for name in ("glass", "porcelain", "ceramic", "stone", "plaster"):
+        m = pdsim.presets.preset(name)
+        ratio[name] = pf.SPEED / (np.sqrt(m.youngs_modulus / m.density) * m.critical_stretch)
+        stress[name] = m.youngs_modulus * m.critical_stretch
+    for name, value in ratio.items():
+        assert value == pytest.approx(pdsim.presets.IMPACT_STRAIN_RATIO, rel=0.05), (name, value)
+    assert stress["glass"] >= stress["porcelain"] > stress["stone"] > stress["ceramic"] > stress["plaster"], stress
+
+
 def test_plain_presets_fail_the_shard_figures():
     """The plain glass (pattern=False) dropped as above turns what breaks out to dust (the dust figure over 20 % or
     fewer than 3 large fragments): the pattern settings, not the case, give the shards."""

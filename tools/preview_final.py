@@ -28,6 +28,8 @@ smaller in volume.
         --doc docs/fracture.md                                      # the section of the page, from the figures
     python tools/preview_final.py --presets glass --cases drop --spacings 0.02 0.01 --stills docs/presets_glass_drop.png
     python tools/preview_final.py --presets glass --cases drop --spacings 0.02 --usd runs/   # caches for pdsim preview
+    python tools/preview_final.py --seeds 5       # each case with strength seeds 0-4: how many meet the must-show
+    python tools/preview_final.py --hertz         # elastic peak contact force of each case against the splitting load
 """
 
 from __future__ import annotations
@@ -178,6 +180,42 @@ def measure(
     r = {**figures(solver), "wall_s": wall, "preset": preset, "case": case, "spacing": spacing}
     r = r if horizon is None else {**r, "horizon": horizon}
     return r if ball_radius == BALL_RADIUS else {**r, "ball_radius": ball_radius}
+
+
+def meets(r: dict) -> bool:
+    """The must-show at the preview spacing: dust at most 20 % of the broken-out mass and at least 3 fragments over
+    5 % of the body."""
+    return r["dust"] <= 0.20 and r["big"] >= 3
+
+
+def hertz_load(material: pdsim.Material, case: str) -> dict:
+    """Elastic (Hertz) estimate of the peak contact force of a case [N] against the load that splits the sphere
+    between two opposite point loads [N] (Hiramatsu-Oka: tensile stress 0.9 P / d^2 in a sphere of diameter d, set
+    equal to the breaking stress E s0, s0 = s_c / (1 - nu) the breaking strain of a plain bond pulled with its
+    lateral contraction, or the real tensile strength pdsim.presets.TENSILE_STRENGTH for the real values): the drop
+    against a rigid ground (the sphere's mass), the hit against the ball (the reduced mass of ball and sphere; the
+    ball rigid, as simulated, or of steel, 210 GPa and nu 0.3, with the real values). Returns {"force",
+    "split_load", "ratio"}."""
+    e, nu, rho = material.youngs_modulus, material.poisson_ratio, material.density
+    radius = DIAMETER / 2.0
+    sphere_mass = rho * math.pi / 6.0 * DIAMETER**3
+    inv_e = (1.0 - nu**2) / e
+    if case == "drop":
+        r_eff, mass = radius, sphere_mass
+    else:
+        if material.critical_stretch is None:  # real values: a steel ball; the simulated ball is rigid
+            inv_e += (1.0 - 0.3**2) / 210.0e9
+        ball_mass = BALL_DENSITY * 4.0 / 3.0 * math.pi * BALL_RADIUS**3
+        r_eff, mass = radius * BALL_RADIUS / (radius + BALL_RADIUS), ball_mass * sphere_mass / (ball_mass + sphere_mass)
+    e_star = 1.0 / inv_e
+    overlap = (15.0 * mass * SPEED**2 / (16.0 * e_star * math.sqrt(r_eff))) ** 0.4
+    force = 4.0 / 3.0 * e_star * math.sqrt(r_eff) * overlap**1.5
+    if material.critical_stretch is not None:
+        strength = e * material.critical_stretch / (1.0 - nu)
+    else:
+        strength = pdsim.presets.TENSILE_STRENGTH.get(material.name, math.nan)
+    split = strength * DIAMETER**2 / 0.9
+    return {"force": force, "split_load": split, "ratio": force / split}
 
 
 def _ratio(coarse: dict, fine: dict, key: str) -> float:
@@ -462,16 +500,49 @@ def main(argv=None):
     ap.add_argument(
         "--set", nargs="+", default=[], metavar="FIELD=VALUE", help="Material fields over the preset's (numbers)"
     )
+    ap.add_argument(
+        "--seeds", type=int, help="run each preset and case with strength_seed 0 .. N-1 and count those that meet"
+    )
     ap.add_argument("--json", help="write the figures to this JSON file (appended to as runs finish)")
     ap.add_argument("--from-json", help="read the figures from these JSON files (comma-separated) instead of running")
     ap.add_argument("--doc", help="with --from-json: write the section of this page (docs/fracture.md)")
     ap.add_argument("--usd", help="folder: write each run's USD cache there instead (for pdsim preview)")
     ap.add_argument("--stills", help="PNG: the first preset and case at each spacing, side by side, and nothing else")
+    ap.add_argument("--hertz", action="store_true", help="print hertz_load of each preset and case (animation, real)")
     args = ap.parse_args(argv)
     wp.config.quiet = True
+    if args.hertz:
+        for preset in args.presets:
+            for real in (False, True) if preset in pdsim.presets.TENSILE_STRENGTH else (False,):
+                material = pdsim.presets.preset(preset, real=real)
+                for case in args.cases:
+                    h = hertz_load(material, case)
+                    print(
+                        f"{preset} ({'real' if real else 'animation'} values) {case}: peak force {h['force']:.3g} N, "
+                        f"splitting load {h['split_load']:.3g} N, ratio {h['ratio']:.3g}"
+                    )
+        return
     overrides = {k: (int(v) if k == "strength_seed" else float(v)) for k, v in (a.split("=", 1) for a in args.set)}
     if args.stills:
         stills(args.presets[0], args.cases[0], args.spacings, args.stills, frames=args.frames, duration=args.duration)
+        return
+    if args.seeds:
+        for preset in args.presets:
+            for case in args.cases:
+                for spacing in args.spacings:
+                    runs = [
+                        measure(preset, case, spacing, **{**overrides, "strength_seed": seed})
+                        for seed in range(args.seeds)
+                    ]
+                    print(
+                        f"{preset} {case} {spacing * 1000:.0f} mm: {sum(meets(r) for r in runs)} of {args.seeds} "
+                        "seeds meet; (seed: broken out, dust, fragments > 5 %) "
+                        + ", ".join(
+                            f"({k}: {100 * r['broken_out']:.0f} %, {100 * r['dust']:.0f} %, {r['big']})"
+                            for k, r in enumerate(runs)
+                        ),
+                        flush=True,
+                    )
         return
     if args.from_json:
         results, meta = [], None
