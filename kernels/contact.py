@@ -36,6 +36,15 @@ until a particle has more than the budget's worth of contacts, so ordinary conta
 unchanged, and the contact's stable step sqrt(2 rho_k / B_k) is a bound on the contact springs rather than an
 assumption about how many there are.
 
+**Dashpot cap.** An explicit dashpot is stable only while the damping rate it puts on a particle, summed over its
+contacts, times the step stays below about 1: sum_j zeta_kj c_crit,kj V_k / m_k <= 1 / T_k, with T_k =
+sqrt(2 rho_k / B_k) the contact's stable step (the solver's step is at most T_k). One pair at the default
+calibration has T_k zeta c_crit V_k / m_k = 0.58 zeta, so a strong dashpot (zeta = 1.95 for a restitution of 0.05)
+passes the bound from two contacts on, and the crack faces of a crushed brittle body, where the materials' values act,
+have many. Each pair's dashpot is scaled by d_kj = min(d_k, d_j), d_k = min(1, 1 / (T_k sum_j zeta_kj c_crit,kj
+V_k / m_k)) from the previous pass (the stiffness cap's lag and double buffer). d_kj = 1 for the scene's default
+(zeta = 0.02) however many contacts, and for one pair with zeta up to 1.7.
+
 A hard floor backs the penalty up: a pair closer than floor_factor R_kj (an impact faster than the penalty can stop
 within a step or two) is projected back to that distance and its approaching normal velocity removed (inelastic),
 each particle taking its inverse-mass share, averaged over its floor contacts (Jacobi). The projection is computed in
@@ -302,15 +311,20 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
         floor_factor: float,
         budget_count: float,
         scale_in: wp.array(dtype=float),
+        damp_in: wp.array(dtype=float),
         force_density: wp.array(dtype=wp.vec3),
         position_delta: wp.array(dtype=wp.vec3),
         velocity_delta: wp.array(dtype=wp.vec3),
         scale_out: wp.array(dtype=float),
+        damp_out: wp.array(dtype=float),
     ):
         """Adds the contact force density [N/m^3] of every particle j within its contact distance to
         force_density[k], each pair's stiffness and dashpot scaled by min(scale_in[k], scale_in[j]); writes
         scale_out[k] = min(1, B_k / sum_j C_kj V_j) with B_k = budget_count C_k (2 r_k)^3 (the stiffness cap, see the
-        module docstring; scale_in and scale_out must be different arrays).
+        module docstring; scale_in and scale_out must be different arrays). The same for the normal dashpots: each
+        pair's dashpot is scaled by min(damp_in[k], damp_in[j]) and damp_out[k] = min(1, 1 / (T_k sum_j zeta_kj
+        c_crit,kj V_k / m_k)) with T_k = sqrt(2 rho_k / B_k) the contact's stable step (the dashpot cap, see the
+        module docstring).
 
         Hard floor: for pairs closer than floor_factor R_kj the kernel also writes particle k's share of a Jacobi
         (averaged) projection back to that distance into position_delta[k] [m], and of the removal of their
@@ -320,6 +334,7 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
         position_delta[k] = wp.vec3(0.0)
         velocity_delta[k] = wp.vec3(0.0)
         scale_out[k] = 1.0
+        damp_out[k] = 1.0
         if wp.static(SHIELDED):
             if exposed[k] != EXPOSED:
                 return
@@ -327,7 +342,9 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
         vk = velocities[k]
         ck = modulus[k]
         sk = scale_in[k]
+        dk = damp_in[k]
         row = float(0.0)  # unscaled sum_j C_kj V_j (the cap's measure)
+        rate = float(0.0)  # sum_j zeta_kj c_crit,kj V_k / m_k [1/s], the dashpots' rate on k (the dashpot cap's measure)
         vol_k = volume[k]
         mk = mass[k]
         free_k = kind[k] == PARTICLE_FREE
@@ -378,7 +395,8 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
             if apart != 0:
                 zeta = pair_damping_ratio(point_damping_ratio[k], point_damping_ratio[j], damping_ratio)
                 mu = pair_friction(point_friction[k], point_friction[j], friction)
-            fn = wp.max(cv * (R - r) - zeta * cv_crit * vn, 0.0)
+            rate += zeta * cv_crit * vol_k / mk
+            fn = wp.max(cv * (R - r) - (zeta * cv_crit * wp.min(dk, damp_in[j])) * vn, 0.0)
             f += fn * n
             if mu > 0.0:
                 vt = vrel - vn * n
@@ -399,6 +417,9 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
         budget = budget_count * ck * (8.0 * radius[k] * radius[k] * radius[k])
         if row > budget:
             scale_out[k] = budget / row
+        step_bound = wp.sqrt(2.0 * mk / (vol_k * budget))  # the contact's stable step for particle k [s]
+        if rate * step_bound > 1.0:
+            damp_out[k] = 1.0 / (rate * step_bound)
         if floor_count > 0:
             s = 1.0 / float(floor_count)
             position_delta[k] = s * dx
