@@ -170,11 +170,12 @@ def crack_pair_geometry(
 ):
     """Contact geometry of a pair when the bonds are known (bodies that break): (active, R, r, n, apart) with the
     contact distance R [m], the current distance r [m] (active when r < R; overlap R - r), the unit direction n of the
-    force on k, for d = y_k - y_j, and apart = 1 when the two particles meet as separate surfaces: of different
-    bodies, or of one body across a crack (their bond broke in the run or a notch cut it, or, with no bond between
-    them, either particle's damage is at least CRACK_FACE_DAMAGE), 0 otherwise (a live bond: intact neighbours). Particles of different bodies, of one body beyond each other's horizon, and pairs
-    with a live bond: the distance rule of contact_pair_distance along the pair (overlap R_b - r; a live bond at rest
-    is at its rest distance, beyond R_b, and one compressed below it keeps the contact it had, so the contact does not
+    force on k, for d = y_k - y_j, and apart = 1 when the two particles meet as separate surfaces: of different bodies,
+    or of one body across a crack (their bond broke in the run or a notch cut it, or, with no bond between them, either
+    particle's damage is at least CRACK_FACE_DAMAGE), 0 otherwise (a live bond: intact neighbours). Particles of
+    different bodies, of one body beyond each other's horizon, and pairs with a live bond: the distance rule of
+    contact_pair_distance along the pair (overlap R_b - r; a live bond at rest is at its rest distance, beyond R_b, and
+    one compressed below it keeps the contact it had, so the contact does not
     jump on when the bond breaks). A pair whose bond a notch cut (BOND_CUT, the particles' fixed normals n_k, n_j of
     bond_state_and_face_normal differing by more than one unit vector): the smaller of that overlap
     and the closing of the gap across the face, measured along nu = normalize(n_k - n_j) (reference frame):
@@ -203,9 +204,8 @@ def crack_pair_geometry(
         j, k, rest_positions, family_offsets, family_neighbors, bond_alive, bond_alive_initial
     )
     apart = 0
-    if state_k == BOND_DEAD or state_k == BOND_CUT:
-        apart = 1
-    elif state_k == BOND_NONE and wp.max(damage_k, damage_j) >= CRACK_FACE_DAMAGE:
+    # BOND_DEAD or BOND_CUT (the two largest states), or no bond and a damaged particle
+    if state_k >= BOND_DEAD or (state_k == BOND_NONE and wp.max(damage_k, damage_j) >= CRACK_FACE_DAMAGE):
         apart = 1
     if state_k != BOND_CUT and state_j != BOND_CUT:  # not across a notch: the distance rule
         return wp.where(r < Rb, 1, 0), Rb, r, n, apart
@@ -344,7 +344,7 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
         sk = scale_in[k]
         dk = damp_in[k]
         row = float(0.0)  # unscaled sum_j C_kj V_j (the cap's measure)
-        rate = float(0.0)  # sum_j zeta_kj c_crit,kj V_k / m_k [1/s], the dashpots' rate on k (the dashpot cap's measure)
+        rate = float(0.0)  # sum_j zeta_kj c_crit,kj V_k / m_k [1/s]: the dashpots' rate on k (the dashpot cap's)
         vol_k = volume[k]
         mk = mass[k]
         free_k = kind[k] == PARTICLE_FREE

@@ -163,9 +163,10 @@ def test_material_values_act_across_crack_faces_within_one_body():
 def test_strong_dashpot_on_many_contacts_only_takes_energy_out():
     """A particle in contact with its 12 neighbours of another body (an fcc shell 12.5 mm away, contact distance
     13.5 mm) moving at 1 m/s among them (they are held), with a restitution of 0.05 (damping ratio 1.95) on every
-    pair, stepped with velocity Verlet at 0.7 of the contact's stable step for 400 steps: the energy (kinetic plus contact) never rises
-    above its start (to 1e-6 relative), over half of the centre's kinetic energy is taken out, and the dashpot cap scales the centre's dashpots by 1 / (T sum_j zeta c_crit V /
-    m) < 1 (float32, 1e-4). Without the cap (the centre's dashpots at 13.5 times the explicit bound) the centre's
+    pair, stepped with velocity Verlet at 0.7 of the contact's stable step for 400 steps: the energy (kinetic plus
+    contact) never rises above its start (to 1e-6 relative), over half of the centre's kinetic energy is taken out, and
+    the dashpot cap scales the centre's dashpots by 1 / (T sum_j zeta c_crit V / m) < 1 (float32, 1e-4). Without the cap
+    (the centre's dashpots at 13.5 times the explicit bound) the centre's
     velocity flips and grows each step and the energy rises."""
     import warp as wp
 
