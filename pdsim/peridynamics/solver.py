@@ -457,6 +457,8 @@ class SolverPeridynamics(PointSolver):
                 raise ParameterError("checkpoint", "no contact state", "a checkpoint of a scene with particle contact")
             assign_state(self.contact._scale, c["scale"], "contact scale")
             assign_state(self.contact._scale_next, c["scale_next"], "contact scale")
+            if "damping" not in c:
+                raise ParameterError("checkpoint", "no contact dashpot scale", "a checkpoint written by this version")
             assign_state(self.contact._damp, c["damping"], "contact dashpot scale")
             assign_state(self.contact.exposed, c["exposed"], "contact exposure")
         self._fragments = None
