@@ -20,7 +20,9 @@ oscillation, m_red the reduced mass) clamped so the normal force never pulls (no
 friction on the tangential relative velocity v_t: |f_t| = min(mu |f_n|, c^t_kj V_j |v_t|) opposing v_t, with the
 critically damped c^t_kj (zeta = 1). zeta and mu are the pair's: each particle brings its material's (NaN: none) and
 the pair combines them (colliders.py pair_damping_ratio, pair_friction), the scene's values standing in where neither
-brings one.
+brings one. The particles' values act between separate surfaces only: particles of different bodies, and, when the
+bonds are known (bodies that break), particles of one body across a crack (crack_pair_geometry's ``apart``); intact
+neighbours of one body take the scene's values.
 The pair energy is 1/2 C_kj V_k V_j (R_kj - r)^2 [J] (times the cap's scale below). Every term is symmetric in
 (k, j), so the pair forces V_k f_kj and V_j f_jk are equal and opposite (momentum is conserved; the hard floor
 below conserves it only approximately, as each particle averages over its own floor contacts).
@@ -33,6 +35,15 @@ double-buffered so no thread reads a value another writes). The scale is symmetr
 until a particle has more than the budget's worth of contacts, so ordinary contact (a few contacts per particle) is
 unchanged, and the contact's stable step sqrt(2 rho_k / B_k) is a bound on the contact springs rather than an
 assumption about how many there are.
+
+**Dashpot cap.** An explicit dashpot is stable only while the damping rate it puts on a particle, summed over its
+contacts, times the step stays below about 1: sum_j zeta_kj c_crit,kj V_k / m_k <= 1 / T_k, with T_k =
+sqrt(2 rho_k / B_k) the contact's stable step (the solver's step is at most T_k). One pair at the default
+calibration has T_k zeta c_crit V_k / m_k = 0.58 zeta, so a strong dashpot (zeta = 1.95 for a restitution of 0.05)
+passes the bound from two contacts on, and the crack faces of a crushed brittle body, where the materials' values act,
+have many. Each pair's dashpot is scaled by d_kj = min(d_k, d_j), d_k = min(1, 1 / (T_k sum_j zeta_kj c_crit,kj
+V_k / m_k)) from the previous pass (the stiffness cap's lag and double buffer). d_kj = 1 for the scene's default
+(zeta = 0.02) however many contacts, and for one pair with zeta up to 1.7.
 
 A hard floor backs the penalty up: a pair closer than floor_factor R_kj (an impact faster than the penalty can stop
 within a step or two) is projected back to that distance and its approaching normal velocity removed (inelastic),
@@ -85,6 +96,11 @@ BOND_NONE = wp.constant(0)  # the pair is not in the family (beyond the horizon)
 BOND_LIVE = wp.constant(1)
 BOND_DEAD = wp.constant(2)  # broken in the run
 BOND_CUT = wp.constant(3)  # cut by a notch (dead from the start)
+# A pair of one body with no bond between them (beyond each other's horizon) meets across a crack when either particle
+# has lost at least this share of its family's bonds: a particle on a crack face loses about half of its family (the
+# bonds across the face), a quarter or more marks a face or a fragment's edge, while the few scattered broken bonds
+# of a body that flows or is compacted stay well below it.
+CRACK_FACE_DAMAGE = wp.constant(0.25)
 
 
 @wp.func
@@ -98,7 +114,8 @@ def bond_state_and_face_normal(
     bond_alive_initial: wp.array(dtype=wp.uint8),
 ):
     """(state of the bond k-j: BOND_NONE, BOND_LIVE, BOND_DEAD or BOND_CUT; the notch-face normal of k, a unit
-    vector, zero when no bond of k was cut): one pass over k's family. The face normal is the direction of k's
+    vector, zero when no bond of k was cut; k's damage, the share of its family's bonds not alive, in [0, 1]): one
+    pass over k's family. The face normal is the direction of k's
     shortest bond a notch cut (``bond_alive_initial`` 0; the mean of the shortest ones when several tie): the bond
     that crosses the notch most squarely, so the normal does not tilt where the notch ends or a free surface cuts the
     family (the sum of all cut bonds tilts there, towards the side with more of them; faces sliding along a tilted
@@ -108,8 +125,13 @@ def bond_state_and_face_normal(
     normal = wp.vec3(0.0)
     shortest = float(1.0e30)
     xk = rest_positions[k]
-    for q in range(family_offsets[k], family_offsets[k + 1]):
+    first = family_offsets[k]
+    last = family_offsets[k + 1]
+    dead = int(0)
+    for q in range(first, last):
         m = family_neighbors[q]
+        if bond_alive[q] == wp.uint8(0):
+            dead += 1
         if m == j:
             state = wp.where(bond_alive[q] == wp.uint8(0), BOND_DEAD, BOND_LIVE)
             if bond_alive_initial[q] == wp.uint8(0):
@@ -124,7 +146,10 @@ def bond_state_and_face_normal(
                 normal += xi / length
     if shortest < 1.0e30:
         normal = wp.normalize(normal)
-    return state, normal
+    damage = float(0.0)
+    if last > first:
+        damage = float(dead) / float(last - first)
+    return state, normal, damage
 
 
 @wp.func
@@ -143,11 +168,14 @@ def crack_pair_geometry(
     bond_alive: wp.array(dtype=wp.uint8),
     bond_alive_initial: wp.array(dtype=wp.uint8),
 ):
-    """Contact geometry of a pair when the bonds are known (bodies that break): (active, R, r, n) with the contact
-    distance R [m], the current distance r [m] (active when r < R; overlap R - r) and the unit direction n of the
-    force on k, for d = y_k - y_j. Particles of different bodies, of one body beyond each other's horizon, and pairs
-    with a live bond: the distance rule of contact_pair_distance along the pair (overlap R_b - r; a live bond at rest
-    is at its rest distance, beyond R_b, and one compressed below it keeps the contact it had, so the contact does not
+    """Contact geometry of a pair when the bonds are known (bodies that break): (active, R, r, n, apart) with the
+    contact distance R [m], the current distance r [m] (active when r < R; overlap R - r), the unit direction n of the
+    force on k, for d = y_k - y_j, and apart = 1 when the two particles meet as separate surfaces: of different bodies,
+    or of one body across a crack (their bond broke in the run or a notch cut it, or, with no bond between them, either
+    particle's damage is at least CRACK_FACE_DAMAGE), 0 otherwise (a live bond: intact neighbours). Particles of
+    different bodies, of one body beyond each other's horizon, and pairs with a live bond: the distance rule of
+    contact_pair_distance along the pair (overlap R_b - r; a live bond at rest is at its rest distance, beyond R_b, and
+    one compressed below it keeps the contact it had, so the contact does not
     jump on when the bond breaks). A pair whose bond a notch cut (BOND_CUT, the particles' fixed normals n_k, n_j of
     bond_state_and_face_normal differing by more than one unit vector): the smaller of that overlap
     and the closing of the gap across the face, measured along nu = normalize(n_k - n_j) (reference frame):
@@ -160,35 +188,39 @@ def crack_pair_geometry(
     gained 4 times the work put in with the normal taken from the bonds dead at each step)."""
     R = distance_factor * (radius[k] + radius[j])
     if r2 >= R * R or r2 == 0.0:
-        return 0, R, float(0.0), wp.vec3(0.0)
+        return 0, R, float(0.0), wp.vec3(0.0), 0
     r = wp.sqrt(r2)
     n = d / r
     if body_id[k] != body_id[j]:
-        return 1, R, r, n
+        return 1, R, r, n, 1
     xi = rest_positions[j] - rest_positions[k]
     Rb = wp.min(R, bonded_factor * wp.length(xi))
     if r >= Rb:  # beyond the distance rule's reach: no contact by either rule (the bond look-up is skipped)
-        return 0, Rb, r, n
-    state_k, nk = bond_state_and_face_normal(
+        return 0, Rb, r, n, 0
+    state_k, nk, damage_k = bond_state_and_face_normal(
         k, j, rest_positions, family_offsets, family_neighbors, bond_alive, bond_alive_initial
     )
-    state_j, nj = bond_state_and_face_normal(
+    state_j, nj, damage_j = bond_state_and_face_normal(
         j, k, rest_positions, family_offsets, family_neighbors, bond_alive, bond_alive_initial
     )
+    apart = 0
+    # BOND_DEAD or BOND_CUT (the two largest states), or no bond and a damaged particle
+    if state_k >= BOND_DEAD or (state_k == BOND_NONE and wp.max(damage_k, damage_j) >= CRACK_FACE_DAMAGE):
+        apart = 1
     if state_k != BOND_CUT and state_j != BOND_CUT:  # not across a notch: the distance rule
-        return wp.where(r < Rb, 1, 0), Rb, r, n
+        return wp.where(r < Rb, 1, 0), Rb, r, n, apart
     nu = nk - nj
     g0 = float(0.0)
     if wp.length(nu) > FACE_NORMAL_MIN:
         nu = wp.normalize(nu)
         g0 = wp.dot(xi, nu)
     if g0 <= 0.0:  # no pre-cut face between them: the distance rule
-        return wp.where(r < Rb, 1, 0), Rb, r, n
+        return wp.where(r < Rb, 1, 0), Rb, r, n, apart
     g = -wp.dot(d, nu)
     Rg = bonded_factor * g0
     if Rg - g < Rb - r:  # the faces' closing is the smaller overlap
-        return wp.where(g < Rg, 1, 0), Rg, g, -nu
-    return wp.where(r < Rb, 1, 0), Rb, r, n
+        return wp.where(g < Rg, 1, 0), Rg, g, -nu, apart
+    return wp.where(r < Rb, 1, 0), Rb, r, n, apart
 
 
 EXPOSED = wp.constant(1)  # hash-grid group of the particles that take part in contact
@@ -279,15 +311,20 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
         floor_factor: float,
         budget_count: float,
         scale_in: wp.array(dtype=float),
+        damp_in: wp.array(dtype=float),
         force_density: wp.array(dtype=wp.vec3),
         position_delta: wp.array(dtype=wp.vec3),
         velocity_delta: wp.array(dtype=wp.vec3),
         scale_out: wp.array(dtype=float),
+        damp_out: wp.array(dtype=float),
     ):
         """Adds the contact force density [N/m^3] of every particle j within its contact distance to
         force_density[k], each pair's stiffness and dashpot scaled by min(scale_in[k], scale_in[j]); writes
         scale_out[k] = min(1, B_k / sum_j C_kj V_j) with B_k = budget_count C_k (2 r_k)^3 (the stiffness cap, see the
-        module docstring; scale_in and scale_out must be different arrays).
+        module docstring; scale_in and scale_out must be different arrays). The same for the normal dashpots: each
+        pair's dashpot is scaled by min(damp_in[k], damp_in[j]) and damp_out[k] = min(1, 1 / (T_k sum_j zeta_kj
+        c_crit,kj V_k / m_k)) with T_k = sqrt(2 rho_k / B_k) the contact's stable step (the dashpot cap, see the
+        module docstring).
 
         Hard floor: for pairs closer than floor_factor R_kj the kernel also writes particle k's share of a Jacobi
         (averaged) projection back to that distance into position_delta[k] [m], and of the removal of their
@@ -297,6 +334,7 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
         position_delta[k] = wp.vec3(0.0)
         velocity_delta[k] = wp.vec3(0.0)
         scale_out[k] = 1.0
+        damp_out[k] = 1.0
         if wp.static(SHIELDED):
             if exposed[k] != EXPOSED:
                 return
@@ -304,7 +342,9 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
         vk = velocities[k]
         ck = modulus[k]
         sk = scale_in[k]
+        dk = damp_in[k]
         row = float(0.0)  # unscaled sum_j C_kj V_j (the cap's measure)
+        rate = float(0.0)  # sum_j zeta_kj c_crit,kj V_k / m_k [1/s]: the dashpots' rate on k (the dashpot cap's)
         vol_k = volume[k]
         mk = mass[k]
         free_k = kind[k] == PARTICLE_FREE
@@ -324,7 +364,7 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
             if r2 >= q2 or j == k:
                 continue
             if wp.static(CRACKS):
-                active, R, r, n = crack_pair_geometry(
+                active, R, r, n, apart = crack_pair_geometry(
                     k, j, d, r2, rest_positions, body_id, radius, distance_factor, bonded_factor,
                     family_offsets, family_neighbors, bond_alive, bond_alive_initial,
                 )  # fmt: skip
@@ -336,6 +376,7 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
                     continue
                 r = wp.sqrt(r2)
                 n = d / r
+                apart = wp.where(body_id[k] != body_id[j], 1, 0)
             vol_j = volume[j]
             mj = mass[j]
             # float32 range: C alone reaches 1e27 N/m^6 at sub-mm spacings, so only products with V_j are formed
@@ -346,14 +387,16 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
             cv_crit = 2.0 * wp.sqrt(cv * (mk * mj / (mk + mj)) / vol_k)
             vrel = vk - velocities[j]
             vn = wp.dot(vrel, n)
-            # the materials' values act between bodies; within one body the scene's law stands (a material's low
-            # restitution, a strong dashpot, between compressed neighbours of a flowing body would tear it)
+            # the materials' values act between separate surfaces: bodies, and the faces of a crack within one body;
+            # between intact neighbours of one body the scene's law stands (a material's low restitution, a strong
+            # dashpot, between compressed neighbours of a flowing body would tear it)
             zeta = damping_ratio
             mu = friction
-            if body_id[k] != body_id[j]:
+            if apart != 0:
                 zeta = pair_damping_ratio(point_damping_ratio[k], point_damping_ratio[j], damping_ratio)
                 mu = pair_friction(point_friction[k], point_friction[j], friction)
-            fn = wp.max(cv * (R - r) - zeta * cv_crit * vn, 0.0)
+            rate += zeta * cv_crit * vol_k / mk
+            fn = wp.max(cv * (R - r) - (zeta * cv_crit * wp.min(dk, damp_in[j])) * vn, 0.0)
             f += fn * n
             if mu > 0.0:
                 vt = vrel - vn * n
@@ -374,6 +417,9 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
         budget = budget_count * ck * (8.0 * radius[k] * radius[k] * radius[k])
         if row > budget:
             scale_out[k] = budget / row
+        step_bound = wp.sqrt(2.0 * mk / (vol_k * budget))  # the contact's stable step for particle k [s]
+        if rate * step_bound > 1.0:
+            damp_out[k] = 1.0 / (rate * step_bound)
         if floor_count > 0:
             s = 1.0 / float(floor_count)
             position_delta[k] = s * dx
@@ -432,7 +478,7 @@ def make_particle_contact_kernels(shielded: bool, cracks: bool = False):
             if r2 >= q2 or j == k:
                 continue
             if wp.static(CRACKS):
-                active, R, r, n = crack_pair_geometry(
+                active, R, r, n, apart = crack_pair_geometry(
                     k, j, d, r2, rest_positions, body_id, radius, distance_factor, bonded_factor,
                     family_offsets, family_neighbors, bond_alive, bond_alive_initial,
                 )  # fmt: skip

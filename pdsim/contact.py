@@ -139,6 +139,11 @@ class ParticleContact:
         point_friction: each particle's side of a pair's Coulomb coefficient, float64 [n] >= 0, NaN where it brings
             none (its material's contact_friction). A pair takes sqrt(mu_k mu_j) (combine_friction), the one side's
             where the other brings none, and ``friction`` where neither does. None: all NaN.
+
+    The particles' values (``point_restitution``, ``point_friction``) act between separate surfaces: particles of
+    different bodies and, once ``track_bonds`` is called, particles of one body across a crack (their bond broke or a
+    notch cut it; with no bond between them, either particle's damage is at least 0.25,
+    kernels/contact.py CRACK_FACE_DAMAGE). Intact neighbours of one body take ``damping_ratio`` and ``friction``.
     """
 
     def __init__(
@@ -234,11 +239,17 @@ class ParticleContact:
         self._scale = wp.ones(n, dtype=float, device=d)
         self._scale_next = wp.ones(n, dtype=float, device=d)
         self._scale_out = wp.ones(n, dtype=float, device=d)
+        # the dashpot cap's per-particle scale (kernels/contact.py): the force pass reads _damp and writes _damp_out,
+        # copied into _damp after the pass
+        self._damp = wp.ones(n, dtype=float, device=d)
+        self._damp_out = wp.ones(n, dtype=float, device=d)
         self._force_buffers = {  # the force pass's scale and hard-floor buffers, by kernel parameter name
             "scale_in": self._scale,
+            "damp_in": self._damp,
             "position_delta": self._position_delta,
             "velocity_delta": self._velocity_delta,
             "scale_out": self._scale_out,
+            "damp_out": self._damp_out,
         }
         self._energy = wp.zeros(n, dtype=float, device=d)
         self._row_sum = wp.zeros(n, dtype=float, device=d)
@@ -335,7 +346,7 @@ class ParticleContact:
         velocity Verlet), then applies the hard-floor projection to ``displacements`` and ``velocities`` (free
         particles only: ``kind`` int32 [n], 0 = free; all free when None). Call it after the bond force density and
         before the kick. Rebuilds the hash grid on ``positions`` (the query, not the rebuild, dominates the call's
-        cost). Updates the stiffness cap's scale for the next call (one call of lag). No allocation."""
+        cost). Updates the stiffness and dashpot caps' scales for the next call (one call of lag). No allocation."""
         self._build_grid(positions)
         kc.particle_contact_forces(
             self.shield_interior,
@@ -353,6 +364,7 @@ class ParticleContact:
         )
         wp.copy(self._scale_next, self._scale)
         wp.copy(self._scale, self._scale_out)
+        wp.copy(self._damp, self._damp_out)
         if self.floor_factor > 0.0:
             kc.hard_floor(displacements, velocities, self._position_delta, self._velocity_delta, self.device)
 

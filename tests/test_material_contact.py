@@ -116,6 +116,108 @@ def test_particle_pair_takes_the_combined_friction_and_damping():
     assert abs(f_material[0, 0] - f_scene[0, 0]) > 0.01 * abs(f_material[0, 0])
 
 
+def test_material_values_act_across_crack_faces_within_one_body():
+    """Two particles of one body (rest 2 cm apart, pressed to 9 mm, sliding past each other) with their bonds handed
+    over (track_bonds): with their bond alive (intact neighbours) the pair's force is the scene's law alone; with it
+    broken (a crack face) the combined material values, as between two bodies. With no bond between them (beyond
+    each other's horizon), a particle that has lost all its bonds (damage 1 >= 0.25) makes the pair a crack face, an
+    undamaged pair (damage 0) keeps the scene's law. Forces equal to 1e-5 (relative) to the contact built with the
+    scene's or the combined values alone, and the two differ by over half the tangential force."""
+    import warp as wp
+
+    rest = np.array([[0.0, 0.0, 0.0], [0.02, 0.0, 0.0], [-0.05, 0.0, 0.0], [0.07, 0.0, 0.0]])
+    x = rest.copy()
+    x[1, 0] = 0.009
+    v = np.array([[-0.5, 0.3, 0.0], [0.5, -0.3, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]], dtype=np.float32)
+    common = {"body_id": [0, 0, 0, 0], "radius": 0.005, "volume": 1.0e-6, "density": 1000.0, "bulk_modulus": 1.0e6,
+              "shear_modulus": 6.0e5, "horizon": 0.03, "shield_interior": False, "floor_factor": 0.0}  # fmt: skip
+
+    def force(neighbors, alive, **values):
+        contact = ParticleContact(rest, **common, **values)
+        counts = np.array([1, 1, 1, 1])
+        offsets = wp.array(np.concatenate([[0], np.cumsum(counts)]).astype(np.int32), dtype=wp.int32)
+        contact.track_bonds(
+            offsets,
+            wp.array(np.asarray(neighbors, dtype=np.int32), dtype=wp.int32),
+            wp.array(np.asarray(alive, dtype=np.uint8), dtype=wp.uint8),
+            wp.ones(4, dtype=wp.uint8),
+        )
+        f = wp.zeros(4, dtype=wp.vec3)
+        contact.apply(wp.array(x.astype(np.float32), dtype=wp.vec3), wp.zeros(4, dtype=wp.vec3),
+                      wp.array(v, dtype=wp.vec3), f)  # fmt: skip
+        return f.numpy()[:2]
+
+    material = {"restitution": 0.9, "friction": 0.05, "point_restitution": [0.2, 0.5, 0.2, 0.5],
+                "point_friction": [0.25, 0.64, 0.25, 0.64]}  # fmt: skip
+    bonded = [1, 0, 3, 2]  # families: 0-1 and 2-3 bonded
+    unbonded = [2, 3, 0, 1]  # 0-2 and 1-3 bonded: no bond between 0 and 1
+    combined = force(bonded, [1, 1, 1, 1], restitution=0.5, friction=0.4)
+    scene = force(bonded, [1, 1, 1, 1], restitution=0.9, friction=0.05)
+    assert abs(combined[0, 1] - scene[0, 1]) > 0.5 * abs(combined[0, 1])
+    np.testing.assert_allclose(force(bonded, [1, 1, 1, 1], **material), scene, rtol=1e-5)  # intact
+    np.testing.assert_allclose(force(bonded, [0, 0, 1, 1], **material), combined, rtol=1e-5)  # broken
+    np.testing.assert_allclose(force(unbonded, [0, 1, 0, 1], **material), combined, rtol=1e-5)  # damage 1
+    np.testing.assert_allclose(force(unbonded, [1, 1, 1, 1], **material), scene, rtol=1e-5)  # damage 0
+
+
+def test_strong_dashpot_on_many_contacts_only_takes_energy_out():
+    """A particle in contact with its 12 neighbours of another body (an fcc shell 12.5 mm away, contact distance
+    13.5 mm) moving at 1 m/s among them (they are held), with a restitution of 0.05 (damping ratio 1.95) on every
+    pair, stepped with velocity Verlet at 0.7 of the contact's stable step for 400 steps: the energy (kinetic plus
+    contact) never rises above its start (to 1e-6 relative), over half of the centre's kinetic energy is taken out, and
+    the dashpot cap scales the centre's dashpots by 1 / (T sum_j zeta c_crit V / m) < 1 (float32, 1e-4). Without the cap
+    (the centre's dashpots at 13.5 times the explicit bound) the centre's
+    velocity flips and grows each step and the energy rises."""
+    import warp as wp
+
+    shell = np.array([[a, b, 0.0] for a in (-1, 1) for b in (-1, 1)] + [[a, 0.0, b] for a in (-1, 1) for b in (-1, 1)]
+                     + [[0.0, a, b] for a in (-1, 1) for b in (-1, 1)]) / np.sqrt(2.0)  # fmt: skip
+    rest = np.vstack([np.zeros(3), 0.0125 * shell]) + np.array([1000.0, -200.0, 50.0])  # far from the origin
+    n = len(rest)
+    rho, vol = 1000.0, 1.0e-6
+    contact = ParticleContact(rest - rest[0], body_id=[0] + [1] * 12, radius=0.005, volume=vol, density=rho,
+                              bulk_modulus=1.0e6, shear_modulus=6.0e5, horizon=0.03, shield_interior=False,
+                              floor_factor=0.0, point_restitution=np.full(n, 0.05))  # fmt: skip
+    x = (rest - rest[0]).astype(np.float32)
+    v = np.vstack([[1.0, 0.3, 0.0], np.zeros((12, 3))]).astype(np.float32)
+    dt = 0.7 * contact.stable_time_step()
+
+    def accel(x, v):
+        f = wp.zeros(n, dtype=wp.vec3)
+        contact.apply(wp.array(x, dtype=wp.vec3), wp.zeros(n, dtype=wp.vec3), wp.array(v, dtype=wp.vec3), f)
+        return f.numpy() / rho
+
+    def energy(x, v):
+        return 0.5 * rho * vol * float(np.sum(v.astype(np.float64) ** 2)) + contact.potential_energy(
+            wp.array(x, dtype=wp.vec3)
+        )
+
+    e0 = energy(x, v)
+    a = accel(x, v)
+    most = e0
+    for _ in range(400):  # the centre moves, the shell is held
+        v[0] += 0.5 * dt * a[0]
+        x[0] += dt * v[0]
+        a = accel(x, v)
+        v[0] += 0.5 * dt * a[0]
+        most = max(most, energy(x, v))
+    assert most <= e0 * (1.0 + 1.0e-6), (most, e0)
+    kinetic = 0.5 * rho * vol * (1.0 + 0.3**2)
+    assert energy(x, v) < e0 - 0.5 * kinetic  # the dashpots took most of the centre's kinetic energy out
+    # the cap's scale at the start: all 12 pairs in contact, each with zeta c_crit V / m from the kernel's formula
+    contact.apply(wp.array((rest - rest[0]).astype(np.float32), dtype=wp.vec3), wp.zeros(n, dtype=wp.vec3),
+                  wp.array(np.vstack([[1.0, 0.3, 0.0], np.zeros((12, 3))]).astype(np.float32), dtype=wp.vec3),
+                  wp.zeros(n, dtype=wp.vec3))  # fmt: skip
+    c = contact._modulus_host[0]
+    budget = 12.0 * c * 0.01**3
+    m = rho * vol
+    zeta = contact.point_damping_ratio.numpy()[0]
+    rate = 12.0 * zeta * 2.0 * np.sqrt(c * vol * (0.5 * m) / vol) * vol / m
+    expected = 1.0 / (rate * np.sqrt(2.0 * rho / budget))
+    assert expected < 0.1
+    assert contact._damp.numpy()[0] == pytest.approx(expected, rel=1e-4)
+
+
 def _preset_rebound(material) -> float:
     """Centre-of-mass rebound over impact speed of a 2 x 2 x 2 h block of ``material`` (the preset's animation
     values, plain pattern) thrown at 1 m/s at the default ground plane (friction 0.5, no restitution of its own),

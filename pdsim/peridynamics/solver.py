@@ -435,6 +435,7 @@ class SolverPeridynamics(PointSolver):
             out["contact"] = {
                 "scale": array_state(c._scale),
                 "scale_next": array_state(c._scale_next),
+                "damping": array_state(c._damp),
                 "exposed": array_state(c.exposed),
             }
         return out
@@ -459,6 +460,9 @@ class SolverPeridynamics(PointSolver):
                 raise ParameterError("checkpoint", "no contact state", "a checkpoint of a scene with particle contact")
             assign_state(self.contact._scale, c["scale"], "contact scale")
             assign_state(self.contact._scale_next, c["scale_next"], "contact scale")
+            if "damping" not in c:
+                raise ParameterError("checkpoint", "no contact dashpot scale", "a checkpoint written by this version")
+            assign_state(self.contact._damp, c["damping"], "contact dashpot scale")
             assign_state(self.contact.exposed, c["exposed"], "contact exposure")
         self._fragments = None
 
