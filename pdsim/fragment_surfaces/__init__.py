@@ -45,7 +45,7 @@ drawn surface of frame N are built on the run's surface thread while frame N + 1
 from .cleanup import shells_closed, triangle_angles
 from .drawn import DrawnSurface
 from .regions import LatticeGrid, build_lattice_grid, partition_regions
-from .surfaces import DAMAGE_THRESHOLD, FragmentSurfaces
+from .surfaces import DAMAGE_THRESHOLD, FragmentSurfaces, surface_states, with_states
 
 __all__ = [
     "DAMAGE_THRESHOLD",
@@ -55,5 +55,7 @@ __all__ = [
     "build_lattice_grid",
     "partition_regions",
     "shells_closed",
+    "surface_states",
     "triangle_angles",
+    "with_states",
 ]

@@ -460,6 +460,8 @@ def clean_complex(
     sliver_angle=SLIVER_ANGLE,
     crack_patch=None,
     surface=None,
+    planes_from=None,
+    origin=None,
 ):
     """Removes slivers from the shell complex by edge collapses that keep every shell a closed 2-manifold.
 
@@ -493,19 +495,25 @@ def clean_complex(
             only vertices off the input planes move.
         crack_patch: bool [patch count], True for crack patches (the others are planar input patches); None: the
             strict patch rule only.
+        planes_from: (points [m], tri, patch) whose triangles give each input-plane patch its plane (default: the
+            complex given), e.g. the raw complex when ``tri`` already holds an earlier clean-up's edits.
+        origin: None, or an int array [f] carried along with the triangles (a triangle keeps its slot through
+            collapses and flips): then returned as a fourth element, for the surviving triangles.
 
     Returns:
-        (tri, shell, patch) after the collapses (triangles that became degenerate removed).
+        (tri, shell, patch) after the collapses (triangles that became degenerate removed), and the surviving
+        triangles' ``origin`` when given.
     """
     plane_eq = None
     if crack_patch is not None:  # unit normal and offset of every input-plane patch (NaN: crack patches)
-        p_count = int(patch.max()) + 1
-        t = points[tri]
+        f_points, f_tri, f_patch = (points, tri, patch) if planes_from is None else planes_from
+        p_count = max(int(patch.max()), int(f_patch.max())) + 1
+        t = f_points[f_tri]
         n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-        normal = np.stack([np.bincount(patch, n[:, a], p_count) for a in range(3)], axis=1)
+        normal = np.stack([np.bincount(f_patch, n[:, a], p_count) for a in range(3)], axis=1)
         normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
-        offset = np.einsum("ij,ij->i", normal[patch], t.mean(axis=1))
-        offset = np.bincount(patch, offset, p_count) / np.maximum(np.bincount(patch, minlength=p_count), 1)
+        offset = np.einsum("ij,ij->i", normal[f_patch], t.mean(axis=1))
+        offset = np.bincount(f_patch, offset, p_count) / np.maximum(np.bincount(f_patch, minlength=p_count), 1)
         plane_eq = np.concatenate([normal, offset[:, None]], axis=1)
         plane_eq[np.asarray(crack_patch, dtype=bool)] = np.nan
     flag = _needs_work(points, tri, spacing, short_edge, sliver_angle)
@@ -537,7 +545,9 @@ def clean_complex(
         tri[sub[keep]] = t1
         flag[sub[keep]] = _needs_work(points, t1, spacing, short_edge, sliver_angle)
         tri, shell, patch, flag = tri[whole], shell[whole], patch[whole], flag[whole]
-    return tri, shell, patch
+        if origin is not None:
+            origin = origin[whole]
+    return (tri, shell, patch) if origin is None else (tri, shell, patch, origin)
 
 
 def _needs_work(points, tri, spacing, short_edge, sliver_angle) -> np.ndarray:
