@@ -69,11 +69,9 @@ def _volume(points, faces, centre):
     return float(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0)
 
 
-def test_carried_edits_on_a_faceted_sphere(flagged):
-    """An icosphere (radius 0.15 m, 1,280 facets) 1 km from the origin broken in three rebuilds (halves, a split, six
-    chips): with carried edits every shell is closed, the shells' volumes add up to the input's (1e-9
-    relative), no more triangles have an angle under 5 degrees than after cleaning the whole complex, and the chips'
-    rebuild starts its clean-up from under half the flagged triangles."""
+def _sphere():
+    """An icosphere (radius 0.15 m, 1,280 facets) 1 km from the origin, its lattice points and three steps: halves, a
+    split, six chips. Returns (shape, rest positions, steps, centre)."""
     mesh = trimesh.creation.icosphere(subdivisions=3, radius=0.15)
     centre = np.array([1000.0, 20.0, -300.0])
     shape = SolidShape(vertices=mesh.vertices + centre, faces=mesh.faces, name="sphere")
@@ -84,9 +82,16 @@ def test_carried_edits_on_a_faceted_sphere(flagged):
     damage = np.zeros(len(rest))
     corner = np.flatnonzero((r[:, 0] < -0.05) & (r[:, 1] < -0.03))
     damage[corner[::5][:6]] = 1.0
+    return shape, rest, [(halves, None), (split, None), (split, damage)], centre
+
+
+def test_carried_edits_on_a_faceted_sphere(flagged):
+    """The sphere of :func:`_sphere` broken in three rebuilds: with carried edits every shell is closed, the shells'
+    volumes add up to the input's (1e-9 relative), no more triangles have an angle under 5 degrees than after
+    cleaning the whole complex, and the chips' rebuild starts its clean-up from under half the flagged triangles."""
+    shape, rest, steps, centre = _sphere()
     whole = _volume(shape.vertices, shape.faces, centre)
     counts = []
-    steps = [(halves, None), (split, None), (split, damage)]
     for on, off, n_on, n_off in _rebuild_both(shape, rest, steps, flagged):
         assert shells_closed(on.faces, on._face_shell, len(on.rest_vertices)).all()
         assert sum(_volume(on.rest_vertices, f, centre) for f in np.split(on.faces, on._face_ranges[1:-1])) == (
@@ -113,3 +118,21 @@ def test_a_record_applied_to_its_own_raw_complex_gives_its_clean_up():
     moved[0] += 1e-6
     out = apply_edits(record, moved, tri, shell, patch, 1.0)
     assert out[5] == 0 and np.array_equal(out[1], tri) and np.array_equal(out[0], moved)
+
+
+def test_the_checkpoint_carries_the_record():
+    """Surfaces made anew from a checkpoint of the sphere's after two rebuilds rebuild the chips as the original
+    does, bit for bit; made anew without it they clean the whole complex, which here gives other shells (so the
+    checkpoint is what keeps a resumed run equal to the uninterrupted one)."""
+    shape, rest, steps, _ = _sphere()
+    first = FragmentSurfaces(shape, rest, H, "b")
+    for labels, damage in steps[:2]:
+        first.update_topology(labels, damage)
+    resumed, fresh = FragmentSurfaces(shape, rest, H, "b"), FragmentSurfaces(shape, rest, H, "b")
+    resumed.restore(first.checkpoint())
+    for s in (first, resumed, fresh):
+        assert s.update_topology(*steps[2])
+    for name in SHELL_ARRAYS:
+        a, b = getattr(first, name), getattr(resumed, name)
+        assert a.dtype == b.dtype and np.array_equal(a, b), name
+    assert first.faces.shape != fresh.faces.shape or not np.array_equal(first.faces, fresh.faces)
