@@ -113,11 +113,11 @@ def test_a_record_applied_to_its_own_raw_complex_gives_its_clean_up():
     clean[0][3] += 0.1  # a moved vertex: every triangle around it is an edit
     record = complex_record((points, tri, shell, patch), clean, np.array([1, 0, 3, 2]))
     out = apply_edits(record, points, tri, shell, patch, 1.0)
-    assert out[5] == -1 and np.array_equal(out[0], clean[0]) and np.array_equal(out[1], clean[1])
+    assert out[6] == -1 and np.array_equal(out[0], clean[0]) and np.array_equal(out[1], clean[1])
     moved = points.copy()
     moved[0] += 1e-6
     out = apply_edits(record, moved, tri, shell, patch, 1.0)
-    assert out[5] == 0 and np.array_equal(out[1], tri) and np.array_equal(out[0], moved)
+    assert out[6] == 0 and np.array_equal(out[1], tri) and np.array_equal(out[0], moved)
 
 
 def test_the_checkpoint_carries_the_record():

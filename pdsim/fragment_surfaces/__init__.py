@@ -38,9 +38,10 @@ faces, 0 on faces of the input surface). Points, vertex velocities and extent ar
 regions changed.
 
 Cost: a rebuild is one boolean per region whose geometry changed since the last rebuild (the others reuse their
-clip), each against the cut of the input near the region (booleans.py: ``InputCuts``), plus the clean-up where the
-complex changed (and where the last clean-up left flagged triangles it could not improve); a frame's vertex update is a rigid fit per shell and a sparse product. In a run the rebuild and the
-drawn surface of frame N are built on the run's surface thread while frame N + 1 simulates (pdsim/frame_worker.py).
+clip), each against the cut of the input near the region (booleans.py: ``InputCuts``), plus the clean-up within two
+rings of where the complex changed; a frame's vertex update is a rigid fit per shell and a sparse product. In a run
+the rebuild and the drawn surface of frame N are built on the run's surface thread while frame N + 1 simulates
+(pdsim/frame_worker.py).
 """
 
 from .cleanup import shells_closed, triangle_angles

@@ -325,11 +325,11 @@ def shared_complex(pieces, k_count: int, surface, spacing: float, *, simplify: f
         is_crack_patch[patch[across2 >= 0]] = True
         plane_of_patch = np.full(len(is_crack_patch), -1, dtype=np.int64)
         plane_of_patch[patch[across2 < 0]] = planes2[across2 < 0]
-        raw = (points.copy(), tri2, shell2, patch, np.arange(len(tri2)), 0, 0)
+        raw = (points.copy(), tri2, shell2, patch, np.arange(len(tri2)), None, 0, 0)
         start = raw if previous is None else apply_edits(previous, *raw[:4], spacing)
         for first in (start, raw) if previous is not None else (raw,):
             points = first[0].copy()
-            if first[5] < 0:  # the last rebuild's raw complex: its clean-up's result
+            if first[6] < 0:  # the last rebuild's raw complex: its clean-up's result
                 tri3, shell3, patch3, origin3 = first[1:5]
             else:
                 tri3, shell3, patch3, origin3 = clean_complex(
@@ -340,6 +340,7 @@ def shared_complex(pieces, k_count: int, surface, spacing: float, *, simplify: f
                     surface=(*surface, plane_of_patch),
                     planes_from=(raw[0], tri2, patch),
                     origin=first[4],
+                    settled=first[5],
                 )
             if shells_closed(tri3, shell3, len(points)).all():
                 if record is not None:

@@ -462,6 +462,7 @@ def clean_complex(
     surface=None,
     planes_from=None,
     origin=None,
+    settled=None,
 ):
     """Removes slivers from the shell complex by edge collapses that keep every shell a closed 2-manifold.
 
@@ -499,6 +500,10 @@ def clean_complex(
             complex given), e.g. the raw complex when ``tri`` already holds an earlier clean-up's edits.
         origin: None, or an int array [f] carried along with the triangles (a triangle keeps its slot through
             collapses and flips): then returned as a fourth element, for the surviving triangles.
+        settled: None, or bool [f]: triangles an earlier clean-up left as they are with their whole neighbourhood
+            (pdsim/fragment_surfaces/edits.py). They are not flagged until something within two rings of them
+            changes, so the rounds work where the complex changed, not on what an earlier clean-up could not
+            improve (short input edges, slivers of a faceted input).
 
     Returns:
         (tri, shell, patch) after the collapses (triangles that became degenerate removed), and the surviving
@@ -517,6 +522,9 @@ def clean_complex(
         plane_eq = np.concatenate([normal, offset[:, None]], axis=1)
         plane_eq[np.asarray(crack_patch, dtype=bool)] = np.nan
     flag = _needs_work(points, tri, spacing, short_edge, sliver_angle)
+    if settled is not None:
+        settled = np.asarray(settled, dtype=bool)
+        flag &= ~settled
     for _ in range(_MAX_CLEAN_ROUNDS):
         # A round works on the triangles within two rings of the flagged ones (every triangle that holds a vertex of a
         # flagged triangle or one of its neighbours): they hold every candidate's neighbourhood in every shell, so
@@ -531,9 +539,14 @@ def clean_complex(
         t1, flipped = _flip_round(points, t1, s1, p1, sliver_angle)
         if collapsed == 0 and flipped == 0:
             # vertex moves change no connectivity: the shells stay closed
+            around = np.unique(t1) if settled is not None else None
+            before = None if around is None else points[around].copy()
             if _relax_round(points, t1, p1, plane_eq, sliver_angle, max_turn=RELAX_TURN, surface=surface) == 0:
                 break
             flag[sub] = _needs_work(points, t1, spacing, short_edge, sliver_angle)
+            if settled is not None:
+                settled, flag = _unsettle(points, tri, settled, flag, around[(points[around] != before).any(axis=1)],
+                                          spacing, short_edge, sliver_angle)  # fmt: skip
             continue
         # the shells this round changed must still be closed (a rare configuration the checks missed: stop here)
         changed = np.concatenate([ss[~keep | (new != ts).any(axis=1)], s1[(t1 != t0).any(axis=1)]])
@@ -544,10 +557,33 @@ def clean_complex(
         tri, flag = tri.copy(), flag.copy()
         tri[sub[keep]] = t1
         flag[sub[keep]] = _needs_work(points, t1, spacing, short_edge, sliver_angle)
+        if settled is not None:  # what is within two rings of the round's changes is looked at again
+            moved = np.concatenate([ts[~keep | (new != ts).any(axis=1)].ravel(), t1[(t1 != t0).any(axis=1)].ravel()])
+            settled, flag = _unsettle(points, tri, settled, flag, moved, spacing, short_edge, sliver_angle)
+            settled = settled[whole]
         tri, shell, patch, flag = tri[whole], shell[whole], patch[whole], flag[whole]
         if origin is not None:
             origin = origin[whole]
     return (tri, shell, patch) if origin is None else (tri, shell, patch, origin)
+
+
+def _unsettle(points, tri, settled, flag, vertices, spacing, short_edge, sliver_angle):
+    """(settled, flag) after a round that changed the triangles around ``vertices`` (ids): the settled triangles
+    within two rings of them are settled no more, and flagged when they need work; the others keep their flags."""
+    near = settled & _two_rings(tri, vertices, len(points))
+    flag = flag.copy()
+    flag[near] = _needs_work(points, tri[near], spacing, short_edge, sliver_angle)
+    flag &= ~(settled & ~near)
+    return settled & ~near, flag
+
+
+def _two_rings(tri, vertices, vertex_count) -> np.ndarray:
+    """Bool [f]: the triangle of ``tri`` [f, 3] holds a vertex within one ring of one of ``vertices`` (ids)."""
+    seed = np.zeros(vertex_count, dtype=bool)
+    seed[vertices] = True
+    ring = seed.copy()
+    ring[tri[seed[tri].any(axis=1)]] = True
+    return ring[tri].any(axis=1)
 
 
 def _needs_work(points, tri, spacing, short_edge, sliver_angle) -> np.ndarray:

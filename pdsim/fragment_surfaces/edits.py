@@ -113,15 +113,18 @@ def apply_edits(record: dict, points, tri, shell, patch, spacing: float):
     Returns:
         (points [v, 3] (a copy, moved vertices at their cleaned positions), tri [f', 3], shell [f'], patch [f'],
         slot [f'] (the new raw triangle whose slot each triangle holds, ascending: an added triangle takes the slot
-        of the raw triangle it replaced), number of clusters applied, number of clusters). When the raw complex is
-        the record's, bit for bit, the record's cleaned complex itself (and -1 clusters).
+        of the raw triangle it replaced), settled [f'] (bool: the triangle is the last clean-up's, and so is every
+        triangle within two rings of it; cleanup.py: clean_complex's ``settled``), number of clusters applied,
+        number of clusters). When the raw complex is the record's, bit for bit, the record's cleaned complex itself
+        (and -1 clusters).
     """
     if _same_raw(record, points, tri, shell, patch):
-        clean = (record[f"clean_{k}"] for k in ("points", "tri", "shell", "patch", "origin"))
-        return (*clean, -1, -1)
+        clean = [record[f"clean_{k}"] for k in ("points", "tri", "shell", "patch", "origin")]
+        return (*clean, np.ones(len(clean[1]), dtype=bool), -1, -1)
     rp, rt, rs, rpa = (record[f"raw_{k}"] for k in ("points", "tri", "shell", "patch"))
     cp, ct, cs, cpa, co = (record[f"clean_{k}"] for k in ("points", "tri", "shell", "patch", "origin"))
-    unchanged = (np.asarray(points, dtype=np.float64).copy(), tri, shell, patch, np.arange(len(tri)), 0, 0)
+    none = np.zeros(len(tri), dtype=bool)
+    unchanged = (np.asarray(points, dtype=np.float64).copy(), tri, shell, patch, np.arange(len(tri)), none, 0, 0)
     n_r = rp.shape[0]
     moved = np.any(cp != rp, axis=1)
     raw_rows = np.concatenate([rs[:, None], rt], axis=1)  # a triangle listed from another corner counts as changed
@@ -147,9 +150,7 @@ def apply_edits(record: dict, points, tri, shell, patch, spacing: float):
     # Record vertices -> new vertices (one to one, within MATCH_TOLERANCE h).
     points = np.asarray(points, dtype=np.float64)
     near_r = np.flatnonzero((cluster[rt] >= 0).any(axis=1))  # record raw triangles around the clusters
-    need = np.zeros(n_r, dtype=bool)
-    need[rt[near_r].ravel()] = True
-    need_ids = np.flatnonzero(need)
+    need_ids = np.arange(n_r)
     dist, at = cKDTree(points).query(rp[need_ids], distance_upper_bound=MATCH_TOLERANCE * spacing)
     vmap = np.full(n_r, -1, dtype=np.int64)
     found = np.isfinite(dist)
@@ -212,4 +213,15 @@ def apply_edits(record: dict, points, tri, shell, patch, spacing: float):
     out_tri = np.concatenate([tri[keep], vmap[ct[add_ids[take]]]])[order]
     out_shell = np.concatenate([shell[keep], add_shell[take]])[order]
     out_patch = np.concatenate([patch[keep], add_patch[take]])[order]
-    return out_points, out_tri, out_shell, out_patch, slot[order], int(n_c - bad.sum()), int(n_c)
+    # The last clean-up's triangles: its unchanged raw triangles found here, and the applied clusters' added ones.
+    every = canonical_corners(np.where(vmap[rt] >= 0, vmap[rt], -1 - rt))
+    q_all = _match_rows(every, canonical_corners(tri))
+    ours = np.zeros(len(tri), dtype=bool)
+    ours[q_all[(q_all >= 0) & ~removed]] = True
+    ours = np.concatenate([ours[keep], np.ones(int(take.sum()), dtype=bool)])[order]
+    seed = np.zeros(len(out_points), dtype=bool)
+    seed[out_tri[~ours]] = True
+    ring = seed.copy()
+    ring[out_tri[seed[out_tri].any(axis=1)]] = True
+    settled = ours & ~ring[out_tri].any(axis=1)
+    return out_points, out_tri, out_shell, out_patch, slot[order], settled, int(n_c - bad.sum()), int(n_c)
