@@ -29,6 +29,7 @@ def main(argv=None) -> int:
     parser.add_argument("scene", help="a scene of scenes/ (run at its PREVIEW settings), or 'default'")
     parser.add_argument("--main-thread", action="store_true", help="build the render surfaces in the main thread")
     parser.add_argument("--lines", type=int, default=40, help="functions listed (default 40)")
+    parser.add_argument("--frames", type=int, default=None, help="frames to run (default: the scene's)")
     args = parser.parse_args(argv)
     if args.scene == "default":
         from pdsim.default_scene import build_scene
@@ -41,7 +42,9 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
         profile.enable()
-        scene.run(os.path.join(tmp, "out.usdc"), progress=False, surface_thread=not args.main_thread)
+        scene.run(
+            os.path.join(tmp, "out.usdc"), frames=args.frames, progress=False, surface_thread=not args.main_thread
+        )
         profile.disable()
         wall = time.perf_counter() - t0
     print(f"{args.scene}: wall {wall:.1f} s under cProfile, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")

@@ -21,7 +21,8 @@ steps, and the module of each:
 5. **Shared complex** (booleans.py): coincident vertices of all shells merged and each crack triangulated once, so
    the two sides of a crack use the very same triangles.
 6. **Slivers** (cleanup.py): edge collapses, edge flips and vertex moves on the shared complex that keep every shell
-   closed and every outer face on the input surface.
+   closed and every outer face on the input surface. A rebuild first applies the last clean-up's edits wherever the
+   complex around them is unchanged (edits.py), so the clean-up works where the regions changed.
 7. **Damage** (surfaces.py): particles whose damage reaches ``damage_threshold`` become regions (chips) of their own.
 8. **Motion** (embedding.py): each shell vertex follows its region's particles: the region's best-fit rigid motion
    plus moving-least-squares interpolated residuals, a sparse product per frame. Vertex velocities are the time
@@ -37,15 +38,16 @@ faces, 0 on faces of the input surface). Points, vertex velocities and extent ar
 regions changed.
 
 Cost: a rebuild is one boolean per region whose geometry changed since the last rebuild (the others reuse their
-clip), each against the cut of the input near the region (booleans.py: ``InputCuts``), plus the clean-up of the
-whole complex; a frame's vertex update is a rigid fit per shell and a sparse product. In a run the rebuild and the
-drawn surface of frame N are built on the run's surface thread while frame N + 1 simulates (pdsim/frame_worker.py).
+clip), each against the cut of the input near the region (booleans.py: ``InputCuts``), plus the clean-up within two
+rings of where the complex changed; a frame's vertex update is a rigid fit per shell and a sparse product. In a run
+the rebuild and the drawn surface of frame N are built on the run's surface thread while frame N + 1 simulates
+(pdsim/frame_worker.py).
 """
 
 from .cleanup import shells_closed, triangle_angles
 from .drawn import DrawnSurface
 from .regions import LatticeGrid, build_lattice_grid, partition_regions
-from .surfaces import DAMAGE_THRESHOLD, FragmentSurfaces
+from .surfaces import DAMAGE_THRESHOLD, FragmentSurfaces, surface_states, with_states
 
 __all__ = [
     "DAMAGE_THRESHOLD",
@@ -55,5 +57,7 @@ __all__ = [
     "build_lattice_grid",
     "partition_regions",
     "shells_closed",
+    "surface_states",
     "triangle_angles",
+    "with_states",
 ]

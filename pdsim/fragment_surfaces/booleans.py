@@ -30,6 +30,7 @@ from scipy.spatial import cKDTree
 
 from ..fragment_labels import connected_components
 from .cleanup import clean_complex, shells_closed
+from .edits import apply_edits, canonical_corners, complex_record
 
 __all__ = ["InputCuts", "clip_regions", "input_manifold", "plane_groups", "refine_surface", "shared_complex"]
 
@@ -245,7 +246,7 @@ def _clip(rv, rf, cuts: InputCuts, solid_id: int, spacing: float, simplify: floa
     return np.asarray(piece.vert_properties, dtype=np.float64)[:, :3], tri, outer, src
 
 
-def shared_complex(pieces, k_count: int, surface, spacing: float, *, simplify: float, clean: bool):
+def shared_complex(pieces, k_count: int, surface, spacing: float, *, simplify: float, clean: bool, record=None):
     """All regions' shells as one complex (vertices shared between shells), crack faces shared by both sides and
     slivers removed (steps 5-6).
 
@@ -255,6 +256,9 @@ def shared_complex(pieces, k_count: int, surface, spacing: float, *, simplify: f
         spacing: particle spacing h [m].
         simplify: > 0 when the pieces were simplified: the sides are then kept independent (no sharing, no clean-up).
         clean: remove slivers (:func:`pdsim.fragment_surfaces.cleanup.clean_complex`).
+        record: None, or a dict holding the last clean-up's record (empty: none yet): its edits are applied where the
+            complex is unchanged before the clean-up runs (pdsim/fragment_surfaces/edits.py), and the dict is replaced
+            by this clean-up's record (emptied when no clean-up ran or it failed).
 
     Returns:
         (points [m] [p, 3], tri [f, 3], shell [f], crack flag [f], patch [f], shared, clean_failed); a patch is an
@@ -313,23 +317,38 @@ def shared_complex(pieces, k_count: int, surface, spacing: float, *, simplify: f
                 None,
             )
     patch = patches(shell2, across2, planes2)
+    previous = dict(record) if record else None
+    if record is not None:
+        record.clear()
     if clean:
         is_crack_patch = np.zeros(int(patch.max()) + 1, dtype=bool)
         is_crack_patch[patch[across2 >= 0]] = True
         plane_of_patch = np.full(len(is_crack_patch), -1, dtype=np.int64)
         plane_of_patch[patch[across2 < 0]] = planes2[across2 < 0]
-        tri3, shell3, patch3 = clean_complex(
-            points,
-            tri2,
-            shell2,
-            patch,
-            spacing,
-            crack_patch=is_crack_patch,
-            surface=(*surface, plane_of_patch),
-        )
-        if shells_closed(tri3, shell3, len(points)).all():
-            # crack flag of each surviving triangle: look it up through its patch
-            crack3 = is_crack_patch[patch3].astype(np.int32)
-            return points, tri3, shell3, crack3, patch3, True, False
+        raw = (points.copy(), tri2, shell2, patch, np.arange(len(tri2)), None, 0, 0)
+        start = raw if previous is None else apply_edits(previous, *raw[:4], spacing)
+        for first in (start, raw) if previous is not None else (raw,):
+            points = first[0].copy()
+            if first[6] < 0:  # the last rebuild's raw complex: its clean-up's result
+                tri3, shell3, patch3, origin3 = first[1:5]
+            else:
+                tri3, shell3, patch3, origin3 = clean_complex(
+                    points,
+                    *first[1:4],
+                    spacing,
+                    crack_patch=is_crack_patch,
+                    surface=(*surface, plane_of_patch),
+                    planes_from=(raw[0], tri2, patch),
+                    origin=first[4],
+                    settled=first[5],
+                )
+            if shells_closed(tri3, shell3, len(points)).all():
+                if record is not None:
+                    record.update(complex_record(raw[:4], (points, tri3, shell3, patch3), origin3))
+                # crack flag of each surviving triangle: look it up through its patch; each triangle listed from
+                # its smallest vertex id (the clean-up's flips leave either corner first)
+                crack3 = is_crack_patch[patch3].astype(np.int32)
+                return points, canonical_corners(tri3), shell3, crack3, patch3, True, False
+        points = raw[0]
         return points, tri2, shell2, (across2 >= 0).astype(np.int32), patch, True, True
     return points, tri2, shell2, (across2 >= 0).astype(np.int32), patch, True, None

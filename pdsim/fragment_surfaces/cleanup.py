@@ -460,6 +460,9 @@ def clean_complex(
     sliver_angle=SLIVER_ANGLE,
     crack_patch=None,
     surface=None,
+    planes_from=None,
+    origin=None,
+    settled=None,
 ):
     """Removes slivers from the shell complex by edge collapses that keep every shell a closed 2-manifold.
 
@@ -493,22 +496,35 @@ def clean_complex(
             only vertices off the input planes move.
         crack_patch: bool [patch count], True for crack patches (the others are planar input patches); None: the
             strict patch rule only.
+        planes_from: (points [m], tri, patch) whose triangles give each input-plane patch its plane (default: the
+            complex given), e.g. the raw complex when ``tri`` already holds an earlier clean-up's edits.
+        origin: None, or an int array [f] carried along with the triangles (a triangle keeps its slot through
+            collapses and flips): then returned as a fourth element, for the surviving triangles.
+        settled: None, or bool [f]: triangles an earlier clean-up left as they are with their whole neighbourhood
+            (pdsim/fragment_surfaces/edits.py). They are not flagged until something within two rings of them
+            changes, so the rounds work where the complex changed, not on what an earlier clean-up could not
+            improve (short input edges, slivers of a faceted input).
 
     Returns:
-        (tri, shell, patch) after the collapses (triangles that became degenerate removed).
+        (tri, shell, patch) after the collapses (triangles that became degenerate removed), and the surviving
+        triangles' ``origin`` when given.
     """
     plane_eq = None
     if crack_patch is not None:  # unit normal and offset of every input-plane patch (NaN: crack patches)
-        p_count = int(patch.max()) + 1
-        t = points[tri]
+        f_points, f_tri, f_patch = (points, tri, patch) if planes_from is None else planes_from
+        p_count = max(int(patch.max()), int(f_patch.max())) + 1
+        t = f_points[f_tri]
         n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-        normal = np.stack([np.bincount(patch, n[:, a], p_count) for a in range(3)], axis=1)
+        normal = np.stack([np.bincount(f_patch, n[:, a], p_count) for a in range(3)], axis=1)
         normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
-        offset = np.einsum("ij,ij->i", normal[patch], t.mean(axis=1))
-        offset = np.bincount(patch, offset, p_count) / np.maximum(np.bincount(patch, minlength=p_count), 1)
+        offset = np.einsum("ij,ij->i", normal[f_patch], t.mean(axis=1))
+        offset = np.bincount(f_patch, offset, p_count) / np.maximum(np.bincount(f_patch, minlength=p_count), 1)
         plane_eq = np.concatenate([normal, offset[:, None]], axis=1)
         plane_eq[np.asarray(crack_patch, dtype=bool)] = np.nan
     flag = _needs_work(points, tri, spacing, short_edge, sliver_angle)
+    if settled is not None:
+        settled = np.asarray(settled, dtype=bool)
+        flag &= ~settled
     for _ in range(_MAX_CLEAN_ROUNDS):
         # A round works on the triangles within two rings of the flagged ones (every triangle that holds a vertex of a
         # flagged triangle or one of its neighbours): they hold every candidate's neighbourhood in every shell, so
@@ -523,9 +539,14 @@ def clean_complex(
         t1, flipped = _flip_round(points, t1, s1, p1, sliver_angle)
         if collapsed == 0 and flipped == 0:
             # vertex moves change no connectivity: the shells stay closed
+            around = np.unique(t1) if settled is not None else None
+            before = None if around is None else points[around].copy()
             if _relax_round(points, t1, p1, plane_eq, sliver_angle, max_turn=RELAX_TURN, surface=surface) == 0:
                 break
             flag[sub] = _needs_work(points, t1, spacing, short_edge, sliver_angle)
+            if settled is not None:
+                settled, flag = _unsettle(points, tri, settled, flag, around[(points[around] != before).any(axis=1)],
+                                          spacing, short_edge, sliver_angle)  # fmt: skip
             continue
         # the shells this round changed must still be closed (a rare configuration the checks missed: stop here)
         changed = np.concatenate([ss[~keep | (new != ts).any(axis=1)], s1[(t1 != t0).any(axis=1)]])
@@ -536,8 +557,33 @@ def clean_complex(
         tri, flag = tri.copy(), flag.copy()
         tri[sub[keep]] = t1
         flag[sub[keep]] = _needs_work(points, t1, spacing, short_edge, sliver_angle)
+        if settled is not None:  # what is within two rings of the round's changes is looked at again
+            moved = np.concatenate([ts[~keep | (new != ts).any(axis=1)].ravel(), t1[(t1 != t0).any(axis=1)].ravel()])
+            settled, flag = _unsettle(points, tri, settled, flag, moved, spacing, short_edge, sliver_angle)
+            settled = settled[whole]
         tri, shell, patch, flag = tri[whole], shell[whole], patch[whole], flag[whole]
-    return tri, shell, patch
+        if origin is not None:
+            origin = origin[whole]
+    return (tri, shell, patch) if origin is None else (tri, shell, patch, origin)
+
+
+def _unsettle(points, tri, settled, flag, vertices, spacing, short_edge, sliver_angle):
+    """(settled, flag) after a round that changed the triangles around ``vertices`` (ids): the settled triangles
+    within two rings of them are settled no more, and flagged when they need work; the others keep their flags."""
+    near = settled & _two_rings(tri, vertices, len(points))
+    flag = flag.copy()
+    flag[near] = _needs_work(points, tri[near], spacing, short_edge, sliver_angle)
+    flag &= ~(settled & ~near)
+    return settled & ~near, flag
+
+
+def _two_rings(tri, vertices, vertex_count) -> np.ndarray:
+    """Bool [f]: the triangle of ``tri`` [f, 3] holds a vertex within one ring of one of ``vertices`` (ids)."""
+    seed = np.zeros(vertex_count, dtype=bool)
+    seed[vertices] = True
+    ring = seed.copy()
+    ring[tri[seed[tri].any(axis=1)]] = True
+    return ring[tri].any(axis=1)
 
 
 def _needs_work(points, tri, spacing, short_edge, sliver_angle) -> np.ndarray:

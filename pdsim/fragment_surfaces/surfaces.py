@@ -23,7 +23,7 @@ from .drawn import DrawnSurface, drawn_surface
 from .embedding import ShellEmbedding, rigid_fit
 from .regions import LatticeGrid, build_lattice_grid, partition_regions
 
-__all__ = ["DAMAGE_THRESHOLD", "FragmentSurfaces"]
+__all__ = ["DAMAGE_THRESHOLD", "FragmentSurfaces", "surface_states", "with_states"]
 
 DAMAGE_THRESHOLD = 0.5  # particles with at least this damage become chips of their own (step 7 of the method)
 
@@ -56,6 +56,9 @@ class FragmentSurfaces:
         device: Warp device of the one-off grid-near-mesh query.
         reuse: a rebuild takes the previous rebuild's clip of every region whose geometry is unchanged, bit for bit
             (default True; the shells are the same either way, False clips every region again).
+        carry_edits: a rebuild takes the last sliver clean-up's edits wherever the complex around them is unchanged
+            and cleans only the rest (default True; pdsim/fragment_surfaces/edits.py); False cleans the whole
+            complex at every rebuild.
 
     Attributes:
         fragment_ids: fragment label of each shell (chips carry their particle's fragment label; several shells
@@ -68,6 +71,8 @@ class FragmentSurfaces:
         version: number of topology rebuilds (0: the intact input mesh).
         rebuild_seconds: wall time of the last rebuild [s].
         clips_made: regions the last rebuild clipped (the others took the previous rebuild's clips).
+        clean_record: the last clean-up's record (pdsim/fragment_surfaces/edits.py: complex_record; empty when none),
+            or None when ``carry_edits`` is off.
     """
 
     def __init__(
@@ -85,6 +90,7 @@ class FragmentSurfaces:
         on_lattice: bool = True,
         device: str = "cpu",
         reuse: bool = True,
+        carry_edits: bool = True,
     ):
         rest = np.asarray(rest_positions, dtype=np.float64)
         if rest.ndim != 2 or rest.shape[1] != 3 or rest.shape[0] == 0:
@@ -114,6 +120,7 @@ class FragmentSurfaces:
         self._cuts: InputCuts | None = None
         self._clips = {} if reuse else None  # the last rebuild's clips, by region (booleans.clip_regions)
         self.clips_made = 0
+        self.clean_record = {} if carry_edits else None
         self._grid: LatticeGrid | None = None
         self.device = device
         self.rebuild_seconds = 0.0
@@ -192,6 +199,18 @@ class FragmentSurfaces:
         self.version += 1
         return True
 
+    def checkpoint(self) -> dict:
+        """What the next rebuild depends on beyond the particles' state: the last clean-up's record (arrays; empty
+        when none or when ``carry_edits`` is off). A run's checkpoint stores it, so that a resumed run rebuilds as
+        the uninterrupted one does."""
+        return {} if not self.clean_record else {k: v.copy() for k, v in self.clean_record.items()}
+
+    def restore(self, state: dict) -> None:
+        """Puts a :meth:`checkpoint` back (the object's other state is rebuilt at the next update)."""
+        if self.clean_record is not None:
+            self.clean_record.clear()
+            self.clean_record.update({k: np.asarray(v) for k, v in state.items()})
+
     def _input_cuts(self) -> InputCuts:
         """The (refined) input surface as a manifold3d solid and its cuts by tiles, made once."""
         if self._cuts is None:
@@ -237,7 +256,13 @@ class FragmentSurfaces:
             reuse=self._clips,
         )
         *shells, clean_failed = shared_complex(
-            pieces, k_count, self._surface, self.spacing, simplify=self.simplify, clean=self.clean
+            pieces,
+            k_count,
+            self._surface,
+            self.spacing,
+            simplify=self.simplify,
+            clean=self.clean,
+            record=self.clean_record,
         )
         if clean_failed is not None:
             self.clean_failed = clean_failed
@@ -410,3 +435,15 @@ class FragmentSurfaces:
             self._embedding.shape_functions,
             lambda at: self.vertex_positions(positions, at=at),
         )
+
+
+def surface_states(surfaces) -> dict:
+    """The checkpoint states (:meth:`FragmentSurfaces.checkpoint`) of a list of surfaces, by index as a string; {}
+    for None."""
+    return {} if surfaces is None else {str(i): f.checkpoint() for i, f in enumerate(surfaces)}
+
+
+def with_states(surfaces, states) -> None:
+    """Puts the states of :func:`surface_states` (or None: nothing) back into a list of surfaces made anew."""
+    for i, f in enumerate(surfaces if states else ()):
+        f.restore(states.get(str(i), {}))

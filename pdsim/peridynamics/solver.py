@@ -39,7 +39,7 @@ import warp as wp
 from ..contact import ParticleContact, material_contact_values
 from ..errors import ParameterError
 from ..fragment_labels import FragmentTracker
-from ..fragment_surfaces import FragmentSurfaces
+from ..fragment_surfaces import FragmentSurfaces, surface_states, with_states
 from ..kernels.peridynamics import bonds as kb
 from ..kernels.peridynamics import damping as pd_damping
 from ..kernels.peridynamics import step as pd_step
@@ -175,6 +175,7 @@ class SolverPeridynamics(PointSolver):
         self._energy_density = wp.zeros(n, dtype=float, device=d)
         self.write_surfaces = bool(surfaces)
         self._surfaces = None  # FragmentSurfaces per body, built on the first views() call
+        self._surface_states = None  # their checkpoint states from restore(), put back when they are built
         self._fragments = None  # FragmentTracker, created on first use when some body can break
         self.features = {"elastic"} | self.kin.features
         if ground is not None:
@@ -430,6 +431,7 @@ class SolverPeridynamics(PointSolver):
             out["bonds"][name] = array_state(getattr(s, name))
         out["bonds"]["bond_plastic"] = array_state(s.bond_plastic)
         out["bonds"]["eqps"] = array_state(s.eqps)
+        out["surfaces"] = surface_states(self._surfaces)  # the render surfaces' last clean-up
         if self.contact is not None:
             c = self.contact
             out["contact"] = {
@@ -465,6 +467,7 @@ class SolverPeridynamics(PointSolver):
             assign_state(self.contact._damp, c["damping"], "contact dashpot scale")
             assign_state(self.contact.exposed, c["exposed"], "contact exposure")
         self._fragments = None
+        self._surfaces, self._surface_states = None, state.get("surfaces")  # rebuilt at the next output
 
     # -- scene integration --------------------------------------------------------------------------------------------
     @property
@@ -546,6 +549,7 @@ class SolverPeridynamics(PointSolver):
                 FragmentSurfaces(b.shape, b.rest_positions, b.spacing, b.name, device=str(self.device))
                 for b in self.bodies
             ]
+            with_states(self._surfaces, self._surface_states)
         reactions = self.reaction_forces()
         out = []
         for i, b in enumerate(self.bodies):
