@@ -24,6 +24,7 @@ from .errors import ParameterError
 from .kernels import contact as kc
 from .kernels import surface_contact as ksf
 from .kernels.launch import by_name
+from .solver import array_state, assign_state
 
 CONTACT_NEIGHBOR_BUDGET = 12
 """Contact modulus calibration: C_k (2 r_k)^3 = S_k / 12, so 12 simultaneous contacts (the kissing number of equal
@@ -309,6 +310,26 @@ class ParticleContact:
     def exposed_mask(self) -> np.ndarray:
         """Which particles take part in contact (bool [n])."""
         return self.exposed.numpy() != 0
+
+    def checkpoint(self) -> dict:
+        """The state a resumed run needs (host copies): the stiffness-cap and dashpot-cap scales, the exposure."""
+        return {
+            "scale": array_state(self._scale),
+            "scale_next": array_state(self._scale_next),
+            "damping": array_state(self._damp),
+            "exposed": array_state(self.exposed),
+        }
+
+    def restore(self, state: dict | None) -> None:
+        """Puts a :meth:`checkpoint` back (ParameterError for a checkpoint without one, or of another version)."""
+        if state is None:
+            raise ParameterError("checkpoint", "no contact state", "a checkpoint of a scene with particle contact")
+        if "damping" not in state:
+            raise ParameterError("checkpoint", "no contact dashpot scale", "a checkpoint written by this version")
+        assign_state(self._scale, state["scale"], "contact scale")
+        assign_state(self._scale_next, state["scale_next"], "contact scale")
+        assign_state(self._damp, state["damping"], "contact dashpot scale")
+        assign_state(self.exposed, state["exposed"], "contact exposure")
 
     @classmethod
     def from_bodies(cls, bodies, *, device="cpu", origin=(0.0, 0.0, 0.0), **kwargs) -> ParticleContact:

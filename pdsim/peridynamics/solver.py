@@ -433,13 +433,7 @@ class SolverPeridynamics(PointSolver):
         out["bonds"]["eqps"] = array_state(s.eqps)
         out["surfaces"] = surface_states(self._surfaces)  # the render surfaces' last clean-up
         if self.contact is not None:
-            c = self.contact
-            out["contact"] = {
-                "scale": array_state(c._scale),
-                "scale_next": array_state(c._scale_next),
-                "damping": array_state(c._damp),
-                "exposed": array_state(c.exposed),
-            }
+            out["contact"] = self.contact.checkpoint()
         return out
 
     def restore(self, state: dict) -> None:
@@ -457,15 +451,7 @@ class SolverPeridynamics(PointSolver):
         if self.handoff is not None:
             self.handoff.restore(state["handoff"])
         if self.contact is not None:
-            c = state.get("contact")
-            if c is None:
-                raise ParameterError("checkpoint", "no contact state", "a checkpoint of a scene with particle contact")
-            assign_state(self.contact._scale, c["scale"], "contact scale")
-            assign_state(self.contact._scale_next, c["scale_next"], "contact scale")
-            if "damping" not in c:
-                raise ParameterError("checkpoint", "no contact dashpot scale", "a checkpoint written by this version")
-            assign_state(self.contact._damp, c["damping"], "contact dashpot scale")
-            assign_state(self.contact.exposed, c["exposed"], "contact exposure")
+            self.contact.restore(state.get("contact"))
         self._fragments = None
         self._surfaces, self._surface_states = None, state.get("surfaces")  # rebuilt at the next output
 
