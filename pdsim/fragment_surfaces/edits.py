@@ -87,6 +87,8 @@ def _pair_map(cluster, old, new, bad):
     """Per (cluster, old id) the one new id its matched triangles show; clusters where an old id shows two new ids
     are marked in ``bad`` (bool [clusters], changed in place). Returns (sorted keys [k, 2], new id of each [k])."""
     rows = np.unique(np.stack([cluster, old, new], axis=1), axis=0)
+    if len(rows) == 0:  # no matched triangle in any cluster
+        return rows[:, :2], rows[:, 2]
     key = rows[:, :2]
     dup = np.all(key[1:] == key[:-1], axis=1)
     bad[rows[1:, 0][dup]] = True
@@ -99,6 +101,8 @@ def _lookup(keys, values, query, bad, cluster):
     ``bad``. Returns int64 [q] (-1 where missing)."""
     at = _match_rows(query, keys)
     bad[cluster[at < 0]] = True
+    if len(values) == 0:
+        return np.full(len(query), -1, dtype=np.int64)
     return np.where(at >= 0, values[np.maximum(at, 0)], -1)
 
 
