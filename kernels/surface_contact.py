@@ -13,11 +13,13 @@ symmetric. Edges crossing edges with no vertex inside a face are not detected.
 
 A hard floor backs the penalty up (the penalty, tied to the step, gives way by about v dt / CONTACT_OMEGA_DT at an
 approach speed v, and a piece pinched between others or the ground by more than its contact springs hold sinks in):
-a vertex deeper than ``floor`` inside is moved back to that depth and the approaching normal velocity of the pair
-removed (inelastic), the vertex and the face's free vertices sharing the correction by their inverse masses
-(a face vertex j of barycentric weight w_j moving by w_j / m_j, the face point's inverse mass sum_j w_j^2 / m_j).
-The velocity impulses are summed (equal and opposite: momentum conserved exactly), the position shifts averaged over
-each point's floor contacts (Jacobi) by ``apply_floor`` after all pairs.
+a vertex deeper than ``floor`` inside loses the approaching normal velocity of its pair (an inelastic impulse), the
+vertex and the face's free vertices sharing it by their inverse masses (a face vertex j of barycentric weight w_j
+changing by w_j / m_j, the face point's inverse mass sum_j w_j^2 / m_j), so the vertex sinks no deeper while the
+penalty pushes it back out. The impulses are summed (equal and opposite: momentum conserved exactly) and applied by
+``apply_floor`` after all pairs. Only velocities change: an impulse that removes approach cannot add energy, where
+moving the vertex back to the floor's depth would strain its elements (a 200 m/s impact on a breakable FEM plate
+gained energy that way, tools/stress.py).
 """
 
 import warp as wp
@@ -102,12 +104,8 @@ def vertex_face_contact(
     floor: float,
     v_kind: wp.array(dtype=wp.int32),
     m_kind: wp.array(dtype=wp.int32),
-    v_shift: wp.array(dtype=wp.vec3),
     v_kick: wp.array(dtype=wp.vec3),
-    v_count: wp.array(dtype=wp.int32),
-    m_shift: wp.array(dtype=wp.vec3),
     m_kick: wp.array(dtype=wp.vec3),
-    m_count: wp.array(dtype=wp.int32),
 ):
     """Contact of surface vertex q (point v_points[q] of its solver, piece v_label[q]) with the nearest face of
     another piece (m_label[f] != v_label[q]) of the surface mesh ``mesh`` (current vertex positions m_x, triangles
@@ -117,9 +115,8 @@ def vertex_face_contact(
     (v_damping_ratio[i], v_friction[i], by solver point; NaN: none) with the face's (its first vertex's), as
     kernels/contact.py particle_mesh_contact. Work: the positive part of each side's work in the step, as
     kernels/contact.py particle_mesh_contact, into slot ``work_slot`` of v_work and m_work. Floor (module docstring):
-    a vertex deeper than ``floor`` [m] adds its share of the shift [m] back to that depth and of the velocity change
-    [m/s] into v_shift / v_kick (its face's vertices into m_shift / m_kick), counting its floor contacts in v_count
-    (m_count); only free points (v_kind, m_kind: PARTICLE_FREE) move."""
+    a vertex deeper than ``floor`` [m] adds its share of the velocity change [m/s] into v_kick (its face's vertices
+    into m_kick); only free points (v_kind, m_kind: PARTICLE_FREE) change."""
     q = wp.tid()
     i = v_points[q]
     x = v_rest[i] + v_u[i]
@@ -205,49 +202,22 @@ def vertex_face_contact(
         inv_c = wp.where(m_kind[ic] == PARTICLE_FREE, 1.0 / m_mass[ic], 0.0)
         inv_s = best_w[0] * best_w[0] * inv_a + best_w[1] * best_w[1] * inv_b + best_w[2] * best_w[2] * inv_c
         inv_sum = inv_v + inv_s
-        if inv_sum > 0.0:
-            shift = (-floor - s) / inv_sum * n  # times each side's inverse mass share
-            vn = wp.dot(v_v[i] - v_surface, n)
-            impulse = wp.vec3(0.0)
-            if vn < 0.0:
-                impulse = (-vn / inv_sum) * n  # [kg m/s] on the vertex, its opposite on the face
-            if inv_v > 0.0:
-                wp.atomic_add(v_shift, i, inv_v * shift)
-                wp.atomic_add(v_kick, i, inv_v * impulse)
-                wp.atomic_add(v_count, i, 1)
-            if inv_a > 0.0:
-                wp.atomic_sub(m_shift, ia, (best_w[0] * inv_a) * shift)
-                wp.atomic_sub(m_kick, ia, (best_w[0] * inv_a) * impulse)
-                wp.atomic_add(m_count, ia, 1)
-            if inv_b > 0.0:
-                wp.atomic_sub(m_shift, ib, (best_w[1] * inv_b) * shift)
-                wp.atomic_sub(m_kick, ib, (best_w[1] * inv_b) * impulse)
-                wp.atomic_add(m_count, ib, 1)
-            if inv_c > 0.0:
-                wp.atomic_sub(m_shift, ic, (best_w[2] * inv_c) * shift)
-                wp.atomic_sub(m_kick, ic, (best_w[2] * inv_c) * impulse)
-                wp.atomic_add(m_count, ic, 1)
+        vn = wp.dot(v_v[i] - v_surface, n)
+        if inv_sum > 0.0 and vn < 0.0:
+            impulse = (-vn / inv_sum) * n  # [kg m/s] on the vertex, its opposite on the face
+            wp.atomic_add(v_kick, i, inv_v * impulse)
+            wp.atomic_sub(m_kick, ia, (best_w[0] * inv_a) * impulse)
+            wp.atomic_sub(m_kick, ib, (best_w[1] * inv_b) * impulse)
+            wp.atomic_sub(m_kick, ic, (best_w[2] * inv_c) * impulse)
 
 
 @wp.kernel
-def surface_floor_apply(
-    shift: wp.array(dtype=wp.vec3),
-    kick: wp.array(dtype=wp.vec3),
-    count: wp.array(dtype=wp.int32),
-    displacements: wp.array(dtype=wp.vec3),
-    velocities: wp.array(dtype=wp.vec3),
-):
-    """The floor's corrections of point i (vertex_face_contact): its displacement [m] by the mean of its shifts, its
-    velocity [m/s] by the sum of its velocity changes; then the three accumulators zeroed for the next step."""
+def surface_floor_apply(kick: wp.array(dtype=wp.vec3), velocities: wp.array(dtype=wp.vec3)):
+    """The floor's velocity changes [m/s] of point i (vertex_face_contact) added to its velocity, then zeroed for the
+    next step."""
     i = wp.tid()
-    c = count[i]
-    if c == 0:
-        return
-    displacements[i] = displacements[i] + shift[i] / float(c)
     velocities[i] = velocities[i] + kick[i]
-    shift[i] = wp.vec3(0.0)
     kick[i] = wp.vec3(0.0)
-    count[i] = 0
 
 
 # -- launches (pdsim/contact.py, MethodContact) -----------------------------------------------------------------------
@@ -270,4 +240,4 @@ def vertex_face_forces(*, dt: float, floor: float, device, **arguments):
 
 def apply_floor(*, device, **arguments):
     """The floor's accumulated corrections applied to a solver's points and zeroed (surface_floor_apply)."""
-    launch(surface_floor_apply, arguments["count"].shape[0], device=device, **arguments)
+    launch(surface_floor_apply, arguments["kick"].shape[0], device=device, **arguments)

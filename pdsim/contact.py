@@ -456,8 +456,9 @@ beyond 0.05 in some phases)."""
 
 SURFACE_FLOOR = 0.01
 """Depth of the hard floor of contact between FEM surfaces (kernels/surface_contact.py) as a fraction of the contact
-band (one mean edge length): a surface vertex never stays more than 1 % of an edge inside another piece at the end of
-a step's contact; above that depth the penalty of the one law acts alone."""
+band (one mean edge length): a surface vertex deeper than 1 % of an edge inside another piece loses its approach
+(an inelastic impulse), so it sinks no deeper while the penalty of the one law pushes it out; above that depth the
+penalty acts alone."""
 
 
 def restitution_of_damping_ratio(damping_ratio: float) -> float:
@@ -691,29 +692,17 @@ class MethodContact:
                 for b in self.mesh_solvers:
                     self._surface_pair(a, b, rate, dt)
             for ms in self.mesh_solvers:
-                shift, kick, count = self._floor(ms)
-                ksf.apply_floor(
-                    shift=shift,
-                    kick=kick,
-                    count=count,
-                    displacements=ms.kin.u,
-                    velocities=ms.kin.v,
-                    device=ms.kin.u.device,
-                )
+                ksf.apply_floor(kick=self._floor(ms), velocities=ms.kin.v, device=ms.kin.u.device)
 
     def _floor(self, solver):
-        """The solver's accumulators of the surface contact's hard floor (kernels/surface_contact.py): shift [m],
-        velocity change [m/s] and floor-contact count per point, zero between steps; reallocated when the point
-        count changes (FEM fracture adds vertices)."""
+        """The solver's accumulator of the surface contact's hard floor (kernels/surface_contact.py): the velocity
+        change [m/s] per point, zero between steps; reallocated when the point count changes (FEM fracture adds
+        vertices)."""
         key = ("floor", id(solver))
         entry = self._scratch.get(key)
-        n, d = solver.kin.u.shape[0], solver.kin.u.device
-        if entry is None or entry[2].shape[0] != n:
-            entry = (
-                wp.zeros(n, dtype=wp.vec3, device=d),
-                wp.zeros(n, dtype=wp.vec3, device=d),
-                wp.zeros(n, dtype=wp.int32, device=d),
-            )
+        n = solver.kin.u.shape[0]
+        if entry is None or entry.shape[0] != n:
+            entry = wp.zeros(n, dtype=wp.vec3, device=solver.kin.u.device)
             self._scratch[key] = entry
         return entry
 
@@ -762,12 +751,8 @@ class MethodContact:
             floor=SURFACE_FLOOR * min(band_a, band_b),
             v_kind=a.kin.point_kind,
             m_kind=b.kin.point_kind,
-            v_shift=self._floor(a)[0],
-            v_kick=self._floor(a)[1],
-            v_count=self._floor(a)[2],
-            m_shift=self._floor(b)[0],
-            m_kick=self._floor(b)[1],
-            m_count=self._floor(b)[2],
+            v_kick=self._floor(a),
+            m_kick=self._floor(b),
             device=a.kin.u.device,
         )
 
