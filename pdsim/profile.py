@@ -38,6 +38,7 @@ class RunProfile:
         self.worker_seconds: dict[str, float] = {}
         self.wall_seconds: float | None = None
         self.frames = 0
+        self._nested: list[float] = []  # per open phase, the time of the phases timed inside it [s]
 
     def lap(self, name: str | None = None) -> None:
         """Adds the wall time since the previous lap (or the start) to phase ``name`` (None: to none of them, left to
@@ -49,12 +50,18 @@ class RunProfile:
 
     @contextlib.contextmanager
     def phase(self, name: str):
-        """Adds the wall time of the ``with`` block to phase ``name``."""
+        """Adds the wall time of the ``with`` block to phase ``name``, less the time of phases timed inside it (a
+        checkpoint, timed as write, first finishes the frame in flight, whose surfaces and write are timed as such):
+        each second counts in one phase."""
         t0 = time.perf_counter()
+        self._nested.append(0.0)
         try:
             yield
         finally:
-            self.seconds[name] += time.perf_counter() - t0
+            elapsed = time.perf_counter() - t0
+            self.seconds[name] += elapsed - self._nested.pop()
+            if self._nested:
+                self._nested[-1] += elapsed
 
     def move(self, source: str, target: str, seconds: float) -> None:
         """Moves ``seconds`` [s] timed inside phase ``source`` to phase ``target`` (a nested phase timed elsewhere:

@@ -97,6 +97,35 @@ def test_time_lands_in_its_phase(tmp_path, monkeypatch):
         assert abs(slow[k] - base[k]) < 0.5 * added, k
 
 
+def test_a_phase_timed_inside_another_counts_once(tmp_path, monkeypatch):
+    """A phase timed inside another (a checkpoint, timed as write, first finishes the frame in flight, whose
+    surfaces and write are timed as such) counts in the inner phase only: nested blocks of known length land in their
+    own phases (to 5 ms), and a run that checkpoints every frame with slow surfaces (DELAY per view, built in the
+    main thread) keeps its named phases within the wall time and the surfaces' time in surfaces. Counting the inner
+    time in both phases put about FRAMES x DELAY too much into write."""
+    profile = RunProfile()
+    with profile.phase("write"):
+        time.sleep(0.02)
+        with profile.phase("surfaces"):
+            time.sleep(0.05)
+    assert profile.seconds["surfaces"] == pytest.approx(0.05, abs=5.0e-3)
+    assert profile.seconds["write"] == pytest.approx(0.02, abs=5.0e-3)
+
+    view = FragmentSurfaces.view
+    views = []
+
+    def slow_view(self, *args, **kwargs):
+        views.append(1)
+        time.sleep(DELAY)
+        return view(self, *args, **kwargs)
+
+    monkeypatch.setattr(FragmentSurfaces, "view", slow_view)
+    p = _scene().run(tmp_path / "ckpt.usdc", device="cpu", progress=False, checkpoint_interval_s=0.0).profile
+    named = sum(p["seconds"][k] for k in PHASES if k != "other")
+    assert named <= p["wall_seconds"]
+    assert p["seconds"]["write"] < p["seconds"]["surfaces"], p["seconds"]  # the waits are not counted as write too
+
+
 def test_timing_a_phase_costs_microseconds():
     """A phase block plus a move costs under 20 us (measured 4.5 to 6.5 us on the 2-core machine under load); a run
     times four or five per frame, against frames of tens of milliseconds or more."""
