@@ -31,6 +31,20 @@ def _run(tmp_path, name, **kwargs):
     return _scene().run(tmp_path / f"{name}.usdc", device="cpu", progress=False, checkpoint_interval_s=None, **kwargs)
 
 
+def _slowed(monkeypatch, cls, name: str) -> list:
+    """Replaces method ``name`` of ``cls`` by one that sleeps DELAY first; returns the list its calls append to."""
+    method = getattr(cls, name)
+    calls = []
+
+    def slow(self, *args, **kwargs):
+        calls.append(1)
+        time.sleep(DELAY)
+        return method(self, *args, **kwargs)
+
+    monkeypatch.setattr(cls, name, slow)
+    return calls
+
+
 def test_phases_add_up_and_are_written(tmp_path, capsys):
     """Every phase is timed (> 0 s), the named phases together stay within the wall time (nothing counted twice) and
     ``other`` is the rest to 1e-9 s; profile=True prints the table and writes the run report beside the cache."""
@@ -59,14 +73,7 @@ def test_time_lands_in_its_phase(tmp_path, monkeypatch):
     base = _run(tmp_path, "base", surface_thread=False).profile["seconds"]
 
     view = FragmentSurfaces.view
-    views = []
-
-    def slow_view(self, *args, **kwargs):
-        views.append(1)
-        time.sleep(DELAY)
-        return view(self, *args, **kwargs)
-
-    monkeypatch.setattr(FragmentSurfaces, "view", slow_view)
+    views = _slowed(monkeypatch, FragmentSurfaces, "view")
     slow = _run(tmp_path, "surfaces", surface_thread=False).profile["seconds"]
     added = len(views) * DELAY
     assert len(views) == FRAMES + 1  # frame 0 and each frame
@@ -80,15 +87,7 @@ def test_time_lands_in_its_phase(tmp_path, monkeypatch):
     assert threaded["seconds"]["surfaces"] <= threaded["worker_seconds"]["surfaces"] + 0.5 * added
     monkeypatch.setattr(FragmentSurfaces, "view", view)
 
-    check = Watchdog._check
-    calls = []
-
-    def slow_check(self, *args, **kwargs):
-        calls.append(1)
-        time.sleep(DELAY)
-        return check(self, *args, **kwargs)
-
-    monkeypatch.setattr(Watchdog, "_check", slow_check)
+    calls = _slowed(monkeypatch, Watchdog, "_check")
     slow = _run(tmp_path, "checks", surface_thread=False).profile["seconds"]
     added = len(calls) * DELAY
     assert len(calls) >= FRAMES
@@ -100,9 +99,9 @@ def test_time_lands_in_its_phase(tmp_path, monkeypatch):
 def test_a_phase_timed_inside_another_counts_once(tmp_path, monkeypatch):
     """A phase timed inside another (a checkpoint, timed as write, first finishes the frame in flight, whose
     surfaces and write are timed as such) counts in the inner phase only: nested blocks of known length land in their
-    own phases (to 5 ms), and a run that checkpoints every frame with slow surfaces (DELAY per view, built in the
-    main thread) keeps its named phases within the wall time and the surfaces' time in surfaces. Counting the inner
-    time in both phases put about FRAMES x DELAY too much into write."""
+    own phases (to 5 ms), and a run that checkpoints every frame with slow surfaces (DELAY per view, built on the
+    surface thread, which each checkpoint waits for) keeps its named phases within the wall time and the surfaces'
+    time in surfaces. Counting the inner time in both phases put about FRAMES x DELAY too much into write."""
     profile = RunProfile()
     with profile.phase("write"):
         time.sleep(0.02)
@@ -111,15 +110,7 @@ def test_a_phase_timed_inside_another_counts_once(tmp_path, monkeypatch):
     assert profile.seconds["surfaces"] == pytest.approx(0.05, abs=5.0e-3)
     assert profile.seconds["write"] == pytest.approx(0.02, abs=5.0e-3)
 
-    view = FragmentSurfaces.view
-    views = []
-
-    def slow_view(self, *args, **kwargs):
-        views.append(1)
-        time.sleep(DELAY)
-        return view(self, *args, **kwargs)
-
-    monkeypatch.setattr(FragmentSurfaces, "view", slow_view)
+    _slowed(monkeypatch, FragmentSurfaces, "view")
     p = _scene().run(tmp_path / "ckpt.usdc", device="cpu", progress=False, checkpoint_interval_s=0.0).profile
     named = sum(p["seconds"][k] for k in PHASES if k != "other")
     assert named <= p["wall_seconds"]
