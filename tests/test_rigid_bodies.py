@@ -14,6 +14,8 @@ from pdsim.errors import FeatureNotAvailableError, ParameterError
 from pdsim.rigid import BoxShape, RigidBodies, RigidBody, SphereShape, box_inertia, sphere_inertia
 from pdsim.run import advance_frame, method_contact
 
+import rigid_impacts  # tools/rigid_impacts.py (tests/conftest.py puts tools/ on the path)
+
 STEEL = 7850.0  # kg/m^3
 
 
@@ -193,29 +195,9 @@ def test_a_ball_cannot_throw_a_heavy_breakable_body_faster_than_momentum_and_ene
     (horizontally), and no fragment of mass m can carry more kinetic energy than the ball brought plus the work
     gravity can do on it over the block's height H: v <= sqrt((m_b v0^2 + 2 m g H) / m). A kinematic ball
     (pdsim.SphereProjectile, infinite mass) fails the first bound."""
-    m_ball, v0, g = 0.2, 15.0, 9.81
-    radius = (m_ball / (STEEL * 4.0 / 3.0 * math.pi)) ** (1.0 / 3.0)
+    m_ball, v0, g = rigid_impacts.FIGURINE_BALL_MASS, rigid_impacts.FIGURINE_BALL_SPEED, 9.81
     material = pdsim.presets.concrete(pattern=False)  # no debris damping: it would slow the kinematic control
-    edge = (10.0 / material.density) ** (1.0 / 3.0)
-
-    def run(kinematic: bool):
-        scene = pdsim.Scene(fps=1000)
-        scene.add_ground_plane()
-        body = scene.add_peridynamic_body(
-            pdsim.box((edge, edge, edge), center=(0.0, 0.0, 0.5 * edge)), material, edge / 4.0, name="block"
-        )
-        start = (-0.5 * edge - radius - 0.002, 0.0, 0.5 * edge)
-        if kinematic:
-            scene.add_collider(pdsim.SphereProjectile(radius, start, velocity=(v0, 0.0, 0.0)))
-        else:
-            scene.add_rigid_body(SphereShape(radius), mass=m_ball, position=start, velocity=(v0, 0.0, 0.0))
-        solvers = scene.build_solvers(device="cpu")
-        (solver,) = solvers
-        dt = 0.7 * solver.stable_time_step()
-        advance_frame(solvers, dt, math.ceil(0.01 / dt), method_contact(scene, solvers))  # 10 ms
-        return body, solver
-
-    _body, solver = run(kinematic=False)
+    solver, edge = rigid_impacts.figurine_run(kinematic=False, material=material)
     mass, v = solver.masses(), solver.velocities()
     M = float(mass.sum())
     assert pytest.approx(10.0, rel=0.05) == M
@@ -228,7 +210,7 @@ def test_a_ball_cannot_throw_a_heavy_breakable_body_faster_than_momentum_and_ene
         m = float(mass[sel].sum())
         speed = float(np.linalg.norm(mass[sel] @ v[sel] / m))
         assert speed <= math.sqrt((m_ball * v0**2 + 2.0 * m * g * edge) / m)
-    _, kinematic_solver = run(kinematic=True)
+    kinematic_solver, _ = rigid_impacts.figurine_run(kinematic=True, material=material)
     km = kinematic_solver.masses()
     assert (km @ kinematic_solver.velocities() / float(km.sum()))[0] > bound
 

@@ -78,13 +78,18 @@ def momentum_case(method: str, shape: str, shift) -> dict:
     }
 
 
-def figurine_case(kinematic: bool) -> dict:
-    """A 0.2 kg steel ball at 15 m/s into a resting 10 kg breakable concrete cube (h = edge / 4) on the ground,
-    10 ms."""
-    m_ball, v0, g = 0.2, 15.0, 9.81
+FIGURINE_BALL_MASS, FIGURINE_BALL_SPEED, FIGURINE_BODY_MASS = 0.2, 15.0, 10.0  # [kg], [m/s], [kg]
+
+
+def figurine_run(kinematic: bool, material: pdsim.Material | None = None):
+    """A FIGURINE_BALL_MASS steel ball at FIGURINE_BALL_SPEED into a resting FIGURINE_BODY_MASS breakable cube
+    (``material``, default the concrete preset; h = edge / 4) on the ground, 10 ms: a dynamic ball
+    (``add_rigid_body``) or, with ``kinematic``, a scripted one of infinite mass (SphereProjectile). Returns the
+    peridynamic solver and the cube's edge [m]."""
+    m_ball, v0 = FIGURINE_BALL_MASS, FIGURINE_BALL_SPEED
     radius = (m_ball / (STEEL * 4.0 / 3.0 * math.pi)) ** (1.0 / 3.0)
-    material = pdsim.presets.concrete()
-    edge = (10.0 / material.density) ** (1.0 / 3.0)
+    material = pdsim.presets.concrete() if material is None else material
+    edge = (FIGURINE_BODY_MASS / material.density) ** (1.0 / 3.0)
     scene = pdsim.Scene(fps=1000)
     scene.add_ground_plane()
     scene.add_peridynamic_body(pdsim.box((edge,) * 3, center=(0.0, 0.0, 0.5 * edge)), material, edge / 4.0, name="b")
@@ -97,6 +102,14 @@ def figurine_case(kinematic: bool) -> dict:
     (solver,) = solvers
     dt = 0.7 * solver.stable_time_step()
     advance_frame(solvers, dt, math.ceil(0.01 / dt), method_contact(scene, solvers))
+    return solver, edge
+
+
+def figurine_case(kinematic: bool) -> dict:
+    """:func:`figurine_run`'s figures: the cube's centre-of-mass speed against the elastic bound, the fragment count
+    and the fastest fragment's speed over its energy bound."""
+    m_ball, v0, g = FIGURINE_BALL_MASS, FIGURINE_BALL_SPEED, 9.81
+    solver, edge = figurine_run(kinematic)
     mass, v = solver.masses(), solver.velocities()
     M = float(mass.sum())
     com = mass @ v / M
