@@ -61,6 +61,16 @@ def collide_ground_plane(
 
 
 @wp.func
+def face_point_mass(wa: float, wb: float, wc: float, ma: float, mb: float, mc: float):
+    """Effective mass [kg] of the point of a triangle with barycentric weights (wa, wb, wc) whose vertices weigh ma,
+    mb, mc [kg] (> 0): a force F at the point pushes vertex j with w_j F, which accelerates the point by
+    F sum_j w_j^2 / m_j, so its mass is 1 / sum_j w_j^2 / m_j. The barycentric average sum_j w_j m_j overstates it
+    near a light vertex (a small element's corner beside large ones), and a penalty tied to that average is too
+    stiff for the light vertex at the step."""
+    return 1.0 / (wa * wa / ma + wb * wb / mb + wc * wc / mc)
+
+
+@wp.func
 def penalty_force(
     n: wp.vec3, depth: float, v_rel: wp.vec3, k: float, m_red: float, damping_ratio: float, friction: float
 ):

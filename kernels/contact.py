@@ -59,7 +59,7 @@ or crack) take part, through a grouped hash grid (see make_particle_contact_kern
 
 import warp as wp
 
-from .colliders import mesh_contact_point, pair_damping_ratio, pair_friction, penalty_force
+from .colliders import face_point_mass, mesh_contact_point, pair_damping_ratio, pair_friction, penalty_force
 from .integration import PARTICLE_FREE
 from .launch import launch
 from .neighbors import same_body_count
@@ -576,7 +576,7 @@ def particle_mesh_contact(
     c = m_points[m_faces[3 * face + 2]]
     wc = 1.0 - wa - wb
     v_surface = wa * m_v[a] + wb * m_v[b] + wc * m_v[c]
-    m_surface = wa * m_mass[a] + wb * m_mass[b] + wc * m_mass[c]
+    m_surface = face_point_mass(wa, wb, wc, m_mass[a], m_mass[b], m_mass[c])
     mp = p_mass[i]
     m_red = mp * m_surface / (mp + m_surface)
     zeta = pair_damping_ratio(p_damping_ratio[i], m_damping_ratio[a], damping_ratio)

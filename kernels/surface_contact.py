@@ -24,7 +24,7 @@ gained energy that way, tools/stress.py).
 
 import warp as wp
 
-from .colliders import pair_damping_ratio, pair_friction, penalty_force
+from .colliders import face_point_mass, pair_damping_ratio, pair_friction, penalty_force
 from .integration import PARTICLE_FREE
 from .launch import launch
 from .watchdog import WATCH_COLLIDERS
@@ -111,8 +111,8 @@ def vertex_face_contact(
     another piece (m_label[f] != v_label[q]) of the surface mesh ``mesh`` (current vertex positions m_x, triangles
     m_faces into them, solver points m_points); see the module docstring. Forces [N] are multiplied by v_to_force /
     m_to_force into each solver's force unit. The penalty k = stiffness_rate m_red (m_red the reduced mass of the
-    vertex and the face's barycentric mass); its damping ratio and friction combine the vertex's side
-    (v_damping_ratio[i], v_friction[i], by solver point; NaN: none) with the face's (its first vertex's), as
+    vertex and the face point, colliders.face_point_mass); its damping ratio and friction combine the vertex's
+    side (v_damping_ratio[i], v_friction[i], by solver point; NaN: none) with the face's (its first vertex's), as
     kernels/contact.py particle_mesh_contact. Work: the positive part of each side's work in the step, as
     kernels/contact.py particle_mesh_contact, into slot ``work_slot`` of v_work and m_work. Floor (module docstring):
     a vertex deeper than ``floor`` [m] adds its share of the velocity change [m/s] into v_kick (its face's vertices
@@ -183,7 +183,7 @@ def vertex_face_contact(
     ib = m_points[m_faces[3 * best + 1]]
     ic = m_points[m_faces[3 * best + 2]]
     v_surface = best_w[0] * m_v[ia] + best_w[1] * m_v[ib] + best_w[2] * m_v[ic]
-    m_surface = best_w[0] * m_mass[ia] + best_w[1] * m_mass[ib] + best_w[2] * m_mass[ic]
+    m_surface = face_point_mass(best_w[0], best_w[1], best_w[2], m_mass[ia], m_mass[ib], m_mass[ic])
     mv = v_mass[i]
     m_red = mv * m_surface / (mv + m_surface)
     zeta = pair_damping_ratio(v_damping_ratio[i], m_damping_ratio[ia], damping_ratio)

@@ -31,8 +31,8 @@ def test_two_fem_cubes_collide_head_on_and_separate_conserving_momentum(origin):
     momentum is conserved to 1e-4 of one body's momentum (the pair forces are equal and opposite by construction,
     float32 sums); no vertex of one cube is ever more than 5 % of an edge (1 mm) inside the other (trimesh's signed
     distance, checked every 20 steps): the contact's hard floor (pdsim.contact.SURFACE_FLOOR, an inelastic impulse)
-    holds them, measured 0.84 mm checked every 5 steps, where the penalty alone gave way by 4.3 mm at this 3 m/s
-    approach. The cubes part at 0.58 of their approach speed. With contact off they pass through each other (25 mm
+    holds them, measured 0.77 mm checked every 5 steps, where the penalty alone gave way by 4.3 mm at this 3 m/s
+    approach. The cubes part at 0.57 of their approach speed. With contact off they pass through each other (25 mm
     deep), so the test fails there."""
     o = np.asarray(origin)
     scene = pdsim.Scene(gravity=(0.0, 0.0, 0.0))
@@ -78,7 +78,7 @@ def test_the_pieces_of_a_cracked_fem_slab_never_end_inside_each_other():
     surface vertex of one piece lies more than 8 % of a mean edge length (1.9 mm) inside another piece's closed surface
     (trimesh's signed distance: tools/fem_piece_contact.py deepest_inside, an independent inside test). The contact's
     hard floor (kernels/surface_contact.py: a vertex deeper than pdsim.contact.SURFACE_FLOOR, 1 % of an edge, loses
-    its approach) holds it: measured at most 1.75 mm (7.2 % of an edge); the penalty alone let vertices sink 0.4 to
+    its approach) holds it: measured at most 1.70 mm (7.0 % of an edge); the penalty alone let vertices sink 0.4 to
     2.8 mm (11.6 %: the test fails on it). A floor that also moved vertices back to its depth held 0.72 mm but gained
     energy in a 200 m/s impact (tools/stress.py), so the floor changes velocities only. About 3 s."""
     import fem_piece_contact  # tools/ (on the path through conftest.py)
