@@ -166,11 +166,14 @@ def measure(
     ball_radius=BALL_RADIUS,
     **overrides,
 ) -> dict:
-    """Runs one preset (pdsim.presets, with Material ``overrides``) in one case at ``spacing`` [m] (``horizon`` [m]:
-    the body's horizon, None for the default; ``ball_radius`` [m]: the hit's ball); its figures."""
+    """Runs one preset (pdsim.presets, with Material ``overrides``; a ``critical_stretch`` among them replaces the
+    preset's fracture energy) in one case at ``spacing`` [m] (``horizon`` [m]: the body's horizon, None for the
+    default; ``ball_radius`` [m]: the hit's ball); its figures."""
     import dataclasses
 
     material = pdsim.presets.preset(preset)
+    if "critical_stretch" in overrides:  # a stretch fixed at every spacing in place of the preset's fracture energy
+        overrides = {"fracture_energy": None, **overrides}
     if overrides:
         material = dataclasses.replace(material, **overrides)
     scene = build_case(
@@ -188,11 +191,12 @@ def meets(r: dict) -> bool:
     return r["dust"] <= 0.20 and r["big"] >= 3
 
 
-def hertz_load(material: pdsim.Material, case: str) -> dict:
+def hertz_load(material: pdsim.Material, case: str, *, real: bool = False, spacing: float = PREVIEW_SPACING) -> dict:
     """Elastic (Hertz) estimate of the peak contact force of a case [N] against the load that splits the sphere
     between two opposite point loads [N] (Hiramatsu-Oka: tensile stress 0.9 P / d^2 in a sphere of diameter d, set
     equal to the breaking stress E s0, s0 = s_c / (1 - nu) the breaking strain of a plain bond pulled with its
-    lateral contraction, or the real tensile strength pdsim.presets.TENSILE_STRENGTH for the real values): the drop
+    lateral contraction, s_c the critical stretch at ``spacing`` [m] with the default horizon; or, with ``real``, the
+    real tensile strength pdsim.presets.TENSILE_STRENGTH): the drop
     against a rigid ground (the sphere's mass), the hit against the ball (the reduced mass of ball and sphere; the
     ball rigid, as simulated, or of steel, 210 GPa and nu 0.3, with the real values). Returns {"force",
     "split_load", "ratio"}."""
@@ -203,17 +207,18 @@ def hertz_load(material: pdsim.Material, case: str) -> dict:
     if case == "drop":
         r_eff, mass = radius, sphere_mass
     else:
-        if material.critical_stretch is None:  # real values: a steel ball; the simulated ball is rigid
+        if real:  # real values: a steel ball; the simulated ball is rigid
             inv_e += (1.0 - 0.3**2) / 210.0e9
         ball_mass = BALL_DENSITY * 4.0 / 3.0 * math.pi * BALL_RADIUS**3
         r_eff, mass = radius * BALL_RADIUS / (radius + BALL_RADIUS), ball_mass * sphere_mass / (ball_mass + sphere_mass)
     e_star = 1.0 / inv_e
     overlap = (15.0 * mass * SPEED**2 / (16.0 * e_star * math.sqrt(r_eff))) ** 0.4
     force = 4.0 / 3.0 * e_star * math.sqrt(r_eff) * overlap**1.5
-    if material.critical_stretch is not None:
-        strength = e * material.critical_stretch / (1.0 - nu)
-    else:
+    if real:
         strength = pdsim.presets.TENSILE_STRENGTH.get(material.name, math.nan)
+    else:
+        s_c = material.critical_stretch_for(pdsim.presets.REFERENCE_HORIZON_FACTOR * spacing)
+        strength = e * s_c / (1.0 - nu)
     split = strength * DIAMETER**2 / 0.9
     return {"force": force, "split_load": split, "ratio": force / split}
 
@@ -542,7 +547,7 @@ def main(argv=None):
             for real in (False, True) if preset in pdsim.presets.TENSILE_STRENGTH else (False,):
                 material = pdsim.presets.preset(preset, real=real)
                 for case in args.cases:
-                    h = hertz_load(material, case)
+                    h = hertz_load(material, case, real=real, spacing=args.spacings[0])
                     print(
                         f"{preset} ({'real' if real else 'animation'} values) {case}: peak force {h['force']:.3g} N, "
                         f"splitting load {h['split_load']:.3g} N, ratio {h['ratio']:.3g}"
