@@ -25,8 +25,9 @@ of the animation values for glass and porcelain, less for the others, a fixed ra
 spacing) and the full compressive bonus capped at 1.5 s_c (:data:`SHARD_BONUS`, :data:`SHARD_BONUS_CAP`; 2 to 2.5
 s_c for ceramic, stone and plaster). Each preset's docstring gives its values and why. ``pattern=False`` gives the
 plain material (uniform strength, lattice sampling, no debris damping, the compressive bonus
-:data:`COMPRESSIVE_BONUS`), whose breaking strain at the reference spacing is exactly the stated one. The other presets have no pattern settings (wood splits by its grain; clay, steel and
-aluminium tear by plasticity; rubber never breaks), so ``pattern`` changes nothing for them.
+:data:`COMPRESSIVE_BONUS`), whose breaking strain at the reference spacing is exactly the stated one. The other
+presets have no pattern settings (wood splits by its grain; clay, steel and aluminium tear by plasticity; rubber never
+breaks), so ``pattern`` changes nothing for them.
 
 Contact. Every preset carries a ``contact_restitution`` and a ``contact_friction`` (:data:`CONTACT`), the values its
 contacts bring to a pair (combined with the other side's, pdsim/contact.py combine_restitution, combine_friction).
@@ -161,7 +162,7 @@ def _brittle(
     if real:
         energy = fracture_energy
     else:
-        elastic = Material(density=density, youngs_modulus=youngs_modulus * STIFFNESS_SCALE, poisson_ratio=poisson_ratio)
+        elastic = Material(density, youngs_modulus * STIFFNESS_SCALE, poisson_ratio)
         energy = energy_for_stretch(elastic, critical_stretch)
     if pattern:
         extra = {
@@ -247,7 +248,8 @@ def porcelain(*, real: bool = False, pattern: bool = True) -> Material:
     fracture toughness 1-1.5 MPa m^0.5, G = 20 J/m^2 (15-30); bending strength 40-100 MPa (Weibull modulus 8-15).
 
     Animation values: E = 7 MPa (1e-4: 54 m/s wave speed); fracture energy 12.7 J/m^2, the critical stretch 0.005 at
-    the 2 cm reference spacing, as glass (a real breaking strain of about 7e-4 in both). Break pattern: Weibull modulus 8, correlation length 5 cm.
+    the 2 cm reference spacing, as glass (a real breaking strain of about 7e-4 in both). Break pattern: Weibull
+    modulus 8, correlation length 5 cm.
     """
     return _brittle(
         "porcelain",
@@ -275,10 +277,10 @@ def ceramic(*, real: bool = False, pattern: bool = True) -> Material:
     glass's impact strain over breaking strain at 6 m/s; the breaking stress, 24 kPa, stays below glass's 35 kPa) and
     0.0085 at 1 cm. Break pattern, tuned on the 30 cm sphere dropped at 6 m/s at the 2 cm preview spacing
     (tools/preview_final.py --seeds 5; docs/fracture.md, "Presets at preview and final spacing"): Weibull modulus 8
-    (real 5-12; with 5 the scattered weak bonds crumbled: no seed of five met the shard figures), correlation length
-    5 cm, debris damping 1750 / s (3000 held the sphere together: 3-19 % broken out, 1-2 pieces over 5 %; 1000 shed
-    33-44 % of what broke out as dust) and the bonus cap 2 s_c (ceramics are 5-10 times stronger in compression than in tension;
-    1.5 crushed the contact zone: 2 of 5 seeds met, with 2: 4 of 5).
+    (real 5-12; with the former 5, debris damping 1500 / s and cap 1.5 the scattered weak bonds crumbled: no seed of
+    five met the shard figures), correlation length 5 cm, debris damping 1750 / s (3000 held the sphere together: 3-19 %
+    broken out, 1-2 pieces over 5 %; 1000 shed 33-44 % of what broke out as dust) and the bonus cap 2 s_c (ceramics are
+    5-10 times stronger in compression than in tension; 1.5 crushed the contact zone: 2 of 5 seeds met, with 2: 4).
     """
     return _brittle(
         "ceramic",
@@ -308,9 +310,9 @@ def stone(*, real: bool = False, pattern: bool = True) -> Material:
     fracture energy 13.0 J/m^2, the critical stretch 0.006 at the 2 cm reference spacing (:data:`IMPACT_STRAIN_RATIO`:
     glass's impact strain over breaking strain at 6 m/s; the breaking stress, 30 kPa, stays below glass's 35 kPa, as
     the real one, 5-15 MPa, is below glass's) and 0.0085 at 1 cm. Break pattern, tuned as :func:`ceramic`'s: Weibull
-    modulus 8 (real 5-20; 5 crumbled), correlation length 5 cm (grains and veins of a few centimetres), debris damping
-    1750 / s and the bonus cap 2.5 s_c (stone is about ten times stronger in compression than in tension; with 2 one
-    seed of five met the shard figures, with 2.5 four).
+    modulus 8 (real 5-20; the former 5 at the former settings met on no seed), correlation length 5 cm (grains and
+    veins of a few centimetres), debris damping 1750 / s and the bonus cap 2.5 s_c (stone is about ten times
+    stronger in compression than in tension; with 2 one seed of five met the shard figures, with 2.5 four).
     """
     return _brittle(
         "stone",
@@ -373,8 +375,8 @@ def plaster(*, real: bool = False, pattern: bool = True) -> Material:
     as the real 1-3 MPa is) and 0.0113 at 1 cm. Break pattern, tuned as :func:`ceramic`'s: Weibull modulus 8 (the
     top of the real 3-8: with 3 the scattered weak bonds crumbled, no seed of five met the shard figures at any
     damping measured; with 6 none at the shipped damping and cap), correlation length 5 cm, debris damping 1000 / s
-    (3000 held the sphere whole, under 7 % broken out; 500 shed 42-70 % of what broke out as dust) and the bonus cap 2 s_c
-    (set plaster is 5-7 times stronger in compression than in tension; 3 of 5 seeds met, 0 with 1.5).
+    (with m = 3: 3000 held the sphere whole, under 7 % broken out; 500 shed 42-70 % of what broke out as dust) and the
+    bonus cap 2 s_c (set plaster is 5-7 times stronger in compression than in tension; 3 of 5 seeds met, 0 with 1.5).
     """
     return _brittle(
         "plaster",
