@@ -142,7 +142,11 @@ class Material:
             check_range("hardening_modulus", self.hardening_modulus, 0.0, None, lo_open=False),
         )
         if self.fracture_energy is not None and self.critical_stretch is not None:
-            raise ParameterError("critical_stretch", self.critical_stretch, "None when fracture_energy is given")
+            raise ParameterError(
+                "critical_stretch",
+                self.critical_stretch,
+                "None when fracture_energy is given (set fracture_energy=None to give a critical stretch instead)",
+            )
         if self.fracture_energy is not None:
             object.__setattr__(self, "fracture_energy", check_range("fracture_energy", self.fracture_energy, 0.0, None))
         if self.critical_stretch is not None:
