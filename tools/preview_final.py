@@ -305,17 +305,17 @@ the preset's Material; `--set critical_stretch=S` replaces its fracture energy w
 
 The strength is a fracture energy (pdsim/presets.py, `REFERENCE_SPACING`, `energy_for_stretch`). Each brittle preset
 gives a fracture energy G, stated as the critical stretch it gives at the 2 cm reference spacing with the default
-horizon delta = 3.015 h: G = c_G delta s_c^2, c_G = 3 mu + (3/4)^4 (kappa - 5 mu / 3)
-(`Material.crack_energy_modulus`: the ordinary state-based model's energy per unit crack area when every bond across
-the crack is stretched to s_c, Madenci and Oterkus, Peridynamic Theory and Its Applications, 2014; the discrete model's
-energy of a cut matches it within 0.3 % at 3.015 spacings, tests/test_pd_plastic_fracture.py,
-`test_fracture_energy_calibration`). The solver then sets s_c = sqrt(G / (c_G delta)) for the run's horizon: 0.005 at
-2 cm and 0.00707 at 1 cm for glass (G = 12.7 J/m^2 at the animation stiffness; the real glass's is 8 J/m^2 at 10^4
-times the stiffness). At a fixed horizon factor the discrete sum over the bonds crossing a plane scales exactly as
-delta s_c^2 (every bond length and volume scales with h), so the energy per crack area is the same at every spacing;
-tests/test_preset_patterns.py checks the solver's bond strengths at 2 and 1 cm (sqrt 2 apart). Before, the presets
-gave s_c fixed in strain, so G fell with the spacing: at h/2 the same preset was half as tough and the same impact
-opened about twice the crack area (the glass drop broke out 43.7 % at h and 62.0 % at h/2: +42 %). A material given
+horizon delta = 3.015 h: G = c_G delta s_c^2, c_G = 3 mu + (3/4)^4 (kappa - 5 mu / 3) (`Material.crack_energy_modulus`:
+the ordinary state-based model's energy per unit crack area when every bond across the crack is stretched to s_c,
+Madenci and Oterkus, Peridynamic Theory and Its Applications, 2014; the discrete model's energy of a cut matches it
+within 0.3 % at 3.015 spacings, tests/test_pd_plastic_fracture.py, `test_fracture_energy_calibration`). The solver then
+sets s_c = sqrt(G / (c_G delta)) for the run's horizon: 0.005 at 2 cm and 0.00707 at 1 cm for glass (G = 12.7 J/m^2 at
+the animation stiffness; the real glass's is 8 J/m^2 at 10^4 times the stiffness). At a fixed horizon factor the
+discrete sum over the bonds crossing a plane scales exactly as delta s_c^2 (every bond length and volume scales with h),
+so the energy per crack area is the same at every spacing; tests/test_preset_patterns.py checks the solver's bond
+strengths at 2 and 1 cm (sqrt 2 apart). Before, the presets gave s_c fixed in strain, so G fell with the spacing: at h/2
+the same preset was half as tough and the same impact opened about twice the crack area (below, "Preview against final":
+with s_c fixed the drops' n80 grew 6.7 to 13.7 times from h to h/2, with G fixed 1.45 to 6.4 times). A material given
 `critical_stretch` keeps it at every spacing. The price: in stress, the material at h/2 is sqrt 2 stronger (E s_c).
 
 The break pattern (pdsim/presets.py). Each brittle preset carries a strength field: each bond's critical stretch is
