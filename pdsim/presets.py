@@ -21,21 +21,29 @@ tests/test_preset_patterns.py records which drops and hits meet that (docs/fract
 spacing"): a strength field with a material correlation length (``strength_weibull_modulus``,
 ``strength_correlation_length``: the weak spots are the material's, the same at every spacing), jittered particles
 (``sampling_jitter`` 0.5: no lattice planes for cracks to follow), debris damping (:data:`DEBRIS_DAMPING` per second
-of the animation values, a fixed rate so that it acts alike at every spacing) and the full compressive bonus capped at
-1.5 s_c (:data:`SHARD_BONUS`, :data:`SHARD_BONUS_CAP`). ``pattern=False`` gives the plain material (uniform strength,
-lattice sampling, no debris damping, the compressive bonus :data:`COMPRESSIVE_BONUS`), whose breaking strain is
-exactly the calibrated one. The other presets have no pattern settings (wood splits by its grain; clay, steel and
-aluminium tear by plasticity; rubber never breaks), so ``pattern`` changes nothing for them.
+of the animation values for glass and porcelain, less for the others, a fixed rate so that it acts alike at every
+spacing) and the full compressive bonus capped at 1.5 s_c (:data:`SHARD_BONUS`, :data:`SHARD_BONUS_CAP`; 2 to 2.5
+s_c for ceramic, stone and plaster). Each preset's docstring gives its values and why. ``pattern=False`` gives the
+plain material (uniform strength, lattice sampling, no debris damping, the compressive bonus
+:data:`COMPRESSIVE_BONUS`), whose breaking strain at the reference spacing is exactly the stated one. The other
+presets have no pattern settings (wood splits by its grain; clay, steel and aluminium tear by plasticity; rubber never
+breaks), so ``pattern`` changes nothing for them.
 
 Contact. Every preset carries a ``contact_restitution`` and a ``contact_friction`` (:data:`CONTACT`), the values its
 contacts bring to a pair (combined with the other side's, pdsim/contact.py combine_restitution, combine_friction).
 
 Spacing. The particles across the thinnest part of a body set the accuracy of its stiffness (docs/accuracy.md: 10 %
-at about 5 across, 5 % at 10) and its cost. With a real ``fracture_energy`` G the critical stretch, and so the
-tensile strength, depends on the horizon delta: s_c = sqrt(G / (c_G delta)). :func:`spacing_for_strength` gives the
-spacing at which the real G reproduces the real tensile strength: glass 0.08 mm, wood split along the grain 4 mm,
-concrete 11 cm. So a building-scale concrete wall at real values is affordable while a glass pane is not. The
-animation presets use a critical stretch instead, so a coarse preview breaks at the same strain as the final run.
+at about 5 across, 5 % at 10) and its cost. Every brittle preset gives its strength as a ``fracture_energy`` G, the
+energy per unit area of crack, which the spacing does not change: the critical stretch follows from the horizon delta
+as s_c = sqrt(G / (c_G delta)) (:attr:`pdsim.Material.crack_energy_modulus`), so at half the spacing s_c is sqrt 2
+larger and opening a crack costs the same energy at every spacing (a fixed s_c would make the material half as tough
+at h/2, and the same impact would open twice the crack area: docs/fracture.md, "Presets at preview and final
+spacing"). The animation presets state their G as the critical stretch it gives at :data:`REFERENCE_SPACING` (2 cm,
+the preview spacing of a 30 cm object) with the default horizon of :data:`REFERENCE_HORIZON_FACTOR` spacings
+(:func:`energy_for_stretch`). A material built with ``critical_stretch`` keeps exactly that stretch at every spacing
+(replace the preset's ``fracture_energy`` with None to give one). With the real G, :func:`spacing_for_strength`
+gives the spacing at which it reproduces the real tensile strength: glass 0.08 mm, wood split along the grain 4 mm,
+concrete 11 cm. So a building-scale concrete wall at real values is affordable while a glass pane is not.
 """
 
 from __future__ import annotations
@@ -49,6 +57,10 @@ from .errors import ParameterError
 from .materials import Anisotropy, Material
 
 STIFFNESS_SCALE = 1.0e-4  # Young's modulus (and stresses) of the animation presets over the real ones
+# The brittle animation presets' strength is a fracture energy, stated as the critical stretch it gives at this
+# spacing [m] with the default horizon (PeridynamicBody's horizon_factor 3.015): the preview spacing of a 30 cm object.
+REFERENCE_SPACING = 0.02
+REFERENCE_HORIZON_FACTOR = 3.015
 # Silling-Askari compressive bonus alpha of the brittle presets (s0 = s_c - alpha s_min). It makes them unbreakable
 # in uniaxial compression (nu < alpha) while keeping them about as weak in pure shear as in tension: simple shear
 # breaks them at 1.33 times the unbonused shear strain, where alpha = 1 would hold them to 2 sqrt(s_c) instead of
@@ -57,15 +69,17 @@ COMPRESSIVE_BONUS = 0.25
 
 # The brittle presets' break pattern (pattern=True; docs/fracture.md, "Presets at preview and final spacing"): the
 # full compressive bonus capped at 1.5 s_c holds the material under a contact together (0.25 turns it to dust, the
-# uncapped bonus keeps a dropped sphere whole, a cap of 3 left half of what a dropped glass sphere shed as dust),
-# debris damping at a fixed rate [1/s] of the animation values, per preset (glass: c dt 0.4 at the 2 cm preview
-# spacing, 0.2 at 1 cm; times the wave-speed ratio 100 for the real values), jitter 0.5.
+# uncapped bonus keeps a dropped sphere whole, a cap of 3 left half of what a dropped glass sphere shed as dust;
+# ceramic, stone and plaster take 2 to 2.5, their docstrings say why), debris damping at a fixed rate [1/s] of the
+# animation values, per preset (glass: c dt 0.4 at the 2 cm preview spacing, 0.2 at 1 cm; times the wave-speed ratio
+# 100 for the real values), jitter 0.5.
 SHARD_BONUS = 1.0
 SHARD_BONUS_CAP = 1.5
-DEBRIS_DAMPING = 3000.0  # glass and porcelain; the weaker presets take half (their dust came loose less)
+DEBRIS_DAMPING = 3000.0  # glass and porcelain; concrete half; ceramic, stone and plaster as tuned (their docstrings)
 SAMPLING_JITTER = 0.5
 # The animation values' impact strain over breaking strain, v / (c s_c) at v = 6 m/s (a 1.8 m fall), of glass (c =
-# 53 m/s, s_c = 0.005): ceramic, stone and plaster take the critical stretch that gives them the same ratio
+# 53 m/s, s_c = 0.005 at the reference spacing): ceramic, stone and plaster take the critical stretch (at the
+# reference spacing) that gives them the same ratio
 # (s_c = 6 / (23 c), rounded), so a drop loads each of them as much as glass. With their former strains (0.004, 0.003,
 # 0.0025) the ratio was 35, 46 and 73 and a dropped sphere of them turned to dust where glass broke into pieces
 # (docs/fracture.md, "Presets at preview and final spacing"). The breaking stresses E s_c keep their order: glass
@@ -116,6 +130,15 @@ TENSILE_STRENGTH = {
 }
 
 
+def energy_for_stretch(material: Material, critical_stretch: float, *, spacing: float = REFERENCE_SPACING) -> float:
+    """The fracture energy G [J/m^2] at which ``material``'s elastic constants give the critical stretch
+    ``critical_stretch`` [-] at ``spacing`` [m] with the default horizon: G = c_G delta s_c^2, delta =
+    REFERENCE_HORIZON_FACTOR * spacing, c_G = :attr:`pdsim.Material.crack_energy_modulus`."""
+    s_c = check_range("critical_stretch", critical_stretch, 0.0, None)
+    h = check_range("spacing", spacing, 0.0, None)
+    return material.crack_energy_modulus * REFERENCE_HORIZON_FACTOR * h * s_c * s_c
+
+
 def _brittle(
     name,
     density,
@@ -129,16 +152,22 @@ def _brittle(
     real,
     pattern,
     debris_damping=DEBRIS_DAMPING,
+    bonus_cap=SHARD_BONUS_CAP,
 ) -> Material:
     """A brittle preset: the real ``youngs_modulus`` [Pa] and ``fracture_energy`` [J/m^2] with ``real``, else the
-    modulus times STIFFNESS_SCALE and a ``critical_stretch`` [-]. With ``pattern`` the break-pattern settings (module
-    docstring): a strength field of Weibull modulus ``weibull_modulus`` and ``correlation_length`` [m], jitter,
-    ``debris_damping`` [1/s] (of the animation values), the capped full bonus; without, the COMPRESSIVE_BONUS alone."""
-    strength = {"fracture_energy": fracture_energy} if real else {"critical_stretch": critical_stretch}
+    modulus times STIFFNESS_SCALE and the fracture energy that gives ``critical_stretch`` [-] at REFERENCE_SPACING
+    (:func:`energy_for_stretch`). With ``pattern`` the break-pattern settings (module docstring): a strength field of
+    Weibull modulus ``weibull_modulus`` and ``correlation_length`` [m], jitter, ``debris_damping`` [1/s] (of the
+    animation values), the full bonus capped at ``bonus_cap`` s_c; without, the COMPRESSIVE_BONUS alone."""
+    if real:
+        energy = fracture_energy
+    else:
+        elastic = Material(density, youngs_modulus * STIFFNESS_SCALE, poisson_ratio)
+        energy = energy_for_stretch(elastic, critical_stretch)
     if pattern:
         extra = {
             "compressive_bonus": SHARD_BONUS,
-            "compressive_bonus_cap": SHARD_BONUS_CAP,
+            "compressive_bonus_cap": bonus_cap,
             "strength_weibull_modulus": weibull_modulus,
             "strength_correlation_length": correlation_length,
             "debris_damping": debris_damping / math.sqrt(STIFFNESS_SCALE) if real else debris_damping,
@@ -151,7 +180,7 @@ def _brittle(
         youngs_modulus=youngs_modulus if real else youngs_modulus * STIFFNESS_SCALE,
         poisson_ratio=poisson_ratio,
         name=name,
-        **strength,
+        fracture_energy=energy,
         **extra,
     )
 
@@ -188,9 +217,10 @@ def glass(*, real: bool = False, pattern: bool = True) -> Material:
     about 1 GPa.
 
     Animation values (``real=False``): E = 7 MPa (1e-4 of the real one: 53 m/s wave speed, about 400 steps per frame
-    at 24 fps and h = 1 cm); critical_stretch 0.005 instead of G: the real G gives s_c = 5.6e-5 at h = 1 cm, and with a
-    wave speed 100x lower a larger breaking strain keeps an impact's strain over the breaking strain (v / (c s_c))
-    within a factor of about 10 of its real value. 0.5 % stays invisible before the break.
+    at 24 fps and h = 1 cm); fracture energy 12.7 J/m^2 (the real 8 J/m^2 gives s_c = 5.6e-5 at h = 1 cm with the
+    real E), the critical stretch 0.005 at the 2 cm reference spacing and 0.0071 at 1 cm: with a wave speed 100x
+    lower a larger breaking strain keeps an impact's strain over the breaking strain (v / (c s_c)) within a factor of
+    about 10 of its real value. 0.5 % stays invisible before the break.
 
     Break pattern (``pattern=True``, module docstring): strength field of Weibull modulus 6 (real glass: 5-10) and
     correlation length 5 cm (weak spots a shard apart on a figurine; resolved from a 2 cm spacing); without it the
@@ -217,8 +247,9 @@ def porcelain(*, real: bool = False, pattern: bool = True) -> Material:
     Real values and typical ranges: density 2400 kg/m^3 (2300-2500); E = 70 GPa (60-100); nu = 0.22 (0.2-0.25);
     fracture toughness 1-1.5 MPa m^0.5, G = 20 J/m^2 (15-30); bending strength 40-100 MPa (Weibull modulus 8-15).
 
-    Animation values: E = 7 MPa (1e-4: 54 m/s wave speed); critical_stretch 0.005, as glass (a breaking strain of
-    about 7e-4 in both). Break pattern: Weibull modulus 8, correlation length 5 cm.
+    Animation values: E = 7 MPa (1e-4: 54 m/s wave speed); fracture energy 12.7 J/m^2, the critical stretch 0.005 at
+    the 2 cm reference spacing, as glass (a real breaking strain of about 7e-4 in both). Break pattern: Weibull
+    modulus 8, correlation length 5 cm.
     """
     return _brittle(
         "porcelain",
@@ -242,8 +273,14 @@ def ceramic(*, real: bool = False, pattern: bool = True) -> Material:
     fracture toughness about 1 MPa m^0.5, G = 25 J/m^2 (10-40); bending strength 15-50 MPa (Weibull modulus 5-12).
 
     Animation values: E = 4 MPa (1e-4: 43 m/s wave speed, about 330 steps per frame at 24 fps and h = 1 cm);
-    critical_stretch 0.006 (:data:`IMPACT_STRAIN_RATIO`: glass's impact strain over breaking strain at 6 m/s; the
-    breaking stress, 24 kPa, stays below glass's 35 kPa). Break pattern: Weibull modulus 5, correlation length 5 cm.
+    fracture energy 10.5 J/m^2, the critical stretch 0.006 at the 2 cm reference spacing (:data:`IMPACT_STRAIN_RATIO`:
+    glass's impact strain over breaking strain at 6 m/s; the breaking stress, 24 kPa, stays below glass's 35 kPa) and
+    0.0085 at 1 cm. Break pattern, tuned on the 30 cm sphere dropped at 6 m/s at the 2 cm preview spacing
+    (tools/preview_final.py --seeds 5; docs/fracture.md, "Presets at preview and final spacing"): Weibull modulus 8
+    (real 5-12; with the former 5, debris damping 1500 / s and cap 1.5 the scattered weak bonds crumbled: no seed of
+    five met the shard figures), correlation length 5 cm, debris damping 1750 / s (3000 held the sphere together: 3-19 %
+    broken out, 1-2 pieces over 5 %; 1000 shed 33-44 % of what broke out as dust) and the bonus cap 2 s_c (ceramics are
+    5-10 times stronger in compression than in tension; 1.5 crushed the contact zone: 2 of 5 seeds met, with 2: 4).
     """
     return _brittle(
         "ceramic",
@@ -252,11 +289,12 @@ def ceramic(*, real: bool = False, pattern: bool = True) -> Material:
         0.2,
         fracture_energy=25.0,
         critical_stretch=0.006,
-        weibull_modulus=5.0,
+        weibull_modulus=8.0,
         correlation_length=0.05,
         real=real,
         pattern=pattern,
-        debris_damping=0.5 * DEBRIS_DAMPING,
+        debris_damping=1750.0,
+        bonus_cap=2.0,
     )
 
 
@@ -269,9 +307,12 @@ def stone(*, real: bool = False, pattern: bool = True) -> Material:
     100-250 MPa.
 
     Animation values: E = 5 MPa (1e-4: 43 m/s wave speed, about 330 steps per frame at 24 fps and h = 1 cm);
-    critical_stretch 0.006 (:data:`IMPACT_STRAIN_RATIO`: glass's impact strain over breaking strain at 6 m/s; the
-    breaking stress, 30 kPa, stays below glass's 35 kPa, as the real one, 5-15 MPa, is below glass's). Break pattern:
-    Weibull modulus 5, correlation length 6 cm (grains and veins a little coarser than glass's flaws).
+    fracture energy 13.0 J/m^2, the critical stretch 0.006 at the 2 cm reference spacing (:data:`IMPACT_STRAIN_RATIO`:
+    glass's impact strain over breaking strain at 6 m/s; the breaking stress, 30 kPa, stays below glass's 35 kPa, as
+    the real one, 5-15 MPa, is below glass's) and 0.0085 at 1 cm. Break pattern, tuned as :func:`ceramic`'s: Weibull
+    modulus 8 (real 5-20; the former 5 at the former settings met on no seed), correlation length 5 cm (grains and
+    veins of a few centimetres), debris damping 1750 / s and the bonus cap 2.5 s_c (stone is about ten times
+    stronger in compression than in tension; with 2 one seed of five met the shard figures, with 2.5 four).
     """
     return _brittle(
         "stone",
@@ -280,11 +321,12 @@ def stone(*, real: bool = False, pattern: bool = True) -> Material:
         0.25,
         fracture_energy=50.0,
         critical_stretch=0.006,
-        weibull_modulus=5.0,
-        correlation_length=0.06,
+        weibull_modulus=8.0,
+        correlation_length=0.05,
         real=real,
         pattern=pattern,
-        debris_damping=0.5 * DEBRIS_DAMPING,
+        debris_damping=1750.0,
+        bonus_cap=2.5,
     )
 
 
@@ -299,8 +341,9 @@ def concrete(*, real: bool = False, pattern: bool = True) -> Material:
     or a slab.
 
     Animation values: E = 3 MPa (1e-4: 35 m/s wave speed, about 270 steps per frame at 24 fps and h = 1 cm);
-    critical_stretch 0.002: concrete's real breaking strain f_t / E = 1e-4 is the smallest of the presets and stays
-    below glass's; raised 20x it keeps concrete the weaker, crumblier of the brittle presets at animation speeds.
+    fracture energy 0.87 J/m^2, the critical stretch 0.002 at the 2 cm reference spacing (0.0028 at 1 cm):
+    concrete's real breaking strain f_t / E = 1e-4 is the smallest of the presets and stays below glass's; raised 20x
+    it keeps concrete the weaker, crumblier of the brittle presets at animation speeds.
     Break pattern: Weibull modulus 8 (real 8-12), correlation length 8 cm (the aggregate and its voids).
     """
     return _brittle(
@@ -327,9 +370,13 @@ def plaster(*, real: bool = False, pattern: bool = True) -> Material:
     fracture energy 5 J/m^2 (2-10); tensile strength 1-3 MPa (Weibull modulus 3-8); compressive strength 5-20 MPa.
 
     Animation values: E = 1.2 MPa (1e-4: 33 m/s wave speed, about 260 steps per frame at 24 fps and h = 1 cm);
-    critical_stretch 0.008 (:data:`IMPACT_STRAIN_RATIO`: glass's impact strain over breaking strain at 6 m/s; the
-    breaking stress, 9.6 kPa, is the lowest of the presets, as the real 1-3 MPa is). Break pattern: Weibull modulus 3
-    (crumbly), correlation length 4 cm.
+    fracture energy 5.6 J/m^2, the critical stretch 0.008 at the 2 cm reference spacing (:data:`IMPACT_STRAIN_RATIO`:
+    glass's impact strain over breaking strain at 6 m/s; the breaking stress, 9.6 kPa, is the lowest of the presets,
+    as the real 1-3 MPa is) and 0.0113 at 1 cm. Break pattern, tuned as :func:`ceramic`'s: Weibull modulus 8 (the
+    top of the real 3-8: with 3 the scattered weak bonds crumbled, no seed of five met the shard figures at any
+    damping measured; with 6 none at the shipped damping and cap), correlation length 5 cm, debris damping 1000 / s
+    (with m = 3: 3000 held the sphere whole, under 7 % broken out; 500 shed 42-70 % of what broke out as dust) and the
+    bonus cap 2 s_c (set plaster is 5-7 times stronger in compression than in tension; 3 of 5 seeds met, 0 with 1.5).
     """
     return _brittle(
         "plaster",
@@ -338,11 +385,12 @@ def plaster(*, real: bool = False, pattern: bool = True) -> Material:
         0.2,
         fracture_energy=5.0,
         critical_stretch=0.008,
-        weibull_modulus=3.0,
-        correlation_length=0.04,
+        weibull_modulus=8.0,
+        correlation_length=0.05,
         real=real,
         pattern=pattern,
-        debris_damping=0.5 * DEBRIS_DAMPING,
+        debris_damping=1000.0,
+        bonus_cap=2.0,
     )
 
 
@@ -511,6 +559,8 @@ __all__ = [
     "COMPRESSIVE_BONUS",
     "DEBRIS_DAMPING",
     "PRESETS",
+    "REFERENCE_HORIZON_FACTOR",
+    "REFERENCE_SPACING",
     "SAMPLING_JITTER",
     "SHARD_BONUS",
     "SHARD_BONUS_CAP",
@@ -520,6 +570,7 @@ __all__ = [
     "ceramic",
     "clay",
     "concrete",
+    "energy_for_stretch",
     "glass",
     "plaster",
     "porcelain",

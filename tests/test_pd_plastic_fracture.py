@@ -414,16 +414,17 @@ def test_brittle_presets_hold_in_uniaxial_compression(name):
     for alpha, factors, breaks in ((None, (5.0, 30.0), False), (0.0, (8.0,), True)):
         material = presets.preset(name, pattern=False)
         assert material.compressive_bonus == presets.COMPRESSIVE_BONUS > material.poisson_ratio
+        s_c = material.critical_stretch_for(presets.REFERENCE_HORIZON_FACTOR * H)
         if alpha is not None:
             material = pdsim.Material(
                 density=material.density,
                 youngs_modulus=material.youngs_modulus,
                 poisson_ratio=material.poisson_ratio,
-                critical_stretch=material.critical_stretch,
+                critical_stretch=s_c,
                 compressive_bonus=alpha,
             )
         for factor in factors:
-            eps = factor * material.critical_stretch
+            eps = factor * s_c
             body = pdsim.PeridynamicBody(pdsim.box((6 * H, 6 * H, 6 * H), center=(40.0, -25.0, 3.0)), material, H)
             solver = pdsim.SolverPeridynamics([body])
             X = solver.model.rest_host.astype(np.float64)
