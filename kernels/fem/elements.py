@@ -297,8 +297,12 @@ def fem_funcs(dtype):
 
 
 @functools.cache
-def element_force_kernel(dtype, measure: int, plastic: bool, fracture: bool, store_rotation: bool):
-    """Kernel over elements: corner forces f_a = -V P g_a [N] into ``corner_forces[4 e + a]``.
+def element_force_kernel(dtype, measure: int, plastic: bool, fracture: bool, store_rotation: bool, scatter: bool):
+    """Kernel over elements: corner forces f_a = -V P g_a [N] into ``corner_forces[4 e + a]``, or with ``scatter``
+    added onto ``forces[t_a]`` of the element's corners t_a instead (``corner_forces`` unused). Scatter is for the CPU
+    only: there one thread walks the elements in order, so every vertex sums its corner forces in element order
+    (deterministic, and Warp's atomic_add is a plain add there); on a GPU the additions would race in no fixed order,
+    so the GPU writes corners and gathers them per vertex (kernels/fem/solver.py).
 
     Inputs: ``displacements`` [m] per vertex; per element ``tets`` (vec4i), ``dm_inv`` (Dm^-1 [1/m]), ``volume``
     [m^3], ``lame`` = (lambda, mu) [Pa].
@@ -341,6 +345,7 @@ def element_force_kernel(dtype, measure: int, plastic: bool, fracture: bool, sto
         rotation_q: wp.array(dtype=quat),
         rotation: wp.array(dtype=mat33),
         corner_forces: wp.array(dtype=vec3),
+        forces: wp.array(dtype=vec3),
     ):
         e = wp.tid()
         t = tets[e]
@@ -386,7 +391,16 @@ def element_force_kernel(dtype, measure: int, plastic: bool, fracture: bool, sto
         else:
             p = sigma
         h = (-volume[e]) * (p * wp.transpose(dmi))  # columns are f_1, f_2, f_3
-        store_corners(h, e, corner_forces)
+        if wp.static(scatter):
+            f1 = vec3(h[0, 0], h[1, 0], h[2, 0])
+            f2 = vec3(h[0, 1], h[1, 1], h[2, 1])
+            f3 = vec3(h[0, 2], h[1, 2], h[2, 2])
+            wp.atomic_add(forces, t[0], -(f1 + f2 + f3))
+            wp.atomic_add(forces, t[1], f1)
+            wp.atomic_add(forces, t[2], f2)
+            wp.atomic_add(forces, t[3], f3)
+        else:
+            store_corners(h, e, corner_forces)
 
     return element_forces
 
@@ -564,11 +578,14 @@ def embed_points_kernel(dtype):
 # solver's scalar type (wp.float32 or wp.float64), one thread per element (per embedded point for embed_points).
 
 
-def element_forces(*, dtype, measure: int, plastic: bool, fracture: bool, device, **arguments):
-    """Corner forces [N] of every element into ``corner_forces`` at ``displacements`` [m], with the plastic update of
-    step ``dt`` [s], the principal stresses and the over-strength count (fracture) and the rotations (corotated) as
-    element_force_kernel documents (the rotation matrix stored)."""
-    kernel = element_force_kernel(dtype, measure, plastic, fracture, True)
+def element_forces(*, dtype, measure: int, plastic: bool, fracture: bool, device, scatter: bool = False, **arguments):
+    """Corner forces [N] of every element into ``corner_forces`` (``scatter``, CPU only: added onto ``forces`` per
+    vertex instead) at ``displacements`` [m], with the plastic update of step ``dt`` [s], the principal stresses and
+    the over-strength count (fracture) and the rotations (corotated) as element_force_kernel documents (the rotation
+    matrix stored)."""
+    if scatter and not wp.get_device(device).is_cpu:
+        raise ValueError("element_forces: scatter=True adds in a fixed order only on the CPU")
+    kernel = element_force_kernel(dtype, measure, plastic, fracture, True, bool(scatter))
     launch(kernel, arguments["tets"].shape[0], device=device, **arguments)
 
 

@@ -28,9 +28,10 @@ and delegates to
 
 Integrators:
 
-- explicit: velocity Verlet (kernels/integration.py's kick-drift, then a fused gather of the element forces and the
-  shared second half kick) with lumped masses m_i = sum over the vertex's elements of rho V / 4. The stable step is
-  dt_stable = 0.5 h_min / c_p with h_min the smallest element height (3 V / largest face area) and
+- explicit: velocity Verlet (kernels/integration.py's kick-drift, then the element forces and the shared second half
+  kick: on the CPU the element pass adds its forces onto the vertices in element order, on a GPU the corner forces
+  are gathered per vertex fused with the kick) with lumped masses m_i = sum over the vertex's elements of rho V / 4.
+  The stable step is dt_stable = 0.5 h_min / c_p with h_min the smallest element height (3 V / largest face area) and
   c_p = sqrt((lambda + 2 mu) / rho) the dilatational wave speed. The factor 0.5 keeps the step below the
   element-by-element bound 2 / sqrt(max eig(M_e^-1 K_e)), a lower bound of the true critical step (largest eigenvalue
   of M^-1 K; tests/test_fem_dynamics.py checks the margin). :meth:`SolverFem.step` refuses a larger step

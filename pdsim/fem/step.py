@@ -36,9 +36,11 @@ class FemStep:
         return self.model.explicit_dt
 
     # -- the operators of the implicit step and the static solve (pdsim/fem/operators.py) ---------------------------
-    def element_forces(self, dt: float, displacements=None) -> None:
+    def element_forces(self, dt: float, displacements=None, scatter: bool = False) -> None:
         """Corner forces [N] of every element at ``displacements`` (Warp [m]; default: the current ones), with the
-        plastic update of step dt [s]; fracture's over-strength count starts from zero."""
+        plastic update of step dt [s]; fracture's over-strength count starts from zero. ``scatter`` (CPU only): added
+        onto ``force`` per vertex in element order instead of written per corner (the same sums, in the same order,
+        as the per-vertex gathers over the incidence list, whose slots run in element order)."""
         m = self.model
         if self.fracture:
             self._over_count.zero_()
@@ -55,10 +57,12 @@ class FemStep:
             rotation_q=self._rotation_q,
             rotation=self._rotation,
             corner_forces=self._corner,
+            forces=self.force,
             dtype=self.dtype,
             measure=self._measure_id,
             plastic=self.plastic,
             fracture=self.fracture,
+            scatter=scatter,
             device=self.device,
         )
 
@@ -147,9 +151,12 @@ class FemStep:
         the end of the step into ``force``. Implicit: nothing (``force`` holds the forces the step used)."""
         if self.integrator == "implicit":
             return
-        self.element_forces(self._dt)
         self.loads_into_force(self._force_time)
-        self.add_element_forces()
+        if self.device.is_cpu:
+            self.element_forces(self._dt, scatter=True)
+        else:
+            self.element_forces(self._dt)
+            self.add_element_forces()
 
     def end_step(self, dt: float) -> None:
         """Explicit: the shared second half kick. Both: time advances, then fracture splits over-stressed elements."""
@@ -175,11 +182,16 @@ class FemStep:
                 "dt", dt, f"(0, {limit:.6g}] s: the explicit stable limit 0.5 h_min / c_p (simulate() substeps)"
             )
         self.begin_step(dt)
-        # compute_forces and the kick fused: one gather-and-kick launch
-        self.element_forces(dt)
         self.loads_into_force(self._force_time)
-        self._gather_kick(dt)
-        self.kin.end_clock_step()
+        if self.device.is_cpu:
+            # the element forces added onto the loads by the element pass, then the shared kick
+            self.element_forces(dt, scatter=True)
+            self.kin.end_step(self.force, self.inv_mass, dt)
+        else:
+            # compute_forces and the kick fused: one gather-and-kick launch
+            self.element_forces(dt)
+            self._gather_kick(dt)
+            self.kin.end_clock_step()
         self.time += dt
         self.step_count += 1
         if self.fracture:
