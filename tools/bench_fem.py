@@ -24,6 +24,7 @@ range printed beside it). The largest displacement of each at the end shows that
     python tools/bench_fem.py --k 6 --json         # one size, one JSON line
     python tools/bench_fem.py --cantilever         # also the cantilever convergence table (float64 static solves)
     python tools/bench_fem.py --k 6 --newton-particle-radius 0.1   # the earlier set-up: Newton's particle contact on
+    python tools/bench_fem.py --k 6 --pair-only --profile          # the pair, and where each step's time goes
 """
 
 from __future__ import annotations
@@ -181,7 +182,9 @@ def _alternated(mesh, *, device, steps, warmup, repeats, particle_radius=None):
     """pdsim's explicit corotated step against Newton's SolverSemiImplicit, in ``repeats`` alternating blocks of
     ``steps`` steps each at the same dt (after ``warmup`` steps each, untimed): per code the median block [s] and
     every block's time, the ratio of the medians (pdsim's element updates per second over Newton's), the range of
-    the per-block ratios, the largest displacement [m] of each at the end. None without newton."""
+    the per-block ratios, the same ratio in process CPU time (both codes run their CPU kernels on this thread, so it
+    leaves out the time the process waits for a core on a loaded machine), the largest displacement [m] of each at
+    the end. None without newton."""
     solver, dt = _pdsim_solver(mesh, integrator="explicit", measure="corotated", device=device)
     stepper = _newton_stepper(
         mesh, solver_name="SolverSemiImplicit", device=device, dt=dt, particle_radius=particle_radius
@@ -198,22 +201,28 @@ def _alternated(mesh, *, device, steps, warmup, repeats, particle_radius=None):
     pdsim_step(warmup)
     newton_step(warmup)
     blocks = {"pdsim": [], "newton": []}
+    cpu = {"pdsim": [], "newton": []}
     for _ in range(repeats):
         for name, run in (("pdsim", pdsim_step), ("newton", newton_step)):
-            t0 = time.perf_counter()
+            c0, t0 = time.process_time(), time.perf_counter()
             run(steps)
             blocks[name].append(time.perf_counter() - t0)
+            cpu[name].append(time.process_time() - c0)
     med = {name: float(np.median(b)) for name, b in blocks.items()}
+    med_cpu = {name: float(np.median(b)) for name, b in cpu.items()}
     pair = np.asarray(blocks["newton"]) / np.asarray(blocks["pdsim"])
     u_pdsim = solver.displacements()
     return {
         "steps_per_block": steps,
         "repeats": repeats,
         "dt": dt,
-        "pdsim": _rates(mesh, med["pdsim"], steps, dt) | {"blocks_s": blocks["pdsim"]},
-        "newton": _rates(mesh, med["newton"], steps, dt) | {"blocks_s": blocks["newton"]},
+        "pdsim": _rates(mesh, med["pdsim"], steps, dt)
+        | {"blocks_s": blocks["pdsim"], "cpu_ms_per_step": 1e3 * med_cpu["pdsim"] / steps},
+        "newton": _rates(mesh, med["newton"], steps, dt)
+        | {"blocks_s": blocks["newton"], "cpu_ms_per_step": 1e3 * med_cpu["newton"] / steps},
         "ratio": med["newton"] / med["pdsim"],
         "ratio_range": [float(pair.min()), float(pair.max())],
+        "ratio_cpu": med_cpu["newton"] / med_cpu["pdsim"],
         "max_displacement": {
             "pdsim": float(np.abs(u_pdsim).max()),
             "newton": float(np.abs(newton_u()).max()),
@@ -221,6 +230,61 @@ def _alternated(mesh, *, device, steps, warmup, repeats, particle_radius=None):
         "newton_particle_radius": particle_radius,
         "newton_version": version,
     }
+
+
+def _timed(table: dict, name: str, fn):
+    """fn wrapped to add its wall time [s] to table[name]."""
+
+    def wrapper(*args, **kwargs):
+        t0 = time.perf_counter()
+        out = fn(*args, **kwargs)
+        table[name] = table.get(name, 0.0) + time.perf_counter() - t0
+        return out
+
+    return wrapper
+
+
+def step_profile(mesh, *, device, steps, warmup):
+    """Where one explicit step's time goes [ms per step], each part timed around the real calls of ``steps`` steps:
+    pdsim's corotated step (begin_step: velocity kicks, clock, conditions, kick-drift, colliders; loads; the element
+    pass; the kick), the element pass of the linear measure (the same pass without the rotation), and Newton's
+    SolverSemiImplicit per kernel launch (its particle contact off as in the headline pair; None without newton)."""
+    out = {}
+    for measure in ("corotated", "linear"):
+        solver, dt = _pdsim_solver(mesh, integrator="explicit", measure=measure, device=device)
+        solver.simulate(dt, warmup)
+        parts: dict = {}
+        solver.begin_step = _timed(parts, "begin_step", solver.begin_step)
+        solver.loads_into_force = _timed(parts, "loads", solver.loads_into_force)
+        solver.element_forces = _timed(parts, "element_pass", solver.element_forces)
+        solver.kin.end_step = _timed(parts, "kick", solver.kin.end_step)
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            solver.step(dt)
+        wp.synchronize_device(solver.device)
+        parts["step"] = time.perf_counter() - t0
+        out[f"pdsim_{measure}"] = {name: 1e3 * s / steps for name, s in parts.items()}
+    stepper = _newton_stepper(mesh, solver_name="SolverSemiImplicit", device=device, dt=dt)
+    if stepper is None:
+        out["newton"] = None
+        return out
+    step, _, _ = stepper
+    step(warmup)
+    parts = {}
+    launch = wp.launch
+
+    def timed_launch(kernel, *args, **kwargs):
+        return _timed(parts, kernel.key, launch)(kernel, *args, **kwargs)
+
+    wp.launch = timed_launch
+    try:
+        t0 = time.perf_counter()
+        step(steps)
+        parts["step"] = time.perf_counter() - t0
+    finally:
+        wp.launch = launch
+    out["newton"] = {name: 1e3 * s / steps for name, s in parts.items()}
+    return out
 
 
 def cantilever_table(cells=(2, 4, 8)):
@@ -279,6 +343,7 @@ def main(argv=None) -> int:
         help="time Newton with its particle-particle contact on at this radius [m] (default: contact off)",
     )
     p.add_argument("--pair-only", action="store_true", help="only the alternated pdsim corotated / Newton pair")
+    p.add_argument("--profile", action="store_true", help="also where one explicit step's time goes (both codes)")
     p.add_argument("--cantilever", action="store_true", help="also print the cantilever convergence table")
     p.add_argument("--json", action="store_true", help="one JSON line per size")
     args = p.parse_args(argv)
@@ -303,6 +368,8 @@ def main(argv=None) -> int:
                 particle_radius=args.newton_particle_radius,
             )
             row["alternated"] = alt if alt is not None else "newton not installed"
+        if args.profile:
+            row["profile"] = step_profile(mesh, device=args.device, steps=n_exp, warmup=args.warmup)
         if args.pair_only:
             row.update(machine_info(args.device))
             results.append(row)
@@ -376,10 +443,14 @@ def _print_row(row):
             r = alt[key]
             print(
                 f"    {label:32s} {r['ms_per_step']:9.3f} ms/step {r['element_updates_per_s'] / 1e6:8.2f} M elem/s"
-                f"  (median block; max |u| {alt['max_displacement'][key]:.3g} m)"
+                f"  (median block; CPU {r['cpu_ms_per_step']:.3f} ms/step; "
+                f"max |u| {alt['max_displacement'][key]:.3g} m)"
             )
         lo, hi = alt["ratio_range"]
-        print(f"    pdsim / Newton per element update: {alt['ratio']:.2f}x (blocks {lo:.2f}-{hi:.2f}x)")
+        print(
+            f"    pdsim / Newton per element update: {alt['ratio']:.2f}x (blocks {lo:.2f}-{hi:.2f}x), "
+            f"in CPU time {alt['ratio_cpu']:.2f}x"
+        )
     for key, label in (
         ("explicit_corotated", "pdsim explicit corotated"),
         ("explicit_linear", "pdsim explicit linear"),
@@ -400,6 +471,13 @@ def _print_row(row):
             f"  {label:34s} {r['ms_per_step']:9.3f} ms/step {r['element_updates_per_s'] / 1e6:8.2f} M elem/s"
             f"  (dt {r['dt']:.3g} s, {r['steps']} steps){extra}"
         )
+    prof = row.get("profile")
+    if prof:
+        print("  where one explicit step's time goes [ms per step]:")
+        for key in ("pdsim_corotated", "pdsim_linear", "newton"):
+            if prof.get(key):
+                parts = ", ".join(f"{name} {ms:.3f}" for name, ms in sorted(prof[key].items(), key=lambda kv: -kv[1]))
+                print(f"    {key}: {parts}")
     if row.get("newton") == "not installed":
         print("  Newton: not installed (pip install newton)")
     print(
