@@ -406,6 +406,20 @@ def element_force_kernel(dtype, measure: int, plastic: bool, fracture: bool, sto
 
 
 @functools.cache
+def rotation_matrices_kernel(dtype):
+    """Kernel over elements: ``rotation[e]`` <- the matrix of the unit quaternion ``rotation_q[e]``."""
+    _, mat33, _ = fem_types(dtype)
+    quat = wp.types.quaternion(dtype)
+
+    @wp.kernel(module="unique")
+    def rotation_matrices(rotation_q: wp.array(dtype=quat), rotation: wp.array(dtype=mat33)):
+        e = wp.tid()
+        rotation[e] = wp.quat_to_matrix(rotation_q[e])
+
+    return rotation_matrices
+
+
+@functools.cache
 def element_energy_kernel(dtype, measure: int, plastic: bool):
     """Kernel over elements: elastic energy V (mu |eps_el|^2 + lambda/2 tr(eps_el)^2) [J] into ``energy[e]`` at the
     vertex ``displacements`` [m], with eps_el = eps - eps_plastic in the element's strain measure (plastic strain read,
@@ -578,15 +592,31 @@ def embed_points_kernel(dtype):
 # solver's scalar type (wp.float32 or wp.float64), one thread per element (per embedded point for embed_points).
 
 
-def element_forces(*, dtype, measure: int, plastic: bool, fracture: bool, device, scatter: bool = False, **arguments):
+def element_forces(
+    *,
+    dtype,
+    measure: int,
+    plastic: bool,
+    fracture: bool,
+    device,
+    scatter: bool = False,
+    store_rotation: bool = True,
+    **arguments,
+):
     """Corner forces [N] of every element into ``corner_forces`` (``scatter``, CPU only: added onto ``forces`` per
     vertex instead) at ``displacements`` [m], with the plastic update of step ``dt`` [s], the principal stresses and
     the over-strength count (fracture) and the rotations (corotated) as element_force_kernel documents (the rotation
-    matrix stored)."""
+    matrix stored into ``rotation`` with ``store_rotation``; the quaternions always)."""
     if scatter and not wp.get_device(device).is_cpu:
         raise ValueError("element_forces: scatter=True adds in a fixed order only on the CPU")
-    kernel = element_force_kernel(dtype, measure, plastic, fracture, True, bool(scatter))
+    kernel = element_force_kernel(dtype, measure, plastic, fracture, bool(store_rotation), bool(scatter))
     launch(kernel, arguments["tets"].shape[0], device=device, **arguments)
+
+
+def rotation_matrices(*, dtype, device, **arguments):
+    """The rotation matrices of the elements' quaternions ``rotation_q`` into ``rotation``
+    (rotation_matrices_kernel)."""
+    launch(rotation_matrices_kernel(dtype), arguments["rotation"].shape[0], device=device, **arguments)
 
 
 def element_energy(*, dtype, measure: int, plastic: bool, device, **arguments):

@@ -293,7 +293,8 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
         m = model.element_count
         self.element_count = m
         self._corner = wp.zeros(4 * m, dtype=self.vec3, device=dev)
-        self._rotation = wp.array(np.tile(np.eye(3), (m, 1, 1)).astype(f), dtype=self.mat33, device=dev)
+        self._rotation_matrix = wp.array(np.tile(np.eye(3), (m, 1, 1)).astype(f), dtype=self.mat33, device=dev)
+        self._rotation_stale = False  # the explicit step updates the quaternions only (see _rotation)
         self._rotation_q = wp.array(
             np.tile([0.0, 0.0, 0.0, 1.0], (m, 1)).astype(f), dtype=wp.types.quaternion(self.dtype), device=dev
         )
@@ -328,6 +329,17 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
         self.crack_area = 0.0
         self.fracture_dissipated = 0.0
         self._build_vertex_data(bodies)
+
+    @property
+    def _rotation(self):
+        """Each element's rotation matrix (Warp mat33, the last force evaluation's), formed from its quaternion first
+        where the explicit step left it out of date."""
+        if self._rotation_stale:
+            ke.rotation_matrices(
+                rotation_q=self._rotation_q, rotation=self._rotation_matrix, dtype=self.dtype, device=self.device
+            )
+            self._rotation_stale = False
+        return self._rotation_matrix
 
     @property
     def _dm_inv(self):

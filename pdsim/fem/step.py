@@ -36,12 +36,15 @@ class FemStep:
         return self.model.explicit_dt
 
     # -- the operators of the implicit step and the static solve (pdsim/fem/operators.py) ---------------------------
-    def element_forces(self, dt: float, displacements=None, scatter: bool = False) -> None:
+    def element_forces(self, dt: float, displacements=None, scatter: bool = False, store_rotation: bool = True) -> None:
         """Corner forces [N] of every element at ``displacements`` (Warp [m]; default: the current ones), with the
         plastic update of step dt [s]; fracture's over-strength count starts from zero. ``scatter`` (CPU only): added
         onto ``force`` per vertex in element order instead of written per corner (the same sums, in the same order,
-        as the per-vertex gathers over the incidence list, whose slots run in element order)."""
+        as the per-vertex gathers over the incidence list, whose slots run in element order). Without
+        ``store_rotation`` (the explicit step, whose forces read the quaternions only) the rotation matrices are
+        formed from the quaternions when next read (``_rotation``)."""
         m = self.model
+        self._rotation_stale = self._rotated and not store_rotation
         if self.fracture:
             self._over_count.zero_()
         ke.element_forces(
@@ -55,7 +58,7 @@ class FemStep:
             principal=self._principal,
             over_count=self._over_count,
             rotation_q=self._rotation_q,
-            rotation=self._rotation,
+            rotation=self._rotation_matrix,
             corner_forces=self._corner,
             forces=self.force,
             dtype=self.dtype,
@@ -63,6 +66,7 @@ class FemStep:
             plastic=self.plastic,
             fracture=self.fracture,
             scatter=scatter,
+            store_rotation=store_rotation,
             device=self.device,
         )
 
@@ -153,9 +157,9 @@ class FemStep:
             return
         self.loads_into_force(self._force_time)
         if self.device.is_cpu:
-            self.element_forces(self._dt, scatter=True)
+            self.element_forces(self._dt, scatter=True, store_rotation=False)
         else:
-            self.element_forces(self._dt)
+            self.element_forces(self._dt, store_rotation=False)
             self.add_element_forces()
 
     def end_step(self, dt: float) -> None:
@@ -185,11 +189,11 @@ class FemStep:
         self.loads_into_force(self._force_time)
         if self.device.is_cpu:
             # the element forces added onto the loads by the element pass, then the shared kick
-            self.element_forces(dt, scatter=True)
+            self.element_forces(dt, scatter=True, store_rotation=False)
             self.kin.end_step(self.force, self.inv_mass, dt)
         else:
             # compute_forces and the kick fused: one gather-and-kick launch
-            self.element_forces(dt)
+            self.element_forces(dt, store_rotation=False)
             self._gather_kick(dt)
             self.kin.end_clock_step()
         self.time += dt
