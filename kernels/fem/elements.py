@@ -349,12 +349,10 @@ def element_force_kernel(dtype, measure: int, plastic: bool, fracture: bool, sto
     ):
         e = wp.tid()
         t = tets[e]
-        dmi = dm_inv[e]
+        # Dm^-1 and the Lame constants are read where they are used, so that fewer values live across the rotation
         g = displacement_gradient(
-            displacements[t[0]], displacements[t[1]], displacements[t[2]], displacements[t[3]], dmi
+            displacements[t[0]], displacements[t[1]], displacements[t[2]], displacements[t[3]], dm_inv[e]
         )
-        lam = lame[e][0]
-        mu = lame[e][1]
         r = wp.identity(3, dtype)
         if wp.static(measure == MEASURE_COROTATED):
             r, q = rotation_iterative(wp.identity(3, dtype) + g, rotation_q[e])
@@ -369,7 +367,8 @@ def element_force_kernel(dtype, measure: int, plastic: bool, fracture: bool, sto
             ep = plastic_update(eps, plastic_strain[e], pp[0], wp.min(pp[1] * dt, dtype(1.0)), pp[2])
             plastic_strain[e] = ep
             eps = eps - ep
-        sigma = hooke(eps, lam, mu)
+        dmi = dm_inv[e]
+        sigma = hooke(eps, lame[e][0], lame[e][1])
         if wp.static(fracture):
             # Samuelson's bound max eig <= mean + sqrt(2/3) |deviator| spares the eigen-decomposition when no
             # principal stress can exceed the strength
