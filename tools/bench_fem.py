@@ -7,14 +7,24 @@ k = 13), clamped at x = 0 and sagging under gravity (E = 1 MPa, nu = 0.3, rho = 
 - pdsim implicit (backward Euler, corotated stiffness, CG) at 10 x that step, with the assembled and the matrix-free
   stiffness (CG iterations per step reported);
 - Newton's tetrahedral solvers on the same mesh and step when ``newton`` is installed: SolverSemiImplicit (stable
-  Neo-Hookean, triangle contact off) and SolverXPBD (2 iterations).
+  Neo-Hookean, triangle contact off) and SolverXPBD (2 iterations). Newton's particle-particle contact is off (its
+  hash grid set to None, as Newton's SolverSemiImplicit documents, and for SolverXPBD the largest particle radius
+  to 0): with it on, every vertex within two particle radii
+  of another repels it (at Newton's default radius of 0.1 m every vertex of this 0.042 m mesh does, and the body flies
+  apart: metres of displacement in 0.2 s), which is neither the physics pdsim runs here nor a fair cost.
+  ``--newton-particle-radius R`` times it with the contact on at radius R [m] instead (0.1: the earlier set-up).
 
 Element updates per second = element count x steps / seconds (an implicit step counts once, whatever its CG
-iterations). Warm-up steps (kernel loads included) are never timed.
+iterations). Warm-up steps (kernel loads included) are never timed. The headline pair, pdsim's explicit corotated
+step and Newton's SolverSemiImplicit, runs in alternating blocks (``--repeats``, default 5) of the same steps on the
+same mesh in one process; each figure is the median block, and the ratio is that of the medians (the per-block ratios'
+range printed beside it). The largest displacement of each at the end shows that both ran the same motion.
 
     python tools/bench_fem.py                      # both sizes, human-readable
     python tools/bench_fem.py --k 6 --json         # one size, one JSON line
     python tools/bench_fem.py --cantilever         # also the cantilever convergence table (float64 static solves)
+    python tools/bench_fem.py --k 6 --newton-particle-radius 0.1   # the earlier set-up: Newton's particle contact on
+    python tools/bench_fem.py --k 6 --pair-only --profile          # the pair, and where each step's time goes
 """
 
 from __future__ import annotations
@@ -50,12 +60,29 @@ def _clamped(mesh):
     return mesh.vertices[:, 0] <= 1.0e-9
 
 
-def _time_pdsim(mesh, *, integrator, measure, device, steps, warmup, stiffness="assembled"):
+def _pdsim_solver(mesh, *, integrator, measure, device, stiffness="assembled"):
+    """(solver, dt) of the bench box: pdsim's SolverFem, clamped at x = 0, under gravity, at its automatic step (10 x
+    that step for the implicit integrator)."""
     body = FemBody(mesh, MAT, measure=measure, integrator=integrator)
     body.fix(pdsim.BoxRegion(lo=(-1, -1, -1), hi=(1e-9, 1, 1)))
     context = SolverContext(device=device, gravity=GRAVITY, origin=scene_origin([body.bounds()]))
     solver = SolverFem([body], context, stiffness=stiffness)
     dt = solver.explicit_time_step() * (10.0 if integrator == "implicit" else 1.0)
+    return solver, dt
+
+
+def _rates(mesh, seconds, steps, dt) -> dict:
+    return {
+        "seconds": seconds,
+        "steps": steps,
+        "dt": dt,
+        "ms_per_step": 1e3 * seconds / steps,
+        "element_updates_per_s": mesh.element_count * steps / seconds,
+    }
+
+
+def _time_pdsim(mesh, *, integrator, measure, device, steps, warmup, stiffness="assembled"):
+    solver, dt = _pdsim_solver(mesh, integrator=integrator, measure=measure, device=device, stiffness=stiffness)
     solver.simulate(dt, warmup)
     wp.synchronize_device(solver.device)
     iterations = 0
@@ -65,17 +92,10 @@ def _time_pdsim(mesh, *, integrator, measure, device, steps, warmup, stiffness="
         if integrator == "implicit":
             iterations += solver.cg_reports[-1].iterations
     wp.synchronize_device(solver.device)
-    seconds = time.perf_counter() - t0
-    out = {
-        "seconds": seconds,
-        "steps": steps,
-        "dt": dt,
-        "ms_per_step": 1e3 * seconds / steps,
-        "element_updates_per_s": mesh.element_count * steps / seconds,
-    }
+    out = _rates(mesh, time.perf_counter() - t0, steps, dt)
     if integrator == "implicit":
         out["cg_iterations_per_step"] = iterations / steps
-        out["ms_per_cg_iteration"] = 1e3 * seconds / max(iterations, 1)
+        out["ms_per_cg_iteration"] = 1e3 * out["seconds"] / max(iterations, 1)
     return out
 
 
@@ -104,45 +124,167 @@ def newton_soft_mesh(newton, mesh, material, clamped, **options):
     return builder
 
 
-def _time_newton(mesh, *, solver_name, device, steps, warmup, dt):
-    """Newton's tetrahedral solver on the same mesh; None when newton is not installed."""
+def _newton_stepper(mesh, *, solver_name, device, dt, particle_radius=None):
+    """(step(n), displacements()) of Newton's solver ``solver_name`` on the bench box at step ``dt`` [s]; None when
+    newton is not installed. Particle-particle contact is off unless ``particle_radius`` [m] is given (see the module
+    docstring)."""
     try:
         import newton
     except ImportError:
         return None
-    builder = newton_soft_mesh(newton, mesh, MAT, np.flatnonzero(_clamped(mesh)))
+    options = {} if particle_radius is None else {"particle_radius": float(particle_radius)}
+    builder = newton_soft_mesh(newton, mesh, MAT, np.flatnonzero(_clamped(mesh)), **options)
     model = builder.finalize(device=device)
     model.set_gravity(GRAVITY)
+    if particle_radius is None:
+        # no particle-particle contact: SolverSemiImplicit skips it without a hash grid (its documented switch),
+        # SolverXPBD without a particle radius
+        model.particle_grid = None
+        model.particle_max_radius = 0.0
     if solver_name == "SolverSemiImplicit":
         solver = newton.solvers.SolverSemiImplicit(model, enable_tri_contact=False)
     else:
         solver = newton.solvers.SolverXPBD(model, iterations=2)
-    s0, s1 = model.state(), model.state()
+    states = [model.state(), model.state()]
     control = model.control()
 
-    def run(n):
-        nonlocal s0, s1
+    def step(n):
+        s0, s1 = states
         for _ in range(n):
             s0.clear_forces()
             solver.step(s0, s1, control, None, dt)
             s0, s1 = s1, s0
+        states[:] = [s0, s1]
+        wp.synchronize_device(device)
 
-    run(warmup)
-    wp.synchronize_device(device)
+    def displacements():
+        return states[0].particle_q.numpy().astype(np.float64) - mesh.vertices
+
+    return step, displacements, getattr(newton, "__version__", "?")
+
+
+def _time_newton(mesh, *, solver_name, device, steps, warmup, dt, particle_radius=None):
+    """Newton's tetrahedral solver on the same mesh; None when newton is not installed."""
+    stepper = _newton_stepper(mesh, solver_name=solver_name, device=device, dt=dt, particle_radius=particle_radius)
+    if stepper is None:
+        return None
+    step, displacements, version = stepper
+    step(warmup)
     t0 = time.perf_counter()
-    run(steps)
-    wp.synchronize_device(device)
-    seconds = time.perf_counter() - t0
-    q = s0.particle_q.numpy()
+    step(steps)
+    out = _rates(mesh, time.perf_counter() - t0, steps, dt)
+    u = displacements()
+    out.update(finite=bool(np.isfinite(u).all()), max_displacement=float(np.abs(u).max()), newton_version=version)
+    return out
+
+
+def _alternated(mesh, *, device, steps, warmup, repeats, particle_radius=None):
+    """pdsim's explicit corotated step against Newton's SolverSemiImplicit, in ``repeats`` alternating blocks of
+    ``steps`` steps each at the same dt (after ``warmup`` steps each, untimed): per code the median block [s] and
+    every block's time, the ratio of the medians (pdsim's element updates per second over Newton's), the range of
+    the per-block ratios, the same ratio in process CPU time (both codes run their CPU kernels on this thread, so it
+    leaves out the time the process waits for a core on a loaded machine), the largest displacement [m] of each at
+    the end. None without newton."""
+    solver, dt = _pdsim_solver(mesh, integrator="explicit", measure="corotated", device=device)
+    stepper = _newton_stepper(
+        mesh, solver_name="SolverSemiImplicit", device=device, dt=dt, particle_radius=particle_radius
+    )
+    if stepper is None:
+        return None
+    newton_step, newton_u, version = stepper
+
+    def pdsim_step(n):
+        for _ in range(n):
+            solver.step(dt)
+        wp.synchronize_device(solver.device)
+
+    pdsim_step(warmup)
+    newton_step(warmup)
+    blocks = {"pdsim": [], "newton": []}
+    cpu = {"pdsim": [], "newton": []}
+    for _ in range(repeats):
+        for name, run in (("pdsim", pdsim_step), ("newton", newton_step)):
+            c0, t0 = time.process_time(), time.perf_counter()
+            run(steps)
+            blocks[name].append(time.perf_counter() - t0)
+            cpu[name].append(time.process_time() - c0)
+    med = {name: float(np.median(b)) for name, b in blocks.items()}
+    med_cpu = {name: float(np.median(b)) for name, b in cpu.items()}
+    pair = np.asarray(blocks["newton"]) / np.asarray(blocks["pdsim"])
+    u_pdsim = solver.displacements()
     return {
-        "seconds": seconds,
-        "steps": steps,
+        "steps_per_block": steps,
+        "repeats": repeats,
         "dt": dt,
-        "ms_per_step": 1e3 * seconds / steps,
-        "element_updates_per_s": mesh.element_count * steps / seconds,
-        "finite": bool(np.isfinite(q).all()),
-        "newton_version": getattr(newton, "__version__", "?"),
+        "pdsim": _rates(mesh, med["pdsim"], steps, dt)
+        | {"blocks_s": blocks["pdsim"], "cpu_ms_per_step": 1e3 * med_cpu["pdsim"] / steps},
+        "newton": _rates(mesh, med["newton"], steps, dt)
+        | {"blocks_s": blocks["newton"], "cpu_ms_per_step": 1e3 * med_cpu["newton"] / steps},
+        "ratio": med["newton"] / med["pdsim"],
+        "ratio_range": [float(pair.min()), float(pair.max())],
+        "ratio_cpu": med_cpu["newton"] / med_cpu["pdsim"],
+        "max_displacement": {
+            "pdsim": float(np.abs(u_pdsim).max()),
+            "newton": float(np.abs(newton_u()).max()),
+        },
+        "newton_particle_radius": particle_radius,
+        "newton_version": version,
     }
+
+
+def _timed(table: dict, name: str, fn):
+    """fn wrapped to add its wall time [s] to table[name]."""
+
+    def wrapper(*args, **kwargs):
+        t0 = time.perf_counter()
+        out = fn(*args, **kwargs)
+        table[name] = table.get(name, 0.0) + time.perf_counter() - t0
+        return out
+
+    return wrapper
+
+
+def step_profile(mesh, *, device, steps, warmup):
+    """Where one explicit step's time goes [ms per step], each part timed around the real calls of ``steps`` steps:
+    pdsim's corotated step (begin_step: velocity kicks, clock, conditions, kick-drift, colliders; loads; the element
+    pass; the kick), the element pass of the linear measure (the same pass without the rotation), and Newton's
+    SolverSemiImplicit per kernel launch (its particle contact off as in the headline pair; None without newton)."""
+    out = {}
+    for measure in ("corotated", "linear"):
+        solver, dt = _pdsim_solver(mesh, integrator="explicit", measure=measure, device=device)
+        solver.simulate(dt, warmup)
+        parts: dict = {}
+        solver.begin_step = _timed(parts, "begin_step", solver.begin_step)
+        solver.loads_into_force = _timed(parts, "loads", solver.loads_into_force)
+        solver.element_forces = _timed(parts, "element_pass", solver.element_forces)
+        solver.kin.end_step = _timed(parts, "kick", solver.kin.end_step)
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            solver.step(dt)
+        wp.synchronize_device(solver.device)
+        parts["step"] = time.perf_counter() - t0
+        out[f"pdsim_{measure}"] = {name: 1e3 * s / steps for name, s in parts.items()}
+    stepper = _newton_stepper(mesh, solver_name="SolverSemiImplicit", device=device, dt=dt)
+    if stepper is None:
+        out["newton"] = None
+        return out
+    step, _, _ = stepper
+    step(warmup)
+    parts = {}
+    launch = wp.launch
+
+    def timed_launch(kernel, *args, **kwargs):
+        return _timed(parts, kernel.key, launch)(kernel, *args, **kwargs)
+
+    wp.launch = timed_launch
+    try:
+        t0 = time.perf_counter()
+        step(steps)
+        parts["step"] = time.perf_counter() - t0
+    finally:
+        wp.launch = launch
+    out["newton"] = {name: 1e3 * s / steps for name, s in parts.items()}
+    return out
 
 
 def cantilever_table(cells=(2, 4, 8)):
@@ -192,7 +334,16 @@ def main(argv=None) -> int:
     p.add_argument("--explicit-steps", type=int, default=None, help="timed explicit steps (default 5e6 / elements)")
     p.add_argument("--implicit-steps", type=int, default=None, help="timed implicit steps (default 5e5 / elements)")
     p.add_argument("--warmup", type=int, default=5)
+    p.add_argument("--repeats", type=int, default=5, help="alternating blocks of pdsim corotated and Newton")
     p.add_argument("--no-newton", action="store_true", help="skip the Newton peer")
+    p.add_argument(
+        "--newton-particle-radius",
+        type=float,
+        default=None,
+        help="time Newton with its particle-particle contact on at this radius [m] (default: contact off)",
+    )
+    p.add_argument("--pair-only", action="store_true", help="only the alternated pdsim corotated / Newton pair")
+    p.add_argument("--profile", action="store_true", help="also where one explicit step's time goes (both codes)")
     p.add_argument("--cantilever", action="store_true", help="also print the cantilever convergence table")
     p.add_argument("--json", action="store_true", help="one JSON line per size")
     args = p.parse_args(argv)
@@ -206,6 +357,27 @@ def main(argv=None) -> int:
         n_exp = args.explicit_steps or max(10, int(5.0e6 / m))
         n_imp = args.implicit_steps or max(3, int(5.0e5 / m))
         row = {"k": k, "elements": m, "vertices": mesh.vertex_count, "device": args.device}
+        row["load_average_before"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
+        if not args.no_newton:
+            alt = _alternated(
+                mesh,
+                device=args.device,
+                steps=n_exp,
+                warmup=args.warmup,
+                repeats=args.repeats,
+                particle_radius=args.newton_particle_radius,
+            )
+            row["alternated"] = alt if alt is not None else "newton not installed"
+        if args.profile:
+            row["profile"] = step_profile(mesh, device=args.device, steps=n_exp, warmup=args.warmup)
+        if args.pair_only:
+            row.update(machine_info(args.device))
+            results.append(row)
+            if args.json:
+                print(json.dumps(row))
+            else:
+                _print_row(row)
+            continue
         row["explicit_corotated"] = _time_pdsim(
             mesh, integrator="explicit", measure="corotated", device=args.device, steps=n_exp, warmup=args.warmup
         )
@@ -225,7 +397,15 @@ def main(argv=None) -> int:
         if not args.no_newton:
             dt = row["explicit_corotated"]["dt"]
             for name in ("SolverSemiImplicit", "SolverXPBD"):
-                r = _time_newton(mesh, solver_name=name, device=args.device, steps=n_exp, warmup=args.warmup, dt=dt)
+                r = _time_newton(
+                    mesh,
+                    solver_name=name,
+                    device=args.device,
+                    steps=n_exp,
+                    warmup=args.warmup,
+                    dt=dt,
+                    particle_radius=args.newton_particle_radius,
+                )
                 if r is None:
                     row["newton"] = "not installed"
                     break
@@ -252,6 +432,25 @@ def main(argv=None) -> int:
 
 def _print_row(row):
     print(f"k={row['k']}: {row['elements']} elements, {row['vertices']} vertices, device {row['device']}")
+    alt = row.get("alternated")
+    if isinstance(alt, dict):
+        contact = "off" if alt["newton_particle_radius"] is None else f"on, radius {alt['newton_particle_radius']} m"
+        print(
+            f"  alternated, {alt['repeats']} blocks of {alt['steps_per_block']} steps each (Newton particle contact "
+            f"{contact}):"
+        )
+        for key, label in (("pdsim", "pdsim explicit corotated"), ("newton", "Newton SolverSemiImplicit")):
+            r = alt[key]
+            print(
+                f"    {label:32s} {r['ms_per_step']:9.3f} ms/step {r['element_updates_per_s'] / 1e6:8.2f} M elem/s"
+                f"  (median block; CPU {r['cpu_ms_per_step']:.3f} ms/step; "
+                f"max |u| {alt['max_displacement'][key]:.3g} m)"
+            )
+        lo, hi = alt["ratio_range"]
+        print(
+            f"    pdsim / Newton per element update: {alt['ratio']:.2f}x (blocks {lo:.2f}-{hi:.2f}x), "
+            f"in CPU time {alt['ratio_cpu']:.2f}x"
+        )
     for key, label in (
         ("explicit_corotated", "pdsim explicit corotated"),
         ("explicit_linear", "pdsim explicit linear"),
@@ -272,11 +471,18 @@ def _print_row(row):
             f"  {label:34s} {r['ms_per_step']:9.3f} ms/step {r['element_updates_per_s'] / 1e6:8.2f} M elem/s"
             f"  (dt {r['dt']:.3g} s, {r['steps']} steps){extra}"
         )
+    prof = row.get("profile")
+    if prof:
+        print("  where one explicit step's time goes [ms per step]:")
+        for key in ("pdsim_corotated", "pdsim_linear", "newton"):
+            if prof.get(key):
+                parts = ", ".join(f"{name} {ms:.3f}" for name, ms in sorted(prof[key].items(), key=lambda kv: -kv[1]))
+                print(f"    {key}: {parts}")
     if row.get("newton") == "not installed":
         print("  Newton: not installed (pip install newton)")
     print(
-        f"  {row['cpu_model']}, {row['cpu_cores']} cores, load {row['load_average']}, Warp {row['warp_version']}, "
-        f"{row['date']}"
+        f"  {row['cpu_model']}, {row['cpu_cores']} cores, load {row['load_average_before']:.2f} before, "
+        f"{row['load_average']:.2f} after, Warp {row['warp_version']}, {row['date']}"
     )
 
 

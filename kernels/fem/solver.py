@@ -3,8 +3,9 @@ implicit backward-Euler right-hand side and update, and the quasi-static residua
 in kernels/fem/cg.py.
 
 Element kernels (kernels/fem/elements.py) write one vector per element corner ("slot" 4 e + a); the vertex kernels
-gather them over a CSR incidence list (``vertex_offsets``, ``vertex_slots``): one thread per vertex, no atomics, so the
-CPU and the GPU sum in the same order.
+gather them over a CSR incidence list (``vertex_offsets``, ``vertex_slots``, each vertex's slots in element order):
+one thread per vertex, no atomics. The explicit step on the CPU skips the corners: its element pass adds them onto the
+vertices itself, one thread walking the elements in order, which is the same sum in the same order (bit for bit).
 
 State: displacements u [m], velocities v [m/s], accelerations a [m/s^2] of the shared kinematics
 (kernels/integration.py, pdsim/kinematics.py); the force array starts each evaluation holding the loads [N]
@@ -13,6 +14,7 @@ State: displacements u [m], velocities v [m/s], accelerations a [m/s^2] of the s
 Explicit step (velocity Verlet, kernels/integration.py's ``kick_drift``, then):
     (element forces at the new displacements)
     gather_kick:  f = loads + sum of corner forces ; a = f / m + g - c v ; v <- v + dt/2 a   (free axes; kick_point)
+    (on the CPU: the element pass adds the corner forces onto the loads, then kernels/integration.py's ``kick``)
 
 Implicit step (linearly implicit backward Euler with the corotated stiffness, rotations frozen at u_n):
     ((1 + dt c) M + dt^2 K_R) v_{n+1} = M v_n + dt (f(u_n) + f_ext + M g),   u_{n+1} = u_n + dt v_{n+1}

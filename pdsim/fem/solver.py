@@ -28,9 +28,10 @@ and delegates to
 
 Integrators:
 
-- explicit: velocity Verlet (kernels/integration.py's kick-drift, then a fused gather of the element forces and the
-  shared second half kick) with lumped masses m_i = sum over the vertex's elements of rho V / 4. The stable step is
-  dt_stable = 0.5 h_min / c_p with h_min the smallest element height (3 V / largest face area) and
+- explicit: velocity Verlet (kernels/integration.py's kick-drift, then the element forces and the shared second half
+  kick: on the CPU the element pass adds its forces onto the vertices in element order, on a GPU the corner forces
+  are gathered per vertex fused with the kick) with lumped masses m_i = sum over the vertex's elements of rho V / 4.
+  The stable step is dt_stable = 0.5 h_min / c_p with h_min the smallest element height (3 V / largest face area) and
   c_p = sqrt((lambda + 2 mu) / rho) the dilatational wave speed. The factor 0.5 keeps the step below the
   element-by-element bound 2 / sqrt(max eig(M_e^-1 K_e)), a lower bound of the true critical step (largest eigenvalue
   of M^-1 K; tests/test_fem_dynamics.py checks the margin). :meth:`SolverFem.step` refuses a larger step
@@ -292,7 +293,8 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
         m = model.element_count
         self.element_count = m
         self._corner = wp.zeros(4 * m, dtype=self.vec3, device=dev)
-        self._rotation = wp.array(np.tile(np.eye(3), (m, 1, 1)).astype(f), dtype=self.mat33, device=dev)
+        self._rotation_matrix = wp.array(np.tile(np.eye(3), (m, 1, 1)).astype(f), dtype=self.mat33, device=dev)
+        self._rotation_stale = False  # the explicit step updates the quaternions only (see _rotation)
         self._rotation_q = wp.array(
             np.tile([0.0, 0.0, 0.0, 1.0], (m, 1)).astype(f), dtype=wp.types.quaternion(self.dtype), device=dev
         )
@@ -327,6 +329,17 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
         self.crack_area = 0.0
         self.fracture_dissipated = 0.0
         self._build_vertex_data(bodies)
+
+    @property
+    def _rotation(self):
+        """Each element's rotation matrix (Warp mat33, the last force evaluation's), formed from its quaternion first
+        where the explicit step left it out of date."""
+        if self._rotation_stale:
+            ke.rotation_matrices(
+                rotation_q=self._rotation_q, rotation=self._rotation_matrix, dtype=self.dtype, device=self.device
+            )
+            self._rotation_stale = False
+        return self._rotation_matrix
 
     @property
     def _dm_inv(self):

@@ -36,10 +36,15 @@ class FemStep:
         return self.model.explicit_dt
 
     # -- the operators of the implicit step and the static solve (pdsim/fem/operators.py) ---------------------------
-    def element_forces(self, dt: float, displacements=None) -> None:
+    def element_forces(self, dt: float, displacements=None, scatter: bool = False, store_rotation: bool = True) -> None:
         """Corner forces [N] of every element at ``displacements`` (Warp [m]; default: the current ones), with the
-        plastic update of step dt [s]; fracture's over-strength count starts from zero."""
+        plastic update of step dt [s]; fracture's over-strength count starts from zero. ``scatter`` (CPU only): added
+        onto ``force`` per vertex in element order instead of written per corner (the same sums, in the same order,
+        as the per-vertex gathers over the incidence list, whose slots run in element order). Without
+        ``store_rotation`` (the explicit step, whose forces read the quaternions only) the rotation matrices are
+        formed from the quaternions when next read (``_rotation``)."""
         m = self.model
+        self._rotation_stale = self._rotated and not store_rotation
         if self.fracture:
             self._over_count.zero_()
         ke.element_forces(
@@ -53,12 +58,15 @@ class FemStep:
             principal=self._principal,
             over_count=self._over_count,
             rotation_q=self._rotation_q,
-            rotation=self._rotation,
+            rotation=self._rotation_matrix,
             corner_forces=self._corner,
+            forces=self.force,
             dtype=self.dtype,
             measure=self._measure_id,
             plastic=self.plastic,
             fracture=self.fracture,
+            scatter=scatter,
+            store_rotation=store_rotation,
             device=self.device,
         )
 
@@ -147,9 +155,12 @@ class FemStep:
         the end of the step into ``force``. Implicit: nothing (``force`` holds the forces the step used)."""
         if self.integrator == "implicit":
             return
-        self.element_forces(self._dt)
         self.loads_into_force(self._force_time)
-        self.add_element_forces()
+        if self.device.is_cpu:
+            self.element_forces(self._dt, scatter=True, store_rotation=False)
+        else:
+            self.element_forces(self._dt, store_rotation=False)
+            self.add_element_forces()
 
     def end_step(self, dt: float) -> None:
         """Explicit: the shared second half kick. Both: time advances, then fracture splits over-stressed elements."""
@@ -175,11 +186,16 @@ class FemStep:
                 "dt", dt, f"(0, {limit:.6g}] s: the explicit stable limit 0.5 h_min / c_p (simulate() substeps)"
             )
         self.begin_step(dt)
-        # compute_forces and the kick fused: one gather-and-kick launch
-        self.element_forces(dt)
         self.loads_into_force(self._force_time)
-        self._gather_kick(dt)
-        self.kin.end_clock_step()
+        if self.device.is_cpu:
+            # the element forces added onto the loads by the element pass, then the shared kick
+            self.element_forces(dt, scatter=True, store_rotation=False)
+            self.kin.end_step(self.force, self.inv_mass, dt)
+        else:
+            # compute_forces and the kick fused: one gather-and-kick launch
+            self.element_forces(dt, store_rotation=False)
+            self._gather_kick(dt)
+            self.kin.end_clock_step()
         self.time += dt
         self.step_count += 1
         if self.fracture:
