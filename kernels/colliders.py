@@ -71,6 +71,14 @@ def face_point_mass(wa: float, wb: float, wc: float, ma: float, mb: float, mc: f
 
 
 @wp.func
+def contact_step_factor(dt: float, step: float):
+    """(dt / max(dt, step))^2: the factor that turns a penalty rate (omega / dt)^2 tied to the run's step dt [s] into
+    one tied to the longer ``step`` [s] of the elements around a contact (never stiffer than dt allows)."""
+    r = dt / wp.max(dt, step)
+    return r * r
+
+
+@wp.func
 def penalty_force(
     n: wp.vec3, depth: float, v_rel: wp.vec3, k: float, m_red: float, damping_ratio: float, friction: float
 ):

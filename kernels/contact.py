@@ -59,7 +59,14 @@ or crack) take part, through a grouped hash grid (see make_particle_contact_kern
 
 import warp as wp
 
-from .colliders import face_point_mass, mesh_contact_point, pair_damping_ratio, pair_friction, penalty_force
+from .colliders import (
+    contact_step_factor,
+    face_point_mass,
+    mesh_contact_point,
+    pair_damping_ratio,
+    pair_friction,
+    penalty_force,
+)
 from .integration import PARTICLE_FREE
 from .launch import launch
 from .neighbors import same_body_count
@@ -543,6 +550,8 @@ def particle_mesh_contact(
     p_work: wp.array(dtype=wp.float64),
     m_work: wp.array(dtype=wp.float64),
     work_slot: int,
+    m_step: wp.array(dtype=float),
+    step_safety: float,
 ):
     """Contact between the particles of one method and the closed surface mesh of another (cross-method contact).
 
@@ -552,7 +561,9 @@ def particle_mesh_contact(
     -F in proportion to their barycentric weights, so the pair's momentum is conserved exactly. The penalty
     k = stiffness_rate m_red uses the pair's reduced mass m_red, with stiffness_rate = (omega dt / dt)^2
     (pdsim/contact.py CONTACT_OMEGA_DT = 0.15): even tens of simultaneous contacts on one point stay inside velocity
-    Verlet's stability limit (omega dt < 2).
+    Verlet's stability limit (omega dt < 2). It is sized on the mesh's elements where they take a longer step
+    than the run: times (dt / max(dt, T))^2, T = ``step_safety`` times the largest ``m_step`` of the face's vertices
+    (each vertex's stable step for the elements around it: SolverFem.contact_steps).
     ``p_to_force`` and the mesh's forces: multiply a force [N] into each solver's force unit (1 / V for a force
     density, 1 for nodal forces); ``m_points`` maps the mesh's vertices to its solver's points. The pair's damping
     ratio and friction combine the particle's side (p_damping_ratio[i], p_friction[i], by solver point; NaN: none)
@@ -581,7 +592,8 @@ def particle_mesh_contact(
     m_red = mp * m_surface / (mp + m_surface)
     zeta = pair_damping_ratio(p_damping_ratio[i], m_damping_ratio[a], damping_ratio)
     mu = pair_friction(p_friction[i], m_friction[a], friction)
-    force = penalty_force(n, r - sdf, p_v[i] - v_surface, stiffness_rate * m_red, m_red, zeta, mu)
+    rate = stiffness_rate * contact_step_factor(dt, step_safety * wp.max(m_step[a], wp.max(m_step[b], m_step[c])))
+    force = penalty_force(n, r - sdf, p_v[i] - v_surface, rate * m_red, m_red, zeta, mu)
     wp.atomic_add(p_force, i, force * p_to_force[i])
     wp.atomic_sub(m_force, a, force * wa)
     wp.atomic_sub(m_force, b, force * wb)

@@ -24,7 +24,7 @@ gained energy that way, tools/stress.py).
 
 import warp as wp
 
-from .colliders import face_point_mass, pair_damping_ratio, pair_friction, penalty_force
+from .colliders import contact_step_factor, face_point_mass, pair_damping_ratio, pair_friction, penalty_force
 from .integration import PARTICLE_FREE
 from .launch import launch
 from .watchdog import WATCH_COLLIDERS
@@ -106,12 +106,18 @@ def vertex_face_contact(
     m_kind: wp.array(dtype=wp.int32),
     v_kick: wp.array(dtype=wp.vec3),
     m_kick: wp.array(dtype=wp.vec3),
+    v_step: wp.array(dtype=float),
+    m_step: wp.array(dtype=float),
+    step_safety: float,
 ):
     """Contact of surface vertex q (point v_points[q] of its solver, piece v_label[q]) with the nearest face of
     another piece (m_label[f] != v_label[q]) of the surface mesh ``mesh`` (current vertex positions m_x, triangles
     m_faces into them, solver points m_points); see the module docstring. Forces [N] are multiplied by v_to_force /
-    m_to_force into each solver's force unit. The penalty k = stiffness_rate m_red (m_red the reduced mass of the
-    vertex and the face point, colliders.face_point_mass); its damping ratio and friction combine the vertex's
+    m_to_force into each solver's force unit. The penalty k = stiffness_rate m_red (dt / max(dt, T))^2 (m_red the
+    reduced mass of the vertex and the face point, colliders.face_point_mass; stiffness_rate = (CONTACT_OMEGA_DT /
+    dt)^2; T = step_safety times the largest of v_step[i] and the face's m_step, each point's stable step for the
+    elements around it: the pair oscillates at omega T = CONTACT_OMEGA_DT, as stiff as those elements bear); its
+    damping ratio and friction combine the vertex's
     side (v_damping_ratio[i], v_friction[i], by solver point; NaN: none) with the face's (its first vertex's), as
     kernels/contact.py particle_mesh_contact. Work: the positive part of each side's work in the step, as
     kernels/contact.py particle_mesh_contact, into slot ``work_slot`` of v_work and m_work. Floor (module docstring):
@@ -188,7 +194,10 @@ def vertex_face_contact(
     m_red = mv * m_surface / (mv + m_surface)
     zeta = pair_damping_ratio(v_damping_ratio[i], m_damping_ratio[ia], damping_ratio)
     mu = pair_friction(v_friction[i], m_friction[ia], friction)
-    force = penalty_force(n, skin - s, v_v[i] - v_surface, stiffness_rate * m_red, m_red, zeta, mu)
+    rate = stiffness_rate * contact_step_factor(
+        dt, step_safety * wp.max(wp.max(v_step[i], m_step[ia]), wp.max(m_step[ib], m_step[ic]))
+    )
+    force = penalty_force(n, skin - s, v_v[i] - v_surface, rate * m_red, m_red, zeta, mu)
     wp.atomic_add(v_force, i, force * v_to_force[i])
     wp.atomic_sub(m_force, ia, force * (best_w[0] * m_to_force[ia]))
     wp.atomic_sub(m_force, ib, force * (best_w[1] * m_to_force[ib]))

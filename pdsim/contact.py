@@ -560,9 +560,11 @@ class MethodContact:
     (the solvers' ``point_contact_values()``), combined per pair (combine_restitution, combine_friction); the
     ``damping_ratio`` / ``restitution`` and ``friction`` given here stand where neither side brings one.
 
-    The stiffness is tied to the step: k = m_red (CONTACT_OMEGA_DT / dt)^2 (a contact oscillates at omega dt = 0.15,
-    far inside velocity Verlet's limit of 2), so contact never needs a smaller step. The restitution e a user sets
-    gives the dashpot's damping ratio (damping_ratio_for_restitution).
+    The stiffness is tied to the step: k = m_red (CONTACT_OMEGA_DT / T)^2 (a contact oscillates at omega T = 0.15,
+    far inside velocity Verlet's limit of 2), so contact never needs a smaller step. T is the run's step dt, or where
+    the mesh's elements around the pair take a longer stable step, ``step_safety`` times that step (never less than
+    dt): a vertex's contact is as stiff as its elements bear, the same at any step the run takes. The restitution e a
+    user sets gives the dashpot's damping ratio (damping_ratio_for_restitution).
 
     The scene calls :meth:`apply` once per step, after every solver's ``compute_forces`` and before the kicks. The
     surface mesh is rebuilt when its topology version changes (fracture) and refitted to the current positions
@@ -577,6 +579,10 @@ class MethodContact:
         restitution: the normal restitution e in (0, 1] of a pair (sets damping_ratio).
         friction: Coulomb coefficient mu >= 0 between the surfaces (default 0).
         surfaces: contact between mesh surfaces (FEM-FEM and the pieces of a cracked FEM body); default True.
+        step_safety: the fraction of a mesh vertex's stable step (its smallest element's, ``contact_steps()`` of the
+            mesh solvers) the stiffness is sized on where that is longer than the run's step, in (0, 1]; default 0.7
+            (Scene.time_step_safety's default: a mesh of equal elements run at the automatic step gets the stiffness
+            of the run's step).
     """
 
     def __init__(
@@ -588,6 +594,7 @@ class MethodContact:
         restitution: float | None = None,
         friction: float = 0.0,
         surfaces: bool = True,
+        step_safety: float = 0.7,
     ):
         self.particle_solvers = list(particle_solvers)
         self.mesh_solvers = list(mesh_solvers)
@@ -600,6 +607,7 @@ class MethodContact:
         )
         self.friction = check_range("friction", friction, 0.0, None, lo_open=False)
         self.surfaces = bool(surfaces)
+        self.step_safety = check_range("step_safety", step_safety, 0.0, 1.0, hi_open=False)
         self._meshes = {}  # id(solver) -> [version, points, faces, positions, wp.Mesh]
         self._to_force = {}  # id(solver) -> 1 / force_to_newton per point (Warp array)
         self._scratch = {}  # id(solver) -> work account of a solver without a watchdog
@@ -684,6 +692,8 @@ class MethodContact:
                     dt=dt,
                     p_work=self._work_account(ps),
                     m_work=m_work,
+                    m_step=ms.contact_steps(),
+                    step_safety=self.step_safety,
                     device=ps.kin.u.device,
                 )
 
@@ -753,6 +763,9 @@ class MethodContact:
             m_kind=b.kin.point_kind,
             v_kick=self._floor(a),
             m_kick=self._floor(b),
+            v_step=a.contact_steps(),
+            m_step=b.contact_steps(),
+            step_safety=self.step_safety,
             device=a.kin.u.device,
         )
 

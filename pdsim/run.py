@@ -531,7 +531,8 @@ def advance_checked(scene, solvers, dt, substeps, coupling, limit, *, first=0):
 def method_contact(scene, solvers):
     """Contact of mesh methods (pdsim.contact.MethodContact): on when contact is not switched off and the scene holds
     a mesh method with a particle method, or mesh surfaces that can meet (several FEM bodies, or one that cracks);
-    None otherwise. The scene's contact options ``restitution`` and ``friction`` (Scene.enable_contact) set its law."""
+    None otherwise. The scene's contact options ``restitution`` and ``friction`` (Scene.enable_contact) set its law,
+    and its ``time_step_safety`` the fraction of the elements' stable steps the contact's stiffness is sized on."""
     if scene.contact is False:
         return None
     particles = [s for s in solvers if callable(getattr(s, "contact_particles", None))]
@@ -541,7 +542,7 @@ def method_contact(scene, solvers):
         return None
     options = scene.contact if isinstance(scene.contact, dict) else {}
     law = {key: options[key] for key in ("restitution", "friction") if key in options}
-    return MethodContact(particles, meshes, surfaces=surfaces, **law)
+    return MethodContact(particles, meshes, surfaces=surfaces, step_safety=scene.time_step_safety, **law)
 
 
 def frame_graphs(solvers, graph_capture):

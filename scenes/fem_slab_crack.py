@@ -33,17 +33,19 @@ def slab_with_hole(size=(1.0, 0.05, 0.5), radius=0.08, center=(0.0, 0.0, 0.6)) -
 PREVIEW = {"edge_length": 0.05, "frames": 24}  # tools/make_gallery.py and tests/test_gallery.py: a quick run
 
 
-def build_scene(*, edge_length: float = 0.03, frames: int = 48) -> pdsim.Scene:
+def build_scene(*, edge_length: float = 0.03, frames: int = 48, mesh=None) -> pdsim.Scene:
+    """The scene; ``mesh``: a ready TetMesh of the slab (tools/fem_slab_meshes.py) instead of fTetWild's at
+    ``edge_length``."""
     scene = pdsim.Scene(fps=24, frames=frames, up_axis="Z", gravity=(0.0, 0.0, 0.0), name="fem_slab_crack")
     material = pdsim.Material(density=2000.0, youngs_modulus=2.0e6, poisson_ratio=0.25, name="brittle")
+    meshing = {"edge_length": edge_length, "mesh_cache": MESH_CACHE} if mesh is None else {}
     slab = FemBody(
-        slab_with_hole(),
+        slab_with_hole() if mesh is None else mesh,
         material,
-        edge_length=edge_length,
         measure="corotated",
         tensile_strength=3.0e4,  # [Pa]: a strain of about 1.5 %
         damping=2.0,
-        mesh_cache=MESH_CACHE,
+        **meshing,
     )
     slab.fix(pdsim.BoxRegion(lo=(-1.0, -1.0, -1.0), hi=(-0.49, 1.0, 2.0)))
     slab.set_velocity(pdsim.BoxRegion(lo=(0.49, -1.0, -1.0), hi=(1.0, 1.0, 2.0)), (0.05, 0.0, 0.0))

@@ -3,7 +3,9 @@ vertex_face_contact) is tied to the step through the pair's reduced mass: k = st
 contact oscillates at omega^2 = k (1 / m_point + 1 / m_face) = stiffness_rate, whatever the masses. The face point's
 mass is 1 / sum_j w_j^2 / m_j (kernels/colliders.py face_point_mass). With the barycentric average sum_j w_j m_j in
 its place, a light face vertex (the corner of a small element beside large ones, as fTetWild makes near curved
-surfaces) oscillated at hundreds of times the rate."""
+surfaces) oscillated at hundreds of times the rate. Where the elements around the pair take a longer stable step
+than the run, the rate is that step's (SolverFem.contact_steps: the step of a vertex's smallest element, not the
+mesh's smallest)."""
 
 from __future__ import annotations
 
@@ -82,6 +84,8 @@ def test_particle_against_a_face_oscillates_at_the_rate(face_masses):
         p_force=p_force,
         dt=1.0e-4,
         p_work=_zeros(8, wp.float64),
+        m_step=_arr(np.zeros(4), float),
+        step_safety=0.7,
         device="cpu",
         **face,
     )
@@ -91,9 +95,10 @@ def test_particle_against_a_face_oscillates_at_the_rate(face_masses):
     np.testing.assert_allclose(face["m_force"].numpy()[:, 2], -WEIGHTS * f[2], rtol=1e-5, atol=1e-9)
 
 
-def _vertex_face(face_masses, height: float, point_mass: float = 1.0):
-    """vertex_face_forces of one vertex at ``height`` [m] above the tetrahedron's top face: (force on the vertex,
-    forces on the face's vertices)."""
+def _vertex_face(face_masses, height: float, point_mass: float = 1.0, steps=(0.0, 0.0, 0.0, 0.0, 0.0)):
+    """vertex_face_forces of one vertex at ``height`` [m] above the tetrahedron's top face (step 1e-4 s), with the
+    points' element steps ``steps`` [s] (the vertex's, then the tetrahedron's four; 0: none longer than the run's) and
+    a step safety of 0.5: (force on the vertex, forces on the face's vertices)."""
     mesh, face = _face_side(face_masses)
     v_force = _zeros(1, wp.vec3)
     ksf.vertex_face_forces(
@@ -123,6 +128,9 @@ def _vertex_face(face_masses, height: float, point_mass: float = 1.0):
         m_kind=_arr(np.full(4, PARTICLE_FREE), wp.int32),
         v_kick=_zeros(1, wp.vec3),
         m_kick=_zeros(4, wp.vec3),
+        v_step=_arr([steps[0]], float),
+        m_step=_arr(steps[1:], float),
+        step_safety=0.5,
         device="cpu",
         **face,
     )
@@ -138,3 +146,40 @@ def test_vertex_against_a_face_of_another_piece_oscillates_at_the_rate(face_mass
     # the pair's frequency: omega dt of one contact stays the law's CONTACT_OMEGA_DT at any step
     inv = 1.0 / point_mass + float(np.sum(WEIGHTS**2 / face_masses))
     assert math.sqrt(f[2] / DEPTH * inv) == pytest.approx(math.sqrt(RATE), rel=1e-4)
+
+
+def test_the_stiffness_is_sized_on_the_longest_element_step_of_the_pair():
+    """Where the elements around the pair take a longer stable step T than the run's dt (1e-4 s), the penalty is
+    (dt / (0.5 T))^2 of the run's, T the longest step of the vertex and the face's three vertices (the softest
+    elements around the pair; the tetrahedron's fourth vertex is not part of the face); a step shorter than the
+    run's (0.5 T < dt) leaves it as it is."""
+    masses = FACES[1]
+    k = _expected_k(1.0, masses)
+    for steps, factor in [
+        ((4.0e-4, 0.0, 0.0, 0.0, 0.0), 0.25),
+        ((0.0, 0.0, 1.0e-3, 4.0e-4, 0.0), 0.04),
+        ((0.0, 0.0, 0.0, 0.0, 1.0e-2), 1.0),
+        ((1.0e-4, 1.0e-4, 1.0e-4, 1.0e-4, 1.0e-4), 1.0),
+    ]:
+        f, _ = _vertex_face(masses, SKIN - DEPTH, steps=steps)
+        assert f[2] / DEPTH == pytest.approx(factor * k, rel=1e-4), steps
+
+
+def test_a_vertex_among_large_elements_gets_the_step_of_those_elements():
+    """SolverFem.contact_steps: a coarse cube (1 cm cells) and a fine one (2.5 mm cells) in one solver, which runs
+    at the fine cube's step; each vertex's step is its smallest element's, 0.5 h / c_p: the fine cube's vertices the
+    solver's stable step, the coarse cube's four times it (the same material: the steps are in the ratio of the
+    cells), to 1e-6."""
+    import pdsim
+
+    material = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)
+    scene = pdsim.Scene(gravity=(0.0, 0.0, 0.0))
+    scene.add_body(pdsim.FemBody(pdsim.box_tet_mesh((0.04,) * 3, (4, 4, 4)), material, name="coarse"))
+    fine = pdsim.box_tet_mesh((0.01,) * 3, (4, 4, 4), center=(0.1, 0.0, 0.0))
+    scene.add_body(pdsim.FemBody(fine, material, name="fine"))
+    (solver,) = scene.build_solvers(device="cpu")
+    steps = solver.contact_steps().numpy()
+    coarse = slice(int(solver.body_offsets[0]), int(solver.body_offsets[1]))
+    fine = slice(int(solver.body_offsets[1]), int(solver.body_offsets[2]))
+    np.testing.assert_allclose(steps[fine], solver.stable_time_step(), rtol=1e-6)
+    np.testing.assert_allclose(steps[coarse], 4.0 * solver.stable_time_step(), rtol=1e-6)

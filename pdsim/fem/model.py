@@ -84,11 +84,11 @@ class FemModel:
     bodies without fracture, None when no body fractures; the solver retires split elements in its own copy),
     ``fracture_energy_h`` (G_c per element [J/m^2], None when no body fractures),
     ``surface_face_ids`` (the boundary faces 4 e + k of the input meshes: every other boundary face is a crack face),
-    ``widths`` (half the mean edge length of each body [m], the PointsView widths), ``explicit_dt`` (0.5 h_min / c_p
-    [s]); Warp arrays ``dm_inv``, ``volume``, ``lame`` ((lambda, mu) per element [Pa]; the three also as the dict
-    ``element_arrays``, keyed by the kernels' parameter names) and ``plastic_params`` ((yield strain, creep, max strain)
-    per element; None without plasticity); ``render``: a :class:`RenderEmbedding` per body
-    with a render mesh.
+    ``widths`` (half the mean edge length of each body [m], the PointsView widths), ``element_dt_h`` (each element's
+    own stable step 0.5 h / c_p [s]), ``explicit_dt`` (their smallest, 0.5 h_min / c_p [s]); Warp arrays
+    ``dm_inv``, ``volume``, ``lame`` ((lambda, mu) per element [Pa]; the three also as the dict ``element_arrays``,
+    keyed by the kernels' parameter names) and ``plastic_params`` ((yield strain, creep, max strain) per element; None
+    without plasticity); ``render``: a :class:`RenderEmbedding` per body with a render mesh.
 
     Input vertex data (the solver's initial topology): ``rest`` (world rest positions [m]), ``rest_local64`` (local
     rest positions, float64: the stable step and the lumped masses), ``rest_local`` (the local rest positions as the
@@ -130,7 +130,8 @@ class FemModel:
         mu = per_element([m.shear_modulus for m in mats])
         cp = per_element([m.p_wave_speed for m in mats])
         heights = element_heights(self.rest_local64, tets)
-        self.explicit_dt = float(EXPLICIT_STEP_FACTOR * np.min(heights / cp))
+        self.element_dt_h = EXPLICIT_STEP_FACTOR * heights / cp
+        self.explicit_dt = float(np.min(self.element_dt_h))
         self.centroids_h = x.mean(axis=1)  # local frame (fracture's crack planes)
         self.plastic = any(b.plasticity is not None for b in bodies)
         self.fracture = any(b.tensile_strength is not None for b in bodies)

@@ -159,6 +159,20 @@ class FemViews:
             )
         return self._contact_pieces[1], self._contact_pieces[2]
 
+    def contact_steps(self):
+        """Per point, the stable step [s] of its smallest incident element (SolverFem model ``element_dt_h``),
+        float32 Warp array: contact between FEM surfaces sizes its stiffness on it (kernels/surface_contact.py), so
+        a vertex's contact is as stiff as the elements around it bear, whatever step the run takes. Sized on the
+        run's step alone, a mesh whose one small element forces a step 30 times smaller made every other vertex's
+        contact 1000 times stiffer than its elements, and contact crushed them (inverted elements, or speeds past the
+        watchdog's limit)."""
+        if self._contact_steps is None:
+            step = np.full(self.point_count, np.inf)
+            tets = np.asarray(self._tets_h, dtype=np.int64)
+            np.minimum.at(step, tets.ravel(), np.repeat(self.model.element_dt_h, 4))
+            self._contact_steps = wp.array(step.astype(np.float32), dtype=float, device=self.device)
+        return self._contact_steps
+
     def contact_skin(self) -> tuple[float, float]:
         """(skin, band) [m] of contact between FEM surfaces: a surface vertex is a point (skin 0: the faces a crack
         separates lie on each other when the piece comes free, and a skin would push them apart at once), found inside
