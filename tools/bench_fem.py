@@ -351,6 +351,16 @@ def main(argv=None) -> int:
     wp.config.quiet = True
     wp.init()
     results = []
+
+    def emit(row: dict) -> None:
+        """Adds the machine to ``row``, keeps it and prints it (JSON or the table)."""
+        row.update(machine_info(args.device))
+        results.append(row)
+        if args.json:
+            print(json.dumps(row))
+        else:
+            _print_row(row)
+
     for k in args.k:
         mesh = bench_mesh(k)
         m = mesh.element_count
@@ -371,12 +381,7 @@ def main(argv=None) -> int:
         if args.profile:
             row["profile"] = step_profile(mesh, device=args.device, steps=n_exp, warmup=args.warmup)
         if args.pair_only:
-            row.update(machine_info(args.device))
-            results.append(row)
-            if args.json:
-                print(json.dumps(row))
-            else:
-                _print_row(row)
+            emit(row)
             continue
         row["explicit_corotated"] = _time_pdsim(
             mesh, integrator="explicit", measure="corotated", device=args.device, steps=n_exp, warmup=args.warmup
@@ -410,12 +415,7 @@ def main(argv=None) -> int:
                     row["newton"] = "not installed"
                     break
                 row[f"newton_{name}"] = r
-        row.update(machine_info(args.device))
-        results.append(row)
-        if args.json:
-            print(json.dumps(row))
-        else:
-            _print_row(row)
+        emit(row)
     if args.cantilever:
         rows = cantilever_table()
         if args.json:
