@@ -12,6 +12,7 @@ import numpy as np
 import warp as wp
 
 from ..errors import ParameterError
+from ..kernels.launch import launch_wrapped
 from ..kernels.peridynamics import step as pd_step
 
 THREADS_ENV = "PDSIM_THREADS"
@@ -65,11 +66,6 @@ def resolve_threads(threads, device, bond_count: int = 0) -> int:
             raise ParameterError(THREADS_ENV, env, "an integer >= 1 (CPU threads of the peridynamic bond passes)")
         return value
     return max(1, min(available_cores(), int(bond_count) // MIN_BONDS_PER_THREAD))
-
-
-def _launch_wrapped(wp) -> bool:
-    """Whether ``wp.launch`` is a tool's wrapper (one that records or times launches) rather than Warp's own."""
-    return not getattr(wp.launch, "__module__", "").startswith("warp.")
 
 
 _executors: dict[tuple[int, int], ThreadPoolExecutor] = {}
@@ -138,7 +134,7 @@ class ParticleRanges:
     def launch(self, kernel, inputs: list) -> None:
         """``kernel`` over every particle: one launch per range with inputs ``[first, *inputs]``, joined."""
         device = self.device
-        if device.is_cuda or device.is_capturing or _launch_wrapped(wp):
+        if device.is_cuda or device.is_capturing or launch_wrapped():
             # one launch on a GPU; in order from this thread while a graph is recorded; through wp.launch while a
             # tool records or times launches by wrapping it (pdsim/explain.py, tools/bench_pd_throughput.py)
             for first, count in self.ranges:
