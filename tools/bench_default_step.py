@@ -8,10 +8,14 @@ pool thread, Python), e.g. a checkout from ``git archive`` on ``PYTHONPATH`` wit
         .venv/bin/python tools/bench_default_step.py; done
 
 Each figure is the median over ROUNDS rounds of one frame's steps (134) at 0.7 x the stable step, after a warm-up
-frame; ``--json`` prints one JSON line.
+frame; ``--json`` prints one JSON line. ``--parts`` prints instead what a step's parts cost on the main thread's CPU
+clock (the fastest of ROUNDS rounds of 100): each bond pass's range launched alone (two threads' ranges), and one
+kick-drift launch over the 2,560 points through ``wp.launch``, replayed from a recording, and the compiled kernel
+alone.
 """
 
 import argparse
+import ctypes
 import json
 import statistics
 import time
@@ -75,10 +79,51 @@ def launches_per_step() -> int:
     return round(count[0] / STEPS)
 
 
+def _fastest(call) -> float:
+    """The fastest of ROUNDS rounds of 100 calls of ``call``, main-thread CPU time per call [us]."""
+    best = float("inf")
+    for _ in range(ROUNDS):
+        t0 = time.thread_time()
+        for _ in range(100):
+            call()
+        best = min(best, (time.thread_time() - t0) / 100)
+    return best * 1.0e6
+
+
+def parts() -> dict:
+    """Main-thread CPU [us] of each bond pass's range launched alone and of one kick-drift launch three ways."""
+    solver = build_scene().build_solvers(device="cpu")[0]
+    solver.threads = 2
+    dt = 0.7 * solver.stable_time_step()
+    for _ in range(STEPS):
+        solver.step(dt)
+    out = {}
+    for key, (_, commands, _) in solver._ranges._commands.items():
+        name = key.split("__")[-1]
+        for i, cmd in enumerate(commands):
+            out[f"{name} range {i}"] = _fastest(cmd.launch)
+    kin = solver.kin
+    inputs = [0, kin.u, kin.v, kin.a, kin.point_condition, kin.active_kind, kin.cond_axes, kin.active_velocity]
+    inputs += [kin.k.dtype(dt), kin.point_kind]
+    kernel, n = kin.k.kick_drift, kin.point_count
+    out["kick_drift wp.launch"] = _fastest(lambda: wp.launch(kernel, dim=n, inputs=inputs, device="cpu"))
+    cmd = wp.launch(kernel, dim=n, inputs=inputs, device="cpu", record_cmd=True)
+    out["kick_drift replayed"] = _fastest(cmd.launch)
+    args, _ = wp._src.context._build_cpu_args_structs(kernel, cmd.hooks, cmd.params, False)
+    bounds, packed = ctypes.byref(cmd.params[0]), ctypes.byref(args)
+    out["kick_drift kernel alone"] = _fastest(lambda: cmd.hooks.forward(bounds, packed))
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--json", action="store_true", help="one JSON line")
+    parser.add_argument("--parts", action="store_true", help="the step's parts instead (see the module)")
     args = parser.parse_args()
+    if args.parts:
+        for name, us in parts().items():
+            print(f"{name}: {us:.1f} us main-thread CPU")
+        return
     out = {"launches_per_step": launches_per_step(), "threads": {t: step_times(t) for t in (1, 2)}}
     if args.json:
         print(json.dumps(out))
