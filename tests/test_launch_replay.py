@@ -79,7 +79,11 @@ def _cantilever_state(monkeypatch, plain: bool) -> bytes:
     (``plain``: wp.launch wrapped, so nothing is replayed) or with replays."""
     if plain:
         original = wp.launch
-        monkeypatch.setattr(wp, "launch", lambda *args, **kwargs: original(*args, **kwargs))
+
+        def plain_launch(*args, **kwargs):  # a wrapper: launch_inputs then replays nothing
+            return original(*args, **kwargs)
+
+        monkeypatch.setattr(wp, "launch", plain_launch)
     solver = build_scene().build_solvers(device="cpu")[0]
     for dt in (2.0e-4,) * 6 + (3.0e-4,) * 6:
         solver.step(dt)

@@ -96,7 +96,7 @@ class _Worker:
             self._start.acquire()
             try:
                 self._task()
-            except BaseException as exc:  # handed to the thread that joins
+            except BaseException as exc:  # noqa: BLE001 - handed to the thread that joins, raised there
                 self._error = exc
             finally:
                 self._task = None
