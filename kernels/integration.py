@@ -33,7 +33,7 @@ import functools
 
 import warp as wp
 
-from .launch import launch, range_inputs
+from .launch import launch, launch_inputs, range_inputs
 
 POINT_FREE = wp.constant(0)
 POINT_FIXED = wp.constant(1)
@@ -315,12 +315,12 @@ def integration_kernels(dtype=wp.float32):
 
 def begin_clock_step(clock, dt: float, device):
     """The device clock of a step of ``dt`` [s] (clock_begin_step)."""
-    wp.launch(clock_begin_step, dim=1, inputs=[clock, wp.float64(dt)], device=device)
+    launch_inputs(clock_begin_step, 1, [clock, wp.float64(dt)], device)
 
 
 def end_clock_step(clock, device):
     """The step is done on the device clock (clock_end_step)."""
-    wp.launch(clock_end_step, dim=1, inputs=[clock], device=device)
+    launch_inputs(clock_end_step, 1, [clock], device)
 
 
 def conditions_at(count: int, *, slot: int, offset: float, device, **arguments):
@@ -330,7 +330,7 @@ def conditions_at(count: int, *, slot: int, offset: float, device, **arguments):
 
 def curves_at(count: int, span, curve_time, curve_data, clock, slot: int, value, device):
     """value[c] = curve c at the device time clock[slot] [s] for ``count`` curves (evaluate_curves)."""
-    wp.launch(evaluate_curves, dim=count, inputs=[span, curve_time, curve_data, clock, slot, value], device=device)
+    launch_inputs(evaluate_curves, count, [span, curve_time, curve_data, clock, slot, value], device)
 
 
 def _points_launch(kernel, count: int, ranges, device, arguments: dict) -> None:
@@ -353,7 +353,7 @@ def kick(k, count: int, *, dt: float, device, ranges=None, **arguments):
 
 def apply_loads(k, count: int, load_point, load_index, load_force, load_scale, force, device):
     """Adds ``count`` scaled (point, load) entries to ``force`` (``k.apply_loads``)."""
-    wp.launch(k.apply_loads, dim=count, inputs=[load_point, load_index, load_force, load_scale, force], device=device)
+    launch_inputs(k.apply_loads, count, [load_point, load_index, load_force, load_scale, force], device)
 
 
 def add_velocity(k, points, dv, velocities, device):

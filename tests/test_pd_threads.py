@@ -130,3 +130,23 @@ def test_checkpoint_of_a_yielding_block_continues_exactly():
     assert np.array_equal(a.displacements(), b.displacements())
     assert np.array_equal(a.bond_alive(), b.bond_alive())
     assert np.array_equal(a.plastic_strain(), b.plastic_strain())
+
+
+def test_pool_threads_run_every_range_and_hand_back_what_one_raised():
+    """The range launches' pool threads (ranges.py, _Workers): every task runs once per pass, the caller's first; a
+    task that raises is re-raised in the caller once all have finished, and the pool keeps working after it."""
+    pool = pd_ranges._executor(2)
+    done = []
+    pool.run(lambda: done.append("first"), [lambda: done.append("a"), lambda: done.append("b")])
+    assert sorted(done) == ["a", "b", "first"]
+
+    def fails():
+        raise ValueError("range 2")
+
+    done.clear()
+    with pytest.raises(ValueError, match="range 2"):
+        pool.run(lambda: done.append("first"), [fails, lambda: done.append("b")])
+    assert sorted(done) == ["b", "first"]
+    done.clear()
+    pool.run(lambda: done.append("first"), [lambda: done.append("a")])
+    assert sorted(done) == ["a", "first"]

@@ -66,22 +66,23 @@ def test_phases_add_up_and_are_written(tmp_path, capsys):
     assert saved["estimate"]["seconds_per_frame"] > 0.0
 
 
-def test_time_lands_in_its_phase(tmp_path, monkeypatch):
-    """DELAY added to every render-surface view, then to every watchdog check: that phase holds at least DELAY per
-    call, and the other phases stay as they were (within half the added time: the runs' own spread). The surfaces are
-    built in the main thread here (surface_thread=False); with the surface thread the delay lands in the worker's
-    own time, and the main thread waits for at most that much. Python's garbage collector is paused over the runs:
-    a full collection (about 0.1 s here once earlier tests have filled the heap) lands in whichever phase is running
-    and would read as that phase's time."""
+@pytest.fixture
+def no_garbage_collection():
+    """The garbage collector off for the test (a full collection of a test process takes about 0.12 s and lands in
+    whichever phase it falls in, more than the spread the attribution test allows)."""
     gc.collect()
     gc.disable()
     try:
-        _attribution_runs(tmp_path, monkeypatch)
+        yield
     finally:
         gc.enable()
 
 
-def _attribution_runs(tmp_path, monkeypatch):
+def test_time_lands_in_its_phase(tmp_path, monkeypatch, no_garbage_collection):
+    """DELAY added to every render-surface view, then to every watchdog check: that phase holds at least DELAY per
+    call, and the other phases stay as they were (within half the added time: the runs' own spread; garbage
+    collection off). The surfaces are built in the main thread here (surface_thread=False); with the surface thread
+    the delay lands in the worker's own time, and the main thread waits for at most that much."""
     base = _run(tmp_path, "base", surface_thread=False).profile["seconds"]
 
     view = FragmentSurfaces.view

@@ -6,12 +6,12 @@ from __future__ import annotations
 import itertools
 import os
 import threading
-from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 import warp as wp
 
 from ..errors import ParameterError
+from ..kernels.launch import launch_wrapped
 from ..kernels.peridynamics import step as pd_step
 
 THREADS_ENV = "PDSIM_THREADS"
@@ -67,24 +67,77 @@ def resolve_threads(threads, device, bond_count: int = 0) -> int:
     return max(1, min(available_cores(), int(bond_count) // MIN_BONDS_PER_THREAD))
 
 
-def _launch_wrapped(wp) -> bool:
-    """Whether ``wp.launch`` is a tool's wrapper (one that records or times launches) rather than Warp's own."""
-    return not getattr(wp.launch, "__module__", "").startswith("warp.")
+class _Worker:
+    """A thread that runs one callable per hand-off: started by releasing one lock, joined by acquiring another (two
+    lock operations each way, the cheapest hand-off in CPython; a ThreadPoolExecutor's future, queue and condition
+    cost more per pass: tools/bench_kick_ranges.py, docs/benchmarks.md)."""
+
+    def __init__(self):
+        self._start = threading.Lock()
+        self._start.acquire()
+        self._done = threading.Lock()
+        self._done.acquire()
+        self._task = None
+        self._error: BaseException | None = None
+        threading.Thread(target=self._loop, name="pdsim-pd", daemon=True).start()
+
+    def submit(self, task) -> None:
+        self._task = task
+        self._start.release()
+
+    def join(self) -> BaseException | None:
+        """Waits for the task submitted last; returns what it raised, or None."""
+        self._done.acquire()
+        error, self._error = self._error, None
+        return error
+
+    def _loop(self) -> None:
+        while True:
+            self._start.acquire()
+            try:
+                self._task()
+            except BaseException as exc:  # noqa: BLE001 - handed to the thread that joins, raised there
+                self._error = exc
+            finally:
+                self._task = None
+                self._done.release()
 
 
-_executors: dict[tuple[int, int], ThreadPoolExecutor] = {}
-_executors_lock = threading.Lock()
+class _Workers:
+    """The process's pool threads of the range launches: ``run(first, others)`` runs ``first`` on the calling thread
+    and each of ``others`` on a worker thread, and returns when all are done (raising what one of them raised); one
+    caller at a time."""
+
+    def __init__(self, count: int):
+        self._busy = threading.Lock()
+        self._workers = [_Worker() for _ in range(count)]
+
+    def run(self, first, others: list) -> None:
+        with self._busy:
+            workers = self._workers[: len(others)]
+            for worker, task in zip(workers, others):
+                worker.submit(task)
+            try:
+                first()
+            finally:  # every range has finished before this returns or raises (they write the same arrays)
+                errors = [worker.join() for worker in workers]
+            for error in errors:
+                if error is not None:
+                    raise error
 
 
-def _executor(workers: int) -> ThreadPoolExecutor:
-    """The process's pool of ``workers`` threads for range launches (shared by solvers, created on first use; a
-    process forked from one that had a pool gets its own, as the parent's threads do not exist in it)."""
+_pools: dict[tuple[int, int], _Workers] = {}
+_pools_lock = threading.Lock()
+
+
+def _executor(workers: int) -> _Workers:
+    """The process's ``workers`` pool threads for range launches (shared by solvers, created on first use; a process
+    forked from one that had a pool gets its own, as the parent's threads do not exist in it)."""
     key = (os.getpid(), workers)
-    with _executors_lock:
-        pool = _executors.get(key)
+    with _pools_lock:
+        pool = _pools.get(key)
         if pool is None:
-            pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="pdsim-pd")
-            _executors[key] = pool
+            pool = _pools[key] = _Workers(workers)
         return pool
 
 
@@ -138,7 +191,7 @@ class ParticleRanges:
     def launch(self, kernel, inputs: list) -> None:
         """``kernel`` over every particle: one launch per range with inputs ``[first, *inputs]``, joined."""
         device = self.device
-        if device.is_cuda or device.is_capturing or _launch_wrapped(wp):
+        if device.is_cuda or device.is_capturing or launch_wrapped():
             # one launch on a GPU; in order from this thread while a graph is recorded; through wp.launch while a
             # tool records or times launches by wrapping it (pdsim/explain.py, tools/bench_pd_throughput.py)
             for first, count in self.ranges:
@@ -150,14 +203,7 @@ class ParticleRanges:
             for cmd in launches:
                 cmd.launch()
             return
-        pool = _executor(len(launches) - 1)
-        futures = [pool.submit(cmd.launch) for cmd in launches[1:]]
-        try:
-            launches[0].launch()
-        finally:  # every range has finished before this returns or raises (they write the same arrays)
-            wait(futures)
-        for fut in futures:
-            fut.result()
+        _executor(len(launches) - 1).run(launches[0].launch, [cmd.launch for cmd in launches[1:]])
 
     def _recorded(self, kernel, inputs: list) -> list:
         """The recorded launches (``wp.launch(..., record_cmd=True)``) of ``kernel`` over the ranges with ``inputs``,
