@@ -117,12 +117,11 @@ def vertex_face_contact(
     reduced mass of the vertex and the face point, colliders.face_point_mass; stiffness_rate = (CONTACT_OMEGA_DT /
     dt)^2; T = step_safety times the largest of v_step[i] and the face's m_step, each point's stable step for the
     elements around it: the pair oscillates at omega T = CONTACT_OMEGA_DT, as stiff as those elements bear); its
-    damping ratio and friction combine the vertex's
-    side (v_damping_ratio[i], v_friction[i], by solver point; NaN: none) with the face's (its first vertex's), as
-    kernels/contact.py particle_mesh_contact. Work: the positive part of each side's work in the step, as
-    kernels/contact.py particle_mesh_contact, into slot ``work_slot`` of v_work and m_work. Floor (module docstring):
-    a vertex deeper than ``floor`` [m] adds its share of the velocity change [m/s] into v_kick (its face's vertices
-    into m_kick); only free points (v_kind, m_kind: PARTICLE_FREE) change."""
+    damping ratio and friction combine the vertex's side (v_damping_ratio[i], v_friction[i], by solver point; NaN:
+    none) with the face's (its first vertex's), as kernels/contact.py particle_mesh_contact. Work: the positive part
+    of each side's work in the step, as kernels/contact.py particle_mesh_contact, into slot ``work_slot`` of v_work
+    and m_work. Floor (module docstring): a vertex deeper than ``floor`` [m] adds its share of the velocity change
+    [m/s] into v_kick (its face's vertices into m_kick); only free points (v_kind, m_kind: PARTICLE_FREE) change."""
     q = wp.tid()
     i = v_points[q]
     x = v_rest[i] + v_u[i]
