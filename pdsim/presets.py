@@ -55,12 +55,13 @@ import math
 from .checks import check_range, check_vec3
 from .errors import ParameterError
 from .materials import Anisotropy, Material
+from .peridynamics.body import DEFAULT_HORIZON_FACTOR
 
 STIFFNESS_SCALE = 1.0e-4  # Young's modulus (and stresses) of the animation presets over the real ones
 # The brittle animation presets' strength is a fracture energy, stated as the critical stretch it gives at this
-# spacing [m] with the default horizon (PeridynamicBody's horizon_factor 3.015): the preview spacing of a 30 cm object.
+# spacing [m] with the default horizon (PeridynamicBody's horizon_factor): the preview spacing of a 30 cm object.
 REFERENCE_SPACING = 0.02
-REFERENCE_HORIZON_FACTOR = 3.015
+REFERENCE_HORIZON_FACTOR = DEFAULT_HORIZON_FACTOR
 # Silling-Askari compressive bonus alpha of the brittle presets (s0 = s_c - alpha s_min). It makes them unbreakable
 # in uniaxial compression (nu < alpha) while keeping them about as weak in pure shear as in tension: simple shear
 # breaks them at 1.33 times the unbonused shear strain, where alpha = 1 would hold them to 2 sqrt(s_c) instead of
@@ -533,7 +534,9 @@ def preset(name: str, *, real: bool = False, pattern: bool = True) -> Material:
     return PRESETS[name](real=real, pattern=pattern)
 
 
-def spacing_for_strength(material: Material, tensile_strength: float, *, horizon_factor: float = 3.015) -> float:
+def spacing_for_strength(
+    material: Material, tensile_strength: float, *, horizon_factor: float = DEFAULT_HORIZON_FACTOR
+) -> float:
     """The spacing h [m] at which ``material``'s fracture energy gives ``tensile_strength`` [Pa] in uniaxial tension.
 
     A bar pulled along a lattice axis breaks when its bonds along the axis reach s_c, at a stress of about E s_c, and

@@ -16,6 +16,8 @@ from ..regions import BoxRegion, region_mask
 from ..sampling import fill_solid, jitter_points, morton_order
 from .handoff import handoff_setting
 
+DEFAULT_HORIZON_FACTOR = 3.015  # horizon over spacing of a PeridynamicBody unless it sets its own
+
 SURFACE_CORRECTIONS = ("directional", "family", "none")
 SAMPLINGS = ("lattice", "jittered")
 
@@ -58,7 +60,7 @@ class PeridynamicBody(PointBody):
         material: Material,
         spacing: float,
         *,
-        horizon_factor: float = 3.015,
+        horizon_factor: float = DEFAULT_HORIZON_FACTOR,
         name: str | None = None,
         surface_correction: str = "directional",
         partial_volumes: bool = True,
