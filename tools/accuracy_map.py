@@ -542,8 +542,8 @@ answer: the tip settles at +1.5 mm at n = 2 (44x Timoshenko's 34 um, and upwards
 pdsim's explicit step) and whether the load goes in through `particle_f` or as velocity increments, while the same
 set-up under gravity sags the right way. Two findings on the way: Newton's default particle radius (0.1 m) makes
 neighbouring vertices of a mesh this fine repel by particle contact (a free body at rest drifts by metres in 200
-steps; `particle_radius=1e-6` stops it), which also concerns tools/bench_fem.py's Newton timings; and lambda = 0
-(nu = 0) gives NaN. So the cantilever has no Newton point in this map.
+steps; `particle_radius=1e-6` stops it), which tools/bench_fem.py now switches off for its Newton timings; and
+lambda = 0 (nu = 0) gives NaN. So the cantilever has no Newton point in this map.
 """
 
 RECOMMENDED = """
