@@ -59,10 +59,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pdsim.kernels
+import trimesh
 import warp as wp
 
 import pdsim
 from pdsim.run import advance_frame
+from pdsim.sampling import simple_cubic_lattice
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BEFORE_REVISION = "e153a59"  # last commit with the pair modulus 2 C_k C_j / (C_k + C_j) evaluated as written
@@ -150,6 +152,22 @@ class Case:
     particle_count: int = 0
 
 
+def slotted_plate(size, spacing: float, slots) -> pdsim.SolidShape:
+    """A box of edge lengths ``size`` [m] centred at the origin with slots cut through its thickness from its edge
+    x = -size[0] / 2: each slot (y_centre, width, x_end) [m] removes the band |y - y_centre| < width / 2 for
+    x < x_end (manifold3d booleans through trimesh)."""
+    lx, _, lz = size
+    plate = trimesh.creation.box(extents=size)
+    cutters = []
+    for y, width, x_end in slots:
+        length = x_end + 0.5 * lx + spacing  # from beyond the edge to x_end
+        cutter = trimesh.creation.box(extents=(length, width, 2.0 * lz))
+        cutter.apply_translation((x_end - 0.5 * length, y, 0.0))
+        cutters.append(cutter)
+    mesh = trimesh.boolean.difference([plate, *cutters], engine="manifold")
+    return pdsim.shape_from_arrays(mesh.vertices, mesh.faces, name="plate")
+
+
 def kalthoff_winkler(
     spacing: float = 4.0e-3,
     *,
@@ -157,17 +175,33 @@ def kalthoff_winkler(
     time_step_safety: float = 0.7,
     contact: bool = True,
     projectile_height: float = 0.05,
+    notch_width: float = 0.0,
 ) -> Case:
     """The Kalthoff-Winkler-like steel plate of the module docstring at particle spacing ``spacing`` [m]; ``contact``
     False switches the scene's contact off (Scene.enable_contact(False)); ``projectile_height`` [m]: the box's extent
-    across the notches (default 50 mm, the notches' spacing: its edges lie on the notches)."""
+    across the notches (default 50 mm, the notches' spacing).
+
+    ``notch_width`` [m]: 0 (default) cuts each notch as a plane of zero width between two particle layers (every bond
+    crossing it starts dead; the faces' particles start h apart, in contact range); > 0 makes each notch a slot of
+    that width centred on the particle layer nearest y = +-25 mm: the particles whose centres lie in it are removed
+    (slotted_plate; one layer for a width below 2 h) and the bonds that cross it start dead, so the faces' particles
+    start 2 h apart (one layer removed) and touch only when the slot closes. The notches run to x = 0 either way."""
     h = spacing
     lx, ly, lz = 0.1, 0.2, 2.0 * h
-    body = pdsim.PeridynamicBody(pdsim.box((lx, ly, lz)), STEEL, h, name="plate")
-    layers = np.unique(np.round(body.rest_positions[:, 1], 9))
-    for sign in (1.0, -1.0):
-        y = layers[np.argmin(np.abs(layers - sign * 0.025))] + sign * 0.5 * h  # between two particle layers
-        body.add_notch(pdsim.BoxRegion(lo=(-1.0, y - 1.0e-5, -1.0), hi=(-0.5 * lx + 0.05, y + 1.0e-5, 1.0)))
+    tip = -0.5 * lx + 0.05
+    layers = np.unique(np.round(simple_cubic_lattice(pdsim.box((lx, ly, lz)), h)[:, 1], 9))
+    centres = [layers[np.argmin(np.abs(layers - sign * 0.025))] for sign in (1.0, -1.0)]
+    if notch_width > 0.0:
+        tip -= 1.0e-3 * h  # off a lattice plane (x = 0 is one at h = 4 mm): the particles there stay, on both sides
+        shape = slotted_plate((lx, ly, lz), h, [(y, notch_width, tip) for y in centres])
+        half = 0.5 * notch_width
+    else:  # a plane between two particle layers
+        shape = pdsim.box((lx, ly, lz))
+        centres = [y + np.sign(y) * 0.5 * h for y in centres]
+        half = 1.0e-5
+    body = pdsim.PeridynamicBody(shape, STEEL, h, name="plate")
+    for y in centres:
+        body.add_notch(pdsim.BoxRegion(lo=(-1.0, y - half, -1.0), hi=(tip, y + half, 1.0)))
     scene = pdsim.Scene(gravity=(0.0, 0.0, 0.0), time_step_safety=time_step_safety)
     if not contact:
         scene.enable_contact(False)
