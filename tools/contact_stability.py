@@ -168,6 +168,21 @@ def slotted_plate(size, spacing: float, slots) -> pdsim.SolidShape:
     return pdsim.shape_from_arrays(mesh.vertices, mesh.faces, name="plate")
 
 
+KW_PLATE = (0.1, 0.2, None)  # [m]: x (the impact direction), y; the thickness is two particle layers
+
+
+def notch_lines(spacing: float, notch_width: float = 0.0) -> list[float]:
+    """y [m] of the Kalthoff-Winkler plate's two notches (the upper one first) at particle spacing ``spacing`` [m]:
+    for a slot (``notch_width`` > 0) the particle layer nearest y = +-25 mm, its centre; for the zero-width cut the
+    plane half a spacing beyond that layer, between two layers."""
+    lx, ly, _ = KW_PLATE
+    layers = np.unique(np.round(simple_cubic_lattice(pdsim.box((lx, ly, spacing)), spacing)[:, 1], 9))
+    centres = [float(layers[np.argmin(np.abs(layers - sign * 0.025))]) for sign in (1.0, -1.0)]
+    if notch_width > 0.0:
+        return centres
+    return [y + math.copysign(0.5 * spacing, y) for y in centres]
+
+
 def kalthoff_winkler(
     spacing: float = 4.0e-3,
     *,
@@ -176,6 +191,7 @@ def kalthoff_winkler(
     contact: bool = True,
     projectile_height: float = 0.05,
     notch_width: float = 0.0,
+    sampling_seed: int | None = None,
 ) -> Case:
     """The Kalthoff-Winkler-like steel plate of the module docstring at particle spacing ``spacing`` [m]; ``contact``
     False switches the scene's contact off (Scene.enable_contact(False)); ``projectile_height`` [m]: the box's extent
@@ -185,21 +201,23 @@ def kalthoff_winkler(
     crossing it starts dead; the faces' particles start h apart, in contact range); > 0 makes each notch a slot of
     that width centred on the particle layer nearest y = +-25 mm: the particles whose centres lie in it are removed
     (slotted_plate; one layer for a width below 2 h) and the bonds that cross it start dead, so the faces' particles
-    start 2 h apart (one layer removed) and touch only when the slot closes. The notches run to x = 0 either way."""
+    start 2 h apart (one layer removed) and touch only when the slot closes. The notches run to x = 0 either way.
+    ``sampling_seed``: None (default) puts the particles on the lattice; an integer jitters them (sampling
+    "jittered", that seed)."""
     h = spacing
-    lx, ly, lz = 0.1, 0.2, 2.0 * h
+    lx, ly, lz = KW_PLATE
+    lz = 2.0 * h
     tip = -0.5 * lx + 0.05
-    layers = np.unique(np.round(simple_cubic_lattice(pdsim.box((lx, ly, lz)), h)[:, 1], 9))
-    centres = [layers[np.argmin(np.abs(layers - sign * 0.025))] for sign in (1.0, -1.0)]
+    centres = notch_lines(h, notch_width)
     if notch_width > 0.0:
         tip -= 1.0e-3 * h  # off a lattice plane (x = 0 is one at h = 4 mm): the particles there stay, on both sides
         shape = slotted_plate((lx, ly, lz), h, [(y, notch_width, tip) for y in centres])
         half = 0.5 * notch_width
-    else:  # a plane between two particle layers
+    else:
         shape = pdsim.box((lx, ly, lz))
-        centres = [y + np.sign(y) * 0.5 * h for y in centres]
         half = 1.0e-5
-    body = pdsim.PeridynamicBody(shape, STEEL, h, name="plate")
+    sampling = {} if sampling_seed is None else {"sampling": "jittered", "sampling_seed": sampling_seed}
+    body = pdsim.PeridynamicBody(shape, STEEL, h, name="plate", **sampling)
     for y in centres:
         body.add_notch(pdsim.BoxRegion(lo=(-1.0, y - half, -1.0), hi=(tip, y + half, 1.0)))
     scene = pdsim.Scene(gravity=(0.0, 0.0, 0.0), time_step_safety=time_step_safety)

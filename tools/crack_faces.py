@@ -1,21 +1,35 @@
 """Crack faces and contact: the Kalthoff-Winkler-like steel plate of tools/contact_stability.py with contact on and
-off, and the angle of the cracks that grow from its notch tips; writes the table of docs/fracture.md (section "Crack
+off, and the angle of the cracks that grow from its notch tips; prints the table of docs/fracture.md (section "Crack
 faces and contact").
 
-    python tools/crack_faces.py [--spacing 2e-3] [--end 100e-6] [--projectile-height 0.05] [--history 10]
-                                [--out docs]
+    python tools/crack_faces.py [--spacing 2e-3] [--end 100e-6] [--notch-width 1.5e-3]
+                                [--projectile-height 0.046 0.048 0.05] [--seeds 1 2] [--history 10] [--out docs]
 
 Contact within a body acts only where crack faces close across dead bonds (kernels/contact.py,
 crack_pair_geometry): the notch faces, which the punched block slides along, must not push the plate apart, so the
-crack angle must not depend on whether contact is on. The angle: the damaged particles (damage > 0.5) ahead of each
-notch tip (tip + 2 h < x < tip + 35 mm: the back face's spall is left out) and outside it (|y| > |y_tip| + h), in
-the plate's first particle layer, are fitted with a line through the tip (the principal direction of their offsets
-from the tip); the angle is measured from the notch direction (+x, the impact direction) towards the outside, in
-degrees, averaged over the two tips. The notch's closing: the largest shortening, over the run's end state, of the
-gap across the notch along a bond the notch cut (its rest offset's component across the notch, y), as a fraction of
-h: contact between the notch faces starts at 0.1 h (kernels/contact.py crack_pair_geometry, bonded_factor 0.9).
-``--projectile-height`` narrows the punching box (default 50 mm: its edges lie on the notches' inner faces).
-``--history N`` also prints, at N times through the run with contact on, the notch's closing and the number of
+crack angle must not depend on whether contact is on.
+
+The notches (contact_stability.kalthoff_winkler): slots ``--notch-width`` wide (default 1.5 mm, the notch width
+peridynamic models of the experiment commonly use), the particle layer nearest y = +-25 mm removed; 0 cuts them as
+planes of zero width between two particle layers instead, whose faces start in contact range.
+
+The angle (crack_angles): each tip's crack path is traced through the damaged particles (damage > 0.5, every
+particle layer through the thickness) in shells of width h around the tip, from 5 to 25 mm (PATH_FROM, PATH_TO),
+ahead of the tip (x > x_tip) and outside the notch (|y| >= |y_notch| + h): in each shell the damaged particles are
+split into groups along the arc (a gap over 1.5 h between neighbours in angle splits them), the group on the path is
+the heaviest (summed damage) in the first shell and, in each later shell, the one whose centre lies at the angle
+nearest to the previous shell's, and its damage-weighted centre is the path's point there. A line through the tip is
+fitted to those points (their principal direction); its angle from the notch direction (+x, the impact direction)
+towards the outside is the tip's crack angle [deg]. Cracks that branch off the path (or a second crack from the
+punched block) are thus left out, and the spall of the plate's back face lies beyond 25 mm.
+
+The notch's closing: the largest shortening, over the run's end state, of the gap across the notch along a bond the
+notch cut (its rest offset's component across the notch, y), as a fraction of h: a zero-width cut's faces start h
+apart and touch (contact distance 0.9 of the rest distance) after closing 0.1 h; a slot's start 2 h apart and touch
+at 1.35 h (the contact distance between separate surfaces, kernels/contact.py), after closing 0.65 h.
+``--projectile-height`` gives the punching box's widths across the notches (default 50 mm: its edges lie on the
+notches' centre lines); ``--seeds`` adds runs with the particles jittered (that sampling seed) to the lattice run.
+``--history N`` also prints, at N times through each run with contact on, the notch's closing and the number of
 notch-face particles (those with a bond the notch cut) in contact (ParticleContact.diagnostics).
 """
 
@@ -35,28 +49,61 @@ import warp as wp
 from pdsim.run import advance_frame
 
 NOTCH_TIP_X = 0.0  # the notches run from the plate's edge x = -0.05 m to x = 0 (tools/contact_stability.py)
-NOTCH_Y = 0.025  # [m], the notches' distance from the plate's centre line
+NOTCH_WIDTH = 1.5e-3  # [m], the slots' default width
 DAMAGED = 0.5
-BACK_FACE_MARGIN_X = 0.035  # [m] from the tip: the plate's back face (x = 0.05 m) spalls; its damage is left out
+PATH_FROM = 5.0e-3  # [m], the fitted stretch of crack path: its distance from the tip
+PATH_TO = 25.0e-3
+BAND = 1.5  # [h], the half-width of the band around a candidate crack line
+SCAN_STEP = 0.25  # [deg], the candidate lines' angles
+REFINE = 3  # principal-direction passes over the damage within the band
 
 
-def crack_angle(rest_positions: np.ndarray, damage: np.ndarray, spacing: float) -> float:
-    """Mean angle [deg] from +x of the cracks grown from the two notch tips (module docstring); nan when a tip has no
-    damaged particle ahead of it. ``rest_positions`` [n, 3] in the plate's frame (centre at the origin) [m]."""
-    x = np.asarray(rest_positions, dtype=np.float64)
-    layer = x[:, 2] < x[:, 2].mean()
-    angles = []
-    for sign in (1.0, -1.0):
-        offset = x[:, :2] - np.array([NOTCH_TIP_X, sign * NOTCH_Y])
-        ahead = (offset[:, 0] > 2.0 * spacing) & (offset[:, 0] < BACK_FACE_MARGIN_X)
-        pick = layer & (damage > DAMAGED) & ahead & (sign * offset[:, 1] > spacing)
-        if not pick.any():
-            return math.nan
-        p = offset[pick] * np.array([1.0, sign])  # the outside is +y for both tips
-        _, _, vt = np.linalg.svd(p.T @ p)
-        direction = vt[0] if vt[0] @ p.mean(axis=0) > 0.0 else -vt[0]
-        angles.append(math.degrees(math.atan2(direction[1], direction[0])))
-    return float(np.mean(angles))
+def tip_offsets(rest_positions: np.ndarray, notch_y: float) -> np.ndarray:
+    """Offsets [n, 2] [m] of the particles from the notch tip (NOTCH_TIP_X, ``notch_y``), the outside of the notch
+    towards +y (y mirrored for the lower notch)."""
+    offset = np.asarray(rest_positions, dtype=np.float64)[:, :2] - np.array([NOTCH_TIP_X, notch_y])
+    offset[:, 1] *= math.copysign(1.0, notch_y)
+    return offset
+
+
+def tip_crack_angle(rest_positions: np.ndarray, damage: np.ndarray, spacing: float, notch_y: float) -> float:
+    """The crack angle [deg] of the notch tip (NOTCH_TIP_X, ``notch_y``) [m] (module docstring); nan when no damaged
+    particle lies in the window. ``rest_positions`` [n, 3] in the plate's frame [m], ``damage`` [n]."""
+    offset = tip_offsets(rest_positions, notch_y)
+    r = np.hypot(offset[:, 0], offset[:, 1])
+    pick = (damage > DAMAGED) & (offset[:, 0] > 0.0) & (offset[:, 1] >= spacing) & (r >= PATH_FROM) & (r < PATH_TO)
+    if not pick.any():
+        return math.nan
+    p, w = offset[pick], damage[pick]
+    band = BAND * spacing
+
+    def score(angle):  # damage near the ray from the tip at ``angle`` [rad], a triangle kernel across it
+        across = np.abs(p @ np.array([-math.sin(angle), math.cos(angle)]))
+        return w @ np.maximum(0.0, 1.0 - across / band)
+
+    grid = np.radians(np.arange(0.0, 180.0, SCAN_STEP))
+    angle = float(grid[int(np.argmax([score(a) for a in grid]))])
+    for _ in range(REFINE):  # the principal direction of the damage around the ray, weighted by the kernel
+        across = np.abs(p @ np.array([-math.sin(angle), math.cos(angle)]))
+        weight = w * np.maximum(0.0, 1.0 - across / band)
+        _, _, vt = np.linalg.svd((p * weight[:, None]).T @ p)
+        direction = vt[0] if vt[0] @ (weight @ p) > 0.0 else -vt[0]
+        angle = math.atan2(direction[1], direction[0])
+    return math.degrees(angle)
+
+
+def crack_angles(
+    rest_positions: np.ndarray, damage: np.ndarray, spacing: float, notch_y: tuple = (0.025, -0.025)
+) -> tuple[float, float]:
+    """The crack angles [deg] of the upper and lower notch tips (module docstring), the notches at ``notch_y`` [m]."""
+    return tuple(tip_crack_angle(rest_positions, damage, spacing, y) for y in notch_y)
+
+
+def crack_angle(
+    rest_positions: np.ndarray, damage: np.ndarray, spacing: float, notch_y: tuple = (0.025, -0.025)
+) -> float:
+    """Mean of the two tips' crack angles [deg] (crack_angles); nan when a tip has no traced path."""
+    return float(np.mean(crack_angles(rest_positions, damage, spacing, notch_y)))
 
 
 def notch_closing(solver, rest: np.ndarray) -> float:
@@ -72,12 +119,33 @@ def notch_closing(solver, rest: np.ndarray) -> float:
     return float(max(0.0, -change.min())) if len(change) else 0.0
 
 
-def run(spacing: float, end_time: float, contact: bool, projectile_height: float = 0.05, history: int = 0) -> dict:
-    """The plate at ``spacing`` [m] run to ``end_time`` [s] at the automatic step: crack angle [deg], damaged particle
-    count, the notch's closing [m] (notch_closing), wall time [s]; with ``history`` > 0 and contact on, ``history``
-    rows (time [s], closing [m], notch-face particles in contact) at as many even times through the run."""
-    case = cs.kalthoff_winkler(spacing, contact=contact, projectile_height=projectile_height)
+def run(
+    spacing: float,
+    end_time: float,
+    contact: bool,
+    projectile_height: float = 0.05,
+    history: int = 0,
+    notch_width: float = NOTCH_WIDTH,
+    sampling_seed: int | None = None,
+    former_rule: bool = False,
+) -> dict:
+    """The plate at ``spacing`` [m] with notches ``notch_width`` [m] wide (0: the zero-width cut), particles on the
+    lattice or jittered with ``sampling_seed``, run to ``end_time`` [s] at the automatic step: the two tips' crack
+    angles [deg] (``angles``, upper then lower) and their mean (``angle``), damaged particle count, the notch's
+    closing [m] (notch_closing), wall time [s]; with ``history`` > 0 and contact on, ``history`` rows (time [s],
+    closing [m], notch-face particles in contact) at as many even times through the run. ``former_rule`` (with
+    contact on): the contact ignores the bonds (ParticleContact.cracks off), so particles of one body repel below
+    0.9 of their rest distance whatever lies between them, the rule before crack_pair_geometry."""
+    case = cs.kalthoff_winkler(
+        spacing,
+        contact=contact,
+        projectile_height=projectile_height,
+        notch_width=notch_width,
+        sampling_seed=sampling_seed,
+    )
     solver = case.solver
+    if former_rule and solver.contact is not None:
+        solver.contact.cracks = False
     dt = case.scene.time_step_safety * min(s.stable_time_step() for s in case.solvers)
     rest = np.concatenate([b.rest_positions for b in solver.bodies])
     steps = math.ceil(end_time / dt)
@@ -93,9 +161,11 @@ def run(spacing: float, end_time: float, contact: bool, projectile_height: float
             rows.append((done * dt, notch_closing(solver, rest), notch_contacts(solver, rest)))
     wall = time.perf_counter() - start
     damage = solver.damage()
+    angles = crack_angles(rest, damage, spacing, tuple(cs.notch_lines(spacing, notch_width)))
     return {
         "contact": contact,
-        "angle": crack_angle(rest, damage, spacing),
+        "angles": angles,
+        "angle": float(np.mean(angles)),
         "damaged": int((damage > DAMAGED).sum()),
         "closing": notch_closing(solver, rest),
         "particles": solver.particle_count,
@@ -119,31 +189,61 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--spacing", type=float, default=2.0e-3, help="particle spacing h [m] (gallery: 2 mm)")
     parser.add_argument("--end", type=float, default=100.0e-6, help="end time [s]")
-    parser.add_argument("--projectile-height", type=float, default=0.05, help="the box across the notches [m]")
+    parser.add_argument("--notch-width", type=float, default=NOTCH_WIDTH, help="slot width [m]; 0: zero-width cut")
+    parser.add_argument(
+        "--projectile-height", type=float, nargs="+", default=[0.05], help="the box's widths across the notches [m]"
+    )
+    parser.add_argument("--seeds", type=int, nargs="*", default=[], help="jittered runs' sampling seeds")
     parser.add_argument("--history", type=int, default=0, help="rows of the notch's closing and contacts (on)")
     parser.add_argument("--out", type=Path, default=None, help="print only when omitted")
     args = parser.parse_args(argv)
-    rows = [run(args.spacing, args.end, contact, args.projectile_height, args.history) for contact in (False, True)]
+    wp.config.quiet = True
+    configs = [(box, None) for box in args.projectile_height] + [(args.projectile_height[0], s) for s in args.seeds]
+    command = (
+        f"python tools/crack_faces.py --spacing {args.spacing:g} --end {args.end:g} --notch-width {args.notch_width:g}"
+        f" --projectile-height {' '.join(f'{b:g}' for b in args.projectile_height)}"
+        + (f" --seeds {' '.join(str(s) for s in args.seeds)}" if args.seeds else "")
+    )
+    notch = f"slots {args.notch_width * 1e3:g} mm wide" if args.notch_width > 0.0 else "zero-width cuts"
     lines = [
-        f"Kalthoff-Winkler-like steel plate, h = {args.spacing * 1e3:g} mm, 32 m/s, t = {args.end * 1e6:g} us, box "
-        f"{args.projectile_height * 1e3:g} mm across the notches ({rows[0]['particles']} particles; "
-        f"{platform.processor() or platform.machine()}, {datetime.date.today().isoformat()}; "
-        f"`python tools/crack_faces.py --spacing {args.spacing:g} --end {args.end:g} "
-        f"--projectile-height {args.projectile_height:g}`):",
+        f"Kalthoff-Winkler-like steel plate, h = {args.spacing * 1e3:g} mm, 32 m/s, t = {args.end * 1e6:g} us, notches "
+        f"{notch} ({platform.processor() or platform.machine()}, {datetime.date.today().isoformat()}; `{command}`):",
         "",
-        "| contact | crack angle from the notch [deg] | particles with damage > 0.5 | notch closing [h] | wall [s] |",
-        "|---|---|---|---|---|",
+        "| box [mm] | particles | contact | upper tip [deg] | lower tip [deg] | mean [deg] | on - off [deg] "
+        "| damage > 0.5 | notch closing [h] | wall [s] |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for r in rows:
-        lines.append(
-            f"| {'on' if r['contact'] else 'off'} | {r['angle']:.1f} | {r['damaged']} | "
-            f"{r['closing'] / args.spacing:.3f} | {r['wall']:.1f} |"
-        )
+    means = {False: [], True: []}
+    histories = []
+    for box, seed in configs:
+        rows = [run(args.spacing, args.end, c, box, args.history, args.notch_width, seed) for c in (False, True)]
+        difference = rows[1]["angle"] - rows[0]["angle"]
+        for r in rows:
+            means[r["contact"]].append(r["angle"])
+            label = f"{box * 1e3:g}" + ("" if seed is None else f", seed {seed}")
+            lines.append(
+                f"| {label} | {r['particles']} | {'on' if r['contact'] else 'off'} | {r['angles'][0]:.1f} | "
+                f"{r['angles'][1]:.1f} | {r['angle']:.2f} | {difference if r['contact'] else math.nan:+.2f} | "
+                f"{r['damaged']} | {r['closing'] / args.spacing:.3f} | {r['wall']:.1f} |".replace("| +nan |", "| |")
+            )
+        if rows[1]["history"]:
+            histories.append((box, seed, rows[1]["history"]))
+        print(lines[-2], lines[-1], sep="\n", flush=True)
     lines.append("")
-    lines.append(f"Difference: {abs(rows[1]['angle'] - rows[0]['angle']):.2f} degrees.")
-    if rows[1]["history"]:
-        lines += ["", "| t [us] (contact on) | notch closing [h] | notch-face particles in contact |", "|---|---|---|"]
-        for t, closing, count in rows[1]["history"]:
+    spread = {c: (max(v) - min(v)) if len(v) > 1 else math.nan for c, v in means.items()}
+    lines.append(
+        f"Largest |on - off|: {max(abs(a - b) for a, b in zip(means[True], means[False])):.2f} degrees; the mean "
+        f"angle's spread over the set-ups: {spread[False]:.2f} degrees off, {spread[True]:.2f} on."
+    )
+    for box, seed, history in histories:
+        lines += [
+            "",
+            f"Box {box * 1e3:g} mm{'' if seed is None else f', seed {seed}'}, contact on:",
+            "",
+            "| t [us] | notch closing [h] | notch-face particles in contact |",
+            "|---|---|---|",
+        ]
+        for t, closing, count in history:
             lines.append(f"| {t * 1e6:.0f} | {closing / args.spacing:.3f} | {count} |")
     text = "\n".join(lines)
     print(text)
