@@ -214,12 +214,15 @@ def main(argv=None) -> None:
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     means = {False: [], True: []}
+    jittered = {False: [], True: []}  # the seeded runs' tip angles
     histories = []
     for box, seed in configs:
         rows = [run(args.spacing, args.end, c, box, args.history, args.notch_width, seed) for c in (False, True)]
         difference = rows[1]["angle"] - rows[0]["angle"]
         for r in rows:
             means[r["contact"]].append(r["angle"])
+            if seed is not None:
+                jittered[r["contact"]] += list(r["angles"])
             label = f"{box * 1e3:g}" + ("" if seed is None else f", seed {seed}")
             lines.append(
                 f"| {label} | {r['particles']} | {'on' if r['contact'] else 'off'} | {r['angles'][0]:.1f} | "
@@ -235,6 +238,16 @@ def main(argv=None) -> None:
         f"Largest |on - off|: {max(abs(a - b) for a, b in zip(means[True], means[False])):.2f} degrees; the mean "
         f"angle's spread over the set-ups: {spread[False]:.2f} degrees off, {spread[True]:.2f} on."
     )
+    if args.seeds:
+        off, on = np.asarray(jittered[False]), np.asarray(jittered[True])
+        change = on - off
+        se = change.std(ddof=1) / math.sqrt(len(change))
+        lines.append(
+            f"Jittered runs ({len(args.seeds)} seeds, {len(off)} tips): tip angle {off.mean():.1f} +- "
+            f"{off.std(ddof=1):.1f} degrees off, {on.mean():.1f} +- {on.std(ddof=1):.1f} on (mean +- standard "
+            f"deviation); on - off per tip {change.mean():+.2f} +- {se:.2f} (mean +- standard error), from "
+            f"{change.min():+.1f} to {change.max():+.1f}."
+        )
     for box, seed, history in histories:
         lines += [
             "",
