@@ -195,6 +195,7 @@ def main(argv=None) -> None:
     )
     parser.add_argument("--seeds", type=int, nargs="*", default=[], help="jittered runs' sampling seeds")
     parser.add_argument("--history", type=int, default=0, help="rows of the notch's closing and contacts (on)")
+    parser.add_argument("--former-rule", action="store_true", help="also contact on without the bonds (run)")
     parser.add_argument("--out", type=Path, default=None, help="print only when omitted")
     args = parser.parse_args(argv)
     wp.config.quiet = True
@@ -203,6 +204,7 @@ def main(argv=None) -> None:
         f"python tools/crack_faces.py --spacing {args.spacing:g} --end {args.end:g} --notch-width {args.notch_width:g}"
         f" --projectile-height {' '.join(f'{b:g}' for b in args.projectile_height)}"
         + (f" --seeds {' '.join(str(s) for s in args.seeds)}" if args.seeds else "")
+        + (" --former-rule" if args.former_rule else "")
     )
     notch = f"slots {args.notch_width * 1e3:g} mm wide" if args.notch_width > 0.0 else "zero-width cuts"
     lines = [
@@ -218,20 +220,24 @@ def main(argv=None) -> None:
     histories = []
     for box, seed in configs:
         rows = [run(args.spacing, args.end, c, box, args.history, args.notch_width, seed) for c in (False, True)]
-        difference = rows[1]["angle"] - rows[0]["angle"]
-        for r in rows:
-            means[r["contact"]].append(r["angle"])
-            if seed is not None:
+        if args.former_rule:
+            rows.append(run(args.spacing, args.end, True, box, 0, args.notch_width, seed, former_rule=True))
+        for i, r in enumerate(rows):
+            if i < 2:
+                means[r["contact"]].append(r["angle"])
+            if seed is not None and i < 2:
                 jittered[r["contact"]] += list(r["angles"])
             label = f"{box * 1e3:g}" + ("" if seed is None else f", seed {seed}")
+            mode = ("off", "on", "on, former rule")[i]
+            difference = f"{r['angle'] - rows[0]['angle']:+.2f}" if i else ""
             lines.append(
-                f"| {label} | {r['particles']} | {'on' if r['contact'] else 'off'} | {r['angles'][0]:.1f} | "
-                f"{r['angles'][1]:.1f} | {r['angle']:.2f} | {difference if r['contact'] else math.nan:+.2f} | "
-                f"{r['damaged']} | {r['closing'] / args.spacing:.3f} | {r['wall']:.1f} |".replace("| +nan |", "| |")
+                f"| {label} | {r['particles']} | {mode} | {r['angles'][0]:.1f} | {r['angles'][1]:.1f} | "
+                f"{r['angle']:.2f} | {difference} | {r['damaged']} | {r['closing'] / args.spacing:.3f} | "
+                f"{r['wall']:.1f} |"
             )
         if rows[1]["history"]:
             histories.append((box, seed, rows[1]["history"]))
-        print(lines[-2], lines[-1], sep="\n", flush=True)
+        print(*lines[-len(rows) :], sep="\n", flush=True)
     lines.append("")
     spread = {c: (max(v) - min(v)) if len(v) > 1 else math.nan for c, v in means.items()}
     lines.append(
