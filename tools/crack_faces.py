@@ -3,7 +3,8 @@ off, and the angle of the cracks that grow from its notch tips; prints the table
 faces and contact").
 
     python tools/crack_faces.py [--spacing 2e-3] [--end 100e-6] [--notch-width 1.5e-3]
-                                [--projectile-height 0.046 0.048 0.05] [--seeds 1 2] [--history 10] [--out docs]
+                                [--projectile-height 0.046 0.048 0.05] [--seeds 1 2] [--history 10]
+                                [--former-rule] [--safety 0.7] [--out docs]
 
 Contact within a body acts only where crack faces close across dead bonds (kernels/contact.py,
 crack_pair_geometry): the notch faces, which the punched block slides along, must not push the plate apart, so the
@@ -28,9 +29,12 @@ notch cut (its rest offset's component across the notch, y), as a fraction of h:
 apart and touch (contact distance 0.9 of the rest distance) after closing 0.1 h; a slot's start 2 h apart and touch
 at 1.35 h (the contact distance between separate surfaces, kernels/contact.py), after closing 0.65 h.
 ``--projectile-height`` gives the punching box's widths across the notches (default 50 mm: its edges lie on the
-notches' centre lines); ``--seeds`` adds runs with the particles jittered (that sampling seed) to the lattice run.
+notches' centre lines); ``--seeds`` adds runs with the particles jittered (that sampling seed) to the lattice run;
+``--former-rule`` adds a run with contact on that ignores the bonds (run's ``former_rule``); ``--safety`` sets the
+step over the stable estimate.
 ``--history N`` also prints, at N times through each run with contact on, the notch's closing and the number of
-notch-face particles (those with a bond the notch cut) in contact (ParticleContact.diagnostics).
+notch-face particles (those with a bond the notch cut) in contact (ParticleContact.diagnostics), and where the
+particles in contact at those times lie (contact_regions).
 """
 
 from __future__ import annotations
@@ -128,6 +132,7 @@ def run(
     notch_width: float = NOTCH_WIDTH,
     sampling_seed: int | None = None,
     former_rule: bool = False,
+    time_step_safety: float = 0.7,
 ) -> dict:
     """The plate at ``spacing`` [m] with notches ``notch_width`` [m] wide (0: the zero-width cut), particles on the
     lattice or jittered with ``sampling_seed``, run to ``end_time`` [s] at the automatic step: the two tips' crack
@@ -135,13 +140,15 @@ def run(
     closing [m] (notch_closing), wall time [s]; with ``history`` > 0 and contact on, ``history`` rows (time [s],
     closing [m], notch-face particles in contact) at as many even times through the run. ``former_rule`` (with
     contact on): the contact ignores the bonds (ParticleContact.cracks off), so particles of one body repel below
-    0.9 of their rest distance whatever lies between them, the rule before crack_pair_geometry."""
+    0.9 of their rest distance whatever lies between them, the rule before crack_pair_geometry. ``time_step_safety``:
+    the step over the smallest stable estimate (the Scene's default 0.7)."""
     case = cs.kalthoff_winkler(
         spacing,
         contact=contact,
         projectile_height=projectile_height,
         notch_width=notch_width,
         sampling_seed=sampling_seed,
+        time_step_safety=time_step_safety,
     )
     solver = case.solver
     if former_rule and solver.contact is not None:
@@ -151,6 +158,8 @@ def run(
     steps = math.ceil(end_time / dt)
     chunks = history if history > 0 and solver.contact is not None else 1
     rows = []
+    faces = notch_faces(solver, rest)
+    first = np.full(len(rest), np.nan)  # time of each particle's first contact at a history sample [s]
     start = time.perf_counter()
     done = 0
     for c in range(chunks):
@@ -158,7 +167,9 @@ def run(
         advance_frame(case.solvers, dt, n)
         done += n
         if chunks > 1:
-            rows.append((done * dt, notch_closing(solver, rest), notch_contacts(solver, rest)))
+            touching = in_contact(solver)
+            first[touching & np.isnan(first)] = done * dt
+            rows.append((done * dt, notch_closing(solver, rest), int((touching & faces).sum())))
     wall = time.perf_counter() - start
     damage = solver.damage()
     angles = crack_angles(rest, damage, spacing, tuple(cs.notch_lines(spacing, notch_width)))
@@ -171,18 +182,46 @@ def run(
         "particles": solver.particle_count,
         "wall": wall,
         "history": rows,
+        "regions": contact_regions(rest, first, cs.notch_lines(spacing, notch_width)) if rows else [],
     }
 
 
-def notch_contacts(solver, rest: np.ndarray) -> int:
-    """The number of particles with a bond the notch cut that are in contact now (ParticleContact.diagnostics)."""
+def in_contact(solver) -> np.ndarray:
+    """bool [n]: the particles in contact now (ParticleContact.diagnostics)."""
+    local = solver.model.rest_positions.numpy() + solver.kin.u.numpy()  # the solver's local frame, as the contact's
+    positions = wp.array(local.astype(np.float32), dtype=wp.vec3, device=solver.device)
+    return solver.contact.diagnostics(positions).count > 0
+
+
+def notch_faces(solver, rest: np.ndarray) -> np.ndarray:
+    """bool [n]: the particles with a bond the notch cut."""
     m = solver.model
     owner = np.repeat(np.arange(len(rest)), np.diff(m.family_offsets.numpy()))
     face = np.zeros(len(rest), dtype=bool)
     face[owner[m.bond_alive_initial.numpy() == 0]] = True
-    local = m.rest_positions.numpy() + solver.kin.u.numpy()  # the solver's local frame, as the contact's
-    positions = wp.array(local.astype(np.float32), dtype=wp.vec3, device=solver.device)
-    return int(((solver.contact.diagnostics(positions).count > 0) & face).sum())
+    return face
+
+
+def contact_regions(rest: np.ndarray, first: np.ndarray, notch_y: list) -> list[tuple[str, int, float]]:
+    """Where the particles in contact at some sample lie (``first`` [n]: the time of their first contact [s], nan
+    for none): (region, count, earliest time [s]) for the impact end (x within 10 mm of the impacted face x =
+    -50 mm), the notches' faces beyond it (within 4 mm of a notch's centre line, x < 0), within 30 mm of a notch
+    tip, and elsewhere; each particle counted in the first region that holds it."""
+    hit = np.isfinite(first)
+    near_notch = np.min([np.abs(rest[:, 1] - y) for y in notch_y], axis=0)
+    tip_distance = np.min([np.hypot(rest[:, 0] - NOTCH_TIP_X, rest[:, 1] - y) for y in notch_y], axis=0)
+    regions = [
+        ("impact end", rest[:, 0] < -0.04),
+        ("notch faces", (near_notch < 0.004) & (rest[:, 0] < 0.0)),
+        ("near a tip", tip_distance < 0.03),
+        ("elsewhere", np.ones(len(rest), dtype=bool)),
+    ]
+    out, left = [], hit.copy()
+    for name, mask in regions:
+        pick = left & mask
+        left &= ~mask
+        out.append((name, int(pick.sum()), float(first[pick].min()) if pick.any() else math.nan))
+    return out
 
 
 def main(argv=None) -> None:
@@ -196,6 +235,7 @@ def main(argv=None) -> None:
     parser.add_argument("--seeds", type=int, nargs="*", default=[], help="jittered runs' sampling seeds")
     parser.add_argument("--history", type=int, default=0, help="rows of the notch's closing and contacts (on)")
     parser.add_argument("--former-rule", action="store_true", help="also contact on without the bonds (run)")
+    parser.add_argument("--safety", type=float, default=0.7, help="time step over the stable estimate")
     parser.add_argument("--out", type=Path, default=None, help="print only when omitted")
     args = parser.parse_args(argv)
     wp.config.quiet = True
@@ -205,6 +245,7 @@ def main(argv=None) -> None:
         f" --projectile-height {' '.join(f'{b:g}' for b in args.projectile_height)}"
         + (f" --seeds {' '.join(str(s) for s in args.seeds)}" if args.seeds else "")
         + (" --former-rule" if args.former_rule else "")
+        + (f" --safety {args.safety:g}" if args.safety != 0.7 else "")
     )
     notch = f"slots {args.notch_width * 1e3:g} mm wide" if args.notch_width > 0.0 else "zero-width cuts"
     lines = [
@@ -219,9 +260,10 @@ def main(argv=None) -> None:
     jittered = {False: [], True: []}  # the seeded runs' tip angles
     histories = []
     for box, seed in configs:
-        rows = [run(args.spacing, args.end, c, box, args.history, args.notch_width, seed) for c in (False, True)]
+        options = {"notch_width": args.notch_width, "sampling_seed": seed, "time_step_safety": args.safety}
+        rows = [run(args.spacing, args.end, c, box, args.history, **options) for c in (False, True)]
         if args.former_rule:
-            rows.append(run(args.spacing, args.end, True, box, 0, args.notch_width, seed, former_rule=True))
+            rows.append(run(args.spacing, args.end, True, box, 0, former_rule=True, **options))
         for i, r in enumerate(rows):
             if i < 2:
                 means[r["contact"]].append(r["angle"])
@@ -236,7 +278,7 @@ def main(argv=None) -> None:
                 f"{r['wall']:.1f} |"
             )
         if rows[1]["history"]:
-            histories.append((box, seed, rows[1]["history"]))
+            histories.append((box, seed, rows[1]["history"], rows[1]["regions"]))
         print(*lines[-len(rows) :], sep="\n", flush=True)
     lines.append("")
     spread = {c: (max(v) - min(v)) if len(v) > 1 else math.nan for c, v in means.items()}
@@ -254,7 +296,7 @@ def main(argv=None) -> None:
             f"deviation); on - off per tip {change.mean():+.2f} +- {se:.2f} (mean +- standard error), from "
             f"{change.min():+.1f} to {change.max():+.1f}."
         )
-    for box, seed, history in histories:
+    for box, seed, history, regions in histories:
         lines += [
             "",
             f"Box {box * 1e3:g} mm{'' if seed is None else f', seed {seed}'}, contact on:",
@@ -264,6 +306,14 @@ def main(argv=None) -> None:
         ]
         for t, closing, count in history:
             lines.append(f"| {t * 1e6:.0f} | {closing / args.spacing:.3f} | {count} |")
+        lines.append("")
+        lines.append(
+            "Particles in contact at some sample: "
+            + "; ".join(
+                f"{name} {count}" + (f" (from {t * 1e6:.1f} us)" if count else "") for name, count, t in regions
+            )
+            + "."
+        )
     text = "\n".join(lines)
     print(text)
     if args.out is not None:
