@@ -161,10 +161,10 @@ def test_kalthoff_winkler_crack_angle_is_the_same_with_contact_on_and_off():
     notches is punched forward along the slots, and contact must not change where the cracks go. The crack angle of
     each tip (tools/crack_faces.py, crack_angles: the line through the tip that best fits the damage 5 to 25 mm from
     it) is the same with contact on and off within 2 degrees (measured 47.21 / 47.19 off, 47.10 / 47.10 on); the
-    two tips, mirror images on the lattice, agree. The slots' faces touch only from 38 us on (closing by 0.97 h at
-    most), and even a contact distance of 2.2 h, which puts them in contact from the start, moves the angle by only
-    0.16 degrees: this test checks the criterion on the real geometry, and the zero-width test below is the one that a
-    contact rule pushing sliding faces apart fails. 17 s on a loaded two-core machine."""
+    two tips, mirror images on the lattice, agree. The slots' faces touch only late (from 90 us, closing by 0.97 h
+    at most; docs/fracture.md), and even a contact distance of 2.2 h, which puts them in contact from the start, moves
+    the angle by only 0.16 degrees: this test checks the criterion on the real geometry, and the zero-width test below
+    is the one that a contact rule pushing sliding faces apart fails. 17 s on a loaded two-core machine."""
     import crack_faces  # tools/ (on the path through conftest.py)
 
     off = crack_faces.run(2.0e-3, 100.0e-6, contact=False, notch_width=1.5e-3)

@@ -192,6 +192,7 @@ def kalthoff_winkler(
     projectile_height: float = 0.05,
     notch_width: float = 0.0,
     sampling_seed: int | None = None,
+    contact_options: dict | None = None,
 ) -> Case:
     """The Kalthoff-Winkler-like steel plate of the module docstring at particle spacing ``spacing`` [m]; ``contact``
     False switches the scene's contact off (Scene.enable_contact(False)); ``projectile_height`` [m]: the box's extent
@@ -203,7 +204,8 @@ def kalthoff_winkler(
     (slotted_plate; one layer for a width below 2 h) and the bonds that cross it start dead, so the faces' particles
     start 2 h apart (one layer removed) and touch only when the slot closes. The notches run to x = 0 either way.
     ``sampling_seed``: None (default) puts the particles on the lattice; an integer jitters them (sampling
-    "jittered", that seed)."""
+    "jittered", that seed). ``contact_options`` (with ``contact``): Scene.enable_contact's options, e.g.
+    {"distance_factor": 2.2}."""
     h = spacing
     lx, ly, lz = KW_PLATE
     lz = 2.0 * h
@@ -223,6 +225,8 @@ def kalthoff_winkler(
     scene = pdsim.Scene(gravity=(0.0, 0.0, 0.0), time_step_safety=time_step_safety)
     if not contact:
         scene.enable_contact(False)
+    elif contact_options:
+        scene.enable_contact(True, **contact_options)
     scene.add_body(body)
     # a 20 x 50 x 50 mm box 0.1 mm off the impacted face x = -lx / 2
     velocity = (IMPACT_SPEED, 0.0, 0.0)

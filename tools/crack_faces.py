@@ -4,7 +4,7 @@ faces and contact").
 
     python tools/crack_faces.py [--spacing 2e-3] [--end 100e-6] [--notch-width 1.5e-3]
                                 [--projectile-height 0.046 0.048 0.05] [--seeds 1 2] [--history 10]
-                                [--former-rule] [--safety 0.7] [--out docs]
+                                [--former-rule] [--safety 0.7] [--distance-factor 1.35] [--out docs]
 
 Contact within a body acts only where crack faces close across dead bonds (kernels/contact.py,
 crack_pair_geometry): the notch faces, which the punched block slides along, must not push the plate apart, so the
@@ -31,7 +31,7 @@ at 1.35 h (the contact distance between separate surfaces, kernels/contact.py), 
 ``--projectile-height`` gives the punching box's widths across the notches (default 50 mm: its edges lie on the
 notches' centre lines); ``--seeds`` adds runs with the particles jittered (that sampling seed) to the lattice run;
 ``--former-rule`` adds a run with contact on that ignores the bonds (run's ``former_rule``); ``--safety`` sets the
-step over the stable estimate.
+step over the stable estimate, ``--distance-factor`` the contact distance of separate surfaces over h.
 ``--history N`` also prints, at N times through each run with contact on, the notch's closing and the number of
 notch-face particles (those with a bond the notch cut) in contact (ParticleContact.diagnostics), and where the
 particles in contact at those times lie (contact_regions).
@@ -133,6 +133,7 @@ def run(
     sampling_seed: int | None = None,
     former_rule: bool = False,
     time_step_safety: float = 0.7,
+    distance_factor: float | None = None,
 ) -> dict:
     """The plate at ``spacing`` [m] with notches ``notch_width`` [m] wide (0: the zero-width cut), particles on the
     lattice or jittered with ``sampling_seed``, run to ``end_time`` [s] at the automatic step: the two tips' crack
@@ -141,7 +142,8 @@ def run(
     closing [m], notch-face particles in contact) at as many even times through the run. ``former_rule`` (with
     contact on): the contact ignores the bonds (ParticleContact.cracks off), so particles of one body repel below
     0.9 of their rest distance whatever lies between them, the rule before crack_pair_geometry. ``time_step_safety``:
-    the step over the smallest stable estimate (the Scene's default 0.7)."""
+    the step over the smallest stable estimate (the Scene's default 0.7). ``distance_factor``: the contact distance
+    of separate surfaces over h (ParticleContact's, default 1.35)."""
     case = cs.kalthoff_winkler(
         spacing,
         contact=contact,
@@ -149,6 +151,7 @@ def run(
         notch_width=notch_width,
         sampling_seed=sampling_seed,
         time_step_safety=time_step_safety,
+        contact_options=None if distance_factor is None else {"distance_factor": distance_factor},
     )
     solver = case.solver
     if former_rule and solver.contact is not None:
@@ -236,6 +239,7 @@ def main(argv=None) -> None:
     parser.add_argument("--history", type=int, default=0, help="rows of the notch's closing and contacts (on)")
     parser.add_argument("--former-rule", action="store_true", help="also contact on without the bonds (run)")
     parser.add_argument("--safety", type=float, default=0.7, help="time step over the stable estimate")
+    parser.add_argument("--distance-factor", type=float, default=None, help="contact distance over h (1.35)")
     parser.add_argument("--out", type=Path, default=None, help="print only when omitted")
     args = parser.parse_args(argv)
     wp.config.quiet = True
@@ -246,6 +250,7 @@ def main(argv=None) -> None:
         + (f" --seeds {' '.join(str(s) for s in args.seeds)}" if args.seeds else "")
         + (" --former-rule" if args.former_rule else "")
         + (f" --safety {args.safety:g}" if args.safety != 0.7 else "")
+        + (f" --distance-factor {args.distance_factor:g}" if args.distance_factor is not None else "")
     )
     notch = f"slots {args.notch_width * 1e3:g} mm wide" if args.notch_width > 0.0 else "zero-width cuts"
     lines = [
@@ -260,7 +265,12 @@ def main(argv=None) -> None:
     jittered = {False: [], True: []}  # the seeded runs' tip angles
     histories = []
     for box, seed in configs:
-        options = {"notch_width": args.notch_width, "sampling_seed": seed, "time_step_safety": args.safety}
+        options = {
+            "notch_width": args.notch_width,
+            "sampling_seed": seed,
+            "time_step_safety": args.safety,
+            "distance_factor": args.distance_factor,
+        }
         rows = [run(args.spacing, args.end, c, box, args.history, **options) for c in (False, True)]
         if args.former_rule:
             rows.append(run(args.spacing, args.end, True, box, 0, former_rule=True, **options))
