@@ -14,15 +14,14 @@ The notches (contact_stability.kalthoff_winkler): slots ``--notch-width`` wide (
 peridynamic models of the experiment commonly use), the particle layer nearest y = +-25 mm removed; 0 cuts them as
 planes of zero width between two particle layers instead, whose faces start in contact range.
 
-The angle (crack_angles): each tip's crack path is traced through the damaged particles (damage > 0.5, every
-particle layer through the thickness) in shells of width h around the tip, from 5 to 25 mm (PATH_FROM, PATH_TO),
-ahead of the tip (x > x_tip) and outside the notch (|y| >= |y_notch| + h): in each shell the damaged particles are
-split into groups along the arc (a gap over 1.5 h between neighbours in angle splits them), the group on the path is
-the heaviest (summed damage) in the first shell and, in each later shell, the one whose centre lies at the angle
-nearest to the previous shell's, and its damage-weighted centre is the path's point there. A line through the tip is
-fitted to those points (their principal direction); its angle from the notch direction (+x, the impact direction)
-towards the outside is the tip's crack angle [deg]. Cracks that branch off the path (or a second crack from the
-punched block) are thus left out, and the spall of the plate's back face lies beyond 25 mm.
+The angle (crack_angles, tip_crack_angle), each tip on its own: the damaged particles (damage > 0.5, every particle
+layer through the thickness) 5 to 25 mm from the tip (PATH_FROM, PATH_TO), ahead of it (x > x_tip) and outside the
+notch (|y| >= |y_notch| + h), are scanned for the line through the tip with the most damage near it (directions in
+steps of SCAN_STEP = 0.25 degrees; each particle's damage weighted by a triangle kernel across the line, zero at
+BAND = 1.5 h), and REFINE = 3 passes of the damage- and kernel-weighted principal direction of the particles around
+that line refine it. Its angle from the notch direction (+x, the impact direction) towards the outside is the tip's
+crack angle [deg]. A crack branching off the line (or a second crack from the punched block) adds little to it, and
+the spall of the plate's back face lies beyond 25 mm.
 
 The notch's closing: the largest shortening, over the run's end state, of the gap across the notch along a bond the
 notch cut (its rest offset's component across the notch, y), as a fraction of h: a zero-width cut's faces start h
