@@ -59,10 +59,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pdsim.kernels
+import trimesh
 import warp as wp
 
 import pdsim
 from pdsim.run import advance_frame
+from pdsim.sampling import simple_cubic_lattice
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BEFORE_REVISION = "e153a59"  # last commit with the pair modulus 2 C_k C_j / (C_k + C_j) evaluated as written
@@ -150,6 +152,37 @@ class Case:
     particle_count: int = 0
 
 
+def slotted_plate(size, spacing: float, slots) -> pdsim.SolidShape:
+    """A box of edge lengths ``size`` [m] centred at the origin with slots cut through its thickness from its edge
+    x = -size[0] / 2: each slot (y_centre, width, x_end) [m] removes the band |y - y_centre| < width / 2 for
+    x < x_end (manifold3d booleans through trimesh)."""
+    lx, _, lz = size
+    plate = trimesh.creation.box(extents=size)
+    cutters = []
+    for y, width, x_end in slots:
+        length = x_end + 0.5 * lx + spacing  # from beyond the edge to x_end
+        cutter = trimesh.creation.box(extents=(length, width, 2.0 * lz))
+        cutter.apply_translation((x_end - 0.5 * length, y, 0.0))
+        cutters.append(cutter)
+    mesh = trimesh.boolean.difference([plate, *cutters], engine="manifold")
+    return pdsim.shape_from_arrays(mesh.vertices, mesh.faces, name="plate")
+
+
+KW_PLATE = (0.1, 0.2, None)  # [m]: x (the impact direction), y; the thickness is two particle layers
+
+
+def notch_lines(spacing: float, notch_width: float = 0.0) -> list[float]:
+    """y [m] of the Kalthoff-Winkler plate's two notches (the upper one first) at particle spacing ``spacing`` [m]:
+    for a slot (``notch_width`` > 0) the particle layer nearest y = +-25 mm, its centre; for the zero-width cut the
+    plane half a spacing beyond that layer, between two layers."""
+    lx, ly, _ = KW_PLATE
+    layers = np.unique(np.round(simple_cubic_lattice(pdsim.box((lx, ly, spacing)), spacing)[:, 1], 9))
+    centres = [float(layers[np.argmin(np.abs(layers - sign * 0.025))]) for sign in (1.0, -1.0)]
+    if notch_width > 0.0:
+        return centres
+    return [y + math.copysign(0.5 * spacing, y) for y in centres]
+
+
 def kalthoff_winkler(
     spacing: float = 4.0e-3,
     *,
@@ -157,20 +190,43 @@ def kalthoff_winkler(
     time_step_safety: float = 0.7,
     contact: bool = True,
     projectile_height: float = 0.05,
+    notch_width: float = 0.0,
+    sampling_seed: int | None = None,
+    contact_options: dict | None = None,
 ) -> Case:
     """The Kalthoff-Winkler-like steel plate of the module docstring at particle spacing ``spacing`` [m]; ``contact``
     False switches the scene's contact off (Scene.enable_contact(False)); ``projectile_height`` [m]: the box's extent
-    across the notches (default 50 mm, the notches' spacing: its edges lie on the notches)."""
+    across the notches (default 50 mm, the notches' spacing).
+
+    ``notch_width`` [m]: 0 (default) cuts each notch as a plane of zero width between two particle layers (every bond
+    crossing it starts dead; the faces' particles start h apart, in contact range); > 0 makes each notch a slot of
+    that width centred on the particle layer nearest y = +-25 mm: the particles whose centres lie in it are removed
+    (slotted_plate; one layer for a width below 2 h) and the bonds that cross it start dead, so the faces' particles
+    start 2 h apart (one layer removed) and touch only when the slot closes. The notches run to x = 0 either way.
+    ``sampling_seed``: None (default) puts the particles on the lattice; an integer jitters them (sampling
+    "jittered", that seed). ``contact_options`` (with ``contact``): Scene.enable_contact's options, e.g.
+    {"distance_factor": 2.2}."""
     h = spacing
-    lx, ly, lz = 0.1, 0.2, 2.0 * h
-    body = pdsim.PeridynamicBody(pdsim.box((lx, ly, lz)), STEEL, h, name="plate")
-    layers = np.unique(np.round(body.rest_positions[:, 1], 9))
-    for sign in (1.0, -1.0):
-        y = layers[np.argmin(np.abs(layers - sign * 0.025))] + sign * 0.5 * h  # between two particle layers
-        body.add_notch(pdsim.BoxRegion(lo=(-1.0, y - 1.0e-5, -1.0), hi=(-0.5 * lx + 0.05, y + 1.0e-5, 1.0)))
+    lx, ly, lz = KW_PLATE
+    lz = 2.0 * h
+    tip = -0.5 * lx + 0.05
+    centres = notch_lines(h, notch_width)
+    if notch_width > 0.0:
+        tip -= 1.0e-3 * h  # off a lattice plane (x = 0 is one at h = 4 mm): the particles there stay, on both sides
+        shape = slotted_plate((lx, ly, lz), h, [(y, notch_width, tip) for y in centres])
+        half = 0.5 * notch_width
+    else:
+        shape = pdsim.box((lx, ly, lz))
+        half = 1.0e-5
+    sampling = {} if sampling_seed is None else {"sampling": "jittered", "sampling_seed": sampling_seed}
+    body = pdsim.PeridynamicBody(shape, STEEL, h, name="plate", **sampling)
+    for y in centres:
+        body.add_notch(pdsim.BoxRegion(lo=(-1.0, y - half, -1.0), hi=(tip, y + half, 1.0)))
     scene = pdsim.Scene(gravity=(0.0, 0.0, 0.0), time_step_safety=time_step_safety)
     if not contact:
         scene.enable_contact(False)
+    elif contact_options:
+        scene.enable_contact(True, **contact_options)
     scene.add_body(body)
     # a 20 x 50 x 50 mm box 0.1 mm off the impacted face x = -lx / 2
     velocity = (IMPACT_SPEED, 0.0, 0.0)
