@@ -29,6 +29,7 @@ from .cleanup import (
     SLIVER_ANGLE,
     _collapse_round,
     _flip_round,
+    _neighbourhood,
     _relax_round,
     _undirected_edges,
     triangle_angles,
@@ -127,16 +128,31 @@ def _unsliver(x, faces, parent, shell_of, patch_of, crack_of, first_added, spaci
         crack = crack_of[parent] == 1
         if not crack.any() or triangle_angles(x, faces[crack]).min() >= SLIVER_ANGLE:
             return faces, parent
+        amin = triangle_angles(x, faces).min(axis=1)  # kept up to date on the triangles the rounds change
         for _ in range(DEFORMED_ROUNDS):
-            faces, flipped = _flip_round(x, faces, face_shell, face_patch, SLIVER_ANGLE)
+            sub = _near_slivers(faces, amin, len(x))
+            if sub is None:
+                break
+            verts, local = _compact(faces[sub])
+            out, flipped = _flip_round(x[verts], local, face_shell[sub], face_patch[sub], SLIVER_ANGLE)
             if flipped == 0:
                 break
+            out = verts[out]
+            changed = sub[(out != faces[sub]).any(axis=1)]
+            faces = faces.copy()
+            faces[sub] = out
+            amin[changed] = triangle_angles(x, faces[changed]).min(axis=1)
         for caps in (False, True, False):
             for _ in range(DEFORMED_ROUNDS):
+                sub = _near_slivers(faces, amin, len(x))
+                if sub is None:
+                    break
+                verts, local = _compact(faces[sub])
+                xs = x[verts]
                 moved = _relax_round(
-                    x,
-                    faces,
-                    face_patch,
+                    xs,
+                    local,
+                    face_patch[sub],
                     free,
                     SLIVER_ANGLE,
                     max_turn=60.0,
@@ -145,6 +161,8 @@ def _unsliver(x, faces, parent, shell_of, patch_of, crack_of, first_added, spaci
                 )
                 if moved == 0:
                     break
+                x[verts] = xs
+                amin[sub] = triangle_angles(x, faces[sub]).min(axis=1)  # moved vertices are slivers' corners
         # what is left: added vertices that crushed material brought next to others (needles) or onto a line
         # between them (caps) merge into a neighbour (edge collapses as in step 6)
         merged = 0
@@ -160,6 +178,24 @@ def _unsliver(x, faces, parent, shell_of, patch_of, crack_of, first_added, spaci
         if merged == 0:
             break
     return _drop_three_fans(x, faces, parent, face_patch, first_added, SLIVER_ANGLE)
+
+
+def _near_slivers(faces, amin, vertex_count):
+    """Ids (ascending) of the triangles a round of flips or vertex moves works on: those holding a vertex within
+    one ring of a vertex of a triangle whose smallest angle ``amin`` [f] [degrees] is under SLIVER_ANGLE; None when
+    there is no such triangle. They hold every sliver with its twins and every sliver corner with all its
+    triangles and neighbours, so a round there decides as a round over all ``faces`` and changes nothing else."""
+    sliver = amin < SLIVER_ANGLE
+    if not sliver.any():
+        return None
+    return _neighbourhood(faces, sliver, vertex_count)[0]
+
+
+def _compact(tri):
+    """(the vertex ids of triangles ``tri`` [k, 3], ascending; ``tri`` in those ids' positions), so that a round
+    works on arrays of the triangles' own size, not of the whole surface's vertex count."""
+    verts, local = np.unique(tri, return_inverse=True)
+    return verts, local.reshape(tri.shape)
 
 
 def _drop_three_fans(x, faces, parent, face_patch, first_added, sliver_angle):
