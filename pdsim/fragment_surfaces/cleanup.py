@@ -64,8 +64,17 @@ def shells_closed(tri: np.ndarray, shell: np.ndarray, vertex_count: int) -> np.n
     s = np.tile(shell, 3)
     key = (s * vertex_count + a) * vertex_count + b
     rev = (s * vertex_count + b) * vertex_count + a
-    uk, counts = np.unique(key, return_counts=True)
-    bad_edge = (counts[np.searchsorted(uk, key)] != 1) | ~np.isin(rev, uk)
+    order = np.argsort(key)
+    sk = key[order]
+    dup = np.zeros(len(sk), dtype=bool)  # the directed edge occurs more than once
+    same = sk[1:] == sk[:-1]
+    dup[1:] |= same
+    dup[:-1] |= same
+    bad_edge = np.zeros(len(key), dtype=bool)
+    bad_edge[order] = dup
+    pos = np.minimum(np.searchsorted(sk, rev), max(len(sk) - 1, 0))
+    if len(sk):
+        bad_edge |= sk[pos] != rev  # its reverse is missing
     bad = np.zeros(count, dtype=bool)
     bad[s[bad_edge]] = True
     return ~bad
@@ -556,7 +565,8 @@ def clean_complex(
         whole[sub[~keep]] = False
         tri, flag = tri.copy(), flag.copy()
         tri[sub[keep]] = t1
-        flag[sub[keep]] = _needs_work(points, t1, spacing, short_edge, sliver_angle)
+        redo = (t1 != ts[keep]).any(axis=1)  # the others keep their flags (collapses and flips move no vertex)
+        flag[sub[keep][redo]] = _needs_work(points, t1[redo], spacing, short_edge, sliver_angle)
         if settled is not None:  # what is within two rings of the round's changes is looked at again
             moved = np.concatenate([ts[~keep | (new != ts).any(axis=1)].ravel(), t1[(t1 != t0).any(axis=1)].ravel()])
             settled, flag = _unsettle(points, tri, settled, flag, moved, spacing, short_edge, sliver_angle)
