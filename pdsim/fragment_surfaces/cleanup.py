@@ -120,10 +120,13 @@ def _independent_choice(rows, cols, prio, count, size) -> np.ndarray:
     return chosen
 
 
-def _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle, plane_eq=None, movable=None):
+def _collapse_round(
+    points, tri, shell, patch, spacing, short_edge, sliver_angle, plane_eq=None, movable=None, shell_size=None
+):
     """One round of edge collapses on the complex (see :func:`clean_complex`). Returns (triangles after the round
     [f, 3], mask [f] of the triangles that keep an area, number of collapses; 0: nothing left to do). With
-    ``movable`` (bool [v]) only those vertices may move onto a neighbour."""
+    ``movable`` (bool [v]) only those vertices may move onto a neighbour. ``shell_size``: None, or the vertex count
+    of each shell (int [shell count]) when ``tri`` is part of a larger complex (default: counted in ``tri``)."""
     n_v = points.shape[0]
     lo, hi, side_edge = _undirected_edges(tri, n_v)
     length = np.linalg.norm(points[lo] - points[hi], axis=1)
@@ -190,7 +193,9 @@ def _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle
     dst_in_shell = sv[sd] == dst_key
     edge_in_shell = np.asarray(nbr[su, dst[c_rep]]).ravel() > 0
     common_nbrs = np.asarray(nbr[su].multiply(nbr[sd]).sum(axis=1)).ravel()
-    shell_size = np.bincount(s_of, minlength=int(shell.max()) + 1)[shells_c]
+    if shell_size is None:
+        shell_size = np.bincount(s_of, minlength=int(shell.max()) + 1)
+    shell_size = shell_size[shells_c]
     good = np.where(dst_in_shell, edge_in_shell & (common_nbrs == 2) & (shell_size > 6), True)
     link_ok = np.bincount(c_rep[~good], minlength=len(src)) == 0
     src, dst = src[link_ok], dst[link_ok]
@@ -392,10 +397,11 @@ def _relax_round(
     t_old = points[tri[f_of]]
     n_old = np.cross(t_old[:, 1] - t_old[:, 0], t_old[:, 2] - t_old[:, 0])
     best_step = np.zeros(len(cand))
+    major = _min_angles(t_old) >= sliver_angle  # slivers may turn, these may not
+    corner = tri[f_of] == cand[c_of][:, None]
     for step in steps:
         pos = points[cand] + step * (target - points[cand])
         t_new = t_old.copy()
-        corner = tri[f_of] == cand[c_of][:, None]
         t_new[corner] = np.repeat(pos[c_of], corner.sum(axis=1), axis=0)
         n_new = np.cross(t_new[:, 1] - t_new[:, 0], t_new[:, 2] - t_new[:, 0])
         cos_ok = np.einsum("ij,ij->i", n_old, n_new) >= np.cos(np.radians(max_turn)) * np.linalg.norm(
@@ -403,7 +409,7 @@ def _relax_round(
         ) * np.linalg.norm(n_new, axis=1)
         a_new = np.full(len(cand), np.inf)
         np.minimum.at(a_new, c_of, _min_angles(t_new))
-        turned = np.bincount(c_of[~cos_ok & (_min_angles(t_old) >= sliver_angle)], minlength=len(cand)) > 0
+        turned = np.bincount(c_of[~cos_ok & major], minlength=len(cand)) > 0
         better = (a_new > old_min + 1e-6) & ~turned
         if surface is not None:
             better &= _on_input_planes(pos, own_patch, surface)

@@ -14,7 +14,9 @@ material brings midpoints next to each other or onto a line between their neighb
 edge collapses of step 6, in drawn space, and the flips and moves run again (up to three rounds); an added vertex
 left with three triangles at a sliver (inside the triangle of its neighbours) is then removed
 (:func:`_drop_three_fans`). Splits and clean-up alternate up to six times. This depends on the frame's positions
-only (a resumed run draws the same). The faces and vertex count change only on frames that need it.
+only (a resumed run draws the same). The faces and vertex count change only on frames that need it. Each round of
+flips, moves or merges works on the triangles within two rings of its candidates only (slivers; for merges also the
+short sides at added vertices), in their own vertex numbering, which decides as a round over the whole surface.
 """
 
 from __future__ import annotations
@@ -167,14 +169,30 @@ def _unsliver(x, faces, parent, shell_of, patch_of, crack_of, first_added, spaci
         # between them (caps) merge into a neighbour (edge collapses as in step 6)
         merged = 0
         for _ in range(DEFORMED_ROUNDS):
+            sub = _near_merges(x, faces, movable, spacing)
+            if sub is None:
+                break
+            verts, local = _compact(faces[sub])
             new, keep, collapsed = _collapse_round(
-                x, faces, face_shell, face_patch, spacing, SHORT_EDGE, SLIVER_ANGLE, movable=movable
+                x[verts],
+                local,
+                face_shell[sub],
+                face_patch[sub],
+                spacing,
+                SHORT_EDGE,
+                SLIVER_ANGLE,
+                movable=movable[verts],
+                shell_size=_small_shell_sizes(faces, face_shell),
             )
             if collapsed == 0:
                 break
             merged += collapsed
-            faces, parent = new[keep], parent[keep]
-            face_shell, face_patch = face_shell[keep], face_patch[keep]
+            faces = faces.copy()
+            faces[sub] = verts[new]
+            whole = np.ones(len(faces), dtype=bool)
+            whole[sub] = keep
+            faces, parent = faces[whole], parent[whole]
+            face_shell, face_patch = face_shell[whole], face_patch[whole]
         if merged == 0:
             break
     return _drop_three_fans(x, faces, parent, face_patch, first_added, SLIVER_ANGLE)
@@ -189,6 +207,33 @@ def _near_slivers(faces, amin, vertex_count):
     if not sliver.any():
         return None
     return _neighbourhood(faces, sliver, vertex_count)[0]
+
+
+def _near_merges(x, faces, movable, spacing):
+    """Ids (ascending) of the triangles a round of merges (edge collapses of ``movable`` vertices) works on: those
+    within two rings (as :func:`_near_slivers`) of the slivers and of the triangles with a side under SHORT_EDGE
+    spacings (``spacing`` h [m]) that hold a ``movable`` vertex (bool [v]); every candidate collapse of the round,
+    with its neighbourhood, lies there. None when there is none."""
+    t = x[faces]
+    side = np.linalg.norm(t[:, [1, 2, 0]] - t, axis=2).min(axis=1)
+    flag = (side < SHORT_EDGE * spacing) | (triangle_angles(x, faces).min(axis=1) < SLIVER_ANGLE)
+    flag &= movable[faces].any(axis=1)
+    if not flag.any():
+        return None
+    return _neighbourhood(faces, flag, len(x))[0]
+
+
+def _small_shell_sizes(faces, face_shell):
+    """The vertex count of each shell (int [shell count]) where it may be 6 or less, else its face count: a closed,
+    oriented shell of 6 vertices or less is a sphere of at most 8 faces, so shells of more faces have more than 6
+    vertices (all that the collapses' link condition asks)."""
+    size = np.bincount(face_shell, minlength=int(face_shell.max()) + 1) if len(face_shell) else np.zeros(0, int)
+    small = np.flatnonzero((size > 0) & (size <= 8))
+    if small.size:
+        pick = np.isin(face_shell, small)
+        pairs = np.unique(face_shell[pick][:, None] * (int(faces.max()) + 1) + faces[pick])
+        size[small] = np.bincount(pairs // (int(faces.max()) + 1), minlength=len(size))[small]
+    return size
 
 
 def _compact(tri):
