@@ -2,6 +2,7 @@
 revision, paired on the same drawn surfaces.
 
     python tools/bench_drawn.py [--scene four_walls] [--frames 40] [--rev c0addff] [--save CALLS.pkl]
+                                [--save-cleanups CLEAN.pkl]
     python tools/bench_drawn.py --calls CALLS.pkl [--rev c0addff]
 
 Runs a scene of scenes/ at its PREVIEW settings (surfaces built in the main thread) and keeps the input of every
@@ -9,6 +10,8 @@ Runs a scene of scenes/ at its PREVIEW settings (surfaces built in the main thre
 scene). Then times ``_unsliver`` of pdsim/fragment_surfaces/drawn.py at ``--rev`` (read with ``git show``, with this
 checkout's cleanup.py) and of this checkout on each surface, in turn, and checks that both give the same triangles,
 parents and points bit for bit. Prints the calls over 0.3 s and the totals; exits 1 if any call differs.
+``--save-cleanups`` also keeps the scene's ``clean_complex`` calls (its topology rebuilds' sliver clean-ups) for
+``python tools/bench_cleanup.py --calls CLEAN.pkl``.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+import pdsim.fragment_surfaces.booleans as booleans
 import pdsim.fragment_surfaces.drawn as drawn
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,24 +37,29 @@ sys.path.insert(0, str(ROOT / "tools"))
 from make_gallery import load_scene_module  # noqa: E402
 
 
-def capture(scene_name: str, frames: int) -> list:
-    """The arguments of every ``_unsliver`` call of the scene's drawn surfaces."""
-    calls = []
-    inner = drawn._unsliver
+def capture(scene_name: str, frames: int) -> tuple[list, list]:
+    """The arguments of every ``_unsliver`` call of the scene's drawn surfaces, and of every ``clean_complex`` call
+    of its rebuilds (as tools/bench_cleanup.py keeps them)."""
+    calls, cleanups = [], []
+    inner, inner_clean = drawn._unsliver, booleans.clean_complex
 
     def keep(x, faces, parent, shell_of, patch_of, crack_of, first_added, spacing):
         calls.append((x.copy(), faces.copy(), parent.copy(), shell_of, patch_of, crack_of, first_added, spacing))
         return inner(x, faces, parent, shell_of, patch_of, crack_of, first_added, spacing)
 
-    drawn._unsliver = keep
+    def keep_clean(points, tri, shell, patch, spacing, **kw):
+        cleanups.append((points.copy(), tri.copy(), shell.copy(), patch.copy(), spacing, kw))
+        return inner_clean(points, tri, shell, patch, spacing, **kw)
+
+    drawn._unsliver, booleans.clean_complex = keep, keep_clean
     try:
         module = load_scene_module(scene_name)
         scene = module.build_scene(**getattr(module, "PREVIEW", {}))
         with tempfile.TemporaryDirectory() as tmp:
             scene.run(os.path.join(tmp, "out.usdc"), frames=frames, progress=False, surface_thread=False)
     finally:
-        drawn._unsliver = inner
-    return calls
+        drawn._unsliver, booleans.clean_complex = inner, inner_clean
+    return calls, cleanups
 
 
 def revision_module(rev: str) -> types.ModuleType:
@@ -73,16 +82,18 @@ def main(argv=None) -> int:
     parser.add_argument("--frames", type=int, default=40, help="frames to run (default 40)")
     parser.add_argument("--rev", default="c0addff", help="git revision to compare against (default c0addff)")
     parser.add_argument("--save", help="write the captured calls to this pickle")
+    parser.add_argument("--save-cleanups", help="write the captured clean_complex calls to this pickle")
     parser.add_argument("--calls", help="read the calls from this pickle instead of running the scene")
     args = parser.parse_args(argv)
     if args.calls:
         with open(args.calls, "rb") as f:
             calls = pickle.load(f)
     else:
-        calls = capture(args.scene, args.frames)
-        if args.save:
-            with open(args.save, "wb") as f:
-                pickle.dump(calls, f)
+        calls, cleanups = capture(args.scene, args.frames)
+        for path, what in ((args.save, calls), (args.save_cleanups, cleanups)):
+            if path:
+                with open(path, "wb") as f:
+                    pickle.dump(what, f)
     old = revision_module(args.rev)
     print(f"call  triangles  {args.rev} [s]  this [s]  identical")
     t_old = t_new = 0.0
