@@ -313,6 +313,23 @@ def _flip_round(points, tri, shell, patch, sliver_angle):
     return out, len(pick)
 
 
+def _flip_near_slivers(points, tri, shell, patch, sliver_angle):
+    """:func:`_flip_round` on the triangles within two rings of the slivers of ``tri`` (:func:`_neighbourhood`),
+    in those triangles' own vertex numbering: they hold every sliver, its twins and every edge its flip could
+    create, so the round decides as on all of ``tri``. Returns (triangles [f, 3], number of flips)."""
+    sliver = _min_angles(points[tri]) < sliver_angle
+    if not sliver.any():
+        return tri, 0
+    sub = _neighbourhood(tri, sliver, len(points))[0]
+    verts, local = np.unique(tri[sub], return_inverse=True)
+    out, flipped = _flip_round(points[verts], local.reshape(-1, 3), shell[sub], patch[sub], sliver_angle)
+    if flipped == 0:
+        return tri, 0
+    tri = tri.copy()
+    tri[sub] = verts[out]
+    return tri, flipped
+
+
 def _relax_round(
     points, tri, patch, plane_eq, sliver_angle, max_turn=30.0, surface=None, steps=(0.25, 0.5, 1.0), caps=False
 ):
@@ -551,7 +568,7 @@ def clean_complex(
         new, keep, collapsed = _collapse_round(points, ts, ss, ps, spacing, short_edge, sliver_angle, plane_eq)
         t1, s1, p1 = new[keep], ss[keep], ps[keep]
         t0 = t1.copy()
-        t1, flipped = _flip_round(points, t1, s1, p1, sliver_angle)
+        t1, flipped = _flip_near_slivers(points, t1, s1, p1, sliver_angle)
         if collapsed == 0 and flipped == 0:
             # vertex moves change no connectivity: the shells stay closed
             around = np.unique(t1) if settled is not None else None
