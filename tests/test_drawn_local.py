@@ -1,5 +1,5 @@
 """The drawn surface's sliver pass works on the neighbourhoods of its candidates (pdsim/fragment_surfaces/drawn.py):
-its rounds of flips, vertex moves and merges, each on the triangles within two rings of its candidates in their own
+its rounds of flips, vertex moves and merges, each on the triangles around its candidates' corners in their own
 vertex numbering, give the same surface bit for bit as the same rounds over the whole surface."""
 
 import numpy as np
@@ -45,8 +45,7 @@ def test_local_rounds_match_whole_surface_rounds(monkeypatch):
     assert (triangle_angles(x_local, faces).min(axis=1) < 5.0).sum() < before
     assert len(faces) < len(tri) - 100  # added vertices merged
 
-    whole = lambda t, flag, n: (np.arange(len(t)), np.ones(n, dtype=bool))  # noqa: E731
-    monkeypatch.setattr(drawn, "_neighbourhood", whole)
+    monkeypatch.setattr(drawn, "_around", lambda t, flag, n: np.arange(len(t)))
     seen.clear()
     x_whole = x.copy()
     faces_w, par_w = drawn._unsliver(x_whole, tri, parent, shell, patch, crack, first_added, spacing)

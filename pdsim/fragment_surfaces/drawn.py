@@ -15,8 +15,8 @@ edge collapses of step 6, in drawn space, and the flips and moves run again (up 
 left with three triangles at a sliver (inside the triangle of its neighbours) is then removed
 (:func:`_drop_three_fans`). Splits and clean-up alternate up to six times. This depends on the frame's positions
 only (a resumed run draws the same). The faces and vertex count change only on frames that need it. Each round of
-flips, moves or merges works on the triangles within two rings of its candidates only (slivers; for merges also the
-short sides at added vertices), in their own vertex numbering, which decides as a round over the whole surface.
+flips, moves or merges works only on the triangles around the corners of its candidates (slivers; for merges also
+the short sides at added vertices), in their own vertex numbering, which decides as a round over the whole surface.
 """
 
 from __future__ import annotations
@@ -31,7 +31,6 @@ from .cleanup import (
     SLIVER_ANGLE,
     _collapse_round,
     _flip_round,
-    _neighbourhood,
     _relax_round,
     _undirected_edges,
     triangle_angles,
@@ -198,29 +197,38 @@ def _unsliver(x, faces, parent, shell_of, patch_of, crack_of, first_added, spaci
     return _drop_three_fans(x, faces, parent, face_patch, first_added, SLIVER_ANGLE)
 
 
+def _around(faces, flag, vertex_count):
+    """Ids (ascending) of the triangles of ``faces`` [f, 3] that hold a vertex of a ``flag``-ged triangle (bool
+    [f]; ``vertex_count`` vertices)."""
+    seed = np.zeros(vertex_count, dtype=bool)
+    seed[faces[flag]] = True
+    return np.flatnonzero(seed[faces].any(axis=1))
+
+
 def _near_slivers(faces, amin, vertex_count):
-    """Ids (ascending) of the triangles a round of flips or vertex moves works on: those holding a vertex within
-    one ring of a vertex of a triangle whose smallest angle ``amin`` [f] [degrees] is under SLIVER_ANGLE; None when
-    there is no such triangle. They hold every sliver with its twins and every sliver corner with all its
-    triangles and neighbours, so a round there decides as a round over all ``faces`` and changes nothing else."""
+    """Ids (ascending) of the triangles a round of flips or vertex moves works on: those holding a vertex of a
+    triangle whose smallest angle ``amin`` [f] [degrees] is under SLIVER_ANGLE; None when there is no such triangle.
+    They hold every sliver with its twins and every triangle around its corners (so every edge a flip could create
+    and every corner's neighbours), so a round there decides as a round over all ``faces`` and changes nothing
+    else."""
     sliver = amin < SLIVER_ANGLE
     if not sliver.any():
         return None
-    return _neighbourhood(faces, sliver, vertex_count)[0]
+    return _around(faces, sliver, vertex_count)
 
 
 def _near_merges(x, faces, movable, spacing):
     """Ids (ascending) of the triangles a round of merges (edge collapses of ``movable`` vertices) works on: those
-    within two rings (as :func:`_near_slivers`) of the slivers and of the triangles with a side under SHORT_EDGE
-    spacings (``spacing`` h [m]) that hold a ``movable`` vertex (bool [v]); every candidate collapse of the round,
-    with its neighbourhood, lies there. None when there is none."""
+    holding a vertex of a sliver or of a triangle with a side under SHORT_EDGE spacings (``spacing`` h [m]), that
+    holds a ``movable`` vertex (bool [v]); every candidate collapse of the round lies there with the triangles
+    around both its ends (its zone, link and turn). None when there is none."""
     t = x[faces]
     side = np.linalg.norm(t[:, [1, 2, 0]] - t, axis=2).min(axis=1)
     flag = (side < SHORT_EDGE * spacing) | (triangle_angles(x, faces).min(axis=1) < SLIVER_ANGLE)
     flag &= movable[faces].any(axis=1)
     if not flag.any():
         return None
-    return _neighbourhood(faces, flag, len(x))[0]
+    return _around(faces, flag, len(x))
 
 
 def _small_shell_sizes(faces, face_shell):
