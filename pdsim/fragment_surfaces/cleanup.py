@@ -64,8 +64,17 @@ def shells_closed(tri: np.ndarray, shell: np.ndarray, vertex_count: int) -> np.n
     s = np.tile(shell, 3)
     key = (s * vertex_count + a) * vertex_count + b
     rev = (s * vertex_count + b) * vertex_count + a
-    uk, counts = np.unique(key, return_counts=True)
-    bad_edge = (counts[np.searchsorted(uk, key)] != 1) | ~np.isin(rev, uk)
+    order = np.argsort(key)
+    sk = key[order]
+    dup = np.zeros(len(sk), dtype=bool)  # the directed edge occurs more than once
+    same = sk[1:] == sk[:-1]
+    dup[1:] |= same
+    dup[:-1] |= same
+    bad_edge = np.zeros(len(key), dtype=bool)
+    bad_edge[order] = dup
+    pos = np.minimum(np.searchsorted(sk, rev), max(len(sk) - 1, 0))
+    if len(sk):
+        bad_edge |= sk[pos] != rev  # its reverse is missing
     bad = np.zeros(count, dtype=bool)
     bad[s[bad_edge]] = True
     return ~bad
@@ -111,10 +120,13 @@ def _independent_choice(rows, cols, prio, count, size) -> np.ndarray:
     return chosen
 
 
-def _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle, plane_eq=None, movable=None):
+def _collapse_round(
+    points, tri, shell, patch, spacing, short_edge, sliver_angle, plane_eq=None, movable=None, shell_size=None
+):
     """One round of edge collapses on the complex (see :func:`clean_complex`). Returns (triangles after the round
     [f, 3], mask [f] of the triangles that keep an area, number of collapses; 0: nothing left to do). With
-    ``movable`` (bool [v]) only those vertices may move onto a neighbour."""
+    ``movable`` (bool [v]) only those vertices may move onto a neighbour. ``shell_size``: None, or the vertex count
+    of each shell (int [shell count]) when ``tri`` is part of a larger complex (default: counted in ``tri``)."""
     n_v = points.shape[0]
     lo, hi, side_edge = _undirected_edges(tri, n_v)
     length = np.linalg.norm(points[lo] - points[hi], axis=1)
@@ -181,7 +193,9 @@ def _collapse_round(points, tri, shell, patch, spacing, short_edge, sliver_angle
     dst_in_shell = sv[sd] == dst_key
     edge_in_shell = np.asarray(nbr[su, dst[c_rep]]).ravel() > 0
     common_nbrs = np.asarray(nbr[su].multiply(nbr[sd]).sum(axis=1)).ravel()
-    shell_size = np.bincount(s_of, minlength=int(shell.max()) + 1)[shells_c]
+    if shell_size is None:
+        shell_size = np.bincount(s_of, minlength=int(shell.max()) + 1)
+    shell_size = shell_size[shells_c]
     good = np.where(dst_in_shell, edge_in_shell & (common_nbrs == 2) & (shell_size > 6), True)
     link_ok = np.bincount(c_rep[~good], minlength=len(src)) == 0
     src, dst = src[link_ok], dst[link_ok]
@@ -299,6 +313,23 @@ def _flip_round(points, tri, shell, patch, sliver_angle):
     return out, len(pick)
 
 
+def _flip_near_slivers(points, tri, shell, patch, sliver_angle):
+    """:func:`_flip_round` on the triangles within two rings of the slivers of ``tri`` (:func:`_neighbourhood`),
+    in those triangles' own vertex numbering: they hold every sliver, its twins and every edge its flip could
+    create, so the round decides as on all of ``tri``. Returns (triangles [f, 3], number of flips)."""
+    sliver = _min_angles(points[tri]) < sliver_angle
+    if not sliver.any():
+        return tri, 0
+    sub = _neighbourhood(tri, sliver, len(points))[0]
+    verts, local = np.unique(tri[sub], return_inverse=True)
+    out, flipped = _flip_round(points[verts], local.reshape(-1, 3), shell[sub], patch[sub], sliver_angle)
+    if flipped == 0:
+        return tri, 0
+    tri = tri.copy()
+    tri[sub] = verts[out]
+    return tri, flipped
+
+
 def _relax_round(
     points, tri, patch, plane_eq, sliver_angle, max_turn=30.0, surface=None, steps=(0.25, 0.5, 1.0), caps=False
 ):
@@ -383,10 +414,11 @@ def _relax_round(
     t_old = points[tri[f_of]]
     n_old = np.cross(t_old[:, 1] - t_old[:, 0], t_old[:, 2] - t_old[:, 0])
     best_step = np.zeros(len(cand))
+    major = _min_angles(t_old) >= sliver_angle  # slivers may turn, these may not
+    corner = tri[f_of] == cand[c_of][:, None]
     for step in steps:
         pos = points[cand] + step * (target - points[cand])
         t_new = t_old.copy()
-        corner = tri[f_of] == cand[c_of][:, None]
         t_new[corner] = np.repeat(pos[c_of], corner.sum(axis=1), axis=0)
         n_new = np.cross(t_new[:, 1] - t_new[:, 0], t_new[:, 2] - t_new[:, 0])
         cos_ok = np.einsum("ij,ij->i", n_old, n_new) >= np.cos(np.radians(max_turn)) * np.linalg.norm(
@@ -394,7 +426,7 @@ def _relax_round(
         ) * np.linalg.norm(n_new, axis=1)
         a_new = np.full(len(cand), np.inf)
         np.minimum.at(a_new, c_of, _min_angles(t_new))
-        turned = np.bincount(c_of[~cos_ok & (_min_angles(t_old) >= sliver_angle)], minlength=len(cand)) > 0
+        turned = np.bincount(c_of[~cos_ok & major], minlength=len(cand)) > 0
         better = (a_new > old_min + 1e-6) & ~turned
         if surface is not None:
             better &= _on_input_planes(pos, own_patch, surface)
@@ -536,7 +568,7 @@ def clean_complex(
         new, keep, collapsed = _collapse_round(points, ts, ss, ps, spacing, short_edge, sliver_angle, plane_eq)
         t1, s1, p1 = new[keep], ss[keep], ps[keep]
         t0 = t1.copy()
-        t1, flipped = _flip_round(points, t1, s1, p1, sliver_angle)
+        t1, flipped = _flip_near_slivers(points, t1, s1, p1, sliver_angle)
         if collapsed == 0 and flipped == 0:
             # vertex moves change no connectivity: the shells stay closed
             around = np.unique(t1) if settled is not None else None
@@ -556,7 +588,8 @@ def clean_complex(
         whole[sub[~keep]] = False
         tri, flag = tri.copy(), flag.copy()
         tri[sub[keep]] = t1
-        flag[sub[keep]] = _needs_work(points, t1, spacing, short_edge, sliver_angle)
+        redo = (t1 != ts[keep]).any(axis=1)  # the others keep their flags (collapses and flips move no vertex)
+        flag[sub[keep][redo]] = _needs_work(points, t1[redo], spacing, short_edge, sliver_angle)
         if settled is not None:  # what is within two rings of the round's changes is looked at again
             moved = np.concatenate([ts[~keep | (new != ts).any(axis=1)].ravel(), t1[(t1 != t0).any(axis=1)].ravel()])
             settled, flag = _unsettle(points, tri, settled, flag, moved, spacing, short_edge, sliver_angle)

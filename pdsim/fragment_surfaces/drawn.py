@@ -14,7 +14,9 @@ material brings midpoints next to each other or onto a line between their neighb
 edge collapses of step 6, in drawn space, and the flips and moves run again (up to three rounds); an added vertex
 left with three triangles at a sliver (inside the triangle of its neighbours) is then removed
 (:func:`_drop_three_fans`). Splits and clean-up alternate up to six times. This depends on the frame's positions
-only (a resumed run draws the same). The faces and vertex count change only on frames that need it.
+only (a resumed run draws the same). The faces and vertex count change only on frames that need it. Each round of
+flips, moves or merges works only on the triangles around the corners of its candidates (slivers; for merges also
+the short sides at added vertices), in their own vertex numbering, which decides as a round over the whole surface.
 """
 
 from __future__ import annotations
@@ -127,16 +129,31 @@ def _unsliver(x, faces, parent, shell_of, patch_of, crack_of, first_added, spaci
         crack = crack_of[parent] == 1
         if not crack.any() or triangle_angles(x, faces[crack]).min() >= SLIVER_ANGLE:
             return faces, parent
+        amin = triangle_angles(x, faces).min(axis=1)  # kept up to date on the triangles the rounds change
         for _ in range(DEFORMED_ROUNDS):
-            faces, flipped = _flip_round(x, faces, face_shell, face_patch, SLIVER_ANGLE)
+            sub = _near_slivers(faces, amin, len(x))
+            if sub is None:
+                break
+            verts, local = _compact(faces[sub])
+            out, flipped = _flip_round(x[verts], local, face_shell[sub], face_patch[sub], SLIVER_ANGLE)
             if flipped == 0:
                 break
+            out = verts[out]
+            changed = sub[(out != faces[sub]).any(axis=1)]
+            faces = faces.copy()
+            faces[sub] = out
+            amin[changed] = triangle_angles(x, faces[changed]).min(axis=1)
         for caps in (False, True, False):
             for _ in range(DEFORMED_ROUNDS):
+                sub = _near_slivers(faces, amin, len(x))
+                if sub is None:
+                    break
+                verts, local = _compact(faces[sub])
+                xs = x[verts]
                 moved = _relax_round(
-                    x,
-                    faces,
-                    face_patch,
+                    xs,
+                    local,
+                    face_patch[sub],
                     free,
                     SLIVER_ANGLE,
                     max_turn=60.0,
@@ -145,21 +162,93 @@ def _unsliver(x, faces, parent, shell_of, patch_of, crack_of, first_added, spaci
                 )
                 if moved == 0:
                     break
+                x[verts] = xs
+                amin[sub] = triangle_angles(x, faces[sub]).min(axis=1)  # moved vertices are slivers' corners
         # what is left: added vertices that crushed material brought next to others (needles) or onto a line
         # between them (caps) merge into a neighbour (edge collapses as in step 6)
         merged = 0
         for _ in range(DEFORMED_ROUNDS):
+            sub = _near_merges(x, faces, movable, spacing)
+            if sub is None:
+                break
+            verts, local = _compact(faces[sub])
             new, keep, collapsed = _collapse_round(
-                x, faces, face_shell, face_patch, spacing, SHORT_EDGE, SLIVER_ANGLE, movable=movable
+                x[verts],
+                local,
+                face_shell[sub],
+                face_patch[sub],
+                spacing,
+                SHORT_EDGE,
+                SLIVER_ANGLE,
+                movable=movable[verts],
+                shell_size=_small_shell_sizes(faces, face_shell),
             )
             if collapsed == 0:
                 break
             merged += collapsed
-            faces, parent = new[keep], parent[keep]
-            face_shell, face_patch = face_shell[keep], face_patch[keep]
+            faces = faces.copy()
+            faces[sub] = verts[new]
+            whole = np.ones(len(faces), dtype=bool)
+            whole[sub] = keep
+            faces, parent = faces[whole], parent[whole]
+            face_shell, face_patch = face_shell[whole], face_patch[whole]
         if merged == 0:
             break
     return _drop_three_fans(x, faces, parent, face_patch, first_added, SLIVER_ANGLE)
+
+
+def _around(faces, flag, vertex_count):
+    """Ids (ascending) of the triangles of ``faces`` [f, 3] that hold a vertex of a ``flag``-ged triangle (bool
+    [f]; ``vertex_count`` vertices)."""
+    seed = np.zeros(vertex_count, dtype=bool)
+    seed[faces[flag]] = True
+    return np.flatnonzero(seed[faces].any(axis=1))
+
+
+def _near_slivers(faces, amin, vertex_count):
+    """Ids (ascending) of the triangles a round of flips or vertex moves works on: those holding a vertex of a
+    triangle whose smallest angle ``amin`` [f] [degrees] is under SLIVER_ANGLE; None when there is no such triangle.
+    They hold every sliver with its twins and every triangle around its corners (so every edge a flip could create
+    and every corner's neighbours), so a round there decides as a round over all ``faces`` and changes nothing
+    else."""
+    sliver = amin < SLIVER_ANGLE
+    if not sliver.any():
+        return None
+    return _around(faces, sliver, vertex_count)
+
+
+def _near_merges(x, faces, movable, spacing):
+    """Ids (ascending) of the triangles a round of merges (edge collapses of ``movable`` vertices) works on: those
+    holding a vertex of a sliver or of a triangle with a side under SHORT_EDGE spacings (``spacing`` h [m]), that
+    holds a ``movable`` vertex (bool [v]); every candidate collapse of the round lies there with the triangles
+    around both its ends (its zone, link and turn). None when there is none."""
+    t = x[faces]
+    side = np.linalg.norm(t[:, [1, 2, 0]] - t, axis=2).min(axis=1)
+    flag = (side < SHORT_EDGE * spacing) | (triangle_angles(x, faces).min(axis=1) < SLIVER_ANGLE)
+    flag &= movable[faces].any(axis=1)
+    if not flag.any():
+        return None
+    return _around(faces, flag, len(x))
+
+
+def _small_shell_sizes(faces, face_shell):
+    """The vertex count of each shell (int [shell count]) where it may be 6 or less, else its face count: a closed,
+    oriented shell of 6 vertices or less is a sphere of at most 8 faces, so shells of more faces have more than 6
+    vertices (all that the collapses' link condition asks)."""
+    size = np.bincount(face_shell, minlength=int(face_shell.max()) + 1) if len(face_shell) else np.zeros(0, int)
+    small = np.flatnonzero((size > 0) & (size <= 8))
+    if small.size:
+        pick = np.isin(face_shell, small)
+        pairs = np.unique(face_shell[pick][:, None] * (int(faces.max()) + 1) + faces[pick])
+        size[small] = np.bincount(pairs // (int(faces.max()) + 1), minlength=len(size))[small]
+    return size
+
+
+def _compact(tri):
+    """(the vertex ids of triangles ``tri`` [k, 3], ascending; ``tri`` in those ids' positions), so that a round
+    works on arrays of the triangles' own size, not of the whole surface's vertex count."""
+    verts, local = np.unique(tri, return_inverse=True)
+    return verts, local.reshape(tri.shape)
 
 
 def _drop_three_fans(x, faces, parent, face_patch, first_added, sliver_angle):

@@ -83,10 +83,27 @@ def _match_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+def _unique_rows(a: np.ndarray) -> np.ndarray:
+    """The distinct rows of int array ``a`` [n, k], sorted lexicographically: ``np.unique(a, axis=0)``, by a sort
+    of one int64 key per row (a lexsort when the key would not fit) instead of a sort of the rows as records."""
+    if len(a) == 0:
+        return a
+    low = a.min(axis=0)
+    span = a.max(axis=0).astype(np.int64) - low + 1
+    if float(np.prod(span.astype(np.float64))) < 2.0**62:
+        key = np.zeros(len(a), dtype=np.int64)
+        for j in range(a.shape[1]):
+            key = key * span[j] + (a[:, j] - low[j])
+        first = np.unique(key, return_index=True)[1]
+        return a[first]
+    rows = a[np.lexsort(a.T[::-1])]
+    return rows[np.concatenate([[True], np.any(rows[1:] != rows[:-1], axis=1)])]
+
+
 def _pair_map(cluster, old, new, bad):
     """Per (cluster, old id) the one new id its matched triangles show; clusters where an old id shows two new ids
     are marked in ``bad`` (bool [clusters], changed in place). Returns (sorted keys [k, 2], new id of each [k])."""
-    rows = np.unique(np.stack([cluster, old, new], axis=1), axis=0)
+    rows = _unique_rows(np.stack([cluster, old, new], axis=1))
     if len(rows) == 0:  # no matched triangle in any cluster
         return rows[:, :2], rows[:, 2]
     key = rows[:, :2]
