@@ -137,6 +137,47 @@ def interleaved(name: str, cache: str, frames: int | None, rounds: int = 7, step
     return out
 
 
+def strains(name: str, cache: str, frames: int | None) -> list[str]:
+    """A preview run of scene ``name`` with the hand-off on; per frame and brittle body, the equivalent strain eps of
+    its deformable fragments (FragmentHandoff.fragment_strains): the largest (the clamped remainder) against the
+    threshold, and the broken-out ones (all others): how many, their particles, single particles, those above the
+    threshold and their largest eps, those holding constrained particles, and the particles already rigid. Returns
+    the table's rows."""
+    module = load_scene_module(name)
+    scene = module.build_scene(**dict(getattr(module, "PREVIEW", {})))
+    for b in scene.bodies:
+        if brittle(b):
+            b.rigid_handoff = RigidHandoff()
+    rows = []
+
+    def on_frame(frame, solvers):
+        for s in solvers:
+            if not isinstance(s, SolverPeridynamics) or s.handoff is None:
+                continue
+            f = s.handoff.fragment_strains()
+            rigid = s.handoff.rigid_particles()
+            for i, b in enumerate(s.bodies):
+                mine = np.flatnonzero(f["body"] == i)
+                if not brittle(b) or len(mine) == 0:
+                    continue
+                top = mine[np.argmax(f["size"][mine])]
+                out = mine[mine != top]
+                loud = out[f["eps"][out] >= f["threshold"][out]]
+                eps, limit = f["eps"][top], f["threshold"][top]
+                rows.append(
+                    f"| {name} | {frame} | {b.name} | {f['size'][top]} | {eps:.2e} | {limit:.1e} | {eps / limit:.2f} |"
+                    f" {len(out)} | {int(f['size'][out].sum())} |"
+                    f" {int((f['size'][out] == 1).sum())} | {len(loud)} ({int(f['size'][loud].sum())} particles) |"
+                    f" {f['eps'][out].max(initial=0.0):.2e} | {int((f['constrained'][out] > 0).sum())} |"
+                    f" {int(rigid[s.body_slice(i)].sum())} |"
+                )
+                print(rows[-1], flush=True)
+
+    os.environ["PDSIM_THREADS"] = "1"
+    scene.run(cache, device="cpu", progress=False, frames=frames, on_frame=on_frame)
+    return rows
+
+
 TILES = 4  # the scaling slab is cut into TILES x TILES tiles
 
 
@@ -255,7 +296,38 @@ def main(argv=None) -> None:
         action="store_true",
         help="only the step cost against the rigid share on a slab cut into tiles (docs/rigid_handoff_scaling.md)",
     )
+    parser.add_argument(
+        "--strains",
+        action="store_true",
+        help="only the equivalent strain of each brittle body's fragments per frame (docs/rigid_handoff_strains.md)",
+    )
     args = parser.parse_args(argv)
+    if args.strains:
+        wp.config.quiet = True
+        when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+        lines = [
+            "# Rigid hand-off: the fragments' equivalent strain by frame",
+            "",
+            f"`python tools/rigid_handoff.py --strains --scenes {' '.join(args.scenes)}` on {when}"
+            f" ({platform.machine()}, Warp {wp.__version__} CPU): each scene at its preview settings with the hand-off"
+            " on (`RigidHandoff()` defaults on its brittle bodies); at the end of each frame, for each brittle body,"
+            " the equivalent strain eps = sqrt(2 (K_int + E_el) / (M c_p^2)) of its deformable fragments"
+            " (pdsim/peridynamics/handoff.py) against the threshold (DEFAULT_STRAIN_FRACTION x s_c). Remainder: the"
+            " body's largest deformable fragment (it holds the clamped rim); broken-out: its other deformable"
+            " fragments; loud: those at or above the threshold; constrained: those holding particles under a"
+            " boundary condition; rigid: the body's particles in rigid fragments.",
+            "",
+            "| scene | frame | body | remainder particles | remainder eps | threshold | eps / threshold |"
+            " broken-out fragments | their particles | single particles | loud | largest eps | constrained |"
+            " rigid particles |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        with tempfile.TemporaryDirectory() as tmp:
+            for name in args.scenes:
+                lines += strains(name, os.path.join(tmp, f"{name}.usdc"), args.frames)
+                with open(os.path.join(DOCS, "rigid_handoff_strains.md"), "w") as f:
+                    f.write("\n".join(lines) + "\n")
+        return
     if args.scaling:
         wp.config.quiet = True
         os.environ["PDSIM_THREADS"] = "1"
