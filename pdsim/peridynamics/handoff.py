@@ -356,7 +356,8 @@ class FragmentHandoff:
     def fragment_strains(self) -> dict:
         """The deformable fragments of the bodies with the hand-off on, now (for measurements): per fragment its
         ``body`` (index in the solver), ``size`` (particles), ``eps`` [-] and ``threshold`` [-] (module docstring),
-        ``constrained`` (particles under a boundary condition)."""
+        ``constrained`` (particles under a boundary condition); ``labels``: the global fragment id per particle
+        (its body's fragment id plus the body's first particle), ``ids``: each fragment's."""
         s = self.solver
         labels = s.fragment_ids().astype(np.int64) + self.body_start
         mask = self.enabled & (self.fragment_of < 0)
@@ -365,7 +366,11 @@ class FragmentHandoff:
         constrained = s.kin.point_condition_host[idx] >= 0
         body = np.zeros(count, dtype=np.int64)
         body[inverse] = self.body_of[idx]
+        ids = np.zeros(count, dtype=np.int64)
+        ids[inverse] = labels[idx]
         return {
+            "labels": labels,
+            "ids": ids,
             "body": body,
             "size": np.bincount(inverse, minlength=count),
             "eps": eps,
