@@ -446,11 +446,11 @@ def main(argv=None) -> None:
             + (f" --frames {args.frames}" if args.frames else "")
             + f"{options}`"
             + f" on {when} ({machine}, one bond thread, load average {load} at the end; the machine is shared, so"
-            " the times are the process's CPU time, not wall time). Each scene at its preview settings, with the "
-            "hand-off off and on (`RigidHandoff()` defaults on the bodies whose material breaks and does not "
-            "yield). Broken-out: particles of those bodies outside their body's largest fragment. Step: CPU time "
-            "of a frame's steps (`advance_frame`); frame: with the frame-end hand-off test and the output. Times "
-            "are means over the last third of the frames.",
+            " the times are the process's CPU time, not wall time). Each scene at its preview settings (with the"
+            " options), with the hand-off off and on (`RigidHandoff()` defaults, static fragments included, on the"
+            " bodies whose material breaks and does not yield). Broken-out: particles of those bodies outside their"
+            " body's largest fragment. Step: CPU time of a frame's steps (`advance_frame`); frame: with the"
+            " frame-end hand-off test and the output. Times are means over the last third of the frames.",
             "",
             "| scene | frames | particles | broken-out (off / on) | in rigid fragments (on) | bond rows visited (on) |"
             " step off [s] | step on [s] | step speed-up | frame off [s] | frame on [s] | frame speed-up |"
@@ -459,11 +459,13 @@ def main(argv=None) -> None:
             *rows,
             "",
             "Bond rows visited: the share of the bonds the dilatation and force passes still visit at the last frame"
-            " (the rest belong to rigid fragments); one over it bounds the speed-up of those passes, and the step"
-            " also holds particle contact, the kick-drift, colliders and the ground for every particle. Where the"
-            " broken-out particles are a few per cent of the scene's, no hand-off of them can make the step much"
-            " faster: docs/rigid_handoff_scaling.md measures the step against the rigid share. Pixels differing:"
-            " the share of the stills' pixels whose largest channel differs by more than 25/255.",
+            " (the rest belong to rigid or static fragments); one over it bounds the speed-up of those passes, and"
+            " the step also holds particle contact, the kick-drift, colliders and the ground for every particle."
+            " Where the broken-out particles are a few per cent of the scene's, no hand-off of them alone can make"
+            " the step much faster (docs/rigid_handoff_scaling.md measures the step against the rigid share): the"
+            " rest is the clamped remainder, which sleeps as a static fragment only once its equivalent strain has"
+            " stayed below the threshold for 3 frames (docs/rigid_handoff_strains.md measures it by frame). Pixels"
+            " differing: the share of the stills' pixels whose largest channel differs by more than 25/255.",
             "",
             "Rigid / broken-out particles by frame (hand-off on), and in brackets all particles in rigid or static"
             " fragments:",
