@@ -4,7 +4,7 @@ collision proxy.
 
 Covered: the remainder of a clamped, notched plate is handed off as static while its cut-off piece still vibrates;
 the energy dropped is its kinetic and elastic energy, computed here from the particles; its particles do not move
-(bit for bit) under gravity, and its bonds are not visited (a stretch gives no force); a piece thrown at it bounces
+(bit for bit) under gravity, and its bonds are not visited (a stretch gives no force), also 1 km away; a piece thrown at it bounces
 off while it stays put; a prescribed velocity, a fix on some axes, a fix with a release, a load on the remainder or
 ``RigidHandoff(fixed=False)`` keep it deformable; a run with a sleeping remainder stopped and resumed writes the same
 cache bit for bit; 1 and 3 CPU threads give the same state bit for bit.
@@ -60,17 +60,21 @@ def _sides(s):
     return x[:, 0] < NOTCH_X, x[:, 0] > NOTCH_X, x[:, 0] < -0.045
 
 
-def test_quiet_clamped_remainder_sleeps_and_its_energy_is_released():
+@pytest.mark.parametrize("shift", [(0.0, 0.0, 0.0), (1000.0, -700.0, 300.0)], ids=["origin", "1km"])
+def test_quiet_clamped_remainder_sleeps_and_its_energy_is_released(shift):
     """The remainder, deformed (random displacements of 1e-7 m) and vibrating (1e-4 m/s) below the threshold 1e-4,
     is handed off as static while the piece vibrates at 1 m/s (above it): ``released`` equals the remainder's kinetic
     energy 1/2 sum m v^2 and its elastic energy sum V W (1e-9 relative), the kinetic energy of the whole drops by the
     first exactly; then 200 steps under gravity leave its displacements bit for bit and its velocities exactly zero,
     while the piece moves; a 1 % stretch gives its particles no force density and the bond rows visited are the
-    piece's alone, where without the static hand-off (fixed=False) the stretch gives above 1e8 N/m^3."""
+    piece's alone, where without the static hand-off (fixed=False) the stretch gives above 1e8 N/m^3. The same 1 km
+    from the origin."""
     stretched = {}
     for fixed in (True, False):
         s = SolverPeridynamics(
-            [_plate(pdsim.RigidHandoff(strain=1.0e-4, frames=1, fixed=fixed))], threads=1, gravity=(0.0, 0.0, -9.81)
+            [_plate(pdsim.RigidHandoff(strain=1.0e-4, frames=1, fixed=fixed), shift=shift)],
+            threads=1,
+            gravity=(0.0, 0.0, -9.81),
         )
         rest, piece, end = _sides(s)
         rng = np.random.default_rng(3)
