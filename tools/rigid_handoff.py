@@ -184,9 +184,10 @@ def strains(name: str, cache: str, frames: int | None) -> list[str]:
                     touching += bool(np.any(f["labels"][others] != f["ids"][g]))
                 if top >= 0:
                     eps, limit = f["eps"][top], f["threshold"][top]
-                    remainder = f"{f['size'][top]} | {eps:.2e} | {limit:.1e} | {eps / limit:.2f}"
+                    share = f["kinetic"][top] / max(f["kinetic"][top] + f["elastic"][top], 1e-300)
+                    remainder = f"{f['size'][top]} | {eps:.2e} | {limit:.1e} | {eps / limit:.2f} | {100 * share:.0f} %"
                 else:  # the remainder is a static fragment
-                    remainder = "asleep | - | - | -"
+                    remainder = "asleep | - | - | - | -"
                 rows.append(
                     f"| {name} | {frame} | {b.name} | {remainder} | {len(out)} | {int(f['size'][out].sum())} |"
                     f" {int((f['size'][out] == 1).sum())} | {len(loud)} ({int(f['size'][loud].sum())} particles) |"
@@ -346,16 +347,16 @@ def main(argv=None) -> None:
             " the equivalent strain eps = sqrt(2 (K_int + E_el) / (M c_p^2)) of its deformable fragments"
             " (pdsim/peridynamics/handoff.py) against the threshold (DEFAULT_STRAIN_FRACTION x s_c). Remainder: the"
             " body's deformable fragment that holds the clamped rim (its eps counts its whole kinetic energy; asleep: a"
-            " static fragment); broken-out: its other"
-            " deformable"
+            " static fragment; kinetic: the kinetic energy's share of the energy in its eps, the rest elastic);"
+            " broken-out: its other deformable"
             " fragments; loud: those at or above the threshold (touching: with a particle within one spacing of another"
             " fragment's); constrained: those holding particles under a"
             " boundary condition; rigid: the body's particles in rigid fragments.",
             "",
-            "| scene | frame | body | remainder particles | remainder eps | threshold | eps / threshold |"
+            "| scene | frame | body | remainder particles | remainder eps | threshold | eps / threshold | kinetic |"
             " broken-out fragments | their particles | single particles | loud | loud touching | largest eps |"
             " constrained | rigid particles |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         with tempfile.TemporaryDirectory() as tmp:
             for name in args.scenes:

@@ -332,7 +332,8 @@ class FragmentHandoff:
     def _strains(self, mask: np.ndarray, labels: np.ndarray, anchor: np.ndarray) -> tuple:
         """The equivalent strain eps (module docstring) of the fragments of the particles ``mask`` (grouped by their
         global fragment id ``labels``; a fragment with an ``anchor`` particle counts its whole kinetic energy): (the
-        particles' indices idx, their fragment 0..g-1 ``inverse``, the fragments' rigid_properties, elastic energy
+        particles' indices idx, their fragment 0..g-1 ``inverse``, the fragments' rigid_properties (with
+        ``counted_kinetic``, the kinetic energy in eps [J]), elastic energy
         [J], eps [-], threshold [-], positions x [m] of every particle)."""
         s = self.solver
         x = s.model.rest_positions.numpy().astype(np.float64) + s.kin.u.numpy().astype(np.float64)
@@ -349,19 +350,20 @@ class FragmentHandoff:
         limit[inverse] = self.threshold[idx]
         anchored = np.zeros(len(ids), dtype=bool)
         np.logical_or.at(anchored, inverse, anchor[idx])
-        kinetic = np.where(anchored, props["kinetic"], props["internal_kinetic"])
-        eps = np.sqrt(2.0 * np.maximum(kinetic + e_el, 0.0) / (props["mass"] * c2))
+        props["counted_kinetic"] = np.where(anchored, props["kinetic"], props["internal_kinetic"])  # the K in eps
+        eps = np.sqrt(2.0 * np.maximum(props["counted_kinetic"] + e_el, 0.0) / (props["mass"] * c2))
         return idx, inverse, props, e_el, eps, limit, x
 
     def fragment_strains(self) -> dict:
         """The deformable fragments of the bodies with the hand-off on, now (for measurements): per fragment its
         ``body`` (index in the solver), ``size`` (particles), ``eps`` [-] and ``threshold`` [-] (module docstring),
-        ``constrained`` (particles under a boundary condition); ``labels``: the global fragment id per particle
+        ``constrained`` (particles under a boundary condition), the ``kinetic`` and ``elastic`` energy in eps [J];
+        ``labels``: the global fragment id per particle
         (its body's fragment id plus the body's first particle), ``ids``: each fragment's."""
         s = self.solver
         labels = s.fragment_ids().astype(np.int64) + self.body_start
         mask = self.enabled & (self.fragment_of < 0)
-        idx, inverse, _, _, eps, limit, _ = self._strains(mask, labels, self._points()[1])
+        idx, inverse, props, e_el, eps, limit, _ = self._strains(mask, labels, self._points()[1])
         count = len(eps)
         constrained = s.kin.point_condition_host[idx] >= 0
         body = np.zeros(count, dtype=np.int64)
@@ -376,6 +378,8 @@ class FragmentHandoff:
             "eps": eps,
             "threshold": limit,
             "constrained": np.bincount(inverse, weights=constrained, minlength=count).astype(np.int64),
+            "kinetic": props["counted_kinetic"],
+            "elastic": e_el,
         }
 
     def _hand_off(self, idx, inverse, ready, static, props, x) -> None:
