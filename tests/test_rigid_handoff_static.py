@@ -4,10 +4,10 @@ collision proxy.
 
 Covered: the remainder of a clamped, notched plate is handed off as static while its cut-off piece still vibrates;
 the energy dropped is its kinetic and elastic energy, computed here from the particles; its particles do not move
-(bit for bit) under gravity, and its bonds are not visited (a stretch gives no force), also 1 km away; a piece thrown at it bounces
-off while it stays put; a prescribed velocity, a fix on some axes, a fix with a release, a load on the remainder or
-``RigidHandoff(fixed=False)`` keep it deformable; a run with a sleeping remainder stopped and resumed writes the same
-cache bit for bit; 1 and 3 CPU threads give the same state bit for bit.
+(bit for bit) under gravity, and its bonds are not visited (a stretch gives no force), also 1 km away; a piece
+thrown at it bounces off while it stays put; a prescribed velocity, a fix on some axes, a fix with a release, a load
+on the remainder or ``RigidHandoff(fixed=False)`` keep it deformable; a run with a sleeping remainder stopped and
+resumed writes the same cache bit for bit; 1 and 3 CPU threads give the same state bit for bit.
 """
 
 from __future__ import annotations
