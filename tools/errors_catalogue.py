@@ -426,6 +426,12 @@ def _(ws):
     pdsim.RigidHandoff(frames=0)
 
 
+@case("rigid_handoff_fixed", A_BODY, "pdsim.RigidHandoff(fixed='yes')", "True or False", pdsim.ParameterError,
+      "fixed='yes'", "True or False")  # fmt: skip
+def _(ws):
+    pdsim.RigidHandoff(fixed="yes")
+
+
 # -- boundary conditions and loads ------------------------------------------------------------------------------
 A_BC = "boundary conditions and loads"
 

@@ -8,6 +8,7 @@ the machine is shared), and renders ``pdsim preview``
 stills of the last frame of both runs side by side. Writes docs/rigid_handoff.md and docs/rigid_handoff/*.png.
 
 Run:  python tools/rigid_handoff.py [--scenes four_walls glass_pane] [--frames N] [--page NAME.md]
+          [--options KEY=VALUE ...]   (build_scene keywords over the preview's, e.g. frames=64 duration=0.016)
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import time
 
 import numpy as np
 import warp as wp
+from scipy.spatial import cKDTree
 
 import pdsim
 import pdsim.run as pdrun
@@ -36,6 +38,14 @@ VIEWS = {
     "glass_pane": {"camera": "-35,15", "fit": "first"},
     "drop_shatter": {"camera": "-60,30", "fit": "first"},
 }
+
+
+SCENE_OPTIONS = {}  # build_scene keywords over each scene's PREVIEW (--options)
+
+
+def preview_settings(module) -> dict:
+    """The scene's PREVIEW keywords with SCENE_OPTIONS over them."""
+    return {**dict(getattr(module, "PREVIEW", {})), **SCENE_OPTIONS}
 
 
 def load_scene_module(name: str):
@@ -68,7 +78,7 @@ def broken_out(solver) -> np.ndarray:
 def run(name: str, handoff: bool, cache: str, frames: int | None) -> dict:
     """One preview run of scene ``name``; per frame: stepping and frame CPU times [s], broken-out and rigid counts."""
     module = load_scene_module(name)
-    scene = module.build_scene(**dict(getattr(module, "PREVIEW", {})))
+    scene = module.build_scene(**preview_settings(module))
     if handoff:
         for b in scene.bodies:
             if brittle(b):
@@ -114,7 +124,7 @@ def interleaved(name: str, cache: str, frames: int | None, rounds: int = 7, step
         held["solvers"] = solvers
 
     module = load_scene_module(name)
-    preview = dict(getattr(module, "PREVIEW", {}))
+    preview = preview_settings(module)
     scene = module.build_scene(**preview)
     for b in scene.bodies:
         if brittle(b):
@@ -135,6 +145,61 @@ def interleaved(name: str, cache: str, frames: int | None, rounds: int = 7, step
     out = {k: float(np.median(v)) for k, v in times.items()}
     out["rows"] = on.handoff.live_bond_rows() / max(on.bond_count, 1)
     return out
+
+
+def strains(name: str, cache: str, frames: int | None) -> list[str]:
+    """A preview run of scene ``name`` with the hand-off on; per frame and brittle body, the equivalent strain eps of
+    its deformable fragments (FragmentHandoff.fragment_strains): the largest (the clamped remainder) against the
+    threshold, and the broken-out ones (all others): how many, their particles, single particles, those above the
+    threshold and their largest eps, those holding constrained particles, and the particles already rigid. Returns
+    the table's rows."""
+    module = load_scene_module(name)
+    scene = module.build_scene(**preview_settings(module))
+    for b in scene.bodies:
+        if brittle(b):
+            b.rigid_handoff = RigidHandoff()
+    rows = []
+
+    def on_frame(frame, solvers):
+        for s in solvers:
+            if not isinstance(s, SolverPeridynamics) or s.handoff is None:
+                continue
+            f = s.handoff.fragment_strains()
+            rigid = s.handoff.rigid_particles()
+            x = s.positions()
+            tree = cKDTree(x)
+            for i, b in enumerate(s.bodies):
+                mine = np.flatnonzero(f["body"] == i)
+                if not brittle(b):
+                    continue
+                held = mine[f["constrained"][mine] > 0]
+                top = held[np.argmax(f["size"][held])] if len(held) else -1
+                out = mine[mine != top]
+                loud = out[f["eps"][out] >= f["threshold"][out]]
+                touching = 0  # loud fragments with a particle within one spacing of another fragment's particle
+                for g in loud:  # a loop over a few fragments
+                    mine_p = np.flatnonzero(f["labels"] == f["ids"][g])
+                    near = tree.query_ball_point(x[mine_p], r=b.spacing)
+                    others = np.concatenate([np.asarray(n, dtype=np.int64) for n in near])
+                    touching += bool(np.any(f["labels"][others] != f["ids"][g]))
+                if top >= 0:
+                    eps, limit = f["eps"][top], f["threshold"][top]
+                    share = f["kinetic"][top] / max(f["kinetic"][top] + f["elastic"][top], 1e-300)
+                    remainder = f"{f['size'][top]} | {eps:.2e} | {limit:.1e} | {eps / limit:.2f} | {100 * share:.0f} %"
+                else:  # the remainder is a static fragment
+                    remainder = "asleep | - | - | - | -"
+                rows.append(
+                    f"| {name} | {frame} | {b.name} | {remainder} | {len(out)} | {int(f['size'][out].sum())} |"
+                    f" {int((f['size'][out] == 1).sum())} | {len(loud)} ({int(f['size'][loud].sum())} particles) |"
+                    f" {touching} |"
+                    f" {f['eps'][out].max(initial=0.0):.2e} | {int((f['constrained'][out] > 0).sum())} |"
+                    f" {int(rigid[s.body_slice(i)].sum())} |"
+                )
+                print(rows[-1], flush=True)
+
+    os.environ["PDSIM_THREADS"] = "1"
+    scene.run(cache, device="cpu", progress=False, frames=frames, on_frame=on_frame)
+    return rows
 
 
 TILES = 4  # the scaling slab is cut into TILES x TILES tiles
@@ -218,7 +283,8 @@ def pixel_difference(path_a: str, path_b: str, level: int = 25) -> float:
 
 
 def stills(name: str, caches: dict, frame: int, folder: str) -> str:
-    """Preview stills of ``frame`` of both runs, side by side (left: off, right: on); returns the PNG's name."""
+    """Preview stills of ``frame`` of both runs, side by side (left: off, right: on), ``name``_off.png,
+    ``name``_on.png and ``name``_off_on.png; returns the last one's name."""
     from PIL import Image
 
     from pdsim.preview import write_preview
@@ -241,7 +307,7 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="+", default=["glass_pane", "four_walls"])
     parser.add_argument("--frames", type=int, default=None, help="frames to run (default: the preview's)")
-    parser.add_argument("--page", default="rigid_handoff.md", help="the page written in docs/")
+    parser.add_argument("--page", default=None, help="the page written in docs/ (default: the mode's)")
     parser.add_argument(
         "--difference", action="store_true", help="only compare the stills already in docs/rigid_handoff/"
     )
@@ -255,7 +321,49 @@ def main(argv=None) -> None:
         action="store_true",
         help="only the step cost against the rigid share on a slab cut into tiles (docs/rigid_handoff_scaling.md)",
     )
+    parser.add_argument(
+        "--strains",
+        action="store_true",
+        help="only the equivalent strain of each brittle body's fragments per frame (docs/rigid_handoff_strains.md)",
+    )
+    parser.add_argument(
+        "--options", nargs="+", default=[], help="build_scene keywords over the preview's, as KEY=VALUE (numbers)"
+    )
     args = parser.parse_args(argv)
+    for item in args.options:
+        key, _, value = item.partition("=")
+        SCENE_OPTIONS[key] = int(value) if value.lstrip("-").isdigit() else float(value)
+    options = f" --options {' '.join(args.options)}" if args.options else ""
+    if args.strains:
+        wp.config.quiet = True
+        when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+        lines = [
+            "# Rigid hand-off: the fragments' equivalent strain by frame",
+            "",
+            f"`python tools/rigid_handoff.py --strains --scenes {' '.join(args.scenes)}{options}` on {when}"
+            f" ({platform.machine()}, Warp {wp.__version__} CPU): each scene at its preview settings (with the"
+            " options) and the hand-off"
+            " on (`RigidHandoff()` defaults on its brittle bodies); at the end of each frame, for each brittle body,"
+            " the equivalent strain eps = sqrt(2 (K_int + E_el) / (M c_p^2)) of its deformable fragments"
+            " (pdsim/peridynamics/handoff.py) against the threshold (DEFAULT_STRAIN_FRACTION x s_c). Remainder: the"
+            " body's deformable fragment that holds the clamped rim (its eps counts its whole kinetic energy; asleep: a"
+            " static fragment; kinetic: the kinetic energy's share of the energy in its eps, the rest elastic);"
+            " broken-out: its other deformable"
+            " fragments; loud: those at or above the threshold (touching: with a particle within one spacing of another"
+            " fragment's); constrained: those holding particles under a"
+            " boundary condition; rigid: the body's particles in rigid fragments.",
+            "",
+            "| scene | frame | body | remainder particles | remainder eps | threshold | eps / threshold | kinetic |"
+            " broken-out fragments | their particles | single particles | loud | loud touching | largest eps |"
+            " constrained | rigid particles |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        with tempfile.TemporaryDirectory() as tmp:
+            for name in args.scenes:
+                lines += strains(name, os.path.join(tmp, f"{name}.usdc"), args.frames)
+                with open(os.path.join(DOCS, args.page or "rigid_handoff_strains.md"), "w") as f:
+                    f.write("\n".join(lines) + "\n")
+        return
     if args.scaling:
         wp.config.quiet = True
         os.environ["PDSIM_THREADS"] = "1"
@@ -295,7 +403,9 @@ def main(argv=None) -> None:
         lines = [
             "# Rigid hand-off: the step cost at the last frame",
             "",
-            f"`python tools/rigid_handoff.py --interleaved --scenes {' '.join(args.scenes)}` on {when}"
+            f"`python tools/rigid_handoff.py --interleaved --scenes {' '.join(args.scenes)}"
+            + (f" --page {args.page}" if args.page else "")
+            + f"{options}` on {when}"
             f" ({platform.machine()}, {os.cpu_count()} cores, Warp {wp.__version__} CPU, one bond thread): each scene"
             " at its preview settings runs with the hand-off on to its last frame; then its peridynamic solver and a"
             " solver of the same scene without the hand-off, given the first one's checkpoint, step 40 steps each in"
@@ -312,7 +422,7 @@ def main(argv=None) -> None:
                     f" {100 * t['rows']:.0f} % |"
                 )
                 print(lines[-1], flush=True)
-        with open(os.path.join(DOCS, args.page), "w") as f:
+        with open(os.path.join(DOCS, args.page or "rigid_handoff_steps.md"), "w") as f:
             f.write("\n".join(lines) + "\n")
         return
     if args.difference:
@@ -334,14 +444,15 @@ def main(argv=None) -> None:
             "# Rigid hand-off: measured",
             "",
             f"`python tools/rigid_handoff.py --scenes {' '.join(args.scenes)}"
-            + (f" --page {args.page}" if args.page != "rigid_handoff.md" else "")
-            + (f" --frames {args.frames}`" if args.frames else "`")
+            + (f" --page {args.page}" if args.page else "")
+            + (f" --frames {args.frames}" if args.frames else "")
+            + f"{options}`"
             + f" on {when} ({machine}, one bond thread, load average {load} at the end; the machine is shared, so"
-            " the times are the process's CPU time, not wall time). Each scene at its preview settings, with the "
-            "hand-off off and on (`RigidHandoff()` defaults on the bodies whose material breaks and does not "
-            "yield). Broken-out: particles of those bodies outside their body's largest fragment. Step: CPU time "
-            "of a frame's steps (`advance_frame`); frame: with the frame-end hand-off test and the output. Times "
-            "are means over the last third of the frames.",
+            " the times are the process's CPU time, not wall time). Each scene at its preview settings (with the"
+            " options), with the hand-off off and on (`RigidHandoff()` defaults, static fragments included, on the"
+            " bodies whose material breaks and does not yield). Broken-out: particles of those bodies outside their"
+            " body's largest fragment. Step: CPU time of a frame's steps (`advance_frame`); frame: with the"
+            " frame-end hand-off test and the output. Times are means over the last third of the frames.",
             "",
             "| scene | frames | particles | broken-out (off / on) | in rigid fragments (on) | bond rows visited (on) |"
             " step off [s] | step on [s] | step speed-up | frame off [s] | frame on [s] | frame speed-up |"
@@ -350,13 +461,16 @@ def main(argv=None) -> None:
             *rows,
             "",
             "Bond rows visited: the share of the bonds the dilatation and force passes still visit at the last frame"
-            " (the rest belong to rigid fragments); one over it bounds the speed-up of those passes, and the step"
-            " also holds particle contact, the kick-drift, colliders and the ground for every particle. Where the"
-            " broken-out particles are a few per cent of the scene's, no hand-off of them can make the step much"
-            " faster: docs/rigid_handoff_scaling.md measures the step against the rigid share. Pixels differing:"
-            " the share of the stills' pixels whose largest channel differs by more than 25/255.",
+            " (the rest belong to rigid or static fragments); one over it bounds the speed-up of those passes, and"
+            " the step also holds particle contact, the kick-drift, colliders and the ground for every particle."
+            " Where the broken-out particles are a few per cent of the scene's, no hand-off of them alone can make"
+            " the step much faster (docs/rigid_handoff_scaling.md measures the step against the rigid share): the"
+            " rest is the clamped remainder, which sleeps as a static fragment only once its equivalent strain has"
+            " stayed below the threshold for 3 frames (docs/rigid_handoff_strains.md measures it by frame). Pixels"
+            " differing: the share of the stills' pixels whose largest channel differs by more than 25/255.",
             "",
-            "Rigid / broken-out particles by frame (hand-off on):",
+            "Rigid / broken-out particles by frame (hand-off on), and in brackets all particles in rigid or static"
+            " fragments:",
         ]
         for name, png, value in pictures:
             if png is None:
@@ -365,7 +479,7 @@ def main(argv=None) -> None:
         for name, png, frame in pictures:
             if png is not None:
                 lines += [f"- {name}, frame {frame}:", "", f"  ![{name}](rigid_handoff/{png})", ""]
-        with open(os.path.join(DOCS, args.page), "w") as f:
+        with open(os.path.join(DOCS, args.page or "rigid_handoff.md"), "w") as f:
             f.write("\n".join(lines) + "\n")
         print("\n".join(lines), flush=True)
 
@@ -382,8 +496,9 @@ def main(argv=None) -> None:
             s_off, s_on = last_third(off["steps"]), last_third(on["steps"])
             f_off, f_on = last_third(off["frames"]), last_third(on["frames"])
             frames = on["report"].frames_written - 1
-            png = stills(name, caches, frames, folder)
-            diff = pixel_difference(*(os.path.join(folder, f"{name}_{m}.png") for m in ("off", "on")))
+            stem = name if args.page is None else f"{name}_{os.path.splitext(args.page)[0]}"
+            png = stills(stem, caches, frames, folder)
+            diff = pixel_difference(*(os.path.join(folder, f"{stem}_{m}.png") for m in ("off", "on")))
             rows.append(
                 f"| {name} | {frames} | {last[5]} | {off['rows'][-1][1]} / {last[1]} | {last[2]} ({100 * share:.0f} %)"
                 f" | {100 * last[4] / on['bonds']:.0f} % |"
@@ -391,7 +506,7 @@ def main(argv=None) -> None:
                 f" {100 * diff:.2f} % |"
             )
             pictures.append((name, png, frames))
-            series = ", ".join(f"{r[0]}: {r[2]}/{r[1]}" for r in on["rows"][:: max(1, len(on["rows"]) // 10)])
+            series = ", ".join(f"{r[0]}: {r[2]}/{r[1]} ({r[3]})" for r in on["rows"][:: max(1, len(on["rows"]) // 10)])
             pictures.append((name, None, series))
             write()
 

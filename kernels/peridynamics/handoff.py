@@ -10,6 +10,10 @@ sums do not depend on threads), and ``pose_members`` puts each particle back on 
 mass, momentum and angular momentum. The projection conserves the fragment's linear and angular momentum exactly
 (up to the float32 of the particles' state): the contact forces on the particles act on the fragment as a force and a
 torque, accumulated on the device.
+
+A static fragment (``at_rest`` 1: one held by fixed boundary conditions) is not projected (its velocity and angular
+velocity stay 0), and ``pose_members`` puts each of its members back at the displacement it had when the fragment
+was handed off (its ``body_offset``, bit for bit), with zero velocity.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ def project_fragments(
     velocities: wp.array(dtype=wp.vec3),
     mass: wp.array(dtype=float),
     body_inv_inertia: wp.array(dtype=wp.mat33d),
+    at_rest: wp.array(dtype=wp.int32),
     rotate_dt: wp.float64,
     orientation: wp.array(dtype=wp.quatd),
     centre: wp.array(dtype=wp.vec3d),
@@ -38,8 +43,11 @@ def project_fragments(
 ):
     """Fragment g: centre of mass [m] (local frame), velocity [m/s] and angular momentum about the centre of mass of
     its particles; the orientation turned by the angular velocity over ``rotate_dt`` [s] (0: kept); the angular
-    velocity [rad/s] I(q)^+ L at the (new) orientation, with I^+ the body frame's pseudo-inverse inertia."""
+    velocity [rad/s] I(q)^+ L at the (new) orientation, with I^+ the body frame's pseudo-inverse inertia. A static
+    fragment (at_rest[g] != 0) is left as it is (at rest)."""
     g = wp.tid()
+    if at_rest[g] != 0:
+        return
     m_sum = wp.float64(0.0)
     mx = wp.vec3d(wp.float64(0.0))
     mv = wp.vec3d(wp.float64(0.0))
@@ -75,6 +83,7 @@ def pose_members(
     member_fragment: wp.array(dtype=wp.int32),
     members: wp.array(dtype=wp.int32),
     body_offset: wp.array(dtype=wp.vec3d),
+    at_rest: wp.array(dtype=wp.int32),
     rest: wp.array(dtype=wp.vec3),
     orientation: wp.array(dtype=wp.quatd),
     centre: wp.array(dtype=wp.vec3d),
@@ -87,17 +96,22 @@ def pose_members(
     """Member i (particle members[i] of fragment member_fragment[i]) on its fragment's rigid motion: position
     c + R r_i (displacement from its rest position [m]) and velocity v + w x R r_i [m/s]; its force density is
     cleared [N/m^3] (the bond passes do not visit it: what the next force phase adds to it is contact, the ground,
-    colliders and loads alone)."""
+    colliders and loads alone). A member of a static fragment: displacement ``body_offset`` [m], velocity 0."""
     i = wp.tid()
     g = member_fragment[i]
     k = members[i]
+    force_density[k] = wp.vec3(0.0)
+    if at_rest[g] != 0:
+        held = body_offset[i]
+        displacements[k] = wp.vec3(wp.float32(held[0]), wp.float32(held[1]), wp.float32(held[2]))
+        velocities[k] = wp.vec3(0.0)
+        return
     arm = wp.quat_to_matrix(orientation[g]) * body_offset[i]
     x = centre[g] + arm
     u = x - to_vec3d(rest[k])
     displacements[k] = wp.vec3(wp.float32(u[0]), wp.float32(u[1]), wp.float32(u[2]))
     v = velocity[g] + wp.cross(angular_velocity[g], arm)
     velocities[k] = wp.vec3(wp.float32(v[0]), wp.float32(v[1]), wp.float32(v[2]))
-    force_density[k] = wp.vec3(0.0)
 
 
 def project(*, fragment_count: int, member_count: int, device, record_cmd: bool = False, **arguments) -> list:
@@ -118,10 +132,10 @@ def pose(*, count: int, device, **arguments):
 
 
 _PROJECT_NAMES = (
-    "member_offsets", "members", "rest", "displacements", "velocities", "mass", "body_inv_inertia", "rotate_dt",
-    "orientation", "centre", "velocity", "angular_velocity",
+    "member_offsets", "members", "rest", "displacements", "velocities", "mass", "body_inv_inertia", "at_rest",
+    "rotate_dt", "orientation", "centre", "velocity", "angular_velocity",
 )  # fmt: skip
 _POSE_NAMES = (
-    "member_fragment", "members", "body_offset", "rest", "orientation", "centre", "velocity", "angular_velocity",
-    "displacements", "velocities", "force_density",
+    "member_fragment", "members", "body_offset", "at_rest", "rest", "orientation", "centre", "velocity",
+    "angular_velocity", "displacements", "velocities", "force_density",
 )  # fmt: skip

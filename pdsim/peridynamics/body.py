@@ -48,8 +48,8 @@ class PeridynamicBody(PointBody):
         sampling_seed: seed of the jitter, an integer in [0, 2^31 - 1] (default 0): the same seed gives the same
             particles, wherever the body sits.
         rigid_handoff: None or False (off, default), True (the defaults) or a pdsim.RigidHandoff: fragments of the
-            body that stop deforming become rigid bodies (pdsim/peridynamics/handoff.py; only for a material that
-            breaks).
+            body that stop deforming become rigid bodies, and those held by a fixed rim static ones
+            (pdsim/peridynamics/handoff.py; only for a material that breaks).
 
     Particles are sorted along a Morton curve so that neighbours are close in memory.
     """

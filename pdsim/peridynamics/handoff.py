@@ -9,8 +9,20 @@ stays below ``strain`` [-]. K_int [J] is the kinetic energy of its particles not
 1/2 w . L, with v the velocity of the centre of mass, L the angular momentum about it and w = I^+ L), E_el [J] its
 elastic energy, M [kg] its mass and c_p [m/s] its material's P-wave speed: a plane wave of strain eps carries a
 kinetic and an elastic energy density of 1/2 rho c_p^2 eps^2 each, so eps is the root-mean-square strain of the
-fragment's vibration. Only fragments of a body with the setting on, of free particles only (no boundary condition),
-in a body that has broken into more than one fragment, are handed off.
+fragment's vibration. Only fragments of a body with the setting on, in a body that has broken into more than one
+fragment, are handed off: fragments of free particles only (no boundary condition) as rigid fragments, and (with
+``RigidHandoff.fixed``, the default) fragments held by fixed boundary conditions as static fragments.
+
+A static fragment is one whose constrained particles are all held by ``fix`` on all three axes, from a start already
+passed and never released, and none of whose particles carries a load or a velocity kick still to come (a prescribed
+velocity, a fix on some axes only, a release, a load or a kick keep the fragment deformable); a clamped rim is the
+case it is for. Its eps counts its whole kinetic energy K (the constraint leaves it no free rigid motion). From its
+hand-off on it sleeps: its particles stay where they are (their displacements kept bit for bit) at zero velocity,
+its bonds are no longer visited, and its particles stay in particle contact as static collision proxies (forces on
+them are discarded, as on the fixed rim itself). Its momentum is zero by the constraint; its energy K + E_el is
+dropped (``released``). What it gives up: it no longer breaks, vibrates or responds to a hit (a projectile or a
+fragment that reaches it later meets a fixed obstacle, and a kinematic projectile passes through it). A body that has
+not broken never sleeps (it would before the hit that breaks it).
 
 From the hand-off on (kernels/peridynamics/handoff.py):
 
@@ -27,10 +39,12 @@ From the hand-off on (kernels/peridynamics/handoff.py):
 - its rigid motion is updated on the device every step (two launches, no host round trip);
 - its render surface is cut out of the body's surface mesh at the first frame it is rigid and written from then on as
   a rigid piece: that surface as a static mesh in the fragment's body frame, under the transform of its rigid
-  motion, with its velocity and angular velocity (``RigidPieces``; docs/cache_format.md).
+  motion, with its velocity and angular velocity (``RigidPieces``; docs/cache_format.md); a static fragment's
+  transform stays at its centre of mass at the hand-off, unrotated, with zero velocities.
 
-At the hand-off the fragment keeps its linear and angular momentum exactly; the energy K_int + E_el (at most
-1/2 M c_p^2 strain^2) is dropped (``released``). The fragment no longer breaks further, and its internal vibration is
+At the hand-off a free fragment keeps its linear and angular momentum exactly; the energy K_int + E_el (at most
+1/2 M c_p^2 strain^2) is dropped (``released``: ``internal_kinetic``, which holds a static fragment's whole K, and
+``elastic``). The fragment no longer breaks further, and its internal vibration is
 gone (docs/fracture.md).
 """
 
@@ -48,6 +62,10 @@ from ..kernels.peridynamics import handoff as kh
 from ..output.views import DeferredView, MeshView, RigidView
 
 DEFAULT_STRAIN_FRACTION = 0.1  # default threshold: this fraction of the material's critical stretch
+# the rigid fragments' state in a checkpoint, in the order of FragmentHandoff._host_state
+CHECKPOINT_NAMES = (
+    "offsets", "members", "body_offset", "inv_inertia", "orientation", "centre", "velocity", "angular", "static",
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -58,16 +76,21 @@ class RigidHandoff:
         strain: threshold of the equivalent strain eps (module docstring) [-], > 0; None: DEFAULT_STRAIN_FRACTION
             times the material's critical stretch at the body's horizon.
         frames: consecutive frames a fragment must stay below it, integer >= 1.
+        fixed: also hand off the fragments held by fixed boundary conditions, as static fragments (module
+            docstring); False: only fragments of free particles.
     """
 
     strain: float | None = None
     frames: int = 3
+    fixed: bool = True
 
     def __post_init__(self):
         if self.strain is not None:
             object.__setattr__(self, "strain", check_range("strain", self.strain, 0.0, None))
         if isinstance(self.frames, bool) or int(self.frames) != self.frames or self.frames < 1:
             raise ParameterError("frames", self.frames, "an integer >= 1 (consecutive frames below the threshold)")
+        if not isinstance(self.fixed, bool):
+            raise ParameterError("fixed", self.fixed, "True or False (static hand-off of fragments held by fix)")
 
 
 def handoff_setting(value) -> RigidHandoff | None:
@@ -103,20 +126,29 @@ class FragmentHandoff:
             threshold.append(strain)
             speed.append(b.material.p_wave_speed)
         self.frames_needed = np.array([b.rigid_handoff.frames if b.rigid_handoff else 0 for b in solver.bodies])
+        self.fixed = np.array([bool(b.rigid_handoff and b.rigid_handoff.fixed) for b in solver.bodies])[body_of]
+        # per boundary condition (in the kinematics' order): a fix on all three axes never released; its window [s]
+        anchor, window = [], []
+        for b in solver.bodies:
+            for c in b.conditions:
+                anchor.append(c.kind == PointKind.FIXED and bool(np.all(c.axes != 0)) and c.release == np.inf)
+                window.append((c.start, c.release))
+        self.anchor_condition = np.asarray(anchor, dtype=bool)
+        self.condition_window = np.asarray(window, dtype=np.float64).reshape(-1, 2)
         self.enabled = np.asarray(enabled, dtype=bool)[body_of]
         self.threshold = np.asarray(threshold, dtype=np.float64)[body_of]
         self.wave_speed = np.asarray(speed, dtype=np.float64)[body_of]
         self.quiet = np.zeros(n, dtype=np.int64)  # consecutive frames each particle's fragment stayed quiet
         self.fragment_of = np.full(n, -1, dtype=np.int32)  # rigid fragment per particle, -1: deformable
-        self.released = {"internal_kinetic": 0.0, "elastic": 0.0}  # energy dropped at hand-offs [J]
+        self.released = {"internal_kinetic": 0.0, "elastic": 0.0}  # dropped at hand-offs [J] (module docstring)
         self._pieces = None  # RigidPieces per body (the rigid fragments in the output), made by the first views
         self._set_state(
             np.zeros(1, dtype=np.int32), np.zeros(0, dtype=np.int32), np.zeros((0, 3)), np.zeros((0, 3, 3)),
-            np.zeros((0, 4)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)),
+            np.zeros((0, 4)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=np.int32),
         )  # fmt: skip
 
     # -- device state ---------------------------------------------------------------------------------------------
-    def _set_state(self, offsets, members, body_offset, inv_inertia, orientation, centre, velocity, angular):
+    def _set_state(self, offsets, members, body_offset, inv_inertia, orientation, centre, velocity, angular, static):
         d = self.solver.device
         self.fragment_count = len(offsets) - 1
         self.member_count = len(members)
@@ -130,14 +162,18 @@ class FragmentHandoff:
         self.centre = wp.array(centre, dtype=wp.vec3d, device=d)
         self.velocity = wp.array(velocity, dtype=wp.vec3d, device=d)
         self.angular_velocity = wp.array(angular, dtype=wp.vec3d, device=d)
+        self.static = wp.array(np.asarray(static, dtype=np.int32), dtype=wp.int32, device=d)
         self.fragment_of = np.full(self.solver.model.particle_count, -1, dtype=np.int32)
         self.fragment_of[members] = fragment
         self.live_host = np.flatnonzero(self.fragment_of < 0).astype(np.int32)
         self.live = wp.array(self.live_host, dtype=wp.int32, device=d)
+        self.static_particle = np.zeros(len(self.fragment_of), dtype=bool)  # members of static fragments
+        self.static_particle[members] = np.asarray(static, dtype=np.int32)[fragment] != 0
         damped = self.fragment_of < 0  # the debris-damping pass: the live particles and the rigid ones it acts on
         m = self.solver.model
         if m.debris_rate is not None and len(members):  # a rigid particle's damage no longer changes
-            damped |= (m.debris_rate.numpy() > 0.0) & (self.solver.damage() > m.debris_damage.numpy())
+            damaged = (m.debris_rate.numpy() > 0.0) & (self.solver.damage() > m.debris_damage.numpy())
+            damped |= damaged & ~self.static_particle  # a static fragment is at rest: no drag
         self.damped = wp.array(np.flatnonzero(damped).astype(np.int32), dtype=wp.int32, device=d)
         self._commands = {}  # (rotate_dt, ids of u and v) -> the recorded launches of project
 
@@ -147,6 +183,7 @@ class FragmentHandoff:
             self.body_offset.numpy().astype(np.float64), self.body_inv_inertia.numpy().astype(np.float64),
             self.orientation.numpy().astype(np.float64), self.centre.numpy().astype(np.float64),
             self.velocity.numpy().astype(np.float64), self.angular_velocity.numpy().astype(np.float64),
+            self.static.numpy().astype(np.int32),
         ]  # fmt: skip
 
     @property
@@ -167,7 +204,7 @@ class FragmentHandoff:
         """The rigid fragments of the solver's body ``body`` now, for the output (copies): ``label``, each one's
         fragment id (its particles' entry of ``labels``, the body's fragment ids), ``centre`` [m] (world),
         ``orientation`` (unit quaternion x, y, z, w), ``velocity`` [m/s] and ``angular_velocity`` [rad/s], float64."""
-        offsets, members, _, _, orientation, centre, velocity, angular = self._host_state()
+        offsets, members, _, _, orientation, centre, velocity, angular, _ = self._host_state()
         first = members[offsets[:-1]] if len(members) else np.zeros(0, dtype=np.int64)
         mine = self.body_of[first] == body
         start = int(self.solver.model.body_offsets[body])
@@ -212,6 +249,7 @@ class FragmentHandoff:
                 velocities=s.kin.v,
                 mass=s.kin.mass,
                 body_inv_inertia=self.body_inv_inertia,
+                at_rest=self.static,
                 rotate_dt=float(rotate_dt),
                 orientation=self.orientation,
                 centre=self.centre,
@@ -232,10 +270,13 @@ class FragmentHandoff:
         s = self.solver
         labels = s.fragment_ids().astype(np.int64) + self.body_start  # global id: first particle of the fragment
         n = len(labels)
-        free = s.kin.point_kind.numpy() == int(PointKind.FREE)
+        free, anchor = self._points()
         candidate = self.enabled & (self.fragment_of < 0)
         bad = np.zeros(n, dtype=bool)  # per fragment id: holds a particle that cannot be handed off
-        np.logical_or.at(bad, labels, ~(candidate & free))
+        np.logical_or.at(bad, labels, ~(candidate & (free | anchor)))
+        anchored = np.zeros(n, dtype=bool)  # per fragment id: holds a fixed particle (a static fragment)
+        np.logical_or.at(anchored, labels, anchor)
+        np.logical_or.at(bad, labels, anchored[labels] & (self._loaded() | ~self.fixed))
         pieces = np.zeros(len(s.bodies), dtype=np.int64)  # fragments per body
         firsts = np.unique(labels)
         np.add.at(pieces, self.body_of[firsts], 1)
@@ -244,38 +285,107 @@ class FragmentHandoff:
         if not eligible.any():
             self.quiet[:] = 0
             return 0
-        x = s.model.rest_positions.numpy().astype(np.float64) + s.kin.u.numpy().astype(np.float64)
-        v = s.kin.velocities()
-        mass = np.asarray(s.kin.mass_host, dtype=np.float64)
-        energy = s.model.volumes_host * s.strain_energy_density()
-        ids, inverse = np.unique(labels[eligible], return_inverse=True)
-        props = rigid_properties(x[eligible], v[eligible], mass[eligible], inverse, len(ids))
-        e_el = np.bincount(inverse, weights=energy[eligible], minlength=len(ids))
-        idx = np.flatnonzero(eligible)
-        c2 = np.zeros(len(ids))
-        limit = np.zeros(len(ids))
-        c2[inverse] = self.wave_speed[idx] ** 2
-        limit[inverse] = self.threshold[idx]
-        eps = np.sqrt(2.0 * np.maximum(props["internal_kinetic"] + e_el, 0.0) / (props["mass"] * c2))
+        idx, inverse, props, e_el, eps, limit, x = self._strains(eligible, labels, anchor)
+        count = len(eps)
         quiet_fragment = eps < limit
         quiet = np.zeros(n, dtype=np.int64)
         quiet[idx] = np.where(quiet_fragment[inverse], self.quiet[idx] + 1, 0)
         self.quiet = quiet
-        need = np.zeros(len(ids), dtype=np.int64)
+        need = np.zeros(count, dtype=np.int64)
         need[inverse] = self.frames_needed[self.body_of[idx]]
-        ready_count = np.full(len(ids), np.iinfo(np.int64).max)
+        ready_count = np.full(count, np.iinfo(np.int64).max)
         np.minimum.at(ready_count, inverse, quiet[idx])
         ready = ready_count >= need
         if not ready.any():
             return 0
-        self._hand_off(idx, inverse, ready, props, x)
-        self.released["internal_kinetic"] += float(props["internal_kinetic"][ready].sum())
+        static = np.zeros(count, dtype=bool)
+        np.logical_or.at(static, inverse, anchor[idx])
+        self._hand_off(idx, inverse, ready, static, props, x)
+        dropped = np.where(static, props["kinetic"], props["internal_kinetic"])  # a static fragment's motion: all
+        self.released["internal_kinetic"] += float(dropped[ready].sum())
         self.released["elastic"] += float(e_el[ready].sum())
         return int(ready.sum())
 
-    def _hand_off(self, idx, inverse, ready, props, x) -> None:
+    def _points(self) -> tuple[np.ndarray, np.ndarray]:
+        """bool per particle: (free: under no boundary condition, or under one already released; anchor: held by a
+        fix on all three axes that has started and is never released, the particles that make a fragment static)."""
+        s = self.solver
+        cond = s.kin.point_condition_host
+        free = cond < 0
+        anchor = np.zeros(len(cond), dtype=bool)
+        some = ~free
+        start, release = self.condition_window[cond[some]].T
+        free[some] = release <= s.time
+        anchor[some] = self.anchor_condition[cond[some]] & (start <= s.time)
+        return free, anchor
+
+    def _loaded(self) -> np.ndarray:
+        """bool per particle: carries a load or a velocity kick still to come (a static fragment cannot honour it)."""
+        kin = self.solver.kin
+        out = np.zeros(kin.point_count, dtype=bool)
+        if kin.load_count:
+            out[kin.load_point.numpy()] = True
+        for _, points, _ in kin.kicks[kin.next_kick :]:
+            out[points.numpy()] = True
+        return out
+
+    def _strains(self, mask: np.ndarray, labels: np.ndarray, anchor: np.ndarray) -> tuple:
+        """The equivalent strain eps (module docstring) of the fragments of the particles ``mask`` (grouped by their
+        global fragment id ``labels``; a fragment with an ``anchor`` particle counts its whole kinetic energy): (the
+        particles' indices idx, their fragment 0..g-1 ``inverse``, the fragments' rigid_properties (with
+        ``counted_kinetic``, the kinetic energy in eps [J]), elastic energy
+        [J], eps [-], threshold [-], positions x [m] of every particle)."""
+        s = self.solver
+        x = s.model.rest_positions.numpy().astype(np.float64) + s.kin.u.numpy().astype(np.float64)
+        v = s.kin.velocities()
+        mass = np.asarray(s.kin.mass_host, dtype=np.float64)
+        energy = s.model.volumes_host * s.strain_energy_density()
+        ids, inverse = np.unique(labels[mask], return_inverse=True)
+        props = rigid_properties(x[mask], v[mask], mass[mask], inverse, len(ids))
+        e_el = np.bincount(inverse, weights=energy[mask], minlength=len(ids))
+        idx = np.flatnonzero(mask)
+        c2 = np.zeros(len(ids))
+        limit = np.zeros(len(ids))
+        c2[inverse] = self.wave_speed[idx] ** 2
+        limit[inverse] = self.threshold[idx]
+        anchored = np.zeros(len(ids), dtype=bool)
+        np.logical_or.at(anchored, inverse, anchor[idx])
+        props["counted_kinetic"] = np.where(anchored, props["kinetic"], props["internal_kinetic"])  # the K in eps
+        eps = np.sqrt(2.0 * np.maximum(props["counted_kinetic"] + e_el, 0.0) / (props["mass"] * c2))
+        return idx, inverse, props, e_el, eps, limit, x
+
+    def fragment_strains(self) -> dict:
+        """The deformable fragments of the bodies with the hand-off on, now (for measurements): per fragment its
+        ``body`` (index in the solver), ``size`` (particles), ``eps`` [-] and ``threshold`` [-] (module docstring),
+        ``constrained`` (particles under a boundary condition), the ``kinetic`` and ``elastic`` energy in eps [J];
+        ``labels``: the global fragment id per particle
+        (its body's fragment id plus the body's first particle), ``ids``: each fragment's."""
+        s = self.solver
+        labels = s.fragment_ids().astype(np.int64) + self.body_start
+        mask = self.enabled & (self.fragment_of < 0)
+        idx, inverse, props, e_el, eps, limit, _ = self._strains(mask, labels, self._points()[1])
+        count = len(eps)
+        constrained = s.kin.point_condition_host[idx] >= 0
+        body = np.zeros(count, dtype=np.int64)
+        body[inverse] = self.body_of[idx]
+        ids = np.zeros(count, dtype=np.int64)
+        ids[inverse] = labels[idx]
+        return {
+            "labels": labels,
+            "ids": ids,
+            "body": body,
+            "size": np.bincount(inverse, minlength=count),
+            "eps": eps,
+            "threshold": limit,
+            "constrained": np.bincount(inverse, weights=constrained, minlength=count).astype(np.int64),
+            "kinetic": props["counted_kinetic"],
+            "elastic": e_el,
+        }
+
+    def _hand_off(self, idx, inverse, ready, static, props, x) -> None:
         """Appends the fragments ``ready`` (of the eligible particles ``idx`` grouped by ``inverse``) to the rigid
-        fragments and poses their particles on their rigid motion."""
+        fragments and poses their particles on their rigid motion; those ``static`` at rest where they are (their
+        particles' body offsets: their displacements now, kept bit for bit; velocity and angular velocity 0)."""
         take = ready[inverse]
         new_members = idx[take]
         group = inverse[take]
@@ -286,25 +396,29 @@ class FragmentHandoff:
         renumber[kept] = np.arange(len(kept))
         group = renumber[group]
         counts = np.bincount(group, minlength=len(kept))
-        offsets, members, body_offset, inv_inertia, orientation, centre, velocity, angular = self._host_state()
+        offsets, members, body_offset, inv_inertia, orientation, centre, velocity, angular, fixed = self._host_state()
         start = int(offsets[-1])
+        rests = static[kept]
+        at_rest = rests[:, None]
         centre_new = props["centre"][kept]
+        u = self.solver.kin.u.numpy()[new_members].astype(np.float64)
         new = [
             np.concatenate([offsets, start + np.cumsum(counts)]).astype(np.int32),
             np.concatenate([members, new_members]).astype(np.int32),
-            np.concatenate([body_offset, x[new_members] - centre_new[group]]),
-            np.concatenate([inv_inertia, props["inv_inertia"][kept]]),
+            np.concatenate([body_offset, np.where(at_rest[group], u, x[new_members] - centre_new[group])]),
+            np.concatenate([inv_inertia, np.where(at_rest[:, :, None], 0.0, props["inv_inertia"][kept])]),
             np.concatenate([orientation, np.tile([0.0, 0.0, 0.0, 1.0], (len(kept), 1))]),
             np.concatenate([centre, centre_new]),
-            np.concatenate([velocity, props["velocity"][kept]]),
-            np.concatenate([angular, props["angular_velocity"][kept]]),
+            np.concatenate([velocity, np.where(at_rest, 0.0, props["velocity"][kept])]),
+            np.concatenate([angular, np.where(at_rest, 0.0, props["angular_velocity"][kept])]),
+            np.concatenate([fixed, rests.astype(np.int32)]),
         ]
         self._set_state(*new)
         s = self.solver
         kh.pose(
             member_fragment=self.member_fragment, members=self.members, body_offset=self.body_offset,
-            rest=s.model.rest_positions, orientation=self.orientation, centre=self.centre, velocity=self.velocity,
-            angular_velocity=self.angular_velocity, displacements=s.kin.u, velocities=s.kin.v,
+            at_rest=self.static, rest=s.model.rest_positions, orientation=self.orientation, centre=self.centre,
+            velocity=self.velocity, angular_velocity=self.angular_velocity, displacements=s.kin.u, velocities=s.kin.v,
             force_density=s.state.force_density, count=self.member_count, device=s.device,
         )  # fmt: skip
         self.quiet[new_members] = 0
@@ -312,16 +426,13 @@ class FragmentHandoff:
 
     # -- checkpoints ------------------------------------------------------------------------------------------------
     def checkpoint(self) -> dict:
-        names = ("offsets", "members", "body_offset", "inv_inertia", "orientation", "centre", "velocity", "angular")
-        out = {k: np.array(a, copy=True) for k, a in zip(names, self._host_state())}
+        out = {k: np.array(a, copy=True) for k, a in zip(CHECKPOINT_NAMES, self._host_state())}
         out["quiet"] = np.array(self.quiet, copy=True)
         out["released"] = np.array([self.released["internal_kinetic"], self.released["elastic"]])
         return out
 
     def restore(self, state: dict) -> None:
-        names = ("offsets", "members", "body_offset", "inv_inertia", "orientation", "centre", "velocity", "angular")
-        arrays = [np.asarray(state[k]) for k in names]
-        self._set_state(*arrays)
+        self._set_state(*[np.asarray(state[k]) for k in CHECKPOINT_NAMES])
         self.quiet = np.array(state["quiet"], dtype=np.int64, copy=True)
         released = np.asarray(state["released"], dtype=np.float64)
         self.released = {"internal_kinetic": float(released[0]), "elastic": float(released[1])}
