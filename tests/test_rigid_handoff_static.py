@@ -129,7 +129,7 @@ def test_only_a_fix_on_all_axes_without_loads_lets_the_remainder_sleep(condition
 def test_a_piece_thrown_at_the_sleeping_remainder_bounces_off_it():
     """Contact on: the remainder asleep, the piece thrown back at it at 1 m/s; after 400 steps the piece moves away
     (mean velocity along x above +0.2 m/s) and the remainder's particles have not moved (bit for bit)."""
-    body = _plate(pdsim.RigidHandoff(strain=1.0e-4, frames=1), material=SOFT)
+    body = _plate(pdsim.RigidHandoff(strain=1.0e-4, frames=1, fixed=True), material=SOFT)
     s = SolverPeridynamics([body], threads=1, contact=True)
     rest, piece, _ = _sides(s)
     assert s.handoff.update() == 2
@@ -148,7 +148,7 @@ def _clamped_scene(frames=10, shift=(0.0, 0.0, 0.0)):
     (the remainder static); without the static hand-off the remainder would sag and swing under gravity."""
     o = np.asarray(shift, dtype=np.float64)
     scene = pdsim.Scene(fps=24, frames=frames, frame_time=2.0e-3, name="clamped")
-    body = _plate(pdsim.RigidHandoff(strain=1.0e-3, frames=2), material=SOFT, shift=shift)
+    body = _plate(pdsim.RigidHandoff(strain=1.0e-3, frames=2, fixed=True), material=SOFT, shift=shift)
     x = body.rest_positions
     piece = x[:, 0] > o[0] + NOTCH_X
     centre = x[piece].mean(axis=0)
@@ -185,7 +185,7 @@ def test_sleeping_remainder_is_bit_identical_on_one_and_three_threads():
     out = []
     for threads in (1, 3):
         s = SolverPeridynamics(
-            [_plate(pdsim.RigidHandoff(strain=1.0e-4, frames=1), material=SOFT)], contact=True,
+            [_plate(pdsim.RigidHandoff(strain=1.0e-4, frames=1, fixed=True), material=SOFT)], contact=True,
             gravity=(0.0, 0.0, -9.81),
         )  # fmt: skip
         s.threads = threads

@@ -1,11 +1,11 @@
 """Measures the rigid hand-off (pdsim/peridynamics/handoff.py) on the teaser's brittle walls (scenes/four_walls.py)
 and the glass pane (scenes/glass_pane.py) at their preview settings: each scene runs twice, with the hand-off off
-and on (``RigidHandoff()`` defaults on every peridynamic body whose material breaks and does not yield), on one CPU
-thread. It reports the share of broken-out particles (those outside their body's largest fragment) that are in rigid
-fragments at the last frame, the process CPU time per frame over the last third of the run (``advance_frame``
-alone, then the whole frame with the hand-off's frame-end test and the output; CPU time rather than wall time, as
-the machine is shared), and renders ``pdsim preview``
-stills of the last frame of both runs side by side. Writes docs/rigid_handoff.md and docs/rigid_handoff/*.png.
+and on (``RigidHandoff(fixed=True)``: the defaults with static fragments, on every peridynamic body whose material
+breaks and does not yield), on one CPU thread. It reports the share of broken-out particles (those outside their
+body's largest fragment) that are in rigid fragments at the last frame, the process CPU time per frame over the last
+third of the run (``advance_frame`` alone, then the whole frame with the hand-off's frame-end test and the output;
+CPU time rather than wall time, as the machine is shared), and renders ``pdsim preview`` stills of the last frame
+of both runs side by side. Writes docs/rigid_handoff.md and docs/rigid_handoff/*.png.
 
 Run:  python tools/rigid_handoff.py [--scenes four_walls glass_pane] [--frames N] [--page NAME.md]
           [--options KEY=VALUE ...]   (build_scene keywords over the preview's, e.g. frames=64 duration=0.016)
@@ -82,7 +82,7 @@ def run(name: str, handoff: bool, cache: str, frames: int | None) -> dict:
     if handoff:
         for b in scene.bodies:
             if brittle(b):
-                b.rigid_handoff = RigidHandoff()
+                b.rigid_handoff = RigidHandoff(fixed=True)
     steps, frame_ends, rows = [], [], []
     original = pdrun.advance_frame
 
@@ -128,7 +128,7 @@ def interleaved(name: str, cache: str, frames: int | None, rounds: int = 7, step
     scene = module.build_scene(**preview)
     for b in scene.bodies:
         if brittle(b):
-            b.rigid_handoff = RigidHandoff()
+            b.rigid_handoff = RigidHandoff(fixed=True)
     report = scene.run(cache, device="cpu", progress=False, frames=frames, on_frame=keep)
     on = next(s for s in held["solvers"] if isinstance(s, SolverPeridynamics))
     plain = module.build_scene(**preview).build_solvers(device="cpu", check=False)
@@ -157,7 +157,7 @@ def strains(name: str, cache: str, frames: int | None) -> list[str]:
     scene = module.build_scene(**preview_settings(module))
     for b in scene.bodies:
         if brittle(b):
-            b.rigid_handoff = RigidHandoff()
+            b.rigid_handoff = RigidHandoff(fixed=True)
     rows = []
 
     def on_frame(frame, solvers):
@@ -343,7 +343,7 @@ def main(argv=None) -> None:
             f"`python tools/rigid_handoff.py --strains --scenes {' '.join(args.scenes)}{options}` on {when}"
             f" ({platform.machine()}, Warp {wp.__version__} CPU): each scene at its preview settings (with the"
             " options) and the hand-off"
-            " on (`RigidHandoff()` defaults on its brittle bodies); at the end of each frame, for each brittle body,"
+            " on (`RigidHandoff(fixed=True)` on its brittle bodies); at the end of each frame, for each brittle body,"
             " the equivalent strain eps = sqrt(2 (K_int + E_el) / (M c_p^2)) of its deformable fragments"
             " (pdsim/peridynamics/handoff.py) against the threshold (DEFAULT_STRAIN_FRACTION x s_c). Remainder: the"
             " body's deformable fragment that holds the clamped rim (its eps counts its whole kinetic energy; asleep: a"
@@ -449,9 +449,9 @@ def main(argv=None) -> None:
             + f"{options}`"
             + f" on {when} ({machine}, one bond thread, load average {load} at the end; the machine is shared, so"
             " the times are the process's CPU time, not wall time). Each scene at its preview settings (with the"
-            " options), with the hand-off off and on (`RigidHandoff()` defaults, static fragments included, on the"
-            " bodies whose material breaks and does not yield). Broken-out: particles of those bodies outside their"
-            " body's largest fragment. Step: CPU time of a frame's steps (`advance_frame`); frame: with the"
+            " options), with the hand-off off and on (`RigidHandoff(fixed=True)`: the defaults with static fragments,"
+            " on the bodies whose material breaks and does not yield). Broken-out: particles of those bodies outside"
+            " their body's largest fragment. Step: CPU time of a frame's steps (`advance_frame`); frame: with the"
             " frame-end hand-off test and the output. Times are means over the last third of the frames.",
             "",
             "| scene | frames | particles | broken-out (off / on) | in rigid fragments (on) | bond rows visited (on) |"

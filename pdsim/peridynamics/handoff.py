@@ -11,7 +11,7 @@ elastic energy, M [kg] its mass and c_p [m/s] its material's P-wave speed: a pla
 kinetic and an elastic energy density of 1/2 rho c_p^2 eps^2 each, so eps is the root-mean-square strain of the
 fragment's vibration. Only fragments of a body with the setting on, in a body that has broken into more than one
 fragment, are handed off: fragments of free particles only (no boundary condition) as rigid fragments, and (with
-``RigidHandoff.fixed``, the default) fragments held by fixed boundary conditions as static fragments.
+``RigidHandoff(fixed=True)``; off by default) fragments held by fixed boundary conditions as static fragments.
 
 A static fragment is one whose constrained particles are all held by ``fix`` on all three axes, from a start already
 passed and never released, and none of whose particles carries a load or a velocity kick still to come (a prescribed
@@ -77,12 +77,13 @@ class RigidHandoff:
             times the material's critical stretch at the body's horizon.
         frames: consecutive frames a fragment must stay below it, integer >= 1.
         fixed: also hand off the fragments held by fixed boundary conditions, as static fragments (module
-            docstring); False: only fragments of free particles.
+            docstring); False (default): only fragments of free particles. Off by default because a static fragment
+            no longer responds to hits (module docstring) and nothing wakes it.
     """
 
     strain: float | None = None
     frames: int = 3
-    fixed: bool = True
+    fixed: bool = False
 
     def __post_init__(self):
         if self.strain is not None:
