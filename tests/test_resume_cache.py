@@ -174,6 +174,17 @@ def _interrupt(build, out, frame, polls=1, **kw) -> RunInterrupted:
     return ei.value
 
 
+def _assert_resume_is_bit_identical(build, tmp_path, stop_frame: int, frames: int, polls: int = 2):
+    """A run of ``build()`` stopped ``polls`` stop polls after frame ``stop_frame`` was written, then resumed, leaves
+    no checkpoint and the same cache bit for bit as the uninterrupted run (frames 0..``frames``)."""
+    reference = _run_reference(build, tmp_path)
+    out = tmp_path / "out.usdc"
+    _interrupt(build, out, stop_frame, polls, checkpoint_interval_s=60.0)
+    build().run(out, device="cpu", progress=False, resume=True)
+    assert not checkpoint_path(out).exists()
+    _assert_same_cache(reference, out, frames)
+
+
 @pytest.mark.parametrize(
     ("build", "stop_frame", "frames", "options"),
     [

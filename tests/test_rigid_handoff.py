@@ -13,10 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_resume_cache import _assert_same_cache, _interrupt, _run_reference
+from test_resume_cache import _assert_resume_is_bit_identical
 
 import pdsim
-from pdsim.checkpoint import checkpoint_path
 from pdsim.peridynamics import SolverPeridynamics
 from pdsim.peridynamics.handoff import rigid_properties
 
@@ -160,13 +159,7 @@ def test_handoff_on_with_nothing_handed_off_is_bit_identical_to_off():
 
 def test_resume_with_rigid_fragments_is_bit_identical(tmp_path):
     """Stopped inside a frame after the halves went rigid, then resumed: the cache equals the uninterrupted run's."""
-    build = _pieces
-    reference = _run_reference(build, tmp_path)
-    out = tmp_path / "out.usdc"
-    _interrupt(build, out, 9, 2, checkpoint_interval_s=60.0)
-    build().run(out, device="cpu", progress=False, resume=True)
-    assert not checkpoint_path(out).exists()
-    _assert_same_cache(reference, out, 16)
+    _assert_resume_is_bit_identical(_pieces, tmp_path, 9, 16)
 
 
 def test_one_rigid_half_is_bit_identical_on_one_and_three_threads():

@@ -14,10 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_resume_cache import _assert_same_cache, _interrupt, _run_reference
+from test_resume_cache import _assert_resume_is_bit_identical
 
 import pdsim
-from pdsim.checkpoint import checkpoint_path
 from pdsim.peridynamics import SolverPeridynamics
 
 SPACING = 0.01
@@ -171,12 +170,7 @@ def test_resume_with_a_sleeping_remainder_is_bit_identical(tmp_path):
     static, v = seen[max(seen)]
     assert 0 < static.sum() < len(static) and np.all(v[static] == 0.0)
     assert min(f for f, (st, _) in seen.items() if st.any()) <= 3
-    reference = _run_reference(_clamped_scene, tmp_path)
-    out = tmp_path / "out.usdc"
-    _interrupt(_clamped_scene, out, 5, 2, checkpoint_interval_s=60.0)
-    _clamped_scene().run(out, device="cpu", progress=False, resume=True)
-    assert not checkpoint_path(out).exists()
-    _assert_same_cache(reference, out, 10)
+    _assert_resume_is_bit_identical(_clamped_scene, tmp_path, 5, 10)
 
 
 def test_sleeping_remainder_is_bit_identical_on_one_and_three_threads():
