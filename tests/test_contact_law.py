@@ -98,7 +98,7 @@ def test_crack_faces_that_slide_feel_no_contact_and_faces_that_close_do():
     assert _contact_count(tracked, solver, (-0.15 * H, 0.3 * H, 0.0)) > 0  # closing while sliding still touches
 
 
-def test_sliding_crack_faces_receive_no_contact_force_in_a_step():
+def test_sliding_crack_faces_receive_no_contact_force_in_a_step(device):
     """The same notched block in the solver's step: the half x > 0 sheared at 2 m/s along the face for 20 steps (no
     gravity) gets no contact force: the force density of the steps equals that of the same run with contact off,
     bit for bit (the bonds across the notch are dead, so what remains is the halves' own elastic response)."""
@@ -107,7 +107,7 @@ def test_sliding_crack_faces_receive_no_contact_force_in_a_step():
         body = pdsim.PeridynamicBody(pdsim.box((8 * H, 4 * H, 4 * H)), MAT, H, name="block")
         body.add_notch(pdsim.BoxRegion((-0.01 * H, -1.0, -1.0), (0.01 * H, 1.0, 1.0)))
         body.set_initial_velocity((0.0, 2.0, 0.0), region=pdsim.BoxRegion((0.0, -1.0, -1.0), (1.0, 1.0, 1.0)))
-        solver = pdsim.SolverPeridynamics([body], contact=contact, device="cpu", threads=1)
+        solver = pdsim.SolverPeridynamics([body], contact=contact, device=device, threads=1)
         dt = 0.7 * solver.stable_time_step()
         for _ in range(20):
             solver.step(dt)
@@ -195,7 +195,7 @@ def test_kalthoff_winkler_zero_width_notch_crack_angle_ignores_contact_but_not_t
     assert np.all(np.abs(former - off) > 2.0), (former, off)  # the former rule pushes the faces apart
 
 
-def _ground_solver(size_cells, center_z, velocity, *, restitution, friction, gravity):
+def _ground_solver(size_cells, center_z, velocity, *, restitution, friction, gravity, device="cpu"):
     """A PD block of ``size_cells`` particles per axis (h = 1 cm, E = 1 MPa) above a ground plane at z = 0."""
     from pdsim.colliders import GroundPlane
 
@@ -204,7 +204,7 @@ def _ground_solver(size_cells, center_z, velocity, *, restitution, friction, gra
     body = pdsim.PeridynamicBody(pdsim.box(tuple(size), center=(0.0, 0.0, center_z)), mat, H, name="block")
     body.set_initial_velocity(velocity)
     ground = GroundPlane(restitution=restitution, friction=friction)
-    return pdsim.SolverPeridynamics([body], ground=ground, gravity=gravity, device="cpu", threads=1)
+    return pdsim.SolverPeridynamics([body], ground=ground, gravity=gravity, device=device, threads=1)
 
 
 @pytest.mark.parametrize("e", [0.1, 0.6])
@@ -235,13 +235,13 @@ def test_drop_rebounds_at_the_restitution_set_on_the_ground(e):
 
 
 @pytest.mark.parametrize("restitution", [None, 0.3], ids=["projection", "penalty"])
-def test_block_sliding_on_the_ground_stops_at_v2_over_2_mu_g(restitution):
+def test_block_sliding_on_the_ground_stops_at_v2_over_2_mu_g(restitution, device):
     """A 3 x 3 x 2 h PD block resting on the ground (gravity 9.81 m/s^2) and sliding at 1 m/s with Coulomb friction
     mu = 0.4 stops after v^2 / (2 mu g) = 12.7 cm within 5 %, with the ground's inelastic projection and with its
     penalty form (restitution 0.3): Coulomb friction, mu times the normal force, decelerates it at mu g."""
     mu, g, v = 0.4, 9.81, 1.0
     solver = _ground_solver((3, 3, 2), H, (v, 0.0, 0.0), restitution=restitution, friction=mu,
-                            gravity=(0.0, 0.0, -g))  # fmt: skip
+                            gravity=(0.0, 0.0, -g), device=device)  # fmt: skip
     dt = 0.7 * solver.stable_time_step()
     x0 = solver.positions()[:, 0].mean()
     for _ in range(int(1.2 * v / (mu * g) / dt)):

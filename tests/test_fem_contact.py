@@ -24,7 +24,7 @@ def _inside_depth(solver, a: int, b: int) -> float:
 
 
 @pytest.mark.parametrize("origin", [(0.0, 0.0, 0.0), (1000.0, -500.0, 250.0)], ids=["origin", "1km"])
-def test_two_fem_cubes_collide_head_on_and_separate_conserving_momentum(origin):
+def test_two_fem_cubes_collide_head_on_and_separate_conserving_momentum(origin, device):
     """A 6 cm cube at +1 m/s meets a 4 cm cube at -2 m/s head-on in free space (3 x 3 x 3 and 2 x 2 x 2 cells, the
     same material; restitution 0.6 set through Scene.enable_contact). Before this contact existed they passed
     through each other. Asserted: the bodies separate (their relative velocity along x reverses); total linear
@@ -43,7 +43,7 @@ def test_two_fem_cubes_collide_head_on_and_separate_conserving_momentum(origin):
     b = scene.add_body(pdsim.FemBody(mesh_b, SOFT, name="b"))
     a.set_initial_velocity((1.0, 0.0, 0.0))
     b.set_initial_velocity((-2.0, 0.0, 0.0))
-    (solver,) = scene.build_solvers(device="cpu")
+    (solver,) = scene.build_solvers(device=device)
     coupling = method_contact(scene, [solver])
     assert coupling is not None
     dt = scene.time_step_safety * solver.stable_time_step()
@@ -71,7 +71,7 @@ def test_two_fem_cubes_collide_head_on_and_separate_conserving_momentum(origin):
     assert depth < 0.05 * edge, depth
 
 
-def test_the_pieces_of_a_cracked_fem_slab_never_end_inside_each_other():
+def test_the_pieces_of_a_cracked_fem_slab_never_end_inside_each_other(device):
     """A 16 x 4 x 2 cm FEM slab (8 x 2 x 1 cubes, E = 1 MPa, tensile strength 30 kPa) lies on the ground and a rigid
     steel ball (1.5 cm, 0.11 kg: it has mass) falls on its middle at 3 m/s: the slab cracks into pieces (at least 2,
     asserted) that the ball presses down onto the ground and into each other. Every frame (1/240 s, 16 frames) no
@@ -83,7 +83,7 @@ def test_the_pieces_of_a_cracked_fem_slab_never_end_inside_each_other():
     energy in a 200 m/s impact (tools/stress.py), so the floor changes velocities only. About 3 s."""
     import fem_piece_contact  # tools/ (on the path through conftest.py)
 
-    rows = fem_piece_contact.run(3.0, 16, True, ball=True)
+    rows = fem_piece_contact.run(3.0, 16, True, ball=True, device=device)
     edge = 0.0242  # the slab's mean edge length (SolverFem.contact_skin's band)
     print("pieces, deepest inside [mm] by frame:", [(n, round(d * 1e3, 2)) for n, d in rows])
     assert max(n for n, _ in rows) >= 2

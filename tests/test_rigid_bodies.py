@@ -19,9 +19,9 @@ import rigid_impacts  # tools/rigid_impacts.py (tests/conftest.py puts tools/ on
 STEEL = 7850.0  # kg/m^3
 
 
-def _alone(bodies, gravity=(0.0, 0.0, 0.0), ground=None):
+def _alone(bodies, gravity=(0.0, 0.0, 0.0), ground=None, device="cpu"):
     """RigidBodies of ``bodies`` alone (no solver), local frame at the world origin."""
-    return RigidBodies(bodies, ground=ground, colliders=[], gravity=gravity, origin=np.zeros(3), device="cpu")
+    return RigidBodies(bodies, ground=ground, colliders=[], gravity=gravity, origin=np.zeros(3), device=device)
 
 
 # -- mass properties ----------------------------------------------------------------------------------------------
@@ -102,13 +102,13 @@ def test_a_ball_and_a_box_resting_on_the_ground_stay_without_gaining_energy():
             assert np.linalg.norm(s["angular_velocity"]) <= 1e-9
 
 
-def test_bodies_collide_with_each_other_conserving_momentum_and_stack_on_the_ground():
+def test_bodies_collide_with_each_other_conserving_momentum_and_stack_on_the_ground(device):
     """Sphere-sphere head-on in space: momentum conserved to 1e-12, the inelastic contact leaves both at v/2 (1e-9).
     A box dropped onto a box on the ground comes to rest on it: the top box's centre ends one box height above the
     lower one's within 1 mm, at rest (speed < 0.05 m/s)."""
     a = RigidBody(SphereShape(0.05), density=STEEL, position=(-0.2, 0.0, 0.0), velocity=(2.0, 0.0, 0.0), friction=0.0)
     b = RigidBody(SphereShape(0.05), density=STEEL, position=(0.0, 0.0, 0.0), friction=0.0)
-    system = _alone([a, b])
+    system = _alone([a, b], device=device)
     p0 = system.linear_momentum()
     system.simulate(1.0e-3, 200)
     assert np.allclose(system.linear_momentum(), p0, rtol=0.0, atol=1e-12 * np.linalg.norm(p0))
@@ -118,7 +118,7 @@ def test_bodies_collide_with_each_other_conserving_momentum_and_stack_on_the_gro
     ground = pdsim.GroundPlane(normal=(0.0, 0.0, 1.0), offset=0.0)
     low = RigidBody(BoxShape((0.2, 0.2, 0.1)), density=1000.0, position=(0.0, 0.0, 0.05))
     top = RigidBody(BoxShape((0.1, 0.1, 0.1)), density=1000.0, position=(0.01, 0.0, 0.2))
-    stack = _alone([low, top], gravity=(0.0, 0.0, -g), ground=ground)
+    stack = _alone([low, top], gravity=(0.0, 0.0, -g), ground=ground, device=device)
     stack.simulate(1.0e-3, 800)
     assert top.state_values()["position"][2] == pytest.approx(0.15, abs=1e-3)
     assert low.state_values()["position"][2] == pytest.approx(0.05, abs=1e-3)
@@ -126,7 +126,7 @@ def test_bodies_collide_with_each_other_conserving_momentum_and_stack_on_the_gro
 
 
 # -- two-way contact with deformable bodies --------------------------------------------------------------------------
-def _impact(method: str, shift):
+def _impact(method: str, shift, device="cpu"):
     """A steel ball (r 2 cm, 10 m/s along x, 2 cm off the block's centre line) hits a free elastic 10 cm block
     (2.4 kg, E 30 MPa) in space; returns (scene, ball, solvers, a fixed point for the angular momentum)."""
     shift = np.asarray(shift, dtype=np.float64)
@@ -144,7 +144,7 @@ def _impact(method: str, shift):
         velocity=(10.0, 0.0, 0.0),
         name="ball",
     )
-    solvers = scene.build_solvers(device="cpu")
+    solvers = scene.build_solvers(device=device)
     point = shift + np.array([0.0, -0.05, 0.03])  # a fixed point off every line of the motion
     return scene, ball, solvers, point
 
@@ -160,7 +160,7 @@ def _kinetic(body, solvers) -> float:
 
 
 @pytest.mark.parametrize("method", ["pd", "fem"])
-def test_a_rigid_ball_hitting_a_free_block_conserves_momentum_anywhere(method):
+def test_a_rigid_ball_hitting_a_free_block_conserves_momentum_anywhere(method, device):
     """Linear momentum within 0.5 % and angular momentum (about a fixed point off the line of the impact) within 1 %
     of their initial values (measured: about 1e-7 each, docs/rigid_impacts.md); the ball's loss of momentum equals
     the block's gain within 0.5 % of the initial momentum, and the ball loses at least a third of its speed (with a
@@ -170,7 +170,7 @@ def test_a_rigid_ball_hitting_a_free_block_conserves_momentum_anywhere(method):
     final velocity agrees within 1e-4 m/s."""
     finals = []
     for shift in ((0.0, 0.0, 0.0), (1000.0, 0.0, 0.0)):
-        scene, ball, solvers, point = _impact(method, shift)
+        scene, ball, solvers, point = _impact(method, shift, device)
         dt = 0.7 * min(s.stable_time_step() for s in solvers)
         steps = math.ceil(0.03 / dt)  # the ball's travel to contact, the contact and the separation
         p0, L0 = _totals(ball, solvers, point)

@@ -40,12 +40,12 @@ def _angular_momentum_about_centre(s):
 
 
 @pytest.mark.parametrize("origin", [(0.0, 0.0, 0.0), (1000.0, -700.0, 300.0)], ids=["origin", "1km"])
-def test_handoff_keeps_momentum_and_drops_only_the_internal_energy(origin):
+def test_handoff_keeps_momentum_and_drops_only_the_internal_energy(origin, device):
     """Two deformed, vibrating, spinning halves handed off: linear momentum within 1e-6 and angular momentum within
     1e-5 (relative, float32 state), the kinetic energy lost equals the internal kinetic energy computed here from the
     particles (1e-6 relative), plus the elastic energy; then 200 free steps keep P, L and K (1e-5) and every
     particle distance (1e-6 m)."""
-    s = SolverPeridynamics([_notched_block(origin, pdsim.RigidHandoff(strain=1.0, frames=1))], threads=1)
+    s = SolverPeridynamics([_notched_block(origin, pdsim.RigidHandoff(strain=1.0, frames=1))], device=device, threads=1)
     x = s.positions()
     c = x.mean(axis=0)
     rng = np.random.default_rng(4)
@@ -122,7 +122,7 @@ def _pieces(frames=16, shift=(0.0, 0.0, 0.0)):
     return scene
 
 
-def test_pieces_go_rigid_and_rest_on_the_ground(tmp_path):
+def test_pieces_go_rigid_and_rest_on_the_ground(tmp_path, device):
     """Both halves are rigid by the last frame (100 % of the particles); their particles still meet the ground
     (none below -h/4) and each half keeps its shape (distances within 1e-6 m of the hand-off's)."""
     seen = {}
@@ -131,7 +131,7 @@ def test_pieces_go_rigid_and_rest_on_the_ground(tmp_path):
         s = solvers[0]
         seen[frame] = (s.handoff.rigid_particles().copy(), s.positions().copy(), s.fragment_ids().copy())
 
-    _pieces().run(tmp_path / "p.usdc", device="cpu", progress=False, on_frame=on_frame)
+    _pieces().run(tmp_path / "p.usdc", device=device, progress=False, on_frame=on_frame)
     rigid, x, labels = seen[max(seen)]
     assert rigid.all()
     first = min(f for f, r in seen.items() if r[0].all())

@@ -60,7 +60,7 @@ def _sides(s):
 
 
 @pytest.mark.parametrize("shift", [(0.0, 0.0, 0.0), (1000.0, -700.0, 300.0)], ids=["origin", "1km"])
-def test_quiet_clamped_remainder_sleeps_and_its_energy_is_released(shift):
+def test_quiet_clamped_remainder_sleeps_and_its_energy_is_released(shift, device):
     """The remainder, deformed (random displacements of 1e-7 m) and vibrating (1e-4 m/s) below the threshold 1e-4,
     is handed off as static while the piece vibrates at 1 m/s (above it): ``released`` equals the remainder's kinetic
     energy 1/2 sum m v^2 and its elastic energy sum V W (1e-9 relative), the kinetic energy of the whole drops by the
@@ -72,6 +72,7 @@ def test_quiet_clamped_remainder_sleeps_and_its_energy_is_released(shift):
     for fixed in (True, False):
         s = SolverPeridynamics(
             [_plate(pdsim.RigidHandoff(strain=1.0e-4, frames=1, fixed=fixed), shift=shift)],
+            device=device,
             threads=1,
             gravity=(0.0, 0.0, -9.81),
         )

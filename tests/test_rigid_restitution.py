@@ -13,14 +13,14 @@ from pdsim.rigid import BoxShape, RigidBodies, RigidBody, SphereShape
 G = 9.81
 
 
-def _drop(shape, *, body_e, ground_e, dt=1.0e-3, height=0.1):
+def _drop(shape, *, body_e, ground_e, device="cpu", dt=1.0e-3, height=0.1):
     """The body (density 1000 kg/m^3) released with its lowest point ``height`` [m] above the ground under gravity;
     (impact speed, rebound speed) [m/s]: the largest downward and, after it, the largest upward speed over twice the
     fall's time."""
     half = shape.radius if isinstance(shape, SphereShape) else 0.5 * shape.size[2]
     ground = pdsim.GroundPlane(normal=(0.0, 0.0, 1.0), offset=0.0, restitution=ground_e)
     body = RigidBody(shape, density=1000.0, position=(0.0, 0.0, half + height), restitution=body_e)
-    system = RigidBodies([body], ground=ground, colliders=[], gravity=(0.0, 0.0, -G), origin=np.zeros(3), device="cpu")
+    system = RigidBodies([body], ground=ground, colliders=[], gravity=(0.0, 0.0, -G), origin=np.zeros(3), device=device)
     vz = []
     for _ in range(int(2.0 * np.sqrt(2.0 * height / G) / dt)):
         system.simulate(dt, 1)
@@ -32,31 +32,31 @@ def _drop(shape, *, body_e, ground_e, dt=1.0e-3, height=0.1):
 
 @pytest.mark.parametrize("e", [0.1, 0.6])
 @pytest.mark.parametrize("shape", [SphereShape(0.05), BoxShape((0.2, 0.2, 0.1))], ids=["sphere", "box"])
-def test_a_rigid_body_dropped_on_the_ground_rebounds_at_its_restitution(shape, e):
+def test_a_rigid_body_dropped_on_the_ground_rebounds_at_its_restitution(shape, e, device):
     """Dropped from 10 cm (impact at 1.39 m/s, steps of 1 ms), a sphere and a box landing flat leave the ground at e
     times their impact speed within 0.05, whether e is the body's or the ground's (the pair takes the larger of the
     two sides', here the one given). Measured: 0.069 for e = 0.1 and 0.585 for e = 0.6 (the law's, as a particle on
     the ground's penalty form: tests/test_contact_law.py). Without a restitution on either side the contact is
     inelastic: the body stays on the ground (rebound below 1 mm/s)."""
-    v_in, v_out = _drop(shape, body_e=e, ground_e=None)
+    v_in, v_out = _drop(shape, body_e=e, ground_e=None, device=device)
     print(f"{type(shape).__name__} e = {e}: impact {v_in:.3f} m/s, rebound {v_out:.4f} m/s, ratio {v_out / v_in:.3f}")
     assert v_in == pytest.approx(np.sqrt(2.0 * G * 0.1), rel=0.01)
     assert v_out / v_in == pytest.approx(e, abs=0.05)
-    v_in, v_out = _drop(shape, body_e=None, ground_e=e)
+    v_in, v_out = _drop(shape, body_e=None, ground_e=e, device=device)
     assert v_out / v_in == pytest.approx(e, abs=0.05)
-    _, v_out = _drop(shape, body_e=None, ground_e=None)
+    _, v_out = _drop(shape, body_e=None, ground_e=None, device=device)
     assert v_out < 1.0e-3
 
 
 @pytest.mark.parametrize("e", [0.1, 0.6])
-def test_two_rigid_spheres_meeting_head_on_part_at_their_restitution_with_momentum_conserved(e):
+def test_two_rigid_spheres_meeting_head_on_part_at_their_restitution_with_momentum_conserved(e, device):
     """Two steel spheres (5 cm, the second twice as dense) meeting head-on at 2 m/s in space, each of restitution e:
     their relative speed after the contact is e times the one before within 0.05 (both passes of the pair find the same
     contact and share it), and the linear momentum is conserved to 1e-12 of its size."""
     a = RigidBody(SphereShape(0.05), density=7850.0, position=(-0.15, 0.0, 0.0), velocity=(2.0, 0.0, 0.0),
                   friction=0.0, restitution=e)  # fmt: skip
     b = RigidBody(SphereShape(0.05), density=15700.0, position=(0.0, 0.0, 0.0), friction=0.0, restitution=e)
-    system = RigidBodies([a, b], ground=None, colliders=[], gravity=(0.0, 0.0, 0.0), origin=np.zeros(3), device="cpu")
+    system = RigidBodies([a, b], ground=None, colliders=[], gravity=(0.0, 0.0, 0.0), origin=np.zeros(3), device=device)
     p0 = system.linear_momentum()
     system.simulate(1.0e-3, 200)
     assert np.allclose(system.linear_momentum(), p0, rtol=0.0, atol=1e-12 * np.linalg.norm(p0))

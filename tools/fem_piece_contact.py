@@ -41,7 +41,7 @@ def deepest_inside(solver) -> tuple[int, float]:
     return len(labels), depth
 
 
-def run(speed: float, frames: int, contact: bool, ball: bool = False) -> list[tuple[int, float]]:
+def run(speed: float, frames: int, contact: bool, ball: bool = False, device: str = "cpu") -> list[tuple[int, float]]:
     """(piece count, deepest inside [m]) at the end of each frame (module docstring)."""
     scene = pdsim.Scene(gravity=(0.0, 0.0, -9.81))
     if not contact:
@@ -54,7 +54,7 @@ def run(speed: float, frames: int, contact: bool, ball: bool = False) -> list[tu
                              velocity=(0.0, 0.0, -speed), name="ball")  # fmt: skip
     else:
         scene.add_collider(pdsim.SphereProjectile(0.02, center=(0.0, 0.0, 0.045), velocity=(0.0, 0.0, -speed)))
-    (solver,) = scene.build_solvers(device="cpu")
+    (solver,) = scene.build_solvers(device=device)
     coupling = method_contact(scene, [solver])
     dt = scene.time_step_safety * solver.stable_time_step()
     rows = []

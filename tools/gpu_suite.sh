@@ -7,9 +7,12 @@
 #      (tools/preflight_calibration.py --cost --device cuda --write --out $OUT/cost_calibration_cuda.json);
 #   2. compare: the pre-flight's estimates against gallery scenes run on the GPU at their preview settings
 #      (tools/preflight_calibration.py --compare --device cuda);
-#   3. default_scene: `pdsim run --device cuda --profile` (the run report beside the log);
+#   3. default_scene: `pdsim run --device cuda --profile`, cold and warm kernel cache (the run reports in the log);
 #   4. tests: the CUDA tests of tests/test_gpu_path.py (CPU/CUDA agreement for peridynamics, FEM and lattice, a
 #      captured CUDA graph against frames launched step by step, the device fragment labeller on CUDA);
+#   4b. contact: the CUDA cases of the contact and rigid-body tests ($CONTACT_TESTS: momentum through a rigid ball's
+#      impact on peridynamic and FEM blocks, restitution and friction, FEM-FEM contact, the rigid and static
+#      hand-off), the same physics assertions as on the CPU;
 #   5. agree: a gallery scene's preview frames on the CPU and on CUDA, compared frame by frame (tools/bench_gpu.py
 #      agree $AGREE);
 #   6. pd_throughput: the peridynamic throughput of an elastic block of N_PD^3 particles (tools/bench_gpu.py pd).
@@ -36,7 +39,9 @@ PD_FRAMES="${PD_FRAMES:-3}"
 PD_SUBSTEPS="${PD_SUBSTEPS:-20}"
 REPEATS="${REPEATS:-2}"
 SITE="${SITE:-/tmp/pdsim_gpu_site}"
-STAGES="${STAGES:-calibration compare default_scene tests agree pd_throughput}"  # the stages to run (names below)
+STAGES="${STAGES:-calibration compare default_scene tests contact agree pd_throughput}"  # the stages to run (names below)
+CONTACT_TESTS="${CONTACT_TESTS:-tests/test_rigid_restitution.py tests/test_rigid_bodies.py tests/test_contact_law.py
+    tests/test_fem_contact.py tests/test_rigid_handoff.py tests/test_rigid_handoff_static.py}"
 COMPARE="${COMPARE:-}"  # the compare stage's scenes (empty: the tool's default list)
 AGREE="${AGREE:-fem_slab_crack}"  # the agree stage's scene
 START=$(date +%s)
@@ -157,9 +162,13 @@ run_stage calibration 230 "$PY" tools/preflight_calibration.py --cost --device c
     --out "$OUT/cost_calibration_cuda.json"
 # shellcheck disable=SC2086  # COMPARE is a list of scene names (empty: the tool's default list)
 run_stage compare 150 "$PY" tools/preflight_calibration.py --compare $COMPARE --device cuda
-run_stage default_scene 45 bash -c "mkdir -p /tmp/pdsim_default && \"$PY\" -m pdsim.cli run --device cuda --profile \
-    --out /tmp/pdsim_default/default.usdc && cat /tmp/pdsim_default/default.report.json"
+# the default scene twice: with a cold kernel cache, then warm (bash's time: the whole process's wall time)
+run_stage default_scene 70 bash -c "mkdir -p /tmp/pdsim_default && for run in cold warm; do TIMEFORMAT=\"\$run: wall %R s\"; \
+    time \"$PY\" -m pdsim.cli run --device cuda --profile --out /tmp/pdsim_default/\$run.usdc || exit 1; \
+    cat /tmp/pdsim_default/\$run.report.json; done"
 run_stage tests 80 "$PY" -m pytest -q -rs -p no:cacheprovider tests/test_gpu_path.py -k "cuda"
+# shellcheck disable=SC2086  # CONTACT_TESTS is a list of test files
+run_stage contact 150 "$PY" -m pytest -q -rs -p no:cacheprovider --durations=10 $CONTACT_TESTS -k "cuda"
 run_stage agree 150 "$PY" tools/bench_gpu.py agree "$AGREE" --device cuda --json-out "$OUT/agree.json"
 run_stage pd_throughput 40 "$PY" tools/bench_gpu.py pd --n "$N_PD" --frames "$PD_FRAMES" --substeps "$PD_SUBSTEPS" \
     --device cuda
