@@ -19,8 +19,8 @@ DEST="${DEST:-$ROOT/.gpu_wheels}"
 PART_MB="${PART_MB:-48}"
 PYTHON="${PYTHON:-$ROOT/.venv/bin/python}"
 # pdsim's imports on the run paths that the GPU machine lacks (pdsim itself is installed from the carried tree with
-# --no-deps); warp-lang pinned to the version the tests were written against
-PACKAGES="${PACKAGES:-warp-lang==1.19.0 usd-core trimesh manifold3d meshio pytetwild}"
+# --no-deps; rtree for the tests' trimesh proximity queries); warp-lang pinned to the version the tests were written against
+PACKAGES="${PACKAGES:-warp-lang==1.19.0 usd-core trimesh manifold3d meshio pytetwild rtree}"
 
 rm -rf "$DEST"
 mkdir -p "$DEST/download"
