@@ -276,8 +276,9 @@ class RigidBody(Collider):
     # -- the host's view --------------------------------------------------------------------------------------------
     def state_values(self) -> dict:
         """The body's state read from the device: position (centre of mass, world [m]), orientation (x, y, z, w),
-        velocity [m/s], angular_momentum [kg m^2/s] and angular_velocity [rad/s] (world axes), float64."""
-        s = self.state.numpy()[0]
+        velocity [m/s], angular_momentum [kg m^2/s] and angular_velocity [rad/s] (world axes), float64 copies that
+        keep their values while the body moves on (on the CPU ``numpy()`` is a view of the live state)."""
+        s = np.array(self.state.numpy(), copy=True)[0]
         q = np.asarray(s["orientation"], dtype=np.float64)
         L = np.asarray(s["angular_momentum"], dtype=np.float64)
         return {

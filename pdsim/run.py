@@ -170,8 +170,8 @@ class _FrameRun:
         with self.profile.phase("surfaces"):  # the solvers advance meanwhile: copies of the state
             views = [copied_view(v) for s in self.solvers for v in s.frame_views()]
         views += [copied_view(v) for e in self.events for v in e.collect()]
-        for collider, name in self.rigid:
-            view = collider.view(t, bounds=self.bounds)
+        for collider, name in self.rigid:  # copies too: the frame is written after the next one has advanced
+            view = copied_view(collider.view(t, bounds=self.bounds))
             if name is not None:
                 view.name = name
             views.append(view)

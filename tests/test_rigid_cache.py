@@ -63,9 +63,50 @@ def test_a_rigid_body_is_written_as_a_transform_with_its_velocities(tmp_path):
     assert len(prim.GetAttribute("xformOp:orient").GetTimeSamples()) == FRAMES + 1
 
 
+def _ball_samples(stage) -> dict:
+    """{attribute name: [its value at each frame 0..FRAMES]} of the time-sampled attributes of /World/colliders/ball
+    (quaternions as (x, y, z, w))."""
+    out = {}
+    for attr in stage.GetPrimAtPath("/World/colliders/ball").GetAttributes():
+        if attr.GetNumTimeSamples() == 0:
+            continue
+        values = [attr.Get(f) for f in range(FRAMES + 1)]
+        if hasattr(values[0], "GetReal"):
+            values = [[*q.GetImaginary(), q.GetReal()] for q in values]
+        out[attr.GetName()] = [np.asarray(v, dtype=np.float64) for v in values]
+    return out
+
+
+def test_each_frame_holds_the_rigid_body_state_of_that_frame(tmp_path):
+    """The pose, velocity and angular velocity written for frame f are the ball's state at the end of frame f (read
+    by ``on_frame``), for every frame, with the frame written while the next one simulates (the surface thread, the
+    default): the written values are copies, not views of the live state, which the CPU's ``numpy()`` returns. The
+    ball hits the block in frame 3, so a value written one frame late differs."""
+    from pxr import Usd
+
+    scene = _scene()
+    ball = scene.colliders[0]
+    seen = {}
+
+    def on_frame(frame, solvers):
+        seen[frame] = ball.state_values()
+
+    scene.run(tmp_path / "r.usdc", progress=False, checkpoint_interval_s=None, on_frame=on_frame)
+    samples = _ball_samples(Usd.Stage.Open(str(tmp_path / "r.usdc")))
+    scale = 2.0e-3 * 24.0  # frame_time x fps: the cache's velocities are per played second
+    assert sorted(seen) == list(range(1, FRAMES + 1))
+    for f, s in seen.items():
+        assert samples["xformOp:translate"][f] == pytest.approx(s["position"], abs=1e-12)
+        assert samples["xformOp:orient"][f] == pytest.approx(s["orientation"], abs=1e-6)
+        assert samples["pdsim:velocity"][f] == pytest.approx(s["velocity"] * scale, rel=1e-6, abs=1e-9)
+        omega = np.degrees(s["angular_velocity"]) * scale
+        assert samples["pdsim:angularVelocity"][f] == pytest.approx(omega, rel=1e-5, abs=1e-6)
+    assert not np.allclose(seen[3]["velocity"], seen[2]["velocity"])  # the hit is in frame 3
+
+
 def test_a_run_with_a_rigid_body_resumes_bit_for_bit(tmp_path):
-    """Stopped after frame 2 (its checkpoint) and resumed: the ball's pose and the block's points of the last frame
-    equal those of an uninterrupted run, bit for bit."""
+    """Stopped after frame 2 (its checkpoint) and resumed: every attribute of the ball at every frame and the
+    block's points of the last frame equal those of an uninterrupted run, bit for bit."""
     from pxr import Usd
 
     whole = tmp_path / "whole.usdc"
@@ -84,14 +125,15 @@ def test_a_run_with_a_rigid_body_resumes_bit_for_bit(tmp_path):
         _scene().run(part, progress=False, checkpoint_interval_s=0.0, stop=stop, on_frame=on_frame, layout="clips")
     _scene().run(part, progress=False, resume=True, checkpoint_interval_s=0.0, layout="clips")
     a, b = Usd.Stage.Open(str(whole)), Usd.Stage.Open(str(part))
-    for path, attr in (
-        ("/World/colliders/ball", "xformOp:translate"),
-        ("/World/colliders/ball", "xformOp:orient"),
-        ("/World/block", "points"),
-    ):
-        va = np.asarray(a.GetPrimAtPath(path).GetAttribute(attr).Get(FRAMES))
-        vb = np.asarray(b.GetPrimAtPath(path).GetAttribute(attr).Get(FRAMES))
-        assert np.array_equal(va, vb), (path, attr)
+    ball_a, ball_b = _ball_samples(a), _ball_samples(b)
+    assert {"xformOp:translate", "xformOp:orient", "pdsim:velocity", "pdsim:angularVelocity"} <= set(ball_a)
+    assert set(ball_a) == set(ball_b)
+    for name, values in ball_a.items():
+        for f in range(FRAMES + 1):
+            assert np.array_equal(values[f], ball_b[name][f]), (name, f)
+    va = np.asarray(a.GetPrimAtPath("/World/block").GetAttribute("points").Get(FRAMES))
+    vb = np.asarray(b.GetPrimAtPath("/World/block").GetAttribute("points").Get(FRAMES))
+    assert np.array_equal(va, vb)
 
 
 BLENDER = _blender_python()
