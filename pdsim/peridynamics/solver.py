@@ -306,76 +306,8 @@ class SolverPeridynamics(PointSolver):
         if self._pairs is not None:
             self._pairs.dilatation_and_forces(s, m, self.kin.u, alive, live, self._dummy_f)
         else:
-            self._directed_passes(alive, live)
+            _directed_passes(self, alive, live)
         self._other_forces(alive)
-
-    def _directed_passes(self, alive, live) -> None:
-        """The directed dilatation (with the plastic update) and force passes (kernels/peridynamics/step.py)."""
-        m, s, ks = self.model, self.state, self._kernels
-        f1 = self._dummy_f
-        frac = m.fracture
-        _, plastic, reverse = self._feature_arrays()
-        plastic_args = (
-            {
-                "plastic_particle_count": m.plastic_particle_count,
-                "bond_wv": m.bond_wv,
-                "bond_wv_dev": m.bond_wv_dev,
-                "horizon": m.horizon,
-                "weighted_volume": m.weighted_volume,
-                "yield_stress": m.yield_stress,
-                "hardening": m.hardening,
-                "psi_scale": m.psi_scale,
-                "bond_plastic": plastic,
-                "eqps": s.eqps,
-                "bond_reverse": reverse,
-                "bond_plastic_reverse": s.bond_plastic_reverse,
-            }
-            if m.plastic
-            else pd_step.plastic_placeholders(f1, reverse)
-        )
-        launch = self._bond_ranges.launch
-        pd_step.dilatation(
-            launch,
-            ks,
-            displacements=self.kin.u,
-            family_offsets=m.family_offsets,
-            family_neighbors=m.family_neighbors,
-            bond_geom=m.bond_geom,
-            bond_wv_dil=m.bond_wv_dil,
-            dil_d=m.dil_d,
-            dil_coef=m.dil_coef,
-            dev_b=m.dev_b,
-            bond_alive=alive,
-            theta=s.theta,
-            bp=s.bp,
-            bond_ne=s.bond_ne,
-            stretch_min=s.stretch_min if frac else f1,
-            live_particles=live,
-            **plastic_args,
-        )
-        pd_step.bond_forces(
-            launch,
-            ks,
-            family_offsets=m.family_offsets,
-            family_neighbors=m.family_neighbors,
-            bond_geom=m.bond_geom,
-            bond_ne=s.bond_ne,
-            bond_wv_dil=m.bond_wv_dil,
-            bond_wv_dev=m.bond_wv_dev,
-            bp=s.bp,
-            bond_alive=alive,
-            bond_critical_stretch=m.bond_critical_stretch if frac else f1,
-            compressive_bonus=m.compressive_bonus if frac else f1,
-            compressive_stretch_floor=m.compressive_stretch_floor if frac else f1,
-            stretch_min=s.stretch_min if frac else f1,
-            eqps=s.eqps if m.plastic else f1,
-            failure_eqps=m.failure_eqps if frac else f1,
-            plastic_bond_count=m.plastic_bond_count,
-            bond_plastic=plastic,
-            bond_plastic_reverse=s.bond_plastic_reverse if m.plastic else f1,
-            live_particles=live,
-            force_density=s.force_density,
-        )
 
     def _other_forces(self, alive) -> None:
         """Debris damping, contact, the ground and the loads, added to the bonds' force density."""
@@ -704,6 +636,76 @@ class SolverPeridynamics(PointSolver):
     def body_slice(self, index: int) -> slice:
         """Rows of the solver's body ``index`` (in ``self.bodies`` order) in the concatenated particle arrays."""
         return slice(int(self.model.body_offsets[index]), int(self.model.body_offsets[index + 1]))
+
+
+def _directed_passes(solver: SolverPeridynamics, alive, live) -> None:
+    """The directed dilatation (with the plastic update) and force passes of ``solver`` (kernels/peridynamics/step.py)
+    over its bond ranges; ``alive`` the live flags (or a placeholder), ``live`` the hand-off's live list (or one)."""
+    m, s, ks = solver.model, solver.state, solver._kernels
+    f1 = solver._dummy_f
+    frac = m.fracture
+    _, plastic, reverse = solver._feature_arrays()
+    plastic_args = (
+        {
+            "plastic_particle_count": m.plastic_particle_count,
+            "bond_wv": m.bond_wv,
+            "bond_wv_dev": m.bond_wv_dev,
+            "horizon": m.horizon,
+            "weighted_volume": m.weighted_volume,
+            "yield_stress": m.yield_stress,
+            "hardening": m.hardening,
+            "psi_scale": m.psi_scale,
+            "bond_plastic": plastic,
+            "eqps": s.eqps,
+            "bond_reverse": reverse,
+            "bond_plastic_reverse": s.bond_plastic_reverse,
+        }
+        if m.plastic
+        else pd_step.plastic_placeholders(f1, reverse)
+    )
+    launch = solver._bond_ranges.launch
+    pd_step.dilatation(
+        launch,
+        ks,
+        displacements=solver.kin.u,
+        family_offsets=m.family_offsets,
+        family_neighbors=m.family_neighbors,
+        bond_geom=m.bond_geom,
+        bond_wv_dil=m.bond_wv_dil,
+        dil_d=m.dil_d,
+        dil_coef=m.dil_coef,
+        dev_b=m.dev_b,
+        bond_alive=alive,
+        theta=s.theta,
+        bp=s.bp,
+        bond_ne=s.bond_ne,
+        stretch_min=s.stretch_min if frac else f1,
+        live_particles=live,
+        **plastic_args,
+    )
+    pd_step.bond_forces(
+        launch,
+        ks,
+        family_offsets=m.family_offsets,
+        family_neighbors=m.family_neighbors,
+        bond_geom=m.bond_geom,
+        bond_ne=s.bond_ne,
+        bond_wv_dil=m.bond_wv_dil,
+        bond_wv_dev=m.bond_wv_dev,
+        bp=s.bp,
+        bond_alive=alive,
+        bond_critical_stretch=m.bond_critical_stretch if frac else f1,
+        compressive_bonus=m.compressive_bonus if frac else f1,
+        compressive_stretch_floor=m.compressive_stretch_floor if frac else f1,
+        stretch_min=s.stretch_min if frac else f1,
+        eqps=s.eqps if m.plastic else f1,
+        failure_eqps=m.failure_eqps if frac else f1,
+        plastic_bond_count=m.plastic_bond_count,
+        bond_plastic=plastic,
+        bond_plastic_reverse=s.bond_plastic_reverse if m.plastic else f1,
+        live_particles=live,
+        force_density=s.force_density,
+    )
 
 
 def _bounds_centre(bodies) -> np.ndarray:
