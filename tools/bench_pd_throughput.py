@@ -154,9 +154,12 @@ def critical_stretch_for(state: str, fracture: bool) -> float | None:
     return 1.0 if fracture else None
 
 
-def build_solver(n: int, *, horizon_factor: float, device: str, plastic=False, critical_stretch=None, threads=1):
+def build_solver(
+    n: int, *, horizon_factor: float, device: str, plastic=False, critical_stretch=None, threads=1, pairs=None
+):
     """The benchmark block: n^3 particles, families cut at delta (no partial volumes), at rest; its bond passes on
-    ``threads`` CPU threads (None on a CUDA device)."""
+    ``threads`` CPU threads (None on a CUDA device), in the form ``pairs`` (SolverPeridynamics: None the default,
+    False the directed passes)."""
     material = pdsim.Material(
         density=DENSITY,
         youngs_modulus=YOUNGS_MODULUS,
@@ -167,7 +170,7 @@ def build_solver(n: int, *, horizon_factor: float, device: str, plastic=False, c
     )
     shape = pdsim.box((n * SPACING,) * 3)
     body = pdsim.PeridynamicBody(shape, material, SPACING, horizon_factor=horizon_factor, partial_volumes=False)
-    return pdsim.SolverPeridynamics([body], device=device, threads=threads)
+    return pdsim.SolverPeridynamics([body], device=device, threads=threads, pairs=pairs)
 
 
 def mean_damage(solver) -> float:
@@ -254,6 +257,7 @@ def run_pdsim(
     fracture: bool = False,
     breakdown: bool = False,
     threads: int | None = 1,
+    pairs: bool | None = None,
 ) -> dict:
     """Times pdsim on the block in ``state`` with its bond passes on ``threads`` CPU threads; returns its figures, the
     rest positions and initial velocities (for LAMMPS) and the time step."""
@@ -265,13 +269,13 @@ def run_pdsim(
         threads = None
     if warmup > 0:
         small = build_solver(min(n, 6), horizon_factor=horizon_factor, device=device, plastic=plastic,
-                             critical_stretch=sc, threads=threads)  # fmt: skip
+                             critical_stretch=sc, threads=threads, pairs=pairs)  # fmt: skip
         small.simulate(TIME_STEP_SAFETY * small.stable_time_step(), warmup)
     runs, cpu_runs, setups = [], [], []
     for _ in range(max(1, repeat)):  # each timing starts from the same initial state on a freshly built block
         start = time.perf_counter()
         solver = build_solver(n, horizon_factor=horizon_factor, device=device, plastic=plastic, critical_stretch=sc,
-                              threads=threads)  # fmt: skip
+                              threads=threads, pairs=pairs)  # fmt: skip
         dt = TIME_STEP_SAFETY * solver.stable_time_step()
         rest = solver.positions()
         v0 = lp.initial_velocities(state, rest, steps, dt, seed=seed)
@@ -288,6 +292,7 @@ def run_pdsim(
     out = {
         "state": state,
         "threads": solver.threads,
+        "bond_passes": solver.bond_passes,
         "particles": particles,
         "bonds": bonds,
         "bonds_per_particle": bonds / particles,
@@ -362,6 +367,7 @@ def run_benchmark(
     fracture: bool = False,
     style: str = "lps",
     threads: int | None = None,
+    pairs: bool | None = None,
 ) -> dict:
     """Times pdsim (on one thread, and on ``threads`` threads when that is more than one) and LAMMPS state by state;
     returns the figures as a dict (``states``: one entry per state, each with ``ratio`` and, with more than one rank,
@@ -399,7 +405,7 @@ def run_benchmark(
     for state in states:
         pd, rest, v0, body = run_pdsim(
             n, steps, state, device=device, horizon_factor=horizon_factor, warmup=warmup, repeat=repeat, seed=seed,
-            plastic=plastic, fracture=fracture, breakdown=breakdown,
+            plastic=plastic, fracture=fracture, breakdown=breakdown, pairs=pairs,
         )  # fmt: skip
         pd["surface_correction"] = body.surface_correction
         entry = {"pdsim": pd}
@@ -407,7 +413,7 @@ def run_benchmark(
         if threads > 1:
             pd_all, *_ = run_pdsim(
                 n, steps, state, device=device, horizon_factor=horizon_factor, warmup=warmup, repeat=repeat,
-                seed=seed, plastic=plastic, fracture=fracture, threads=threads,
+                seed=seed, plastic=plastic, fracture=fracture, threads=threads, pairs=pairs,
             )  # fmt: skip
             entry["pdsim_threads"] = pd_all
             entry["thread_speedup"] = pd_all["bond_visits_per_s"] / pd["bond_visits_per_s"]
@@ -550,6 +556,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="seed of the random velocities")
     parser.add_argument("--json", action="store_true", help="print one JSON line instead of text")
     parser.add_argument("--plastic", action="store_true", help="yielding material (LAMMPS runs peri/eps)")
+    parser.add_argument("--directed", action="store_true", help="pdsim's directed bond passes (the CUDA and "
+                        "plasticity form) instead of the CPU's pair form")  # fmt: skip
     parser.add_argument("--fracture", action="store_true", help="breakable material in every state (s_c = 1 where the "
                         "state sets none: every bond tested, none breaks)")  # fmt: skip
     args = parser.parse_args(argv)
@@ -576,6 +584,7 @@ def main(argv: list[str] | None = None) -> int:
         fracture=args.fracture,
         style=args.lammps_style,
         threads=args.threads,
+        pairs=False if args.directed else None,
     )
     print(json.dumps(result) if args.json else format_text(result))
     if any(e.get("bonds_match") is False for e in result["states"].values()):

@@ -249,6 +249,11 @@ class SolverPeridynamics(PointSolver):
             return None
         return PairPasses(self.model, self.model.fracture, handoff, self.device)
 
+    @property
+    def bond_passes(self) -> str:
+        """The form of the dilatation and force passes: "pairs" or "directed" (the ``pairs`` setting)."""
+        return "directed" if self._pairs is None else "pairs"
+
     def bond_cache(self):
         """The bond cache (n, e) per directed bond of the last dilatation pass (state.bond_ne), complete."""
         if self._pairs is not None:
