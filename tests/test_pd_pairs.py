@@ -159,11 +159,11 @@ def test_which_form_a_scene_gets():
 
 
 def test_pair_layout():
-    """Each undirected bond once, from its lower particle, with its reverse; an asymmetric bond list is refused."""
+    """Each undirected bond once, from its lower particle, with its reverse; a bond without a reverse is refused."""
     offsets = np.array([0, 2, 4, 6])
     neighbors = np.array([1, 2, 0, 2, 0, 1])
-    pair_offsets, forward, reverse = pair_layout(offsets, neighbors)
+    pair_offsets, forward, reverse = pair_layout(offsets, neighbors, np.array([2, 4, 0, 5, 1, 3]))
     assert pair_offsets.tolist() == [0, 2, 3, 3]
     assert forward.tolist() == [0, 1, 3] and reverse.tolist() == [2, 4, 5]
     with pytest.raises(ValueError, match="symmetric"):
-        pair_layout(np.array([0, 1, 1]), np.array([1]))
+        pair_layout(np.array([0, 1, 1]), np.array([1]), np.array([-1]))

@@ -14,6 +14,7 @@ import numpy as np
 import warp as wp
 
 from ..kernels.peridynamics import pairs as kp
+from ..kernels.peridynamics import step as pd_step
 from .ranges import ParticleRanges, equal_cost_bounds
 
 PAIR_RANGES = 12
@@ -21,25 +22,23 @@ PAIR_RANGES = 12
 1, 2, 3, 4 and 6 threads."""
 
 
-def pair_layout(offsets: np.ndarray, neighbors: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For directed bonds in CSR form (``offsets`` [n + 1], ``neighbors`` [bonds]; every bond k -> j has its reverse
-    j -> k): the per-particle prefix sums of the pairs (bonds with j > k), the pairs' directed bonds k -> j (in family
-    order) and their reverse bonds j -> k, as int64 arrays."""
+def pair_layout(
+    offsets: np.ndarray, neighbors: np.ndarray, reverse: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For directed bonds in CSR form (``offsets`` [n + 1], ``neighbors`` [bonds]) and the index of each bond's
+    reverse j -> k (``reverse``, -1 where a bond has none): the per-particle prefix sums of the pairs (bonds with
+    j > k), the pairs' directed bonds k -> j (in family order) and their reverse bonds j -> k, as int64 arrays."""
     n = len(offsets) - 1
-    offsets = offsets.astype(np.int64)
-    neighbors = neighbors[: offsets[-1]].astype(np.int64)
-    owner = np.repeat(np.arange(n, dtype=np.int64), np.diff(offsets))
-    forward = np.flatnonzero(neighbors > owner)
-    key = owner * n + neighbors
-    order = np.argsort(key, kind="stable")
-    wanted = neighbors[forward] * n + owner[forward]
-    at = np.searchsorted(key[order], wanted)
-    reverse = order[np.minimum(at, len(order) - 1)]
-    if len(forward) and not np.array_equal(key[reverse], wanted):
+    offsets = np.asarray(offsets, dtype=np.int64)
+    count = int(offsets[-1])
+    owner = np.repeat(np.arange(n, dtype=np.int32), np.diff(offsets))
+    forward = np.flatnonzero(np.asarray(neighbors[:count]) > owner)
+    back = np.asarray(reverse[:count])[forward].astype(np.int64)
+    if (back < 0).any() or 2 * len(forward) != count:
         raise ValueError("peridynamic bonds are not symmetric: a bond k -> j has no reverse j -> k")
     pair_offsets = np.zeros(n + 1, dtype=np.int64)
     pair_offsets[1:] = np.cumsum(np.bincount(owner[forward], minlength=n))
-    return pair_offsets, forward, reverse
+    return pair_offsets, forward, back
 
 
 class PairPasses:
@@ -54,19 +53,20 @@ class PairPasses:
         self.fracture = fracture
         n = model.particle_count
         offsets = model.family_offsets.numpy()[: n + 1]
-        pair_offsets, forward, reverse = pair_layout(offsets, model.family_neighbors.numpy())
+        reverse = wp.zeros(max(model.bond_count, 1), dtype=wp.int32, device=device)
+        pd_step.reverse_bonds(n, model.family_offsets, model.family_neighbors, reverse, device)
+        neighbors = model.family_neighbors.numpy()
+        pair_offsets, forward, reverse = pair_layout(offsets, neighbors, reverse.numpy())
         self.pair_count = len(forward)
         self._pair_offsets_host = pair_offsets
-        neighbors = model.family_neighbors.numpy()
         wd, wv = model.bond_wv_dil.numpy(), model.bond_wv_dev.numpy()
-        weights = np.stack([wd[forward], wd[reverse], wv[forward], wv[reverse]], axis=1).astype(np.float32)
+        weights = np.stack([wd[forward], wd[reverse], wv[forward], wv[reverse]], axis=1).astype(np.float32, copy=False)
         count = max(self.pair_count, 1)
 
         def arr(values, dtype):
-            out = wp.zeros(count, dtype=dtype, device=device)
-            if self.pair_count:
-                out.assign(wp.array(values, dtype=dtype, device=device))
-            return out
+            if not self.pair_count:
+                return wp.zeros(count, dtype=dtype, device=device)
+            return wp.array(values, dtype=dtype, device=device)
 
         self.pair_offsets = wp.array(pair_offsets.astype(np.int32), dtype=wp.int32, device=device)
         self.pair_neighbors = arr(neighbors[forward].astype(np.int32), wp.int32)
