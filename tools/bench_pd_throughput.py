@@ -60,6 +60,7 @@ import importlib.util
 import json
 import os
 import platform
+import resource
 import sys
 import time
 from pathlib import Path
@@ -534,6 +535,19 @@ def format_text(r: dict) -> str:
     return "\n".join(lines)
 
 
+def build_memory(n: int, *, horizon_factor: float, fracture: bool, pairs) -> dict:
+    """Peak resident memory of building the block (after a 4^3 build loaded the kernels), in bytes per directed bond
+    (the pre-flight's PD_BYTES_PER_BOND, particles included): one measurement per process, as the peak only grows."""
+    sc = 0.01 if fracture else None
+    build_solver(4, horizon_factor=horizon_factor, device="cpu", critical_stretch=sc, pairs=pairs)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    solver = build_solver(n, horizon_factor=horizon_factor, device="cpu", critical_stretch=sc, pairs=pairs)
+    after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    bonds = solver.model.bond_count
+    return {"n": n, "bond_passes": solver.bond_passes, "fracture": fracture, "bonds": bonds,
+            "peak_bytes": after - before, "bytes_per_bond": (after - before) / bonds}  # fmt: skip
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=25, help="particles per edge (the block holds n^3)")
@@ -560,7 +574,16 @@ def main(argv: list[str] | None = None) -> int:
                         "plasticity form) instead of the CPU's pair form")  # fmt: skip
     parser.add_argument("--fracture", action="store_true", help="breakable material in every state (s_c = 1 where the "
                         "state sets none: every bond tested, none breaks)")  # fmt: skip
+    parser.add_argument("--memory", action="store_true", help="only the peak memory of building the block, per bond "
+                        "(with --fracture: breakable; --directed: the directed form)")  # fmt: skip
     args = parser.parse_args(argv)
+    if args.memory:
+        _init_warp("cpu")
+        figures = build_memory(args.n, horizon_factor=args.horizon_factor, fracture=args.fracture,
+                               pairs=False if args.directed else None)  # fmt: skip
+        print(json.dumps(figures) if args.json else f"{figures['bond_passes']}: {figures['bytes_per_bond']:.1f} B per "
+              f"bond ({figures['bonds']} bonds, fracture {figures['fracture']})")  # fmt: skip
+        return 0
     if args.n < 1 or args.steps < 1:
         parser.error("--n and --steps must be >= 1")
     if args.ranks is not None and args.ranks < 1:

@@ -59,8 +59,6 @@ class PairPasses:
         pair_offsets, forward, reverse = pair_layout(offsets, neighbors, reverse.numpy())
         self.pair_count = len(forward)
         self._pair_offsets_host = pair_offsets
-        wd, wv = model.bond_wv_dil.numpy(), model.bond_wv_dev.numpy()
-        weights = np.stack([wd[forward], wd[reverse], wv[forward], wv[reverse]], axis=1).astype(np.float32, copy=False)
         count = max(self.pair_count, 1)
 
         def arr(values, dtype):
@@ -68,12 +66,20 @@ class PairPasses:
                 return wp.zeros(count, dtype=dtype, device=device)
             return wp.array(values, dtype=dtype, device=device)
 
+        # one host temporary at a time (the build's peak memory: pdsim/preflight.py PD_BYTES_PER_BOND)
         self.pair_offsets = wp.array(pair_offsets.astype(np.int32), dtype=wp.int32, device=device)
         self.pair_neighbors = arr(neighbors[forward].astype(np.int32), wp.int32)
         self.pair_bond = arr(forward.astype(np.int32), wp.int32)
         self.pair_reverse = arr(reverse.astype(np.int32), wp.int32)
         self.pair_geom = arr(model.bond_geom.numpy()[forward], wp.vec4)
+        weights = np.empty((self.pair_count, 4), dtype=np.float32)
+        for column, (source, bonds) in enumerate(
+            ((model.bond_wv_dil, forward), (model.bond_wv_dil, reverse), (model.bond_wv_dev, forward),
+             (model.bond_wv_dev, reverse))
+        ):  # fmt: skip
+            weights[:, column] = source.numpy()[bonds]
         self.pair_weights = arr(weights, wp.vec4)
+        del weights, forward, reverse
         self.pair_ne = wp.zeros(count, dtype=wp.vec4, device=device)
         self.cache_stale = False  # the directed bond cache lags the pairs' (bond_cache)
         self._threads = 1
