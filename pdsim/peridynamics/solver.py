@@ -122,6 +122,8 @@ class SolverPeridynamics(PointSolver):
         self.bodies = sorted(bodies, key=lambda b: not b.material.yields)
         self.device = wp.get_device(device)
         resolve_threads(threads, self.device)  # a bad setting fails before anything is built
+        if pairs is not None and not isinstance(pairs, bool):
+            raise ParameterError("pairs", pairs, "None, True or False (the pair form of the bond passes)")
         self.ground = ground
         self.model = build_model(self.bodies, self.device, self.origin)
         m = self.model
@@ -234,8 +236,6 @@ class SolverPeridynamics(PointSolver):
 
     def _pair_passes(self, pairs, handoff: bool) -> PairPasses | None:
         """The pair passes for the ``pairs`` setting (see the class docstring), or None for the directed ones."""
-        if pairs is not None and not isinstance(pairs, bool):
-            raise ParameterError("pairs", pairs, "None, True or False (the pair form of the bond passes)")
         why = None
         if self.device.is_cuda:
             why = f"the CUDA device {self.device} (the scatter would need atomics)"
