@@ -15,6 +15,8 @@ import preview_final as pf  # tools/preview_final.py (tests/conftest.py puts too
 # spacing": the ball's elastic peak force is 0.055 of the load that splits a real glass sphere of this size, which
 # chips too); strict, so a case that starts to pass fails here until it is moved to the met ones.
 NOT_MET = {
+    ("glass", "drop"): "27 % broken out, 17 % of it dust; 2 fragments over 5 % (seed 0 of the pair-form bond passes: "
+    "a round-off branch, the drop at 6 m/s x (1 +- 1e-6) gives 45-52 % and 3-4 fragments; docs/benchmarks.md)",
     ("glass", "hit"): "0.2 % broken out, all of it dust; 1 fragment over 5 %",
     ("ceramic", "hit"): "0.1 % broken out, all of it dust; 1 fragment over 5 %",
     ("stone", "hit"): "no particle broken out; 1 fragment over 5 %",
@@ -23,9 +25,8 @@ NOT_MET = {
 # The figures of the met cases at the presets' strength seed 0 (tools/preview_final.py --spacings 0.02): broken out,
 # dust, fragments over 5 %.
 MET = {
-    ("glass", "drop"): (0.522, 0.072, 3),
     ("ceramic", "drop"): (0.511, 0.139, 3),
-    ("stone", "drop"): (0.375, 0.132, 4),
+    ("stone", "drop"): (0.361, 0.141, 4),
     ("plaster", "drop"): (0.246, 0.173, 3),
 }
 # The critical stretches at the 2 cm reference spacing that the ceramic, stone and plaster presets state.
@@ -41,8 +42,9 @@ CASES = [
 def test_brittle_preset_breaks_into_shards_at_preview_spacing(preset, case):
     """At the preview spacing (2 cm: 15 particles across the sphere, 1,791 particles) after 40 ms: at most 20 % of
     the broken-out mass is dust (fragments of fewer than 8 particles) and at least 3 fragments each hold more than
-    5 % of the body's mass. Met by the four drops, at the figures of MET (broken out and dust within 0.005 absolute,
-    the count exact; over strength seeds 0-4 glass, ceramic and stone meet on 4, plaster on 3:
+    5 % of the body's mass. Met by the ceramic, stone and plaster drops, at the figures of MET (broken out and dust
+    within 0.005 absolute, the count exact; over strength seeds 0-4 ceramic and stone meet on 4, glass and plaster
+    on 3:
     `python tools/preview_final.py --seeds 5 --cases drop`); the hits are marked with what they measure."""
     r = pf.measure(preset, case, pf.PREVIEW_SPACING)
     assert r["particles"] == 1791

@@ -60,6 +60,7 @@ import importlib.util
 import json
 import os
 import platform
+import resource
 import sys
 import time
 from pathlib import Path
@@ -154,9 +155,12 @@ def critical_stretch_for(state: str, fracture: bool) -> float | None:
     return 1.0 if fracture else None
 
 
-def build_solver(n: int, *, horizon_factor: float, device: str, plastic=False, critical_stretch=None, threads=1):
+def build_solver(
+    n: int, *, horizon_factor: float, device: str, plastic=False, critical_stretch=None, threads=1, pairs=None
+):
     """The benchmark block: n^3 particles, families cut at delta (no partial volumes), at rest; its bond passes on
-    ``threads`` CPU threads (None on a CUDA device)."""
+    ``threads`` CPU threads (None on a CUDA device), in the form ``pairs`` (SolverPeridynamics: None the default,
+    False the directed passes)."""
     material = pdsim.Material(
         density=DENSITY,
         youngs_modulus=YOUNGS_MODULUS,
@@ -167,7 +171,7 @@ def build_solver(n: int, *, horizon_factor: float, device: str, plastic=False, c
     )
     shape = pdsim.box((n * SPACING,) * 3)
     body = pdsim.PeridynamicBody(shape, material, SPACING, horizon_factor=horizon_factor, partial_volumes=False)
-    return pdsim.SolverPeridynamics([body], device=device, threads=threads)
+    return pdsim.SolverPeridynamics([body], device=device, threads=threads, pairs=pairs)
 
 
 def mean_damage(solver) -> float:
@@ -254,6 +258,7 @@ def run_pdsim(
     fracture: bool = False,
     breakdown: bool = False,
     threads: int | None = 1,
+    pairs: bool | None = None,
 ) -> dict:
     """Times pdsim on the block in ``state`` with its bond passes on ``threads`` CPU threads; returns its figures, the
     rest positions and initial velocities (for LAMMPS) and the time step."""
@@ -265,13 +270,13 @@ def run_pdsim(
         threads = None
     if warmup > 0:
         small = build_solver(min(n, 6), horizon_factor=horizon_factor, device=device, plastic=plastic,
-                             critical_stretch=sc, threads=threads)  # fmt: skip
+                             critical_stretch=sc, threads=threads, pairs=pairs)  # fmt: skip
         small.simulate(TIME_STEP_SAFETY * small.stable_time_step(), warmup)
     runs, cpu_runs, setups = [], [], []
     for _ in range(max(1, repeat)):  # each timing starts from the same initial state on a freshly built block
         start = time.perf_counter()
         solver = build_solver(n, horizon_factor=horizon_factor, device=device, plastic=plastic, critical_stretch=sc,
-                              threads=threads)  # fmt: skip
+                              threads=threads, pairs=pairs)  # fmt: skip
         dt = TIME_STEP_SAFETY * solver.stable_time_step()
         rest = solver.positions()
         v0 = lp.initial_velocities(state, rest, steps, dt, seed=seed)
@@ -288,6 +293,7 @@ def run_pdsim(
     out = {
         "state": state,
         "threads": solver.threads,
+        "bond_passes": solver.bond_passes,
         "particles": particles,
         "bonds": bonds,
         "bonds_per_particle": bonds / particles,
@@ -362,6 +368,7 @@ def run_benchmark(
     fracture: bool = False,
     style: str = "lps",
     threads: int | None = None,
+    pairs: bool | None = None,
 ) -> dict:
     """Times pdsim (on one thread, and on ``threads`` threads when that is more than one) and LAMMPS state by state;
     returns the figures as a dict (``states``: one entry per state, each with ``ratio`` and, with more than one rank,
@@ -399,7 +406,7 @@ def run_benchmark(
     for state in states:
         pd, rest, v0, body = run_pdsim(
             n, steps, state, device=device, horizon_factor=horizon_factor, warmup=warmup, repeat=repeat, seed=seed,
-            plastic=plastic, fracture=fracture, breakdown=breakdown,
+            plastic=plastic, fracture=fracture, breakdown=breakdown, pairs=pairs,
         )  # fmt: skip
         pd["surface_correction"] = body.surface_correction
         entry = {"pdsim": pd}
@@ -407,7 +414,7 @@ def run_benchmark(
         if threads > 1:
             pd_all, *_ = run_pdsim(
                 n, steps, state, device=device, horizon_factor=horizon_factor, warmup=warmup, repeat=repeat,
-                seed=seed, plastic=plastic, fracture=fracture, threads=threads,
+                seed=seed, plastic=plastic, fracture=fracture, threads=threads, pairs=pairs,
             )  # fmt: skip
             entry["pdsim_threads"] = pd_all
             entry["thread_speedup"] = pd_all["bond_visits_per_s"] / pd["bond_visits_per_s"]
@@ -528,6 +535,19 @@ def format_text(r: dict) -> str:
     return "\n".join(lines)
 
 
+def build_memory(n: int, *, horizon_factor: float, fracture: bool, pairs) -> dict:
+    """Peak resident memory of building the block (after a 4^3 build loaded the kernels), in bytes per directed bond
+    (the pre-flight's PD_BYTES_PER_BOND, particles included): one measurement per process, as the peak only grows."""
+    sc = 0.01 if fracture else None
+    build_solver(4, horizon_factor=horizon_factor, device="cpu", critical_stretch=sc, pairs=pairs)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    solver = build_solver(n, horizon_factor=horizon_factor, device="cpu", critical_stretch=sc, pairs=pairs)
+    after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    bonds = solver.model.bond_count
+    return {"n": n, "bond_passes": solver.bond_passes, "fracture": fracture, "bonds": bonds,
+            "peak_bytes": after - before, "bytes_per_bond": (after - before) / bonds}  # fmt: skip
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=25, help="particles per edge (the block holds n^3)")
@@ -550,9 +570,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="seed of the random velocities")
     parser.add_argument("--json", action="store_true", help="print one JSON line instead of text")
     parser.add_argument("--plastic", action="store_true", help="yielding material (LAMMPS runs peri/eps)")
+    parser.add_argument("--directed", action="store_true", help="pdsim's directed bond passes (the CUDA and "
+                        "plasticity form) instead of the CPU's pair form")  # fmt: skip
     parser.add_argument("--fracture", action="store_true", help="breakable material in every state (s_c = 1 where the "
                         "state sets none: every bond tested, none breaks)")  # fmt: skip
+    parser.add_argument("--memory", action="store_true", help="only the peak memory of building the block, per bond "
+                        "(with --fracture: breakable; --directed: the directed form)")  # fmt: skip
     args = parser.parse_args(argv)
+    if args.memory:
+        _init_warp("cpu")
+        figures = build_memory(args.n, horizon_factor=args.horizon_factor, fracture=args.fracture,
+                               pairs=False if args.directed else None)  # fmt: skip
+        print(json.dumps(figures) if args.json else f"{figures['bond_passes']}: {figures['bytes_per_bond']:.1f} B per "
+              f"bond ({figures['bonds']} bonds, fracture {figures['fracture']})")  # fmt: skip
+        return 0
     if args.n < 1 or args.steps < 1:
         parser.error("--n and --steps must be >= 1")
     if args.ranks is not None and args.ranks < 1:
@@ -576,6 +607,7 @@ def main(argv: list[str] | None = None) -> int:
         fracture=args.fracture,
         style=args.lammps_style,
         threads=args.threads,
+        pairs=False if args.directed else None,
     )
     print(json.dumps(result) if args.json else format_text(result))
     if any(e.get("bonds_match") is False for e in result["states"].values()):

@@ -792,7 +792,7 @@ def _(ws):
     _run(scene, ws)
 
 
-@case("memory", A_RUN, "a spacing and horizon whose bonds need about 18 GB (8 GB free)",
+@case("memory", A_RUN, "a spacing and horizon whose bonds need about 28 GB (8 GB free)",
       "a scene that fits the free memory", pdsim.ParameterError, "spacing=0.01", "the most free memory here is 8 GB",
       "spacing >=")  # fmt: skip
 def _(ws):

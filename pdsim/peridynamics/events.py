@@ -86,7 +86,7 @@ class CrackEvents:
                 volumes=m.volumes,
                 dev_b=m.dev_b,
                 bond_wv_dev=m.bond_wv_dev,
-                bond_ne=s.state.bond_ne,
+                bond_ne=s.bond_cache(),
                 plastic_bond_count=m.plastic_bond_count,
                 bond_plastic=s.state.bond_plastic,
                 event_positions=positions,

@@ -67,6 +67,21 @@ def resolve_threads(threads, device, bond_count: int = 0) -> int:
     return max(1, min(available_cores(), int(bond_count) // MIN_BONDS_PER_THREAD))
 
 
+def equal_cost_bounds(offsets_host: np.ndarray, count: int) -> list[int]:
+    """Bounds 0 = b_0 < b_1 < ... < b_m = n of at most ``count`` contiguous ranges of the n particles whose costs
+    (the bond count from the prefix sums ``offsets_host``, plus RANGE_PARTICLE_COST per particle) are about equal;
+    each range holds at least one particle (one range for n = 0)."""
+    n = len(offsets_host) - 1
+    count = max(1, min(int(count), n))
+    cost = offsets_host.astype(np.int64) + RANGE_PARTICLE_COST * np.arange(n + 1, dtype=np.int64)
+    targets = cost[-1] * np.arange(1, count) / count
+    above = np.clip(np.searchsorted(cost, targets), 1, n)  # the first cut at or past each target, or the one
+    cuts = np.where(targets - cost[above - 1] < cost[above] - targets, above - 1, above).tolist()  # nearer
+    for i in range(len(cuts)):  # one per range (a handful): each range keeps at least one particle
+        cuts[i] = min(max(cuts[i], cuts[i - 1] + 1 if i else 1), n - (count - 1 - i))
+    return [0, *cuts, n]
+
+
 class _Worker:
     """A thread that runs one callable per hand-off: started by releasing one lock, joined by acquiring another (two
     lock operations each way, the cheapest hand-off in CPython; a ThreadPoolExecutor's future, queue and condition
@@ -151,7 +166,8 @@ class ParticleRanges:
     passes wrote, so the ranges of one pass are independent: ``launch`` starts one Warp launch per range, the calling
     thread running the first while pool threads run the others (a CPU kernel runs with the GIL released), and returns
     when all are done. A particle's arithmetic does not depend on its range, so results are bit-identical for any
-    thread count. On a CUDA device there is one range: one launch over all particles.
+    thread count. On a CUDA device there is one range: one launch over all particles. ``bounds`` gives the ranges
+    explicitly (the pair passes' thread spans, pdsim/peridynamics/pairs.py) instead of equal cost over ``threads``.
 
     Warp (1.19) passes each launch's thread index as an argument of the generated CPU function and builds each
     launch's argument block afresh, so concurrent CPU launches are safe; what is not safe is loading a module from
@@ -160,18 +176,12 @@ class ParticleRanges:
     (``wp.ScopedCapture``, pdsim/capture.py) the ranges are launched one after another from the calling thread,
     which is the only thread a capture records; a CPU replay then runs them on one thread."""
 
-    def __init__(self, offsets_host: np.ndarray, threads: int, device):
+    def __init__(self, offsets_host: np.ndarray, threads: int, device, bounds: list[int] | None = None):
         n = len(offsets_host) - 1
         self.device = device
         self.particle_count = n
-        count = max(1, min(int(threads), n))
-        cost = offsets_host.astype(np.int64) + RANGE_PARTICLE_COST * np.arange(n + 1, dtype=np.int64)
-        targets = cost[-1] * np.arange(1, count) / count
-        above = np.clip(np.searchsorted(cost, targets), 1, n)  # the first cut at or past each target, or the one
-        cuts = np.where(targets - cost[above - 1] < cost[above] - targets, above - 1, above).tolist()  # nearer
-        for i in range(len(cuts)):  # one per thread (a handful): each range keeps at least one particle
-            cuts[i] = min(max(cuts[i], cuts[i - 1] + 1 if i else 1), n - (count - 1 - i))
-        bounds = [0, *cuts, n]
+        if bounds is None:
+            bounds = equal_cost_bounds(offsets_host, threads)
         self.ranges = [(int(a), int(b - a)) for a, b in itertools.pairwise(bounds)]
         self._loaded = set()
         self._commands = {}  # kernel key -> (inputs key, recorded launches, inputs)

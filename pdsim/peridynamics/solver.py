@@ -50,6 +50,7 @@ from .body import PeridynamicBody
 from .events import CrackEvents
 from .handoff import FragmentHandoff
 from .model import PeridynamicState, build_model
+from .pairs import PairPasses
 from .ranges import ParticleRanges, resolve_threads
 
 
@@ -72,6 +73,14 @@ class SolverPeridynamics(PointSolver):
             bit-identical for any thread count. The debris damping runs on the same ranges, and so do the kick and
             drift of the shared kinematics where the ranges average at least MIN_POINTS_PER_THREAD (ranges.py)
             particles. On a CUDA device each pass is one launch and ``threads`` must be None or 1.
+        pairs: the form of the dilatation and force passes. ``None`` (default): on a CPU device, for scenes without
+            plasticity, each bond pair once (pdsim/peridynamics/pairs.py: the lower particle's thread scatters the
+            other's share into fixed-range buffers, summed in a fixed order), else the directed form (every bond
+            k -> j gathered by k: the GPU, where the scatter would need atomics, and plasticity, whose return
+            mapping needs a particle's whole family). ``True`` asks for the pair form (a ParameterError where it
+            is not available), ``False`` for the directed one. Both give the same forces and dilatation to float32
+            round-off (the sums run in another order) and the same broken bonds; each is bit-identical for any
+            thread count.
 
     State: displacements from the rest configuration, velocities and accelerations (pdsim/kinematics.py), so bond
     deformation is computed from displacement differences and does not depend on where the body sits. The step
@@ -96,6 +105,7 @@ class SolverPeridynamics(PointSolver):
         origin=None,
         surfaces: bool = True,
         threads: int | None = None,
+        pairs: bool | None = None,
     ):
         if not bodies or not all(isinstance(b, PeridynamicBody) for b in bodies):
             raise ParameterError("bodies", bodies, "at least one PeridynamicBody")
@@ -112,6 +122,8 @@ class SolverPeridynamics(PointSolver):
         self.bodies = sorted(bodies, key=lambda b: not b.material.yields)
         self.device = wp.get_device(device)
         resolve_threads(threads, self.device)  # a bad setting fails before anything is built
+        if pairs is not None and not isinstance(pairs, bool):
+            raise ParameterError("pairs", pairs, "None, True or False (the pair form of the bond passes)")
         self.ground = ground
         self.model = build_model(self.bodies, self.device, self.origin)
         m = self.model
@@ -152,6 +164,7 @@ class SolverPeridynamics(PointSolver):
         self._ranges = None  # ranges over every particle (energy, damage); _bond_ranges: the bond passes'
         self._all_particles = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=d)
         self.handoff = None  # FragmentHandoff (pdsim/peridynamics/handoff.py) when a body has rigid_handoff on
+        self._pairs = self._pair_passes(pairs, handoff)  # PairPasses, or None: the directed passes
         self.threads = threads
         if handoff:
             self.handoff = FragmentHandoff(self)
@@ -208,6 +221,8 @@ class SolverPeridynamics(PointSolver):
         count = resolve_threads(value, self.device, self.model.bond_count)
         self._ranges = ParticleRanges(self._offsets_host, count, self.device)
         self.kin.ranges = self._ranges.point_launch()  # the kick and drift: on the ranges or one launch
+        if self._pairs is not None:
+            self._pairs.set_threads(count)
         self.rebalance_ranges()
 
     def rebalance_ranges(self) -> None:
@@ -216,6 +231,34 @@ class SolverPeridynamics(PointSolver):
         if self.handoff is not None and self.handoff.active:
             cost = np.concatenate([[0], np.cumsum(np.diff(self._offsets_host)[self.handoff.live_host])])
             self._bond_ranges = ParticleRanges(cost.astype(np.int64), len(self._ranges.ranges), self.device)
+        if self._pairs is not None:
+            self._pairs.set_particles(self.handoff.live_host if self.handoff is not None else None)
+
+    def _pair_passes(self, pairs, handoff: bool) -> PairPasses | None:
+        """The pair passes for the ``pairs`` setting (see the class docstring), or None for the directed ones."""
+        why = None
+        if self.device.is_cuda:
+            why = f"the CUDA device {self.device} (the scatter would need atomics)"
+        elif self.model.plastic:
+            why = "a yielding material (the return mapping needs a particle's whole family)"
+        if why is not None:
+            if pairs:
+                raise ParameterError("pairs", pairs, f"None or False with {why}")
+            return None
+        if pairs is False:
+            return None
+        return PairPasses(self.model, self.model.fracture, handoff, self.device)
+
+    @property
+    def bond_passes(self) -> str:
+        """The form of the dilatation and force passes: "pairs" or "directed" (the ``pairs`` setting)."""
+        return "directed" if self._pairs is None else "pairs"
+
+    def bond_cache(self):
+        """The bond cache (n, e) per directed bond of the last dilatation pass (state.bond_ne), complete."""
+        if self._pairs is not None:
+            self._pairs.bond_cache(self.state.bond_ne)
+        return self.state.bond_ne
 
     # -- time step -----------------------------------------------------------------------------------------------
     def stable_time_step(self) -> float:
@@ -262,72 +305,18 @@ class SolverPeridynamics(PointSolver):
     def compute_forces(self):
         """Force density [N/m^3] at the current displacements: bonds (with plasticity and the breaking test where
         live), contact, then the loads at the end of the step being taken."""
-        m, s, ks = self.model, self.state, self._kernels
-        f1 = self._dummy_f
-        alive, plastic, reverse = self._feature_arrays()
-        frac = m.fracture
-        plastic_args = (
-            {
-                "plastic_particle_count": m.plastic_particle_count,
-                "bond_wv": m.bond_wv,
-                "bond_wv_dev": m.bond_wv_dev,
-                "horizon": m.horizon,
-                "weighted_volume": m.weighted_volume,
-                "yield_stress": m.yield_stress,
-                "hardening": m.hardening,
-                "psi_scale": m.psi_scale,
-                "bond_plastic": plastic,
-                "eqps": s.eqps,
-                "bond_reverse": reverse,
-                "bond_plastic_reverse": s.bond_plastic_reverse,
-            }
-            if m.plastic
-            else pd_step.plastic_placeholders(f1, reverse)
-        )
-        launch = self._bond_ranges.launch
+        m, s = self.model, self.state
+        alive = self._feature_arrays()[0]
         live = self.handoff.live if self.handoff is not None else self._dummy_i
-        pd_step.dilatation(
-            launch,
-            ks,
-            displacements=self.kin.u,
-            family_offsets=m.family_offsets,
-            family_neighbors=m.family_neighbors,
-            bond_geom=m.bond_geom,
-            bond_wv_dil=m.bond_wv_dil,
-            dil_d=m.dil_d,
-            dil_coef=m.dil_coef,
-            dev_b=m.dev_b,
-            bond_alive=alive,
-            theta=s.theta,
-            bp=s.bp,
-            bond_ne=s.bond_ne,
-            stretch_min=s.stretch_min if frac else f1,
-            live_particles=live,
-            **plastic_args,
-        )
-        pd_step.bond_forces(
-            launch,
-            ks,
-            family_offsets=m.family_offsets,
-            family_neighbors=m.family_neighbors,
-            bond_geom=m.bond_geom,
-            bond_ne=s.bond_ne,
-            bond_wv_dil=m.bond_wv_dil,
-            bond_wv_dev=m.bond_wv_dev,
-            bp=s.bp,
-            bond_alive=alive,
-            bond_critical_stretch=m.bond_critical_stretch if frac else f1,
-            compressive_bonus=m.compressive_bonus if frac else f1,
-            compressive_stretch_floor=m.compressive_stretch_floor if frac else f1,
-            stretch_min=s.stretch_min if frac else f1,
-            eqps=s.eqps if m.plastic else f1,
-            failure_eqps=m.failure_eqps if frac else f1,
-            plastic_bond_count=m.plastic_bond_count,
-            bond_plastic=plastic,
-            bond_plastic_reverse=s.bond_plastic_reverse if m.plastic else f1,
-            live_particles=live,
-            force_density=s.force_density,
-        )
+        if self._pairs is not None:
+            self._pairs.dilatation_and_forces(s, m, self.kin.u, alive, live, self._dummy_f)
+        else:
+            _directed_passes(self, alive, live)
+        self._other_forces(alive)
+
+    def _other_forces(self, alive) -> None:
+        """Debris damping, contact, the ground and the loads, added to the bonds' force density."""
+        m, s = self.model, self.state
         if m.debris_rate is not None:  # Material.debris_damping: all particles on the ranges, or the hand-off's list
             damped = self._all_particles if self.handoff is None else self.handoff.damped
             pd_damping.debris_damping(
@@ -410,6 +399,7 @@ class SolverPeridynamics(PointSolver):
         where = f"at t={self.time:.6g} s (step {self.step_count})"
         if self._stable_dt is None:  # a bond pass: computed once, not at every check
             self._stable_dt = self.stable_time_step()
+        self.bond_cache()  # the watchdog reads the bonds' stretch
         hint = (
             f"the time step is too large for this material and spacing (stable estimate "
             f"{self._stable_dt:.3g} s): use a smaller --dt or leave it automatic"
@@ -424,6 +414,7 @@ class SolverPeridynamics(PointSolver):
         state (live flags, plastic extensions, equivalent plastic strain, the step's dilatation and bond cache) and
         particle contact's stiffness-cap scales and exposure."""
         s = self.state
+        self.bond_cache()
         out = {"kinematics": self.kinematics_checkpoint(), "bonds": {}}
         if self.handoff is not None:
             out["handoff"] = self.handoff.checkpoint()
@@ -448,6 +439,8 @@ class SolverPeridynamics(PointSolver):
         for name, values in state["bonds"].items():
             assign_state(getattr(s, name), values, name)
         self._mirror_plastic()
+        if self._pairs is not None:
+            self._pairs.restore_cache(s.bond_ne)
         if self.handoff is not None:
             self.handoff.restore(state["handoff"])
         if self.contact is not None:
@@ -605,7 +598,7 @@ class SolverPeridynamics(PointSolver):
             self._ranges.launch,
             self._kernels,
             family_offsets=m.family_offsets,
-            bond_ne=s.bond_ne,
+            bond_ne=self.bond_cache(),
             bond_wv_dev=m.bond_wv_dev,
             bond_alive=alive,
             plastic_bond_count=m.plastic_bond_count,
@@ -648,6 +641,76 @@ class SolverPeridynamics(PointSolver):
     def body_slice(self, index: int) -> slice:
         """Rows of the solver's body ``index`` (in ``self.bodies`` order) in the concatenated particle arrays."""
         return slice(int(self.model.body_offsets[index]), int(self.model.body_offsets[index + 1]))
+
+
+def _directed_passes(solver: SolverPeridynamics, alive, live) -> None:
+    """The directed dilatation (with the plastic update) and force passes of ``solver`` (kernels/peridynamics/step.py)
+    over its bond ranges; ``alive`` the live flags (or a placeholder), ``live`` the hand-off's live list (or one)."""
+    m, s, ks = solver.model, solver.state, solver._kernels
+    f1 = solver._dummy_f
+    frac = m.fracture
+    _, plastic, reverse = solver._feature_arrays()
+    plastic_args = (
+        {
+            "plastic_particle_count": m.plastic_particle_count,
+            "bond_wv": m.bond_wv,
+            "bond_wv_dev": m.bond_wv_dev,
+            "horizon": m.horizon,
+            "weighted_volume": m.weighted_volume,
+            "yield_stress": m.yield_stress,
+            "hardening": m.hardening,
+            "psi_scale": m.psi_scale,
+            "bond_plastic": plastic,
+            "eqps": s.eqps,
+            "bond_reverse": reverse,
+            "bond_plastic_reverse": s.bond_plastic_reverse,
+        }
+        if m.plastic
+        else pd_step.plastic_placeholders(f1, reverse)
+    )
+    launch = solver._bond_ranges.launch
+    pd_step.dilatation(
+        launch,
+        ks,
+        displacements=solver.kin.u,
+        family_offsets=m.family_offsets,
+        family_neighbors=m.family_neighbors,
+        bond_geom=m.bond_geom,
+        bond_wv_dil=m.bond_wv_dil,
+        dil_d=m.dil_d,
+        dil_coef=m.dil_coef,
+        dev_b=m.dev_b,
+        bond_alive=alive,
+        theta=s.theta,
+        bp=s.bp,
+        bond_ne=s.bond_ne,
+        stretch_min=s.stretch_min if frac else f1,
+        live_particles=live,
+        **plastic_args,
+    )
+    pd_step.bond_forces(
+        launch,
+        ks,
+        family_offsets=m.family_offsets,
+        family_neighbors=m.family_neighbors,
+        bond_geom=m.bond_geom,
+        bond_ne=s.bond_ne,
+        bond_wv_dil=m.bond_wv_dil,
+        bond_wv_dev=m.bond_wv_dev,
+        bp=s.bp,
+        bond_alive=alive,
+        bond_critical_stretch=m.bond_critical_stretch if frac else f1,
+        compressive_bonus=m.compressive_bonus if frac else f1,
+        compressive_stretch_floor=m.compressive_stretch_floor if frac else f1,
+        stretch_min=s.stretch_min if frac else f1,
+        eqps=s.eqps if m.plastic else f1,
+        failure_eqps=m.failure_eqps if frac else f1,
+        plastic_bond_count=m.plastic_bond_count,
+        bond_plastic=plastic,
+        bond_plastic_reverse=s.bond_plastic_reverse if m.plastic else f1,
+        live_particles=live,
+        force_density=s.force_density,
+    )
 
 
 def _bounds_centre(bodies) -> np.ndarray:
