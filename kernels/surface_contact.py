@@ -22,8 +22,8 @@ it by their inverse masses (a face vertex j of barycentric weight w_j changing b
 mass sum_j w_j^2 / m_j), so a steady press cannot drive the vertex deeper than about one step's travel past the floor
 while the penalty pushes it back out. Pairs that share points (a face-to-face contact is met from both sides) would
 add up their corrections and throw the surfaces apart (a single pass of full impulses gained 26 % of the energy of a
-head-on collision of two FEM cubes): each pass shares a pair's impulse by the most floor pairs any of its points
-takes part in (surface_floor_count), and pdsim.contact.SURFACE_FLOOR_ITERATIONS passes converge on the correction of
+head-on collision of two FEM cubes): each pass shares a pair's impulse by the largest share of floor pairs any of
+its points takes (surface_floor_count: 1 per pair as the vertex, w_j as a face's vertex j), and pdsim.contact.SURFACE_FLOOR_ITERATIONS passes converge on the correction of
 all pairs together. The impulses of a pass are summed (equal and opposite: momentum conserved exactly) and applied
 by ``apply_floor``. Only velocities change: moving the vertex back to the floor's depth would strain its elements
 (a 200 m/s impact on a breakable FEM plate gained energy that way, tools/stress.py). The impulse removes the
@@ -289,20 +289,20 @@ def surface_floor_count(
     v_points: wp.array(dtype=wp.int32),
     m_points: wp.array(dtype=wp.int32),
     m_faces: wp.array(dtype=wp.int32),
-    v_count: wp.array(dtype=wp.int32),
-    m_count: wp.array(dtype=wp.int32),
+    v_count: wp.array(dtype=float),
+    m_count: wp.array(dtype=float),
 ):
-    """How many floor pairs (vertex_face_contact) each point takes part in: the vertex, and the face's vertices of
-    nonzero weight (surface_floor_impulse shares a pair's impulse by the most of them)."""
+    """Each point's share of the floor pairs (vertex_face_contact): 1 per pair it is the vertex of, w_j per pair whose
+    face's vertex j it is (its barycentric weight); surface_floor_impulse shares a pair's impulse by the largest
+    share among the pair's points."""
     q = wp.tid()
     f = pair_face[q]
     if f < 0:
         return
     w = pair_weights[q]
-    wp.atomic_add(v_count, v_points[q], 1)
+    wp.atomic_add(v_count, v_points[q], 1.0)
     for k in range(3):
-        if w[k] > 0.0:
-            wp.atomic_add(m_count, m_points[m_faces[3 * f + k]], 1)
+        wp.atomic_add(m_count, m_points[m_faces[3 * f + k]], w[k])
 
 
 @wp.kernel
@@ -322,8 +322,8 @@ def surface_floor_impulse(
     m_mass: wp.array(dtype=float),
     m_kind: wp.array(dtype=wp.int32),
     dt: float,
-    v_count: wp.array(dtype=wp.int32),
-    m_count: wp.array(dtype=wp.int32),
+    v_count: wp.array(dtype=float),
+    m_count: wp.array(dtype=float),
     v_kick: wp.array(dtype=wp.vec3),
     m_kick: wp.array(dtype=wp.vec3),
 ):
@@ -331,8 +331,8 @@ def surface_floor_impulse(
     half kick (velocities v at the step's end [m/s], accelerations a [m/s^2] the next step's first half kick adds
     before its drift): the pair's normal relative velocity at the next drift, v_n + a_n dt / 2 along the contact
     normal (positive: separating), where negative, is brought to zero by an impulse J along the normal (module
-    docstring) shared by the most floor pairs any of the pair's points takes part in (v_count, m_count: of its
-    vertex and its face's vertices of nonzero weight); J / m goes into v_kick for the vertex and -w_j J / m_j into
+    docstring) divided by the largest share of floor pairs among the pair's points (v_count, m_count:
+    surface_floor_count; at least 1); J / m goes into v_kick for the vertex and -w_j J / m_j into
     m_kick for face vertex j. Only free points (v_kind, m_kind: PARTICLE_FREE) change."""
     q = wp.tid()
     f = pair_face[q]
@@ -363,7 +363,7 @@ def surface_floor_impulse(
         shared = wp.max(shared, m_count[ib])
     if w[2] > 0.0:
         shared = wp.max(shared, m_count[ic])
-    j = -vn_drift / (inv_sum * float(wp.max(shared, 1)))  # [kg m/s]
+    j = -vn_drift / (inv_sum * wp.max(shared, 1.0))  # [kg m/s]
     impulse = j * n  # on the vertex, its opposite on the face
     wp.atomic_add(v_kick, i, inv_v * impulse)
     wp.atomic_sub(m_kick, ia, (w[0] * inv_a) * impulse)

@@ -461,11 +461,11 @@ kicks, the approach the next drift would carry (an inelastic impulse), so it sin
 one law pushes it out; above that depth the penalty acts alone."""
 
 SURFACE_FLOOR_ITERATIONS = 4
-"""Passes of the hard floor of contact between FEM surfaces per step (MethodContact.end_step): each pass shares a
-pair's impulse by the most floor pairs any of its points takes part in (kernels/surface_contact.py
-surface_floor_impulse), so pairs that share points (the two orders of a face-to-face contact) do not add up their
-corrections; the passes converge on the correction of all pairs together (4 and 8 passes part two FEM cubes in a
-head-on collision at the same speed within 1e-3, tests/test_fem_contact.py)."""
+"""Passes of the hard floor of contact between FEM surfaces per step (MethodContact.end_step): each pass divides a
+pair's impulse by the largest share of floor pairs among its points (kernels/surface_contact.py
+surface_floor_count), so pairs that share points (the two orders of a face-to-face contact) do not add up their
+corrections; the passes converge on the correction of all pairs together (4 and 8 passes part the two FEM cubes of
+tests/test_fem_contact.py's head-on collision at the same speed within 2e-4 of the approach speed)."""
 
 
 def restitution_of_damping_ratio(damping_ratio: float) -> float:
@@ -776,14 +776,14 @@ class MethodContact:
 
     def _floor(self, solver):
         """The solver's accumulators of the surface contact's hard floor (kernels/surface_contact.py): the velocity
-        change [m/s] and the number of floor pairs per point, zero between steps; reallocated when the point count
+        change [m/s] and the share of floor pairs per point, zero between steps; reallocated when the point count
         changes (FEM fracture adds vertices)."""
         key = ("floor", id(solver))
         entry = self._scratch.get(key)
         n = solver.kin.u.shape[0]
         if entry is None or entry[0].shape[0] != n:
             d = solver.kin.u.device
-            entry = (wp.zeros(n, dtype=wp.vec3, device=d), wp.zeros(n, dtype=wp.int32, device=d))
+            entry = (wp.zeros(n, dtype=wp.vec3, device=d), wp.zeros(n, dtype=float, device=d))
             self._scratch[key] = entry
         return entry
 

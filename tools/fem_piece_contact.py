@@ -23,7 +23,7 @@ is outside: a kernel that takes the nearest foreign face alone finds no pair the
 next piece) or ``beyond band`` (deeper than the contact's band: the kernel finds no pair); ``collider`` is added where a collider (the
 ground, the ball) has moved the vertex or the points of that face since it entered: colliders move the points they
 push after the drift, each along its own normal, with no regard for the pieces' contact. The depth at entry and the steps since entry
-are printed beside it.
+are printed beside it, and the deepest of the vertices that no collider has moved since they entered.
 """
 
 from __future__ import annotations
@@ -139,12 +139,17 @@ class _Recorder:
     def end_step(self, dt: float) -> None:
         self.coupling.end_step(dt)
 
-    def deepest(self, band: float) -> tuple[float, str, float, int]:
-        """(depth [m], class, depth at entry [m], steps since entry) of the deepest vertex at the last record."""
+    def deepest(self, band: float) -> tuple[float, str, float, int, float]:
+        """(depth [m], class, depth at entry [m], steps since entry) of the deepest vertex at the last record, and
+        the deepest [m] of the vertices that no collider has moved (nor their nearest face's points) since they
+        entered."""
         _, depth, _, nearest_ok = self.last
-        i = int(np.argmax(depth))
-        if not depth[i] > 0.0:
-            return 0.0, "-", 0.0, 0
+        inside = np.flatnonzero(depth > 0.0)
+        free = [float(depth[i]) for i in inside if not self.collided[int(i)]]
+        free_depth = max(free, default=0.0)
+        if len(inside) == 0:
+            return 0.0, "-", 0.0, 0, free_depth
+        i = int(inside[np.argmax(depth[inside])])
         step, at_split, depth0 = self.entry[i]
         kind = "split" if at_split else "load"
         if depth[i] > band:
@@ -152,11 +157,12 @@ class _Recorder:
         elif not nearest_ok[i]:
             kind = "third piece"
         kind += ", collider" if self.collided[i] else ""
-        return float(depth[i]), kind, depth0, self.step - step
+        return float(depth[i]), kind, depth0, self.step - step, free_depth
 
 
-def classify(speed: float, frames: int, ball: bool = True, device: str = "cpu") -> list[tuple[float, str, float, int]]:
-    """Per frame, the deepest vertex's (depth [m], class, depth at entry [m], steps since entry) (module docstring)."""
+def classify(speed: float, frames: int, ball: bool = True, device: str = "cpu") -> list[tuple]:
+    """Per frame, the deepest vertex's (depth [m], class, depth at entry [m], steps since entry) and the deepest [m]
+    of the vertices no collider has moved since they entered (module docstring)."""
     solver, coupling, dt, substeps = _scene(speed, True, ball, device)
     recorder = _Recorder(coupling, solver)
     band = solver.contact_skin()[1]
@@ -204,10 +210,10 @@ def main(argv=None) -> None:
     parser.add_argument("--classify", action="store_true", help="where each frame's deepest vertex comes from")
     args = parser.parse_args(argv)
     if args.classify:
-        print("| frame | deepest inside [mm] | class | depth at entry [mm] | steps since entry |")
-        print("|---|---|---|---|---|")
-        for i, (d, kind, d0, steps) in enumerate(classify(args.speed, args.frames, args.ball)):
-            print(f"| {i + 1} | {d * 1e3:.2f} | {kind} | {d0 * 1e3:.2f} | {steps} |")
+        print("| frame | deepest inside [mm] | class | depth at entry [mm] | steps since entry | deepest, no collider [mm] |")
+        print("|---|---|---|---|---|---|")
+        for i, (d, kind, d0, steps, free) in enumerate(classify(args.speed, args.frames, args.ball)):
+            print(f"| {i + 1} | {d * 1e3:.2f} | {kind} | {d0 * 1e3:.2f} | {steps} | {free * 1e3:.2f} |")
         return
     on, off = (run(args.speed, args.frames, contact, args.ball) for contact in (True, False))
     print("| frame | pieces (on) | deepest inside, contact on [mm] | pieces (off) | deepest inside, contact off [mm] |")
