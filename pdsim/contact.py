@@ -574,8 +574,9 @@ class MethodContact:
     user sets gives the dashpot's damping ratio (damping_ratio_for_restitution).
 
     The scene calls :meth:`apply` once per step, after every solver's ``compute_forces`` and before the kicks, and
-    :meth:`end_step` after the solvers' ``end_step`` (the surface contact's hard floor). The surface mesh is rebuilt when its topology version changes (fracture) and refitted to the current positions
-    every step. Nothing is allocated per step otherwise.
+    :meth:`end_step` after the solvers' ``end_step`` (the surface contact's hard floor). The surface mesh is rebuilt
+    when its topology version changes (fracture) and refitted to the current positions every step. Nothing is allocated
+    per step otherwise.
 
     Args:
         particle_solvers: solvers offering ``contact_particles()`` -> (point indices int32, radii float32) Warp arrays.

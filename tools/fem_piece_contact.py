@@ -14,16 +14,16 @@ for contact on (MethodContact between FEM surfaces, the default) and off (Scene.
 
     python tools/fem_piece_contact.py --ball --speed 3 --frames 16 --classify
 
-follows every surface vertex step by step (contact on) and says, for each frame's deepest vertex, where its depth
-comes from: ``split`` (born at a split: it was inside the other piece in the first step after the split that made the
-two pieces, before contact between them had acted), ``load`` (it entered while the pieces were separate and the
-nearest face of another piece, the pair the contact kernel takes, is a face of the piece it is inside: the contact
-saw it and gave way), ``third piece`` (the nearest face of another piece belongs to a third piece, one the vertex
-is outside: a kernel that takes the nearest foreign face alone finds no pair there, the contact kernel now tries the
-next piece) or ``beyond band`` (deeper than the contact's band: the kernel finds no pair); ``collider`` is added where a collider (the
-ground, the ball) has moved the vertex or the points of that face since it entered: colliders move the points they
-push after the drift, each along its own normal, with no regard for the pieces' contact. The depth at entry and the steps since entry
-are printed beside it, and the deepest of the vertices that no collider has moved since they entered.
+follows every surface vertex step by step (contact on) and says, for each frame's deepest vertex, where its depth comes
+from: ``split`` (born at a split: it was inside the other piece in the first step after the split that made the two
+pieces, before contact between them had acted), ``load`` (it entered while the pieces were separate and the nearest face
+of another piece, the pair the contact kernel takes, is a face of the piece it is inside: the contact saw it and gave
+way), ``third piece`` (the nearest face of another piece belongs to a third piece, one the vertex is outside: a kernel
+that takes the nearest foreign face alone finds no pair there, the contact kernel now tries the next piece) or ``beyond
+band`` (deeper than the contact's band: the kernel finds no pair); ``collider`` is added where a collider (the ground,
+the ball) has moved the vertex or the points of that face since it entered: colliders move the points they push after
+the drift, each along its own normal, with no regard for the pieces' contact. The depth at entry and the steps since
+entry are printed beside it, and the deepest of the vertices that no collider has moved since they entered.
 """
 
 from __future__ import annotations
@@ -210,7 +210,8 @@ def main(argv=None) -> None:
     parser.add_argument("--classify", action="store_true", help="where each frame's deepest vertex comes from")
     args = parser.parse_args(argv)
     if args.classify:
-        print("| frame | deepest inside [mm] | class | depth at entry [mm] | steps since entry | deepest, no collider [mm] |")
+        header = "| frame | deepest inside [mm] | class | depth at entry [mm] | steps since entry |"
+        print(header + " deepest, no collider [mm] |")
         print("|---|---|---|---|---|---|")
         for i, (d, kind, d0, steps, free) in enumerate(classify(args.speed, args.frames, args.ball)):
             print(f"| {i + 1} | {d * 1e3:.2f} | {kind} | {d0 * 1e3:.2f} | {steps} | {free * 1e3:.2f} |")
