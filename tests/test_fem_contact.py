@@ -64,8 +64,8 @@ def test_two_fem_cubes_collide_head_on_and_separate_conserving_momentum(origin, 
         advance_frame([solver], dt, min(20, steps - k), coupling)
         depth = max(depth, _inside_depth(solver, 0, 1), _inside_depth(solver, 1, 0))
     pa, pb = momenta()
-    print("deepest inside [mm]:", round(depth * 1e3, 3))
     va, vb = pa[0] / mass[sa].sum(), pb[0] / mass[sb].sum()
+    print("deepest inside [mm]:", round(depth * 1e3, 3), "parting over approach speed:", round((vb - va) / 3.0, 3))
     assert vb - va > 0.3, (va, vb)  # separating (approach speed 3 m/s)
     assert np.linalg.norm((pa + pb) - (pa0 + pb0)) < 1.0e-4 * scale
     assert abs(pa[0] - pa0[0]) > 0.5 * scale  # momentum was exchanged
