@@ -21,15 +21,16 @@ by an inelastic impulse along the normal, the vertex and the face's free vertice
 face vertex j of barycentric weight w_j changing by w_j / m_j, the face point's inverse mass sum_j w_j^2 / m_j), so a
 steady press cannot drive the vertex deeper than about one step's travel past the floor while the penalty pushes it back
 out. Pairs that share points (a face-to-face contact is met from both sides) would add up their corrections and throw
-the surfaces apart (a single pass of full impulses gained 26 % of the energy of a head-on collision of two FEM cubes):
-each pass shares a pair's impulse by the largest share of floor pairs any of its points takes (surface_floor_count: 1
-per pair as the vertex, w_j as a face's vertex j), and pdsim.contact.SURFACE_FLOOR_ITERATIONS passes converge on the
-correction of all pairs together. The impulses of a pass are summed (equal and opposite: momentum conserved exactly) and
-applied by ``apply_floor``. Only velocities change: moving the vertex back to the floor's depth would strain its
-elements (a 200 m/s impact on a breakable FEM plate gained energy that way, tools/stress.py). The impulse removes the
-approach of the next drift, which can be more than the approach at the step's end, so that it adds no energy is
-measured, not given by construction: tests/test_fem_contact.py (a head-on collision ends with less energy than it began
-at 1 to 1/10 of the automatic step) and tools/stress.py's FEM projectile cases (docs/fem_fracture.md).
+the surfaces apart (a single pass of full impulses, each at most reversing its pair's normal velocity, gained 26 % of
+the energy of a head-on collision of two FEM cubes): each pass shares a pair's impulse by the largest share of floor
+pairs any of its points takes (surface_floor_count: 1 per pair as the vertex, w_j as a face's vertex j), and
+pdsim.contact.SURFACE_FLOOR_ITERATIONS passes converge on the correction of all pairs together. The impulses of a pass
+are summed (equal and opposite: momentum conserved exactly) and applied by ``apply_floor``. Only velocities change:
+moving the vertex back to the floor's depth would strain its elements (a 200 m/s impact on a breakable FEM plate gained
+energy that way, tools/stress.py). The impulse removes the approach of the next drift, which can be more than the
+approach at the step's end, so that it adds no energy is measured, not given by construction: tests/test_fem_contact.py
+(a head-on collision ends with less energy than it began, at the automatic step and a quarter of it) and
+tools/stress.py's FEM projectile cases (docs/fem_fracture.md).
 
 A vertex inside one piece can lie nearer to a face of a third piece that touches it, one it is outside of: where the
 nearest face of another piece leaves the vertex outside, the nearest face of a further piece is tried (up to three
