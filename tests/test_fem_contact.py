@@ -3,10 +3,8 @@ the pieces of one cracked FEM body, keep apart with the one contact law, conserv
 
 import numpy as np
 import pytest
-import warp as wp
 
 import pdsim
-from pdsim.kernels import surface_contact as ksf
 from pdsim.run import advance_frame, method_contact
 
 SOFT = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)  # P-wave speed 37 m/s
@@ -150,57 +148,3 @@ def test_a_collision_does_not_depend_on_a_small_body_elsewhere():
     beside, _ = _parting(0.0005)
     assert alone > 0.2  # they part
     assert beside == pytest.approx(alone, abs=0.05)
-
-
-def _outward_faces(x: np.ndarray, offset: int) -> np.ndarray:
-    """The four faces of the tetrahedron x [4, 3], wound so that cross(b - a, c - a) points out, indices + offset."""
-    faces = np.array([[0, 1, 2], [0, 1, 3], [1, 2, 3], [0, 2, 3]])
-    centre = x.mean(axis=0)
-    for f in faces:
-        a, b, c = x[f]
-        if np.cross(b - a, c - a) @ (a - centre) < 0.0:
-            f[[1, 2]] = f[[2, 1]]
-    return faces + offset
-
-
-def test_a_vertex_inside_one_piece_and_nearer_a_third_is_found():
-    """A vertex of piece 0 lies 1 mm below the top face (z = 0) of piece 1, a tetrahedron, and 0.5 mm from the face
-    x = 0.5 mm of piece 2, a tetrahedron beside it that it is outside of: the nearest face of another piece is piece
-    2's. The contact (kernels/surface_contact.py vertex_face_contact, skin 0, floor 0.1 mm) makes the pair with
-    piece 1's top face: the vertex is pushed along +z (force along x and y below 1e-6 of it), the face's vertices
-    take the opposite force, and the floor records that face. A kernel that takes the nearest foreign face alone
-    finds the vertex outside piece 2 and makes no pair (no force): the test fails there."""
-    b = np.array([[-0.1, -0.1, 0.0], [0.1, -0.1, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, -0.1]])
-    c = np.array([[5e-4, -0.05, -0.05], [5e-4, 0.05, -0.05], [5e-4, 0.0, 0.05], [0.05, 0.0, 0.0]])
-    x = np.vstack([b, c, [[0.0, 0.0, -1e-3]]]).astype(np.float32)
-    faces = np.vstack([_outward_faces(b, 0), _outward_faces(c, 4)]).astype(np.int32)
-    top = int(np.flatnonzero((np.abs(x[faces][:, :, 2]) < 1e-9).all(axis=1))[0])
-
-    def arr(values, dtype):
-        return wp.array(np.asarray(values), dtype=dtype, device="cpu")
-
-    m_x = arr(x[:8], wp.vec3)
-    mesh = wp.Mesh(points=m_x, indices=arr(faces.ravel(), wp.int32))
-    force = wp.zeros(9, dtype=wp.vec3, device="cpu")
-    pair_face = arr([-1], wp.int32)
-    nan = np.full(9, np.nan)
-    ksf.vertex_face_forces(
-        v_points=arr([8], wp.int32), v_label=arr([0], wp.int32), v_rest=arr(x, wp.vec3),
-        v_u=wp.zeros(9, dtype=wp.vec3, device="cpu"), v_v=wp.zeros(9, dtype=wp.vec3, device="cpu"),
-        v_mass=arr(np.ones(9), float), v_to_force=arr(np.ones(9), float), mesh=mesh.id, m_x=m_x,
-        m_points=arr(np.arange(8), wp.int32), m_faces=arr(faces.ravel(), wp.int32),
-        m_label=arr([1] * 4 + [2] * 4, wp.int32), m_v=wp.zeros(9, dtype=wp.vec3, device="cpu"),
-        m_mass=arr(np.ones(9), float), m_to_force=arr(np.ones(9), float), skin=0.0, band=0.02,
-        stiffness_rate=1.0e6, damping_ratio=0.0, friction=0.0, v_damping_ratio=arr(nan, float),
-        v_friction=arr(nan, float), m_damping_ratio=arr(nan, float), m_friction=arr(nan, float),
-        v_force=force, m_force=force, dt=1.0e-4, v_work=wp.zeros(8, dtype=wp.float64, device="cpu"),
-        m_work=wp.zeros(8, dtype=wp.float64, device="cpu"), floor=1.0e-4, pair_face=pair_face,
-        pair_weights=wp.zeros(1, dtype=wp.vec3, device="cpu"), pair_normal=wp.zeros(1, dtype=wp.vec3, device="cpu"),
-        v_step=arr(np.zeros(9), float), m_step=arr(np.zeros(9), float), step_safety=0.7, device="cpu",
-    )  # fmt: skip
-    f = force.numpy()
-    assert f[8, 2] > 0.0, f[8]
-    assert np.abs(f[8, :2]).max() < 1e-6 * f[8, 2]
-    assert np.allclose(f[:3].sum(axis=0), -f[8], rtol=1e-5)
-    assert np.abs(f[3:8]).max() == 0.0
-    assert int(pair_face.numpy()[0]) == top

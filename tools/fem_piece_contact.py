@@ -18,13 +18,13 @@ follows every surface vertex step by step (contact on) and says, for each frame'
 from: ``split`` (born at a split: it was inside the other piece in the first step after the split that made the two
 pieces, before contact between them had acted), ``load`` (it entered while the pieces were separate and the nearest face
 of another piece, the pair the contact kernel takes, is a face of the piece it is inside: the contact saw it and gave
-way), ``third piece`` (the nearest face of another piece belongs to a third piece, one the vertex is outside: a kernel
-that takes the nearest foreign face alone finds no pair there, the contact kernel now tries the next piece) or ``beyond
-band`` (deeper than the contact's band: the kernel finds no pair); ``collider`` is added where a collider (the ground,
-the ball) has moved the vertex or the points of that face since it entered: colliders move the points they push after
-the drift, each along its own normal, with no regard for the pieces' contact. The depth at entry and the steps since
-entry are printed beside it, and the deepest of the vertices that no collider has moved since they entered. ``--time``
-prints the least wall time per step of the shot with contact on over three runs.
+way), ``third piece`` (the nearest face of another piece belongs to a third piece, one the vertex is outside: the
+contact kernel, which takes the nearest face of another piece, finds no pair there) or ``beyond band`` (deeper than the
+contact's band: the kernel finds no pair); ``collider`` is added where a collider (the ground, the ball) has moved the
+vertex or the points of that face since it entered: colliders move the points they push after the drift, each along its
+own normal, with no regard for the pieces' contact. The depth at entry and the steps since entry are printed beside it,
+and the deepest of the vertices that no collider has moved since they entered. ``--time`` prints the least wall time per
+step of the shot with contact on over three runs.
 """
 
 from __future__ import annotations
