@@ -713,18 +713,22 @@ class MethodContact:
     def end_step(self, dt: float) -> None:
         """The hard floor of the surface contact (kernels/surface_contact.py, surface_floor_impulse) on the pairs the
         last :meth:`apply` found deeper than SURFACE_FLOOR, with the velocities and accelerations of the step's end
-        (after every solver's ``end_step``; step length ``dt`` [s]). A solver whose topology changed in its
-        ``end_step`` (an FEM fracture split) has new points and surface: its pairs are dropped for that step."""
+        (after every solver's ``end_step``; step length ``dt`` [s]). Where a solver's topology changed in its
+        ``end_step`` (an FEM fracture split), the pairs' points are carried to its new numbering (_renumbered)."""
         if not self.surfaces:
             return
         pairs = []
         for a in self.mesh_solvers:
             for b in self.mesh_solvers:
                 entry = self._scratch.get(("pairs", id(a), id(b)))
-                if entry is None or entry[0] != (a.contact_mesh()[2], b.contact_mesh()[2]):
+                if entry is None:
                     continue
                 _, a_points, _, _, _ = self._meshes[id(a)]
                 _, b_points, b_faces, _, _ = self._meshes[id(b)]
+                a_points = self._renumbered(a, entry[0][0], a_points)
+                b_points = self._renumbered(b, entry[0][1], b_points)
+                if a_points is None or b_points is None:
+                    continue
                 common = {"pair_face": entry[1], "pair_weights": entry[2], "v_points": a_points, "m_points": b_points}
                 pairs.append((a, b, dict(common, m_faces=b_faces, device=a.kin.u.device), entry[3]))
         for a, b, common, _ in pairs:
@@ -755,6 +759,23 @@ class MethodContact:
                 ksf.apply_floor(kick=self._floor(ms)[0], velocities=ms.kin.v, device=ms.kin.u.device)
         for ms in touched:
             self._floor(ms)[1].zero_()
+
+    @staticmethod
+    def _renumbered(solver, version: int, points):
+        """The solver point indices ``points`` (a Warp int32 array of the numbering of topology ``version``) in the
+        solver's current numbering: ``points`` itself when the topology is unchanged, mapped through the solver's
+        ``renumbering`` (version before, version after, new index of each old point; pdsim/fem/fracture_events.py)
+        when one change led from ``version`` to the current one (a split in the step's ``end_step``: a split vertex's
+        pairs go to the copy that keeps its number), else None (the pairs are dropped). The mapping runs on the host,
+        on the steps of a split only."""
+        current = solver.contact_mesh()[2]
+        if current == version:
+            return points
+        renumbering = getattr(solver, "renumbering", None)
+        if renumbering is None or (renumbering[0], renumbering[1]) != (version, current):
+            return None
+        mapped = np.asarray(renumbering[2])[points.numpy()]
+        return wp.array(mapped.astype(np.int32), dtype=wp.int32, device=points.device)
 
     def _pairs(self, a, b, count: int):
         """The floor's pairs of the vertices of mesh solver ``a`` against the faces of ``b`` (face, barycentric

@@ -193,7 +193,8 @@ class FemFractureEvents:
         (displacement, velocity, acceleration, boundary condition). Vertices are then renumbered body by body (stable:
         a single body keeps the numbering of the split), and the kinematics rebuilt from host arrays. The split keeps
         the old numbering as a prefix and appends the copies, so each body's first vertex_count vertices remain its
-        input vertices (views() relies on it)."""
+        input vertices (views() relies on it). ``renumbering`` keeps (version before, version after, new index of
+        each old vertex) for what refers to the old numbering within the step (pdsim.contact.MethodContact.end_step)."""
         body = self._vertex_body_h[parent]
         perm = np.argsort(body, kind="stable")  # new vertex k is the split's vertex perm[k]
         inverse = np.empty_like(perm)
@@ -210,7 +211,10 @@ class FemFractureEvents:
         self._crack_plane_h = crack_plane[perm]
         self._debt_h = debt[perm]
         self._tets_h = inverse[np.asarray(tets, dtype=np.int64)]
+        old_count = kin.u.shape[0]
         self._build_vertex_data(self._split_bodies(), state)
+        # (version before, version after, new index of each old vertex): the split keeps old vertex j as its vertex j
+        self.renumbering = (self.topology_version, self.topology_version + 1, inverse[:old_count])
         self.topology_version += 1
         if self.integrator == "explicit":
             self.update_accelerations()
