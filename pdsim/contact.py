@@ -581,7 +581,7 @@ class MethodContact:
     Args:
         particle_solvers: solvers offering ``contact_particles()`` -> (point indices int32, radii float32) Warp arrays.
         mesh_solvers: solvers offering ``contact_mesh()`` -> (point indices int32 [v], triangles int32 [3 f] indexing
-            those points, topology version).
+            those points, topology version), and ``points_in_current_numbering(version, points)`` (SolverFem).
         damping_ratio: the dashpot as a fraction of the pair's critical damping, >= 0 (default 0.1, a restitution of
             0.73); give this or ``restitution``.
         restitution: the normal restitution e in (0, 1] of a pair (sets damping_ratio).
@@ -714,7 +714,8 @@ class MethodContact:
         """The hard floor of the surface contact (kernels/surface_contact.py, surface_floor_impulse) on the pairs the
         last :meth:`apply` found deeper than SURFACE_FLOOR, with the velocities and accelerations of the step's end
         (after every solver's ``end_step``; step length ``dt`` [s]). Where a solver's topology changed in its
-        ``end_step`` (an FEM fracture split), the pairs' points are carried to its new numbering (_renumbered)."""
+        ``end_step`` (an FEM fracture split), the pairs' points are carried to its new numbering
+        (``points_in_current_numbering`` of the mesh solvers)."""
         if not self.surfaces:
             return
         pairs = []
@@ -725,8 +726,8 @@ class MethodContact:
                     continue
                 _, a_points, _, _, _ = self._meshes[id(a)]
                 _, b_points, b_faces, _, _ = self._meshes[id(b)]
-                a_points = self._renumbered(a, entry[0][0], a_points)
-                b_points = self._renumbered(b, entry[0][1], b_points)
+                a_points = a.points_in_current_numbering(entry[0][0], a_points)
+                b_points = b.points_in_current_numbering(entry[0][1], b_points)
                 if a_points is None or b_points is None:
                     continue
                 common = {"pair_face": entry[1], "pair_weights": entry[2], "v_points": a_points, "m_points": b_points}
@@ -759,23 +760,6 @@ class MethodContact:
                 ksf.apply_floor(kick=self._floor(ms)[0], velocities=ms.kin.v, device=ms.kin.u.device)
         for ms in touched:
             self._floor(ms)[1].zero_()
-
-    @staticmethod
-    def _renumbered(solver, version: int, points):
-        """The solver point indices ``points`` (a Warp int32 array of the numbering of topology ``version``) in the
-        solver's current numbering: ``points`` itself when the topology is unchanged, mapped through the solver's
-        ``renumbering`` (version before, version after, new index of each old point; pdsim/fem/fracture_events.py)
-        when one change led from ``version`` to the current one (a split in the step's ``end_step``: a split vertex's
-        pairs go to the copy that keeps its number), else None (the pairs are dropped). The mapping runs on the host,
-        on the steps of a split only."""
-        current = solver.contact_mesh()[2]
-        if current == version:
-            return points
-        renumbering = getattr(solver, "renumbering", None)
-        if renumbering is None or (renumbering[0], renumbering[1]) != (version, current):
-            return None
-        mapped = np.asarray(renumbering[2])[points.numpy()]
-        return wp.array(mapped.astype(np.int32), dtype=wp.int32, device=points.device)
 
     def _pairs(self, a, b, count: int):
         """The floor's pairs of the vertices of mesh solver ``a`` against the faces of ``b`` (face, barycentric

@@ -219,6 +219,19 @@ class FemFractureEvents:
         if self.integrator == "explicit":
             self.update_accelerations()
 
+    def points_in_current_numbering(self, version: int, points):
+        """The point indices ``points`` (a Warp int32 array of the numbering of topology ``version``) in the current
+        numbering: ``points`` itself when the topology is unchanged, mapped through ``renumbering`` when one split led
+        from ``version`` to the current one (a split vertex's indices go to the copy that keeps its number), else
+        None. The mapping runs on the host, on the steps of a split only (pdsim.contact.MethodContact.end_step)."""
+        if version == self.topology_version:
+            return points
+        renumbering = getattr(self, "renumbering", None)
+        if renumbering is None or (renumbering[0], renumbering[1]) != (version, self.topology_version):
+            return None
+        mapped = np.asarray(renumbering[2])[points.numpy()]
+        return wp.array(mapped.astype(np.int32), dtype=wp.int32, device=points.device)
+
     def _split_bodies(self) -> list:
         """Per body: its :class:`SplitBody` on the current vertices and element corners (what the kinematics read
         from the bodies after fracture split their vertices)."""
