@@ -12,14 +12,30 @@ Both orders (vertices of A on faces of B and of B on faces of A) are launched: f
 symmetric. Edges crossing edges with no vertex inside a face are not detected.
 
 A hard floor backs the penalty up (the penalty, tied to the step, gives way by about v dt / CONTACT_OMEGA_DT at an
-approach speed v, and a piece pinched between others or the ground by more than its contact springs hold sinks in):
-a vertex deeper than ``floor`` inside loses the approaching normal velocity of its pair (an inelastic impulse), the
-vertex and the face's free vertices sharing it by their inverse masses (a face vertex j of barycentric weight w_j
-changing by w_j / m_j, the face point's inverse mass sum_j w_j^2 / m_j), so the vertex sinks no deeper while the
-penalty pushes it back out. The impulses are summed (equal and opposite: momentum conserved exactly) and applied by
-``apply_floor`` after all pairs. Only velocities change: an impulse that removes approach cannot add energy, where
-moving the vertex back to the floor's depth would strain its elements (a 200 m/s impact on a breakable FEM plate
-gained energy that way, tools/stress.py).
+approach speed v, and a piece pressed by a heavier one or pinched against the ground sinks in until the penalty balances
+the press, about 44 a dt^2 deep under an acceleration a): the force pass records each vertex deeper than ``floor``
+inside with its face, barycentric weights and normal (vertex_face_contact), and after the step's second half kick, when
+the velocities and the accelerations the next drift will use are known, the pair loses the approach that drift would
+carry (surface_floor_impulse): the normal relative velocity v_n + a_n dt / 2 of the next step's drift is brought to zero
+by an inelastic impulse along the normal, the vertex and the face's free vertices sharing it by their inverse masses (a
+face vertex j of barycentric weight w_j changing by w_j / m_j, the face point's inverse mass sum_j w_j^2 / m_j), so a
+steady press cannot drive the vertex deeper than about one step's travel past the floor while the penalty pushes it back
+out. Pairs that share points (a face-to-face contact is met from both sides) would add up their corrections and throw
+the surfaces apart (a single pass of full impulses, each at most reversing its pair's normal velocity, gained 26 % of
+the energy of a head-on collision of two FEM cubes): each pass shares a pair's impulse by the largest share of floor
+pairs any of its points takes (surface_floor_count: 1 per pair as the vertex, w_j as a face's vertex j), and
+pdsim.contact.SURFACE_FLOOR_ITERATIONS passes converge on the correction of all pairs together. The impulses of a pass
+are summed (equal and opposite: momentum conserved exactly) and applied by ``apply_floor``. Only velocities change:
+moving the vertex back to the floor's depth would strain its elements (a 200 m/s impact on a breakable FEM plate gained
+energy that way, tools/stress.py). The impulse removes the approach of the next drift, which can be more than the
+approach at the step's end, so that it adds no energy is measured, not given by construction: tests/test_fem_contact.py
+(a head-on collision ends with less energy than it began, at the automatic step and a quarter of it) and
+tools/stress.py's FEM projectile cases (docs/fem_fracture.md).
+
+A vertex inside one piece that lies nearer to a face of a third piece it is outside of (where three pieces meet) finds
+no pair. Trying the nearest face of the next piece there found those vertices (tools/fem_piece_contact.py --classify),
+but in a soft block (E = 10 MPa) shattered on the ground at 200 m/s (tools/stress.py map_impact) the pairs it added
+collapsed elements (the watchdog stopped the run, which finishes with the nearest face alone), so it is not done.
 """
 
 import warp as wp
@@ -69,6 +85,84 @@ def triangle_closest_weights(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3):
     return wp.vec3(1.0 - v - w, v, w)
 
 
+@wp.func
+def nearest_foreign_face(
+    mesh: wp.uint64,
+    x: wp.vec3,
+    reach: float,
+    m_x: wp.array(dtype=wp.vec3),
+    m_faces: wp.array(dtype=wp.int32),
+    m_label: wp.array(dtype=wp.int32),
+    label: int,
+):
+    """The face of ``mesh`` nearest to x among those whose bounds come within ``reach`` [m] of it and whose piece
+    label is not ``label``: (face, -1 for none; barycentric weights of its closest point; distance [m])."""
+    query = wp.mesh_query_aabb(mesh, x - wp.vec3(reach), x + wp.vec3(reach))
+    f = int(0)
+    best = int(-1)
+    best_d2 = float(1.0e30)
+    best_w = wp.vec3(0.0)
+    while wp.mesh_query_aabb_next(query, f):
+        if m_label[f] == label:
+            continue
+        a = m_x[m_faces[3 * f + 0]]
+        b = m_x[m_faces[3 * f + 1]]
+        c = m_x[m_faces[3 * f + 2]]
+        w = triangle_closest_weights(x, a, b, c)
+        d = x - (w[0] * a + w[1] * b + w[2] * c)
+        d2 = wp.dot(d, d)
+        if d2 < best_d2:
+            best_d2 = d2
+            best = f
+            best_w = w
+    return best, best_w, wp.sqrt(best_d2)
+
+
+@wp.func
+def face_side(
+    mesh: wp.uint64,
+    m_x: wp.array(dtype=wp.vec3),
+    m_faces: wp.array(dtype=wp.int32),
+    m_label: wp.array(dtype=wp.int32),
+    best: int,
+    best_w: wp.vec3,
+    x: wp.vec3,
+    reach: float,
+):
+    """(unit normal of face ``best``, the side of x: +1 outside its piece, -1 inside), the side from the face's
+    normal, or where the closest point (weights best_w) is on an edge or a corner, from the summed unit normals of
+    the faces of that piece sharing it (a pseudo-normal: one face's normal does not tell the side there); (0, 0)
+    for a degenerate face."""
+    a = m_x[m_faces[3 * best + 0]]
+    b = m_x[m_faces[3 * best + 1]]
+    c = m_x[m_faces[3 * best + 2]]
+    face_n = wp.cross(b - a, c - a)
+    area2 = wp.length(face_n)
+    if area2 == 0.0:
+        return wp.vec3(0.0), 0.0
+    face_n = face_n / area2
+    closest = best_w[0] * a + best_w[1] * b + best_w[2] * c
+    side = face_n
+    if wp.min(best_w) <= 0.0:
+        side = wp.vec3(0.0)
+        tol = 1.0e-5 * reach
+        again = wp.mesh_query_aabb(mesh, closest - wp.vec3(tol), closest + wp.vec3(tol))
+        g = int(0)
+        while wp.mesh_query_aabb_next(again, g):
+            if m_label[g] != m_label[best]:
+                continue
+            ga = m_x[m_faces[3 * g + 0]]
+            gb = m_x[m_faces[3 * g + 1]]
+            gc = m_x[m_faces[3 * g + 2]]
+            gw = triangle_closest_weights(closest, ga, gb, gc)
+            if wp.length(closest - (gw[0] * ga + gw[1] * gb + gw[2] * gc)) <= tol:
+                side += wp.normalize(wp.cross(gb - ga, gc - ga))
+    sign = float(1.0)
+    if wp.dot(x - closest, side) < 0.0:
+        sign = -1.0
+    return face_n, sign
+
+
 @wp.kernel
 def vertex_face_contact(
     v_points: wp.array(dtype=wp.int32),
@@ -102,10 +196,9 @@ def vertex_face_contact(
     m_work: wp.array(dtype=wp.float64),
     work_slot: int,
     floor: float,
-    v_kind: wp.array(dtype=wp.int32),
-    m_kind: wp.array(dtype=wp.int32),
-    v_kick: wp.array(dtype=wp.vec3),
-    m_kick: wp.array(dtype=wp.vec3),
+    pair_face: wp.array(dtype=wp.int32),
+    pair_weights: wp.array(dtype=wp.vec3),
+    pair_normal: wp.array(dtype=wp.vec3),
     v_step: wp.array(dtype=float),
     m_step: wp.array(dtype=float),
     step_safety: float,
@@ -120,67 +213,26 @@ def vertex_face_contact(
     damping ratio and friction combine the vertex's side (v_damping_ratio[i], v_friction[i], by solver point; NaN:
     none) with the face's (its first vertex's), as kernels/contact.py particle_mesh_contact. Work: the positive part
     of each side's work in the step, as kernels/contact.py particle_mesh_contact, into slot ``work_slot`` of v_work
-    and m_work. Floor (module docstring): a vertex deeper than ``floor`` [m] adds its share of the velocity change
-    [m/s] into v_kick (its face's vertices into m_kick); only free points (v_kind, m_kind: PARTICLE_FREE) change."""
+    and m_work. Floor (module docstring): a vertex deeper than ``floor`` [m] records its face (pair_face[q], -1 for
+    none), the barycentric weights of its closest point and the contact normal for surface_floor_impulse."""
     q = wp.tid()
+    pair_face[q] = -1
     i = v_points[q]
     x = v_rest[i] + v_u[i]
     label = v_label[q]
-    reach = wp.vec3(wp.max(band, skin))
-    query = wp.mesh_query_aabb(mesh, x - reach, x + reach)
-    f = int(0)
-    best = int(-1)
-    best_d2 = float(1.0e30)
-    best_w = wp.vec3(0.0)
-    while wp.mesh_query_aabb_next(query, f):
-        if m_label[f] == label:
-            continue
-        a = m_x[m_faces[3 * f + 0]]
-        b = m_x[m_faces[3 * f + 1]]
-        c = m_x[m_faces[3 * f + 2]]
-        w = triangle_closest_weights(x, a, b, c)
-        d = x - (w[0] * a + w[1] * b + w[2] * c)
-        d2 = wp.dot(d, d)
-        if d2 < best_d2:
-            best_d2 = d2
-            best = f
-            best_w = w
+    reach = wp.max(band, skin)
+    best, best_w, dist = nearest_foreign_face(mesh, x, reach, m_x, m_faces, m_label, label)
     if best < 0:
+        return
+    face_n, sign = face_side(mesh, m_x, m_faces, m_label, best, best_w, x, reach)
+    if sign == 0.0 or sign * dist >= skin or sign * dist <= -band:
         return
     a = m_x[m_faces[3 * best + 0]]
     b = m_x[m_faces[3 * best + 1]]
     c = m_x[m_faces[3 * best + 2]]
-    face_n = wp.cross(b - a, c - a)
-    area2 = wp.length(face_n)
-    if area2 == 0.0:
-        return
-    face_n = face_n / area2
     closest = best_w[0] * a + best_w[1] * b + best_w[2] * c
     d = x - closest
-    dist = wp.sqrt(best_d2)
-    side = face_n
-    if wp.min(best_w) <= 0.0:
-        # closest on an edge or a corner: the side from the summed unit normals of the faces of that piece sharing
-        # the closest point (a pseudo-normal), not from one of them
-        side = wp.vec3(0.0)
-        tol = 1.0e-5 * wp.max(band, skin)
-        again = wp.mesh_query_aabb(mesh, closest - wp.vec3(tol), closest + wp.vec3(tol))
-        g = int(0)
-        while wp.mesh_query_aabb_next(again, g):
-            if m_label[g] != m_label[best]:
-                continue
-            ga = m_x[m_faces[3 * g + 0]]
-            gb = m_x[m_faces[3 * g + 1]]
-            gc = m_x[m_faces[3 * g + 2]]
-            gw = triangle_closest_weights(closest, ga, gb, gc)
-            if wp.length(closest - (gw[0] * ga + gw[1] * gb + gw[2] * gc)) <= tol:
-                side += wp.normalize(wp.cross(gb - ga, gc - ga))
-    sign = float(1.0)
-    if wp.dot(d, side) < 0.0:
-        sign = -1.0
     s = sign * dist
-    if s >= skin or s <= -band:
-        return
     n = face_n
     if dist > 1.0e-6 * wp.max(skin, band):
         n = (sign / dist) * d
@@ -204,25 +256,103 @@ def vertex_face_contact(
     wp.atomic_add(v_work, work_slot, wp.float64(wp.max(wp.dot(force, v_v[i]) * dt, 0.0)))
     wp.atomic_add(m_work, work_slot, wp.float64(wp.max(-wp.dot(force, v_surface) * dt, 0.0)))
     if s < -floor:
-        inv_v = wp.where(v_kind[i] == PARTICLE_FREE, 1.0 / mv, 0.0)
-        inv_a = wp.where(m_kind[ia] == PARTICLE_FREE, 1.0 / m_mass[ia], 0.0)
-        inv_b = wp.where(m_kind[ib] == PARTICLE_FREE, 1.0 / m_mass[ib], 0.0)
-        inv_c = wp.where(m_kind[ic] == PARTICLE_FREE, 1.0 / m_mass[ic], 0.0)
-        inv_s = best_w[0] * best_w[0] * inv_a + best_w[1] * best_w[1] * inv_b + best_w[2] * best_w[2] * inv_c
-        inv_sum = inv_v + inv_s
-        vn = wp.dot(v_v[i] - v_surface, n)
-        if inv_sum > 0.0 and vn < 0.0:
-            impulse = (-vn / inv_sum) * n  # [kg m/s] on the vertex, its opposite on the face
-            wp.atomic_add(v_kick, i, inv_v * impulse)
-            wp.atomic_sub(m_kick, ia, (best_w[0] * inv_a) * impulse)
-            wp.atomic_sub(m_kick, ib, (best_w[1] * inv_b) * impulse)
-            wp.atomic_sub(m_kick, ic, (best_w[2] * inv_c) * impulse)
+        pair_face[q] = best
+        pair_weights[q] = best_w
+        pair_normal[q] = n
+
+
+@wp.kernel
+def surface_floor_count(
+    pair_face: wp.array(dtype=wp.int32),
+    pair_weights: wp.array(dtype=wp.vec3),
+    v_points: wp.array(dtype=wp.int32),
+    m_points: wp.array(dtype=wp.int32),
+    m_faces: wp.array(dtype=wp.int32),
+    v_count: wp.array(dtype=float),
+    m_count: wp.array(dtype=float),
+):
+    """Each point's share of the floor pairs (vertex_face_contact): 1 per pair it is the vertex of, w_j per pair whose
+    face's vertex j it is (its barycentric weight); surface_floor_impulse shares a pair's impulse by the largest
+    share among the pair's points."""
+    q = wp.tid()
+    f = pair_face[q]
+    if f < 0:
+        return
+    w = pair_weights[q]
+    wp.atomic_add(v_count, v_points[q], 1.0)
+    for k in range(3):
+        wp.atomic_add(m_count, m_points[m_faces[3 * f + k]], w[k])
+
+
+@wp.kernel
+def surface_floor_impulse(
+    pair_face: wp.array(dtype=wp.int32),
+    pair_weights: wp.array(dtype=wp.vec3),
+    pair_normal: wp.array(dtype=wp.vec3),
+    v_points: wp.array(dtype=wp.int32),
+    v_v: wp.array(dtype=wp.vec3),
+    v_a: wp.array(dtype=wp.vec3),
+    v_mass: wp.array(dtype=float),
+    v_kind: wp.array(dtype=wp.int32),
+    m_points: wp.array(dtype=wp.int32),
+    m_faces: wp.array(dtype=wp.int32),
+    m_v: wp.array(dtype=wp.vec3),
+    m_a: wp.array(dtype=wp.vec3),
+    m_mass: wp.array(dtype=float),
+    m_kind: wp.array(dtype=wp.int32),
+    dt: float,
+    v_count: wp.array(dtype=float),
+    m_count: wp.array(dtype=float),
+    v_kick: wp.array(dtype=wp.vec3),
+    m_kick: wp.array(dtype=wp.vec3),
+):
+    """The floor of surface vertex q recorded by vertex_face_contact (pair_face[q] >= 0), after the step's second
+    half kick (velocities v at the step's end [m/s], accelerations a [m/s^2] the next step's first half kick adds
+    before its drift): the pair's normal relative velocity at the next drift, v_n + a_n dt / 2 along the contact
+    normal (positive: separating), where negative, is brought to zero by an impulse J along the normal (module
+    docstring) divided by the largest share of floor pairs among the pair's points (v_count, m_count:
+    surface_floor_count; at least 1); J / m goes into v_kick for the vertex and -w_j J / m_j into
+    m_kick for face vertex j. Only free points (v_kind, m_kind: PARTICLE_FREE) change."""
+    q = wp.tid()
+    f = pair_face[q]
+    if f < 0:
+        return
+    i = v_points[q]
+    ia = m_points[m_faces[3 * f + 0]]
+    ib = m_points[m_faces[3 * f + 1]]
+    ic = m_points[m_faces[3 * f + 2]]
+    w = pair_weights[q]
+    n = pair_normal[q]
+    inv_v = wp.where(v_kind[i] == PARTICLE_FREE, 1.0 / v_mass[i], 0.0)
+    inv_a = wp.where(m_kind[ia] == PARTICLE_FREE, 1.0 / m_mass[ia], 0.0)
+    inv_b = wp.where(m_kind[ib] == PARTICLE_FREE, 1.0 / m_mass[ib], 0.0)
+    inv_c = wp.where(m_kind[ic] == PARTICLE_FREE, 1.0 / m_mass[ic], 0.0)
+    inv_sum = inv_v + w[0] * w[0] * inv_a + w[1] * w[1] * inv_b + w[2] * w[2] * inv_c
+    if inv_sum <= 0.0:
+        return
+    v_rel = v_v[i] - (w[0] * m_v[ia] + w[1] * m_v[ib] + w[2] * m_v[ic])
+    a_rel = v_a[i] - (w[0] * m_a[ia] + w[1] * m_a[ib] + w[2] * m_a[ic])
+    vn_drift = wp.dot(v_rel, n) + 0.5 * dt * wp.dot(a_rel, n)
+    if vn_drift >= 0.0:
+        return
+    shared = v_count[i]
+    if w[0] > 0.0:
+        shared = wp.max(shared, m_count[ia])
+    if w[1] > 0.0:
+        shared = wp.max(shared, m_count[ib])
+    if w[2] > 0.0:
+        shared = wp.max(shared, m_count[ic])
+    j = -vn_drift / (inv_sum * wp.max(shared, 1.0))  # [kg m/s]
+    impulse = j * n  # on the vertex, its opposite on the face
+    wp.atomic_add(v_kick, i, inv_v * impulse)
+    wp.atomic_sub(m_kick, ia, (w[0] * inv_a) * impulse)
+    wp.atomic_sub(m_kick, ib, (w[1] * inv_b) * impulse)
+    wp.atomic_sub(m_kick, ic, (w[2] * inv_c) * impulse)
 
 
 @wp.kernel
 def surface_floor_apply(kick: wp.array(dtype=wp.vec3), velocities: wp.array(dtype=wp.vec3)):
-    """The floor's velocity changes [m/s] of point i (vertex_face_contact) added to its velocity, then zeroed for the
-    next step."""
+    """The floor's velocity changes [m/s] of point i (surface_floor_impulse) added to its velocity, then zeroed."""
     i = wp.tid()
     velocities[i] = velocities[i] + kick[i]
     kick[i] = wp.vec3(0.0)
@@ -233,8 +363,8 @@ def surface_floor_apply(kick: wp.array(dtype=wp.vec3), velocities: wp.array(dtyp
 
 def vertex_face_forces(*, dt: float, floor: float, device, **arguments):
     """Contact of the surface vertices ``v_points`` with the faces of another piece of a surface mesh
-    (vertex_face_contact, step ``dt`` [s], hard floor ``floor`` [m] deep); the work goes to slot WATCH_COLLIDERS of
-    ``v_work`` and ``m_work``."""
+    (vertex_face_contact, step ``dt`` [s], hard floor ``floor`` [m] deep: the pairs deeper go to ``pair_face``,
+    ``pair_weights``, ``pair_normal``); the work goes to slot WATCH_COLLIDERS of ``v_work`` and ``m_work``."""
     launch(
         vertex_face_contact,
         arguments["v_points"].shape[0],
@@ -244,6 +374,17 @@ def vertex_face_forces(*, dt: float, floor: float, device, **arguments):
         work_slot=WATCH_COLLIDERS,
         **arguments,
     )
+
+
+def floor_counts(*, device, **arguments):
+    """Each point's number of floor pairs (surface_floor_count), summed into ``v_count`` and ``m_count``."""
+    launch(surface_floor_count, arguments["pair_face"].shape[0], device=device, **arguments)
+
+
+def floor_impulses(*, dt: float, device, **arguments):
+    """The floor's velocity changes of the pairs recorded by vertex_face_forces, after the step's second half kick
+    (surface_floor_impulse, step ``dt`` [s]), summed into ``v_kick`` and ``m_kick``."""
+    launch(surface_floor_impulse, arguments["pair_face"].shape[0], device=device, dt=float(dt), **arguments)
 
 
 def apply_floor(*, device, **arguments):

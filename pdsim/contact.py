@@ -456,9 +456,16 @@ beyond 0.05 in some phases)."""
 
 SURFACE_FLOOR = 0.01
 """Depth of the hard floor of contact between FEM surfaces (kernels/surface_contact.py) as a fraction of the contact
-band (one mean edge length): a surface vertex deeper than 1 % of an edge inside another piece loses its approach
-(an inelastic impulse), so it sinks no deeper while the penalty of the one law pushes it out; above that depth the
-penalty acts alone."""
+band (one mean edge length): a surface vertex deeper than 1 % of an edge inside another piece loses, after the step's
+kicks, the approach the next drift would carry (an inelastic impulse), so it sinks no deeper while the penalty of the
+one law pushes it out; above that depth the penalty acts alone."""
+
+SURFACE_FLOOR_ITERATIONS = 4
+"""Passes of the hard floor of contact between FEM surfaces per step (MethodContact.end_step): each pass divides a
+pair's impulse by the largest share of floor pairs among its points (kernels/surface_contact.py
+surface_floor_count), so pairs that share points (the two orders of a face-to-face contact) do not add up their
+corrections; the passes converge on the correction of all pairs together (4 and 8 passes part the two FEM cubes of
+tests/test_fem_contact.py's head-on collision at the same speed within 2e-4 of the approach speed)."""
 
 
 def restitution_of_damping_ratio(damping_ratio: float) -> float:
@@ -566,14 +573,15 @@ class MethodContact:
     dt): a vertex's contact is as stiff as its elements bear, the same at any step the run takes. The restitution e a
     user sets gives the dashpot's damping ratio (damping_ratio_for_restitution).
 
-    The scene calls :meth:`apply` once per step, after every solver's ``compute_forces`` and before the kicks. The
-    surface mesh is rebuilt when its topology version changes (fracture) and refitted to the current positions
-    every step. Nothing is allocated per step otherwise.
+    The scene calls :meth:`apply` once per step, after every solver's ``compute_forces`` and before the kicks, and
+    :meth:`end_step` after the solvers' ``end_step`` (the surface contact's hard floor). The surface mesh is rebuilt
+    when its topology version changes (fracture) and refitted to the current positions every step. Nothing is allocated
+    per step otherwise.
 
     Args:
         particle_solvers: solvers offering ``contact_particles()`` -> (point indices int32, radii float32) Warp arrays.
         mesh_solvers: solvers offering ``contact_mesh()`` -> (point indices int32 [v], triangles int32 [3 f] indexing
-            those points, topology version).
+            those points, topology version), and ``points_in_current_numbering(version, points)`` (SolverFem).
         damping_ratio: the dashpot as a fraction of the pair's critical damping, >= 0 (default 0.1, a restitution of
             0.73); give this or ``restitution``.
         restitution: the normal restitution e in (0, 1] of a pair (sets damping_ratio).
@@ -701,18 +709,87 @@ class MethodContact:
             for a in self.mesh_solvers:
                 for b in self.mesh_solvers:
                     self._surface_pair(a, b, rate, dt)
-            for ms in self.mesh_solvers:
-                ksf.apply_floor(kick=self._floor(ms), velocities=ms.kin.v, device=ms.kin.u.device)
+
+    def end_step(self, dt: float) -> None:
+        """The hard floor of the surface contact (kernels/surface_contact.py, surface_floor_impulse) on the pairs the
+        last :meth:`apply` found deeper than SURFACE_FLOOR, with the velocities and accelerations of the step's end
+        (after every solver's ``end_step``; step length ``dt`` [s]). Where a solver's topology changed in its
+        ``end_step`` (an FEM fracture split), the pairs' points are carried to its new numbering
+        (``points_in_current_numbering`` of the mesh solvers)."""
+        if not self.surfaces:
+            return
+        pairs = []
+        for a in self.mesh_solvers:
+            for b in self.mesh_solvers:
+                entry = self._scratch.get(("pairs", id(a), id(b)))
+                if entry is None:
+                    continue
+                _, a_points, _, _, _ = self._meshes[id(a)]
+                _, b_points, b_faces, _, _ = self._meshes[id(b)]
+                a_points = a.points_in_current_numbering(entry[0][0], a_points)
+                b_points = b.points_in_current_numbering(entry[0][1], b_points)
+                if a_points is None or b_points is None:
+                    continue
+                common = {"pair_face": entry[1], "pair_weights": entry[2], "v_points": a_points, "m_points": b_points}
+                pairs.append((a, b, dict(common, m_faces=b_faces, device=a.kin.u.device), entry[3]))
+        for a, b, common, _ in pairs:
+            ksf.floor_counts(v_count=self._floor(a)[1], m_count=self._floor(b)[1], **common)
+        touched = []
+        for a, b, _, _ in pairs:
+            touched += [s for s in (a, b) if all(s is not t for t in touched)]
+        for _ in range(SURFACE_FLOOR_ITERATIONS):
+            for a, b, common, pair_normal in pairs:
+                ksf.floor_impulses(
+                    pair_normal=pair_normal,
+                    v_v=a.kin.v,
+                    v_a=a.kin.a,
+                    v_mass=a.kin.mass,
+                    v_kind=a.kin.point_kind,
+                    m_v=b.kin.v,
+                    m_a=b.kin.a,
+                    m_mass=b.kin.mass,
+                    m_kind=b.kin.point_kind,
+                    dt=dt,
+                    v_count=self._floor(a)[1],
+                    m_count=self._floor(b)[1],
+                    v_kick=self._floor(a)[0],
+                    m_kick=self._floor(b)[0],
+                    **common,
+                )
+            for ms in touched:
+                ksf.apply_floor(kick=self._floor(ms)[0], velocities=ms.kin.v, device=ms.kin.u.device)
+        for ms in touched:
+            self._floor(ms)[1].zero_()
+
+    def _pairs(self, a, b, count: int):
+        """The floor's pairs of the vertices of mesh solver ``a`` against the faces of ``b`` (face, barycentric
+        weights, normal per surface vertex of ``a``: kernels/surface_contact.py vertex_face_contact), tagged with
+        both solvers' topology versions; reallocated when the vertex count changes."""
+        key = ("pairs", id(a), id(b))
+        entry = self._scratch.get(key)
+        versions = (self._meshes[id(a)][0], self._meshes[id(b)][0])
+        if entry is None or entry[1].shape[0] != count:
+            d = a.kin.u.device
+            entry = [
+                versions,
+                wp.full(count, -1, dtype=wp.int32, device=d),
+                wp.zeros(count, dtype=wp.vec3, device=d),
+                wp.zeros(count, dtype=wp.vec3, device=d),
+            ]
+            self._scratch[key] = entry
+        entry[0] = versions
+        return entry
 
     def _floor(self, solver):
-        """The solver's accumulator of the surface contact's hard floor (kernels/surface_contact.py): the velocity
-        change [m/s] per point, zero between steps; reallocated when the point count changes (FEM fracture adds
-        vertices)."""
+        """The solver's accumulators of the surface contact's hard floor (kernels/surface_contact.py): the velocity
+        change [m/s] and the share of floor pairs per point, zero between steps; reallocated when the point count
+        changes (FEM fracture adds vertices)."""
         key = ("floor", id(solver))
         entry = self._scratch.get(key)
         n = solver.kin.u.shape[0]
-        if entry is None or entry.shape[0] != n:
-            entry = wp.zeros(n, dtype=wp.vec3, device=solver.kin.u.device)
+        if entry is None or entry[0].shape[0] != n:
+            d = solver.kin.u.device
+            entry = (wp.zeros(n, dtype=wp.vec3, device=d), wp.zeros(n, dtype=float, device=d))
             self._scratch[key] = entry
         return entry
 
@@ -728,6 +805,7 @@ class MethodContact:
         skin_b, band_b = b.contact_skin()
         v_damping, v_friction = self._side(a)
         m_damping, m_friction = self._side(b)
+        _, pair_face, pair_weights, pair_normal = self._pairs(a, b, a_points.shape[0])
         ksf.vertex_face_forces(
             v_points=a_points,
             v_label=a_label,
@@ -759,10 +837,9 @@ class MethodContact:
             v_work=self._work_account(a),
             m_work=self._work_account(b),
             floor=SURFACE_FLOOR * min(band_a, band_b),
-            v_kind=a.kin.point_kind,
-            m_kind=b.kin.point_kind,
-            v_kick=self._floor(a),
-            m_kick=self._floor(b),
+            pair_face=pair_face,
+            pair_weights=pair_weights,
+            pair_normal=pair_normal,
             v_step=a.contact_steps(),
             m_step=b.contact_steps(),
             step_safety=self.step_safety,
@@ -794,6 +871,7 @@ class MethodContact:
 __all__ = [
     "CONTACT_OMEGA_DT",
     "SURFACE_FLOOR",
+    "SURFACE_FLOOR_ITERATIONS",
     "ContactDiagnostics",
     "MethodContact",
     "ParticleContact",

@@ -251,6 +251,9 @@ def _one_step(rec, labels, solvers, coupling, step_dt) -> None:
         for lab, s in coupled:
             rec.owner = lab
             s.end_step(step_dt)
+        if coupling is not None:
+            rec.owner = "method_contact"
+            coupling.end_step(step_dt)
         if rigid is not None:
             rec.owner = "rigid_bodies"
             rigid.end_step(step_dt)

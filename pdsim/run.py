@@ -597,6 +597,8 @@ def advance_frame(solvers, dt: float, substeps: int, coupling=None, graphs=None)
                 coupling.apply(dt)
             for s in coupled:
                 s.end_step(dt)
+            if coupling is not None:
+                coupling.end_step(dt)
             if rigid is not None:
                 rigid.end_step(dt)
 

@@ -17,7 +17,6 @@ import warp as wp
 
 from pdsim.kernels import contact as kc
 from pdsim.kernels import surface_contact as ksf
-from pdsim.kernels.integration import PARTICLE_FREE
 
 RATE = 1.0e6  # stiffness rate [1/s^2]
 DEPTH = 2.0e-3  # overlap [m]
@@ -124,10 +123,9 @@ def _vertex_face(face_masses, height: float, point_mass: float = 1.0, steps=(0.0
         dt=1.0e-4,
         v_work=_zeros(8, wp.float64),
         floor=1.0,
-        v_kind=_arr([PARTICLE_FREE], wp.int32),
-        m_kind=_arr(np.full(4, PARTICLE_FREE), wp.int32),
-        v_kick=_zeros(1, wp.vec3),
-        m_kick=_zeros(4, wp.vec3),
+        pair_face=_arr([-1], wp.int32),
+        pair_weights=_zeros(1, wp.vec3),
+        pair_normal=_zeros(1, wp.vec3),
         v_step=_arr([steps[0]], float),
         m_step=_arr(steps[1:], float),
         step_safety=0.5,

@@ -80,6 +80,19 @@ def _fem_bar():
     return scene
 
 
+def _fem_pieces_pressed():
+    """An FEM slab on the ground cracked by a kinematic sphere, its pieces pressed into each other (the surface
+    contact's hard floor acts: tools/fem_piece_contact.py). A rigid ball there instead leaves its angular velocity
+    different by about 1e-13 after the resume (the rigid body's state, with or without the floor)."""
+    scene = pdsim.Scene(fps=240.0, frames=6, gravity=(0.0, 0.0, -9.81), name="fem_pieces")
+    scene.add_ground_plane(height=0.0, friction=0.5)
+    material = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)
+    mesh = pdsim.box_tet_mesh((0.16, 0.04, 0.02), (8, 2, 1), center=(0.0, 0.0, 0.011))
+    scene.add_body(pdsim.FemBody(mesh, material, name="slab", tensile_strength=3.0e4))
+    scene.add_collider(pdsim.SphereProjectile(0.02, center=(0.0, 0.0, 0.045), velocity=(0.0, 0.0, -1.5)))
+    return scene
+
+
 def _lattice_block():
     from pdsim.lattice import Lattice, LatticeBody, LatticeFracture
 
@@ -192,8 +205,9 @@ def _assert_resume_is_bit_identical(build, tmp_path, stop_frame: int, frames: in
         (_pd_bar, 2, 8, {"fragments_as_prims": True, "color_attribute": "damage"}),
         (_pd_bar, 2, 8, {"crack_events": True, "debris_particles": 20}),
         (_fem_bar, 3, 8, {}),
+        (_fem_pieces_pressed, 3, 6, {}),
     ],
-    ids=["peridynamics", "peridynamics-fragment-prims", "peridynamics-events-debris", "fem"],
+    ids=["peridynamics", "peridynamics-fragment-prims", "peridynamics-events-debris", "fem", "fem-pieces-in-contact"],
 )
 def test_resumed_cache_plays_as_the_uninterrupted_one(tmp_path, build, stop_frame, frames, options):
     """Stopped inside a frame (at a step boundary, two stop polls after a frame end), then resumed: `out` alone holds

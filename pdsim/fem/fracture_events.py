@@ -193,7 +193,8 @@ class FemFractureEvents:
         (displacement, velocity, acceleration, boundary condition). Vertices are then renumbered body by body (stable:
         a single body keeps the numbering of the split), and the kinematics rebuilt from host arrays. The split keeps
         the old numbering as a prefix and appends the copies, so each body's first vertex_count vertices remain its
-        input vertices (views() relies on it)."""
+        input vertices (views() relies on it). ``renumbering`` keeps (version before, version after, new index of
+        each old vertex) for what refers to the old numbering within the step (pdsim.contact.MethodContact.end_step)."""
         body = self._vertex_body_h[parent]
         perm = np.argsort(body, kind="stable")  # new vertex k is the split's vertex perm[k]
         inverse = np.empty_like(perm)
@@ -210,10 +211,26 @@ class FemFractureEvents:
         self._crack_plane_h = crack_plane[perm]
         self._debt_h = debt[perm]
         self._tets_h = inverse[np.asarray(tets, dtype=np.int64)]
+        old_count = kin.u.shape[0]
         self._build_vertex_data(self._split_bodies(), state)
+        # (version before, version after, new index of each old vertex): the split keeps old vertex j as its vertex j
+        self.renumbering = (self.topology_version, self.topology_version + 1, inverse[:old_count])
         self.topology_version += 1
         if self.integrator == "explicit":
             self.update_accelerations()
+
+    def points_in_current_numbering(self, version: int, points):
+        """The point indices ``points`` (a Warp int32 array of the numbering of topology ``version``) in the current
+        numbering: ``points`` itself when the topology is unchanged, mapped through ``renumbering`` when one split led
+        from ``version`` to the current one (a split vertex's indices go to the copy that keeps its number), else
+        None. The mapping runs on the host, on the steps of a split only (pdsim.contact.MethodContact.end_step)."""
+        if version == self.topology_version:
+            return points
+        renumbering = getattr(self, "renumbering", None)
+        if renumbering is None or (renumbering[0], renumbering[1]) != (version, self.topology_version):
+            return None
+        mapped = np.asarray(renumbering[2])[points.numpy()]
+        return wp.array(mapped.astype(np.int32), dtype=wp.int32, device=points.device)
 
     def _split_bodies(self) -> list:
         """Per body: its :class:`SplitBody` on the current vertices and element corners (what the kinematics read
