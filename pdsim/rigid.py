@@ -390,10 +390,13 @@ class RigidBodies:
             motion.band = float(band)
             self._static_shapes.append((c, shape, wp.array([motion], dtype=kc.RigidMotion, device=self.device)))
         self._gravity = wp.vec3d(*self.gravity)
+        self._step_start = [wp.empty_like(b.state) for b in self.bodies]  # each body's state before its drift
 
     def begin_step(self, dt: float) -> None:
-        """First half kick and drift of every body; their motions for the solvers' collision kernels."""
-        for b in self.bodies:
+        """First half kick and drift of every body; their motions for the solvers' collision kernels. Each body's
+        state before it is kept for :meth:`undo_begin_step`."""
+        for b, kept in zip(self.bodies, self._step_start):
+            wp.copy(kept, b.state)
             kr.drift(
                 state=b.state,
                 shape=b.shape,
@@ -403,6 +406,13 @@ class RigidBodies:
                 motion=b.motion,
                 device=self.device,
             )
+
+    def undo_begin_step(self) -> None:
+        """Every body back to its state before the last :meth:`begin_step` (a run stopped at the start of the
+        solvers' step that followed it: the checkpoint then holds the bodies and the solvers at the same step)."""
+        for b, kept in zip(self.bodies, self._step_start):
+            wp.copy(b.state, kept)
+            b.write_motion()
 
     def end_step(self, dt: float) -> None:
         """Second half kick with the points' reaction, then contact with the ground, static meshes and each other

@@ -589,8 +589,13 @@ def advance_frame(solvers, dt: float, substeps: int, coupling=None, graphs=None)
         for _ in range(substeps):
             if rigid is not None:
                 rigid.begin_step(dt)
-            for s in coupled:
-                s.begin_step(dt)
+            try:
+                for s in coupled:
+                    s.begin_step(dt)  # a stop request is honoured at the start of a solver's step
+            except RunInterrupted:
+                if rigid is not None:
+                    rigid.undo_begin_step()
+                raise
             for s in coupled:
                 s.compute_forces()
             if coupling is not None:
