@@ -601,8 +601,9 @@ def markdown(records, *, command: str, wall: float) -> str:
             "random velocity perturbation of 1e-3 of its wave speed, 600 automatic steps at factor x the automatic "
             "step."
             + (
-                " The explicit FEM splits a step above its stable limit (0.5 h_min / c_p, 1.43 x the automatic step) "
-                "into substeps of its own, so factors above that run at that limit."
+                " Above the explicit FEM's stable limit (0.5 h_min / c_p, 1.43 x the automatic step) an FEM body alone "
+                "splits a step into substeps of its own; this block cracks, so its pieces' contact (MethodContact) "
+                "steps with it at the scene's step and the watchdog catches the run, naming the time step."
                 if method == "fem"
                 else ""
             ),
