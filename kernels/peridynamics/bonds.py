@@ -139,6 +139,19 @@ def compute_directional_bond_factors(
 
 
 @wp.func
+def deformed_bond(xi: wp.vec3, du: wp.vec3, L: float):
+    """The deformed bond of reference bond ``xi`` (|xi| = L [m]) whose ends moved apart by ``du`` [m]: its unit
+    direction n = eta / |eta| (eta = xi + du) and its extension e = |eta| - L [m], evaluated as
+    (2 xi . du + du . du) / (|eta| + L), which keeps float32's relative precision at any strain (|eta| - L would lose
+    it to cancellation below a strain of about 1e-5)."""
+    eta = xi + du
+    length = wp.length(eta)
+    n = eta * (1.0 / length)
+    e = (2.0 * wp.dot(xi, du) + wp.dot(du, du)) / (length + L)
+    return n, e
+
+
+@wp.func
 def bond_strength_factor(a: int, b: int, seed: int, modulus: float):
     """Weibull variate of shape ``modulus`` and unit median, (-ln(1 - U) / ln 2)^(1 / m), for the undirected bond
     between the body-local particle indices a and b: U comes from a PCG hash chain of (seed, min(a, b), max(a, b)),

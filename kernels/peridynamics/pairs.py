@@ -24,6 +24,7 @@ family) has no pair form: such scenes run the directed kernels.
 import warp as wp
 
 from ..launch import range_inputs
+from .bonds import deformed_bond
 
 _cache = {}
 
@@ -79,10 +80,7 @@ def make_pair_kernels(fracture: bool, handoff: bool = False):
             L = g[3]
             xi = wp.vec3(g[0], g[1], g[2]) * L
             du = displacements[j] - uk
-            eta = xi + du
-            length = wp.length(eta)
-            n = eta * (1.0 / length)
-            e = (2.0 * wp.dot(xi, du) + wp.dot(du, du)) / (length + L)
+            n, e = deformed_bond(xi, du, L)
             pair_ne[p] = wp.vec4(n[0], n[1], n[2], e)
             w = pair_weights[p]
             acc += w[0] * e

@@ -39,6 +39,7 @@ reverse bond, read only by the next pass), and reads other particles' rows only 
 import warp as wp
 
 from ..launch import range_inputs
+from .bonds import deformed_bond
 
 _cache = {}
 
@@ -126,11 +127,7 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
             xh = wp.vec3(g[0], g[1], g[2])
             xi = xh * L
             du = displacements[family_neighbors[q]] - uk
-            eta = xi + du
-            length = wp.length(eta)
-            inv = 1.0 / length
-            n = eta * inv
-            e = (2.0 * wp.dot(xi, du) + wp.dot(du, du)) / (length + L)
+            n, e = deformed_bond(xi, du, L)
             bond_ne[q] = wp.vec4(n[0], n[1], n[2], e)
             if wp.static(FRACTURE):
                 smin = wp.min(smin, e / L)
