@@ -142,10 +142,11 @@ def _add_preview_parser(sub) -> None:
     )
     v.add_argument(
         "--fit",
-        choices=["all", "selected", "first"],
-        default="all",
-        help="what the automatic camera frames: all frames' geometry (default), the selected frames', or the first "
-        "frame's (far-flung debris then leaves the picture instead of shrinking the rest)",
+        choices=["auto", "all", "selected", "first"],
+        default="auto",
+        help="what the automatic camera frames: auto (default: all frames' bodies as far as half the rest pose's "
+        "size past it, so far-flung debris leaves the picture instead of shrinking the object), all (every frame's "
+        "bodies, however far), the selected frames', or the first frame's",
     )
     v.add_argument("--supersample", type=str, default="1", help="rays per pixel along each axis, 1..4 (default 1)")
     v.add_argument("--no-ground", action="store_true", help="no ground plane (and no shadows on it)")

@@ -19,7 +19,8 @@ it from the body's Points prim (the value of the nearest point of each vertex), 
 peridynamic body's damage on its surface.
 
 The camera is a pinhole with a 35 degree vertical field of view. By default it looks at the centre of the bounding box
-of the bodies over all frames (colliders and projectiles, the prims under /World/colliders, left out) from a
+of the bodies over all frames (colliders and projectiles, the prims under /World/colliders, left out), as far as half
+the rest pose's largest extent past the rest pose (far-flung debris leaves the picture), from a
 three-quarter view (azimuth -60 degrees about the stage's up axis, elevation 25
 degrees), at the distance that fits that box into the image; see :func:`camera_from_spec` for the other choices.
 

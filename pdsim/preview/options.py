@@ -8,7 +8,8 @@ from ..errors import ParameterError
 
 SUFFIXES = (".png", ".gif", ".mp4")
 MAX_SIZE = 8192  # largest image side [pixels]
-FIT_MODES = ("all", "selected", "first")  # which frames the automatic camera is fitted to (see render_cache)
+FIT_MODES = ("auto", "all", "selected", "first")  # what the automatic camera is fitted to (see render_cache)
+FIT_REACH = 0.5  # fit="auto": how far past the rest pose the box reaches, in the rest pose's largest extent
 POINTS_MODES = ("auto", "all", "none")  # which UsdGeom.Points prims are drawn (see render_cache)
 
 

@@ -92,6 +92,7 @@ def _primvar(prim, name: str, t):
 
 
 COLLIDER_GROUP = "colliders"  # the prim under the default prim that holds colliders and projectiles (RigidView.group)
+GROUND_NAME = "ground"  # the name of the scene's ground plane's prim (pdsim/colliders.py: GroundPlane.name)
 
 
 def _is_collider(path) -> bool:
@@ -287,8 +288,9 @@ class StageReader:
         ``/World/colliders``, the scene's colliders and projectiles, are left out unless there is nothing else) and
         the ground height [m] along the up axis of a ground-like mesh if there is one (else None): a mesh
         perpendicular to the up axis
-        (thickness below 1e-6 of its width), at least as wide as all other geometry and below its middle
-        (pdsim writes the scene's ground plane as such a quad, /World/ground). It is left out of the box and of the
+        (thickness below 1e-6 of its width), below the middle of all other geometry and at least as wide as it, or
+        named ``ground`` (pdsim writes the scene's ground plane as such a quad, /World/ground, which debris may fly
+        past). It is left out of the box and of the
         rendering; the preview's ground plane, at its height, stands for it. ``detect_ground=False`` keeps the
         ground-like prims found by an earlier call and returns None for the height."""
         boxes = {}  # prim path -> (lo, hi)
@@ -329,7 +331,8 @@ class StageReader:
                 oh = max(abs((ohi - olo) @ e1), abs((ohi - olo) @ e2))
                 height, others_mid = float(lo @ self.up), float(0.5 * (olo + ohi) @ self.up)
                 flat = abs(span @ self.up) <= 1.0e-6 * horizontal
-                if flat and horizontal >= oh and height <= others_mid:
+                wide = horizontal >= oh or key.name == GROUND_NAME  # pdsim's own ground, whatever flies past it
+                if flat and wide and height <= others_mid:
                     self.ground_prims.add(key)
                     ground = height
         kept = [b for k, b in boxes.items() if k not in self.ground_prims] or list(boxes.values())

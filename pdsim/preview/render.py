@@ -17,7 +17,7 @@ from ..errors import ParameterError
 from ..kernels.preview import render_image
 from .camera import Camera, camera_from_spec, direction, horizontal_axes
 from .colors import AMBIENT, BACKGROUND, Coloring, linear
-from .options import FIT_MODES, SUFFIXES, parse_frames, parse_size
+from .options import FIT_MODES, FIT_REACH, SUFFIXES, parse_frames, parse_size
 from .reader import FrameGeometry, StageReader
 
 BVH_CONSTRUCTOR = "sah"  # Warp's BVH builder for the per-frame wp.Mesh (see docs/preview.md for the measurements)
@@ -206,7 +206,7 @@ def render_cache(
     supersample: int = 1,
     categorical: bool | None = None,
     points: str = "auto",
-    fit: str = "all",
+    fit: str = "auto",
     default_frames: str = "all",
     device: str = "cpu",
 ) -> PreviewResult:
@@ -225,11 +225,12 @@ def render_cache(
         categorical: colour ``color`` by a palette (True) or a ramp (False); None: palette for integer primvars.
         points: which ``UsdGeom.Points`` prims are drawn as spheres: "auto" (those without a surface mesh
             ``<name>_surface`` beside them: a lattice's points, not a peridynamic or FEM body's), "all" or "none".
-        fit: the frames whose bodies (not colliders or projectiles) the automatic camera frames: "all" frames of
-            the cache (the same camera for every still
-            and animation of the cache), the "selected" frames, or the "first" frame (the rest pose: debris that
-            flies far away leaves the picture instead of shrinking it). The ground stays at the lowest point of all
-            frames.
+        fit: what the automatic camera frames, of the bodies (not colliders or projectiles): "auto", the bodies
+            over all frames as far as ``FIT_REACH`` (0.5) times the rest pose's largest extent past the rest pose
+            on every side (the object and the action around it fill the picture; debris that flies farther leaves
+            it); "all" frames of the cache whatever their extent; the "selected" frames; or the "first" frame (the
+            rest pose). "auto", "all" and "first" give the same camera for every still and animation of a cache.
+            The ground stays at the lowest point of all frames.
         device: Warp device ("cpu" or "cuda").
 
     Raises:
@@ -272,8 +273,7 @@ def render_cache(
     if not isinstance(camera, Camera):  # a bad spec fails before the pass over the frames
         camera_from_spec(camera, np.zeros(3), np.ones(3), up, (width, height))
     all_lo, all_hi, ground_height = stage.bounds(stage.frames)
-    fit_frames = {"all": None, "selected": selected, "first": stage.frames[:1]}[fit]
-    lo, hi = (all_lo, all_hi) if fit_frames is None else stage.bounds(fit_frames, detect_ground=False)[:2]
+    lo, hi = _fitted_box(stage, fit, selected, all_lo, all_hi)
     cam = camera if isinstance(camera, Camera) else camera_from_spec(camera, lo, hi, up, (width, height))
     centre = 0.5 * (lo + hi)
     diag = float(np.linalg.norm(hi - lo)) or 1.0
@@ -310,6 +310,19 @@ def render_cache(
         coverage.append(cov)
         seconds.append(time.perf_counter() - t0)
     return PreviewResult(images, selected, cam, (lo, hi), coverage, color_range, seconds, stage.fps)
+
+
+def _fitted_box(stage: StageReader, fit: str, selected: list[int], all_lo, all_hi) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) [m] of the box the automatic camera frames for ``fit`` (see :func:`render_cache`)."""
+    if fit == "all":
+        return all_lo, all_hi
+    if fit == "selected":
+        return stage.bounds(selected, detect_ground=False)[:2]
+    rest_lo, rest_hi = stage.bounds(stage.frames[:1], detect_ground=False)[:2]
+    if fit == "first":
+        return rest_lo, rest_hi
+    reach = FIT_REACH * float(np.max(rest_hi - rest_lo))
+    return np.maximum(all_lo, rest_lo - reach), np.minimum(all_hi, rest_hi + reach)
 
 
 def write_preview(
