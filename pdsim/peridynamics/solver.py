@@ -239,15 +239,19 @@ class SolverPeridynamics(PointSolver):
         why = None
         if self.device.is_cuda:
             why = f"the CUDA device {self.device} (the scatter would need atomics)"
-        elif self.model.plastic:
-            why = "a yielding material (the return mapping needs a particle's whole family)"
+        elif self.model.plastic and handoff:
+            why = (
+                "a yielding material with rigid_handoff (a yielding particle's plastic strain sums its bonds to rigid"
+                " particles, which the pair passes leave out)"
+            )
         if why is not None:
             if pairs:
                 raise ParameterError("pairs", pairs, f"None or False with {why}")
             return None
         if pairs is False:
             return None
-        return PairPasses(self.model, self.model.fracture, handoff, self.device)
+        ductile = any(b.material.failure_plastic_strain is not None for b in self.bodies)
+        return PairPasses(self.model, self.model.fracture, handoff, self.device, ductile=ductile)
 
     @property
     def bond_passes(self) -> str:
@@ -257,7 +261,7 @@ class SolverPeridynamics(PointSolver):
     def bond_cache(self):
         """The bond cache (n, e) per directed bond of the last dilatation pass (state.bond_ne), complete."""
         if self._pairs is not None:
-            self._pairs.bond_cache(self.state.bond_ne)
+            self._pairs.bond_cache(self.state)
         return self.state.bond_ne
 
     # -- time step -----------------------------------------------------------------------------------------------
@@ -440,7 +444,7 @@ class SolverPeridynamics(PointSolver):
             assign_state(getattr(s, name), values, name)
         self._mirror_plastic()
         if self._pairs is not None:
-            self._pairs.restore_cache(s.bond_ne)
+            self._pairs.restore_cache(s)
         if self.handoff is not None:
             self.handoff.restore(state["handoff"])
         if self.contact is not None:
