@@ -535,16 +535,17 @@ def format_text(r: dict) -> str:
     return "\n".join(lines)
 
 
-def build_memory(n: int, *, horizon_factor: float, fracture: bool, pairs) -> dict:
+def build_memory(n: int, *, horizon_factor: float, fracture: bool, pairs, plastic: bool = False) -> dict:
     """Peak resident memory of building the block (after a 4^3 build loaded the kernels), in bytes per directed bond
     (the pre-flight's PD_BYTES_PER_BOND, particles included): one measurement per process, as the peak only grows."""
     sc = 0.01 if fracture else None
-    build_solver(4, horizon_factor=horizon_factor, device="cpu", critical_stretch=sc, pairs=pairs)
+    build_solver(4, horizon_factor=horizon_factor, device="cpu", critical_stretch=sc, pairs=pairs, plastic=plastic)
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-    solver = build_solver(n, horizon_factor=horizon_factor, device="cpu", critical_stretch=sc, pairs=pairs)
+    solver = build_solver(n, horizon_factor=horizon_factor, device="cpu", critical_stretch=sc, pairs=pairs,
+                          plastic=plastic)  # fmt: skip
     after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     bonds = solver.model.bond_count
-    return {"n": n, "bond_passes": solver.bond_passes, "fracture": fracture, "bonds": bonds,
+    return {"n": n, "bond_passes": solver.bond_passes, "fracture": fracture, "plastic": plastic, "bonds": bonds,
             "peak_bytes": after - before, "bytes_per_bond": (after - before) / bonds}  # fmt: skip
 
 
@@ -570,19 +571,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="seed of the random velocities")
     parser.add_argument("--json", action="store_true", help="print one JSON line instead of text")
     parser.add_argument("--plastic", action="store_true", help="yielding material (LAMMPS runs peri/eps)")
-    parser.add_argument("--directed", action="store_true", help="pdsim's directed bond passes (the CUDA and "
-                        "plasticity form) instead of the CPU's pair form")  # fmt: skip
+    parser.add_argument("--directed", action="store_true", help="pdsim's directed bond passes (the CUDA form) instead "
+                        "of the CPU's pair form")  # fmt: skip
     parser.add_argument("--fracture", action="store_true", help="breakable material in every state (s_c = 1 where the "
                         "state sets none: every bond tested, none breaks)")  # fmt: skip
     parser.add_argument("--memory", action="store_true", help="only the peak memory of building the block, per bond "
-                        "(with --fracture: breakable; --directed: the directed form)")  # fmt: skip
+                        "(with --fracture: breakable; --plastic: yielding; --directed: the directed form)")  # fmt: skip
     args = parser.parse_args(argv)
     if args.memory:
         _init_warp("cpu")
         figures = build_memory(args.n, horizon_factor=args.horizon_factor, fracture=args.fracture,
-                               pairs=False if args.directed else None)  # fmt: skip
+                               pairs=False if args.directed else None, plastic=args.plastic)  # fmt: skip
         print(json.dumps(figures) if args.json else f"{figures['bond_passes']}: {figures['bytes_per_bond']:.1f} B per "
-              f"bond ({figures['bonds']} bonds, fracture {figures['fracture']})")  # fmt: skip
+              f"bond ({figures['bonds']} bonds, fracture {figures['fracture']}, plastic {figures['plastic']})")  # fmt: skip
         return 0
     if args.n < 1 or args.steps < 1:
         parser.error("--n and --steps must be >= 1")

@@ -17,9 +17,9 @@ rotation; pdsim/peridynamics/solver.py):
 
 Since a_k - b_k g_k = d_k (kappa / 2 - 5 mu / 6), A_kj / (4 w) = P_k + b_k e with P_k = d_k c0 theta_k and
 c0 = kappa / 2 - 5 mu / 6. The dilatation kernel writes (b_k, P_k) per particle so the force kernel gathers one vec2
-per neighbour. Both kernels are gathers over a CSR list (one thread per particle, no atomics); on the CPU, scenes
-without plasticity run the pair form of the two passes instead (kernels/peridynamics/pairs.py: each bond pair once,
-the same per-bond arithmetic, the sums in another order).
+per neighbour. Both kernels are gathers over a CSR list (one thread per particle, no atomics); on the CPU the pair
+form of the two passes runs instead (kernels/peridynamics/pairs.py: each bond pair once, the same per-bond
+arithmetic and return mapping, the sums in another order).
 """
 
 import numpy as np

@@ -17,8 +17,18 @@ reverse bond's is (-n, e): eta_jk = -eta_kj exactly in float32). Buffers: range 
 The arithmetic per pair is the directed kernels' (the same (n, e) bits, the same force terms); only the order of
 each particle's sums differs (float32 round-off). The most compressive stretch is a minimum, so it is the directed
 value exactly. A pair breaks once (the test of the directed force kernel, symmetric in k and j) and both directed
-flags are cleared by the one thread that owns the pair. Plasticity (its return mapping needs a particle's whole
-family) has no pair form: such scenes run the directed kernels.
+flags are cleared by the one thread that owns the pair.
+
+Plasticity (the return mapping of kernels/peridynamics/step.py, per particle over its family) splits into pair passes
+and per-particle sums, since each of its family sums is a sum over pairs once theta_p of both ends is known: the
+dilatation pass also sums w V beta L e and w V beta L^2 (``pair_wv`` = (w V beta of k -> j, of j -> k)), its sum
+pass gives theta_p / 3; a norm pass sums each yielding end's deviatoric_norm_term and its sum pass gives the return
+mapping's scale r (yield_ratio, -1 where the particle stays elastic); the force pass returns the plastic extensions
+of each live pair's yielding ends (``pair_plastic`` = (e^p_kj, e^p_jk), the state), uses them in the force and the
+stretch test, and sums w V beta (e^p)^2 over a yielding end's pairs, live or broken, from which its sum pass gives the
+equivalent plastic strain; a last pass, with ductile failure, tests the pairs against this step's equivalent
+plastic strain of both ends. Yielding particles come first (pdsim/peridynamics/model.py), so the plastic pairs are a
+prefix of the pairs. The plastic variants have no hand-off form.
 """
 
 import warp as wp
@@ -510,15 +520,16 @@ def mirror_pair_plastic(
 
 
 @wp.kernel
-def gather_pair_plastic(
+def gather_pair_values(
     pair_bond: wp.array(dtype=wp.int32),
     pair_reverse: wp.array(dtype=wp.int32),
-    bond_plastic: wp.array(dtype=float),
-    pair_plastic: wp.array(dtype=wp.vec2),
+    bond_values: wp.array(dtype=float),
+    pair_values: wp.array(dtype=wp.vec2),
 ):
-    """pair_plastic[p] = (e^p_kj, e^p_jk) of each pair p from the directed plastic extensions [m]."""
+    """pair_values[p] = (value of k -> j, value of j -> k) of each pair p from a per-bond array (the plastic
+    extensions [m], the weights w V beta [m^3])."""
     p = wp.tid()
-    pair_plastic[p] = wp.vec2(bond_plastic[pair_bond[p]], bond_plastic[pair_reverse[p]])
+    pair_values[p] = wp.vec2(bond_values[pair_bond[p]], bond_values[pair_reverse[p]])
 
 
 # ---------------------------------------------------------------------------------------------------- launches
@@ -582,9 +593,9 @@ def bond_plastic_from_pairs(count, pair_bond, pair_reverse, pair_plastic, bond_p
         )
 
 
-def pair_plastic_from_bonds(count, pair_bond, pair_reverse, bond_plastic, pair_plastic, device):
-    """Writes the first ``count`` pairs' plastic extensions from the directed ones (gather_pair_plastic)."""
+def pair_values_from_bonds(count, pair_bond, pair_reverse, bond_values, pair_values, device):
+    """Writes the first ``count`` pairs' (k -> j, j -> k) values from a per-bond array (gather_pair_values)."""
     if count > 0:
         wp.launch(
-            gather_pair_plastic, dim=count, inputs=[pair_bond, pair_reverse, bond_plastic, pair_plastic], device=device
+            gather_pair_values, dim=count, inputs=[pair_bond, pair_reverse, bond_values, pair_values], device=device
         )

@@ -19,7 +19,8 @@ Formulas (kernels/peridynamics/bonds.py gives the notation and the elastic model
   Linear hardening sigma_Y = sigma_Y0 + H eps_p with the equivalent plastic strain
   eps_p = sqrt(5 sum_j w (e^p_j)^2 V_j beta_j / m_k) (equal to the uniaxial plastic strain for isochoric flow).
   The return mapping runs in the dilatation kernel, right after a yielding particle's family sums (its bonds'
-  (n, e) are then still in cache, and the volumetric sums of theta_p come with the dilatation's loop).
+  (n, e) are then still in cache, and the volumetric sums of theta_p come with the dilatation's loop); the CPU's pair
+  form runs the same arithmetic in pair passes (kernels/peridynamics/pairs.py).
 - Fracture: a live bond breaks for good when its stretch (its elastic stretch, s - (e^p_kj + e^p_jk) / (2 L), for
   a yielding material) exceeds s_c,kj - alpha min(s_min,k, s_min,j) (Silling-Askari compressive bonus, s_min the
   particle's most compressive live stretch, <= 0, from this step's dilatation pass; alpha is

@@ -4,9 +4,10 @@ pair ranges and their buffers, and one step's dilatation and force passes.
 Each undirected pair is evaluated once, by the thread of its lower particle; the upper particle's share goes to a
 buffer of the pair range the lower particle belongs to, and a sum pass adds the buffers in range order. The
 PAIR_RANGES ranges are set by the particles' pair counts only (never by the thread count); the threads take
-contiguous blocks of whole ranges, so results are bit-identical for any thread count. Used on a CPU device by scenes
-without plasticity (the return mapping needs a particle's whole family: such scenes, and every CUDA scene, run the
-directed kernels of kernels/peridynamics/step.py, where the GPU would need atomics for the scatter)."""
+contiguous blocks of whole ranges, so results are bit-identical for any thread count. Used on a CPU device, with
+plasticity too (the return mapping in pair passes, kernels/peridynamics/pairs.py), except for yielding bodies with the
+rigid hand-off; those scenes and every CUDA scene run the directed kernels of kernels/peridynamics/step.py (the GPU
+would need atomics for the scatter)."""
 
 from __future__ import annotations
 
@@ -42,7 +43,8 @@ def pair_layout(
 
 
 class PairPasses:
-    """The pair form of one step's bond passes for a model without plasticity on a CPU device: the pair arrays
+    """The pair form of one step's bond passes on a CPU device (``ductile``: some yielding body has a failure plastic
+    strain, so the ductile breaking test runs): the pair arrays
     (kernels/peridynamics/pairs.py), the fixed ranges over the particles (or over the rigid hand-off's live list,
     :meth:`set_particles`) and the buffers, launched on ``threads`` threads (:meth:`set_threads`)."""
 
@@ -81,23 +83,16 @@ class PairPasses:
         ):  # fmt: skip
             weights[:, column] = source.numpy()[bonds]
         self.pair_weights = arr(weights, wp.vec4)
-        del weights
+        del weights, forward, reverse
         self.plastic_pair_count = 0
         if self.plastic:  # the yielding particles' pairs (a prefix): w V beta of both directions, (e^p_kj, e^p_jk)
-            self.plastic_pair_count = int(pair_offsets[model.plastic_particle_count])
-            npp = self.plastic_pair_count
-            wv = model.bond_wv.numpy()
-            self.pair_wv = wp.array(
-                np.stack([wv[forward[:npp]], wv[reverse[:npp]]], axis=1) if npp else np.zeros((1, 2)),
-                dtype=wp.vec2,
-                device=device,
-            )
-            del wv
+            self.plastic_pair_count = npp = int(pair_offsets[model.plastic_particle_count])
+            self.pair_wv = wp.zeros(max(npp, 1), dtype=wp.vec2, device=device)
+            kp.pair_values_from_bonds(npp, self.pair_bond, self.pair_reverse, model.bond_wv, self.pair_wv, device)
             self.pair_plastic = wp.zeros(max(npp, 1), dtype=wp.vec2, device=device)
             self.plastic_th3 = wp.zeros(n, dtype=float, device=device)  # theta_p / 3 of the step
             self.plastic_ratio = wp.zeros(n, dtype=float, device=device)  # the return mapping's scale, -1: elastic
             self.plastic_sum = wp.zeros(n, dtype=wp.vec2, device=device)  # own sums of the plastic passes
-        del forward, reverse
         self.pair_ne = wp.zeros(count, dtype=wp.vec4, device=device)
         self.cache_stale = False  # the directed bond cache lags the pairs' (bond_cache)
         self.plastic_stale = False  # the directed plastic extensions lag the pairs' (bond_cache)
@@ -326,7 +321,7 @@ class PairPasses:
         kp.pair_cache_from_bonds(self.pair_count, self.pair_bond, state.bond_ne, self.pair_ne, self.device)
         self.cache_stale = False
         if self.plastic:
-            kp.pair_plastic_from_bonds(
+            kp.pair_values_from_bonds(
                 self.plastic_pair_count, self.pair_bond, self.pair_reverse, state.bond_plastic, self.pair_plastic,
                 self.device,
             )  # fmt: skip
