@@ -161,7 +161,7 @@ def test_which_form_a_scene_gets():
     )
     body = pdsim.PeridynamicBody(pdsim.box((4e-3,) * 3), tearing, 1.0e-3, rigid_handoff=True)
     assert SolverPeridynamics([body], threads=1).bond_passes == "directed"
-    with pytest.raises(ParameterError, match="pairs.*rigid_handoff"):
+    with pytest.raises(ParameterError, match=r"pairs.*rigid_handoff"):
         SolverPeridynamics([body], threads=1, pairs=True)
     with pytest.raises(ParameterError, match="pairs"):
         _block("yes")

@@ -53,8 +53,7 @@ def make_pair_kernels(fracture: bool, handoff: bool = False, plastic: bool = Fal
         raise ValueError("the pair kernels have no hand-off form with plasticity")
     FRACTURE = key[0]
     HANDOFF = key[1]
-    PLASTIC = key[2]
-    DUCTILE = key[3]
+    PLASTIC = key[2]  # key[3], ductile failure: the launches add the ductile_break pass (it has no other variant)
 
     @wp.kernel(module="unique")
     def pair_dilatation(
