@@ -78,8 +78,8 @@ class SolverPeridynamics(PointSolver):
             fixed-range buffers, summed in a fixed order; with plasticity the return mapping in pair passes too),
             else the directed form (every bond k -> j gathered by k: the GPU, where the scatter would need atomics,
             and a scene with a yielding body and a breakable body with the rigid hand-off, since the plastic strain
-            sums bonds to the rigid particles the pair passes leave out). ``True`` asks for the pair form (a ParameterError where it
-            is not available), ``False`` for the directed one. Both give the same forces and dilatation to float32
+            sums bonds to the rigid particles the pair passes leave out). ``True`` asks for the pair form (a
+            ParameterError where it is not available), ``False`` for the directed one. Both give the same forces and dilatation to float32
             round-off (the sums run in another order) and the same broken bonds (with plasticity also the same
             plastic extensions and equivalent plastic strain to round-off); each is bit-identical for any thread
             count.
