@@ -79,10 +79,10 @@ class SolverPeridynamics(PointSolver):
             else the directed form (every bond k -> j gathered by k: the GPU, where the scatter would need atomics,
             and a scene with a yielding body and a breakable body with the rigid hand-off, since the plastic strain
             sums bonds to the rigid particles the pair passes leave out). ``True`` asks for the pair form (a
-            ParameterError where it is not available), ``False`` for the directed one. Both give the same forces and dilatation to float32
-            round-off (the sums run in another order) and the same broken bonds (with plasticity also the same
-            plastic extensions and equivalent plastic strain to round-off); each is bit-identical for any thread
-            count.
+            ParameterError where it is not available), ``False`` for the directed one. Both give the same forces
+            and dilatation to float32 round-off (the sums run in another order) and the same broken bonds (with
+            plasticity also the same plastic extensions and equivalent plastic strain to round-off); each is
+            bit-identical for any thread count.
 
     State: displacements from the rest configuration, velocities and accelerations (pdsim/kinematics.py), so bond
     deformation is computed from displacement differences and does not depend on where the body sits. The step
