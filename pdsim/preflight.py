@@ -58,12 +58,12 @@ MAX_INDEX = 2**31 - 1  # particles, vertices, bonds and elements are indexed wit
 # Memory model: peak resident bytes of Scene.build_solvers on the CPU backend, fitted on cubes of 1.7e3 to 1.1e5
 # particles and 0.2e6 to 3e7 bonds (tools/preflight_calibration.py): peridynamics 345 B per particle + 52 B per bond
 # elastic, 67 B per bond with fracture and plasticity; FEM about 510 B per element with its vertices. Rounded up.
-# The CPU's pair form of the bond passes (scenes without plasticity, pdsim/peridynamics/pairs.py) adds its pair
-# arrays and their build: 99-110 B per bond, particles included, against 53-59 for the directed form (20^3 and 30^3
-# blocks, elastic and breaking: `python tools/bench_pd_throughput.py --memory --n 20 [--fracture] [--directed]`), so
-# the bond figure is the pair form's, rounded up.
+# The CPU's pair form of the bond passes (pdsim/peridynamics/pairs.py) adds its pair arrays and their build: 99-110 B
+# per bond, particles included, against 53-59 for the directed form (20^3 and 30^3 blocks, elastic and breaking:
+# `python tools/bench_pd_throughput.py --memory --n 20 [--fracture] [--directed]`), and 107-113 B breaking with
+# plasticity (`--fracture --plastic`; 71 B directed), so the bond figure is the pair form's, rounded up.
 PD_BYTES_PER_PARTICLE = 400
-PD_BYTES_PER_BOND = 110
+PD_BYTES_PER_BOND = 115
 FEM_BYTES_PER_VERTEX = 400
 FEM_BYTES_PER_ELEMENT = 450
 LATTICE_BYTES_PER_POINT = 200

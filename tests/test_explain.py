@@ -100,7 +100,7 @@ def test_features_bodies_and_state_of_a_scene_with_every_feature():
     assert {"plasticity", "fracture", "anisotropy", "boundary_conditions"} <= set(bodies["a"]["features"])
     assert bodies["b"]["features"] == ["fracture"]
     names = [k.rpartition("__locals__")[2] for k, _ in s["step_kernels"]]
-    for kernel in ("kick_drift", "collide_sphere", "dilatation", "force", "kick"):
+    for kernel in ("kick_drift", "collide_sphere", "pair_dilatation", "pair_plastic_norm", "pair_force", "kick"):
         assert kernel in names
     assert any(e["kind"] == "hash_grid_build" for e in s["step_operations"])  # the contact pass's grid
     state = s["state"]

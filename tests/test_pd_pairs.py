@@ -6,7 +6,10 @@ independent reference: dilatation, force density and strain energy to float32 ro
 on a deformed elastic block 1 km from the origin, also with bond weights made asymmetric (so the reverse bond's
 weight is the one scattered); the bond cache bit for bit; a fracturing block breaks the same bonds in the same steps
 over 20 steps; with the rigid hand-off (one half rigid) the same forces and no bond force on the rigid half; the
-pair form bit-identical on 1, 2 and 3 threads; which form a scene gets, and the errors of the setting.
+pair form bit-identical on 1, 2 and 3 threads; which form a scene gets, and the errors of the setting. With
+plasticity (the return mapping in pair passes): the same broken bonds step by step and the plastic state to 1e-5 of
+the largest value, breaking by stretch and by ductile failure, with asymmetric weights and beside an elastic body;
+bit-identical on 1, 2 and 3 threads and through a checkpoint restored into a fresh solver.
 """
 
 from __future__ import annotations
@@ -146,16 +149,122 @@ def test_pairs_are_bit_identical_on_one_two_and_three_threads():
 
 
 def test_which_form_a_scene_gets():
-    """CPU without plasticity: pairs by default; a yielding material runs the directed form and refuses pairs=True;
-    a setting other than None, True or False is refused, naming the field."""
+    """CPU: pairs by default, also for a yielding material; a breakable yielding body with the rigid hand-off runs
+    the directed form and refuses pairs=True; a setting other than None, True or False is refused, naming the
+    field."""
     assert _block(None)._pairs is not None and _block(True)._pairs is not None
     yielding = pdsim.Material(density=1000.0, youngs_modulus=1.0e9, poisson_ratio=0.25, yield_stress=1.0e6)
     body = pdsim.PeridynamicBody(pdsim.box((4e-3,) * 3), yielding, 1.0e-3)
-    assert SolverPeridynamics([body], threads=1)._pairs is None
-    with pytest.raises(ParameterError, match="pairs"):
+    assert SolverPeridynamics([body], threads=1).bond_passes == "pairs"
+    tearing = pdsim.Material(
+        density=1000.0, youngs_modulus=1.0e9, poisson_ratio=0.25, yield_stress=1.0e6, critical_stretch=1e-2
+    )
+    body = pdsim.PeridynamicBody(pdsim.box((4e-3,) * 3), tearing, 1.0e-3, rigid_handoff=True)
+    assert SolverPeridynamics([body], threads=1).bond_passes == "directed"
+    with pytest.raises(ParameterError, match=r"pairs.*rigid_handoff"):
         SolverPeridynamics([body], threads=1, pairs=True)
     with pytest.raises(ParameterError, match="pairs"):
         _block("yes")
+
+
+# -- plasticity: the return mapping in pair passes ---------------------------------------------------------------------
+def _plastic_block(pairs, threads=1, ductile=False, n=7, elastic_neighbour=False):
+    """An n^3 yielding block (h = 1 mm, E = 1 GPa, sigma_Y = 1 MPa, H = 50 MPa, s_c = 1e-3; with ``ductile`` a
+    failure plastic strain of 1e-3) at CENTER, pulled apart as _block; with ``elastic_neighbour`` a second, elastic
+    and unbreakable block beside it in the same solver (the plastic arrays then cover a prefix of the particles)."""
+    h = 1.0e-3
+    mat = pdsim.Material(
+        density=1000.0,
+        youngs_modulus=1.0e9,
+        poisson_ratio=0.25,
+        yield_stress=1.0e6,
+        hardening_modulus=5.0e7,
+        critical_stretch=1.0e-3,
+        failure_plastic_strain=1.0e-3 if ductile else None,
+    )
+    bodies = [pdsim.PeridynamicBody(pdsim.box((n * h,) * 3, center=CENTER), mat, h)]
+    if elastic_neighbour:
+        other = pdsim.Material(density=1000.0, youngs_modulus=1.0e9, poisson_ratio=0.25)
+        c = (CENTER[0] + 2 * n * h, CENTER[1], CENTER[2])
+        bodies.append(pdsim.PeridynamicBody(pdsim.box((n * h,) * 3, center=c), other, h))
+    solver = SolverPeridynamics(bodies, threads=threads, pairs=pairs)
+    x = solver.positions()
+    for i in range(len(bodies)):  # each block stretched about its own centre
+        sl = solver.body_slice(i)
+        x[sl] -= x[sl].mean(axis=0)
+    solver.set_velocities(1500.0 * x * np.array([1.0, -0.3, 0.2]))
+    return solver
+
+
+def _plastic_state(s):
+    """What a plastic step produces: displacements, live bonds, plastic extensions, equivalent plastic strain,
+    dilatation, force and energy densities."""
+    s.bond_cache()
+    return [
+        s.displacements(),
+        s.bond_alive(),
+        s.state.bond_plastic.numpy()[: s.model.plastic_bond_count].copy(),
+        s.plastic_strain(),
+        s.dilatation(),
+        s.force_density(),
+        s.strain_energy_density(),
+    ]
+
+
+@pytest.mark.parametrize("case", ["stretch", "ductile", "skewed", "mixed"])
+def test_plastic_pairs_follow_the_directed_return_mapping(case):
+    """A yielding, breaking block pulled apart for 20 steps, both forms side by side: after every step the same live
+    bonds; at the end displacements, plastic extensions, equivalent plastic strain, dilatation, force and energy
+    densities agree to 1e-5 of the largest value (float32 round-off of sums in another order), with most particles
+    yielding and some bonds broken. Cases: breaking by stretch; by ductile failure too; bond weights made
+    asymmetric (the reverse bond's weights are the ones scattered); an elastic block in the same solver."""
+    ductile, mixed = case == "ductile", case == "mixed"
+    directed = _plastic_block(False, ductile=ductile, elastic_neighbour=mixed)
+    paired = _plastic_block(None, ductile=ductile, elastic_neighbour=mixed)
+    assert directed.bond_passes == "directed" and paired.bond_passes == "pairs"
+    if case == "skewed":  # w V beta too (the plastic sums' weight), before _skew_weights rebuilds the pairs
+        for s in (directed, paired):
+            w = s.model.bond_wv
+            w.assign(w.numpy() * np.random.default_rng(6).uniform(0.8, 1.25, w.shape[0]).astype(np.float32))
+            _skew_weights(s, np.random.default_rng(4))
+    dt = 0.5 * directed.stable_time_step()
+    for _ in range(20):
+        directed.step(dt)
+        paired.step(dt)
+        assert np.array_equal(directed.bond_alive(), paired.bond_alive())
+    a, b = _plastic_state(directed), _plastic_state(paired)
+    for x, y in zip(a[2:], b[2:], strict=True):
+        assert _close(x, y)
+    assert _close(a[0], b[0])
+    yielded = (b[3][: paired.model.plastic_particle_count] > 0).mean()
+    broken = 1.0 - b[1].mean()
+    assert yielded > 0.5 and 0.01 < broken < 0.9, (yielded, broken)
+    if mixed:
+        assert paired.model.plastic_particle_count == paired.particle_count // 2
+
+
+def test_plastic_pairs_are_bit_identical_on_threads_and_through_resume():
+    """The plastic pair form (ductile failure on) on 1, 2 and 3 threads: after 20 steps the plastic state is
+    bit-identical; a run checkpointed at step 8 and restored into a fresh solver ends on the same bits."""
+    results = []
+    for threads in (1, 2, 3):
+        s = _plastic_block(None, threads=threads, ductile=True)
+        assert s.threads == threads and s.bond_passes == "pairs"
+        dt = 0.5 * s.stable_time_step()
+        s.simulate(dt, 20)
+        results.append(_plastic_state(s))
+    first = _plastic_block(None, ductile=True)
+    first.simulate(dt, 8)
+    saved = first.checkpoint()
+    first.simulate(dt, 5)  # the checkpoint is a copy: stepping on does not change it
+    resumed = _plastic_block(None, ductile=True, threads=2)
+    resumed.restore(saved)
+    resumed.simulate(dt, 12)
+    results.append(_plastic_state(resumed))
+    assert (results[0][3] > 0).mean() > 0.5 and 0.01 < 1.0 - results[0][1].mean() < 0.9
+    for other in results[1:]:
+        for x, y in zip(results[0], other, strict=True):
+            assert np.array_equal(x, y)
 
 
 def test_pair_layout():

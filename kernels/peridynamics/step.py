@@ -19,7 +19,8 @@ Formulas (kernels/peridynamics/bonds.py gives the notation and the elastic model
   Linear hardening sigma_Y = sigma_Y0 + H eps_p with the equivalent plastic strain
   eps_p = sqrt(5 sum_j w (e^p_j)^2 V_j beta_j / m_k) (equal to the uniaxial plastic strain for isochoric flow).
   The return mapping runs in the dilatation kernel, right after a yielding particle's family sums (its bonds'
-  (n, e) are then still in cache, and the volumetric sums of theta_p come with the dilatation's loop).
+  (n, e) are then still in cache, and the volumetric sums of theta_p come with the dilatation's loop); the CPU's pair
+  form runs the same arithmetic in pair passes (kernels/peridynamics/pairs.py).
 - Fracture: a live bond breaks for good when its stretch (its elastic stretch, s - (e^p_kj + e^p_jk) / (2 L), for
   a yielding material) exceeds s_c,kj - alpha min(s_min,k, s_min,j) (Silling-Askari compressive bonus, s_min the
   particle's most compressive live stretch, <= 0, from this step's dilatation pass; alpha is
@@ -39,7 +40,7 @@ reverse bond, read only by the next pass), and reads other particles' rows only 
 import warp as wp
 
 from ..launch import range_inputs
-from .bonds import deformed_bond
+from .bonds import deformed_bond, deviatoric_norm_term, returned_plastic_extension, yield_ratio
 
 _cache = {}
 
@@ -151,8 +152,6 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
                 # ||t||^2 = sum alpha^2 (e^d - e^p)^2 V beta with alpha = 2 b G^dev w and V beta = w V beta L / delta,
                 # evaluated as delta sum (2 b w V beta G^dev (e^d - e^p))^2 / (w V beta L): one division per bond.
                 delta = horizon[k]
-                sigma_y = yield_stress[k] + hardening[k] * eqps[k]
-                psi0 = psi_scale[k] * 10.0 * sigma_y * sigma_y / (3.0 * wp.pi * wp.pow(delta, 5.0))
                 th3 = float(0.0)  # theta_p / 3
                 if den > 0.0:
                     th3 = num / den
@@ -165,11 +164,10 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
                     if live != 0:
                         L = bond_geom[q][3]
                         ed = bond_ne[q][3] - th3 * L
-                        a = two_b * bond_wv_dev[q] * (ed - bond_plastic[q])
-                        norm2 += a * a / (bond_wv[q] * L)
+                        norm2 += deviatoric_norm_term(two_b, bond_wv_dev[q], bond_wv[q], L, ed, bond_plastic[q])
                 norm2 = norm2 * delta
-                if 0.5 * norm2 > psi0:
-                    r = wp.sqrt(2.0 * psi0 / norm2)
+                r = yield_ratio(norm2, delta, yield_stress[k] + hardening[k] * eqps[k], psi_scale[k])
+                if r >= 0.0:
                     ep2 = float(0.0)
                     for q in range(family_offsets[k], family_offsets[k + 1]):
                         live = int(1)
@@ -178,7 +176,7 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
                         ep = bond_plastic[q]
                         if live != 0:
                             ed = bond_ne[q][3] - th3 * bond_geom[q][3]
-                            ep = ed - r * (ed - ep)
+                            ep = returned_plastic_extension(ed, ep, r)
                             bond_plastic[q] = ep
                             bond_plastic_reverse[bond_reverse[q]] = ep
                         ep2 += bond_wv[q] * ep * ep

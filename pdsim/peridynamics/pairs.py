@@ -4,9 +4,10 @@ pair ranges and their buffers, and one step's dilatation and force passes.
 Each undirected pair is evaluated once, by the thread of its lower particle; the upper particle's share goes to a
 buffer of the pair range the lower particle belongs to, and a sum pass adds the buffers in range order. The
 PAIR_RANGES ranges are set by the particles' pair counts only (never by the thread count); the threads take
-contiguous blocks of whole ranges, so results are bit-identical for any thread count. Used on a CPU device by scenes
-without plasticity (the return mapping needs a particle's whole family: such scenes, and every CUDA scene, run the
-directed kernels of kernels/peridynamics/step.py, where the GPU would need atomics for the scatter)."""
+contiguous blocks of whole ranges, so results are bit-identical for any thread count. Used on a CPU device, with
+plasticity too (the return mapping in pair passes, kernels/peridynamics/pairs.py), except for yielding bodies with the
+rigid hand-off; those scenes and every CUDA scene run the directed kernels of kernels/peridynamics/step.py (the GPU
+would need atomics for the scatter)."""
 
 from __future__ import annotations
 
@@ -42,14 +43,17 @@ def pair_layout(
 
 
 class PairPasses:
-    """The pair form of one step's bond passes for a model without plasticity on a CPU device: the pair arrays
+    """The pair form of one step's bond passes on a CPU device (``ductile``: some yielding body has a failure plastic
+    strain, so the ductile breaking test runs): the pair arrays
     (kernels/peridynamics/pairs.py), the fixed ranges over the particles (or over the rigid hand-off's live list,
     :meth:`set_particles`) and the buffers, launched on ``threads`` threads (:meth:`set_threads`)."""
 
-    def __init__(self, model, fracture: bool, handoff: bool, device):
+    def __init__(self, model, fracture: bool, handoff: bool, device, ductile: bool = False):
         self.device = device
         self.model = model
-        self.kernels = kp.make_pair_kernels(fracture, handoff)
+        self.plastic = bool(model.plastic)
+        self.ductile = bool(ductile) and self.plastic and fracture
+        self.kernels = kp.make_pair_kernels(fracture, handoff, self.plastic, self.ductile)
         self.fracture = fracture
         n = model.particle_count
         offsets = model.family_offsets.numpy()[: n + 1]
@@ -80,11 +84,22 @@ class PairPasses:
             weights[:, column] = source.numpy()[bonds]
         self.pair_weights = arr(weights, wp.vec4)
         del weights, forward, reverse
+        self.plastic_pair_count = 0
+        if self.plastic:  # the yielding particles' pairs (a prefix): w V beta of both directions, (e^p_kj, e^p_jk)
+            self.plastic_pair_count = npp = int(pair_offsets[model.plastic_particle_count])
+            self.pair_wv = wp.zeros(max(npp, 1), dtype=wp.vec2, device=device)
+            kp.pair_values_from_bonds(npp, self.pair_bond, self.pair_reverse, model.bond_wv, self.pair_wv, device)
+            self.pair_plastic = wp.zeros(max(npp, 1), dtype=wp.vec2, device=device)
+            self.plastic_th3 = wp.zeros(n, dtype=float, device=device)  # theta_p / 3 of the step
+            self.plastic_ratio = wp.zeros(n, dtype=float, device=device)  # the return mapping's scale, -1: elastic
+            self.plastic_sum = wp.zeros(n, dtype=wp.vec2, device=device)  # own sums of the plastic passes
         self.pair_ne = wp.zeros(count, dtype=wp.vec4, device=device)
         self.cache_stale = False  # the directed bond cache lags the pairs' (bond_cache)
+        self.plastic_stale = False  # the directed plastic extensions lag the pairs' (bond_cache)
         self._threads = 1
         self._entries = None  # particle index of each list entry (the hand-off's live list), None: every particle
         self._placeholder = wp.zeros(1, dtype=float, device=device)
+        self._placeholder2 = wp.zeros(1, dtype=wp.vec2, device=device)
         self._build()
 
     # -- ranges ------------------------------------------------------------------------------------------------------
@@ -128,6 +143,7 @@ class PairPasses:
         self.theta_buffer = wp.zeros(total, dtype=float, device=d)
         self.stretch_buffer = wp.zeros(total, dtype=float, device=d) if self.fracture else self._placeholder
         self.force_buffer = wp.zeros(total, dtype=wp.vec3, device=d)
+        self.plastic_buffer = wp.zeros(total, dtype=wp.vec2, device=d) if self.plastic else self._placeholder2
         # the threads' spans: contiguous blocks of whole ranges of about equal cost
         blocks = equal_cost_bounds(cost[bounds], self._threads)
         spans = [bounds[b] for b in blocks]
@@ -135,13 +151,23 @@ class PairPasses:
 
     # -- the passes --------------------------------------------------------------------------------------------------
     def dilatation_and_forces(self, s, m, displacements, alive, live, f1) -> None:
-        """One step's dilatation (theta, bp, the most compressive stretch) and force density (with the breaking
-        test) into the state ``s`` of the model ``m`` at ``displacements``; ``alive`` the live flags (or a
-        placeholder), ``live`` the hand-off's live list (or a placeholder), ``f1`` a float placeholder."""
+        """One step's dilatation (theta, bp, the most compressive stretch), with plasticity the return mapping
+        (the plastic extensions, the equivalent plastic strain), and force density (with the breaking tests) into
+        the state ``s`` of the model ``m`` at ``displacements``; ``alive`` the live flags (or a placeholder),
+        ``live`` the hand-off's live list (or a placeholder), ``f1`` a float placeholder."""
         launch, ks = self.launcher.launch, self.kernels
         ranges = {"range_lo": self.range_lo, "buffer_base": self.buffer_base}
         sums = {"range_count": self.range_count, "range_hi": self.range_hi, **ranges}
-        frac = self.fracture
+        frac, plastic = self.fracture, self.plastic
+        v2 = self._placeholder2
+        npp = m.plastic_particle_count if plastic else 0
+        common = {
+            "plastic_particle_count": npp,
+            "plastic_sum": self.plastic_sum if plastic else v2,
+        }
+        pair_wv = self.pair_wv if plastic else v2
+        th3 = self.plastic_th3 if plastic else f1
+        ratio = self.plastic_ratio if plastic else f1
         kp.pair_dilatation(
             launch,
             ks,
@@ -159,6 +185,9 @@ class PairPasses:
             stretch_min=s.stretch_min if frac else f1,
             theta_buffer=self.theta_buffer,
             stretch_buffer=self.stretch_buffer,
+            pair_wv=pair_wv,
+            plastic_buffer=self.plastic_buffer,
+            **common,
             **ranges,
         )
         kp.pair_dilatation_sum(
@@ -173,8 +202,45 @@ class PairPasses:
             theta=s.theta,
             stretch_min=s.stretch_min if frac else f1,
             bp=s.bp,
+            plastic_buffer=self.plastic_buffer,
+            plastic_th3=th3,
+            **common,
             **sums,
         )
+        if plastic:
+            kp.pair_plastic_norm(
+                launch,
+                ks,
+                pair_slot=self.pair_slot,
+                pair_offsets=self.pair_offsets,
+                pair_neighbors=self.pair_neighbors,
+                pair_bond=self.pair_bond,
+                pair_geom=self.pair_geom,
+                pair_weights=self.pair_weights,
+                pair_wv=pair_wv,
+                pair_ne=self.pair_ne,
+                pair_plastic=self.pair_plastic,
+                bond_alive=alive,
+                dev_b=m.dev_b,
+                plastic_th3=th3,
+                theta_buffer=self.theta_buffer,
+                **common,
+                **ranges,
+            )
+            kp.pair_plastic_norm_sum(
+                launch,
+                ks,
+                theta_buffer=self.theta_buffer,
+                horizon=m.horizon,
+                yield_stress=m.yield_stress,
+                hardening=m.hardening,
+                psi_scale=m.psi_scale,
+                eqps=s.eqps,
+                plastic_ratio=ratio,
+                **common,
+                **sums,
+            )
+            self.plastic_stale = True
         kp.pair_forces(
             launch,
             ks,
@@ -195,6 +261,12 @@ class PairPasses:
             stretch_min=s.stretch_min if frac else f1,
             force_density=s.force_density,
             force_buffer=self.force_buffer,
+            pair_wv=pair_wv,
+            pair_plastic=self.pair_plastic if plastic else v2,
+            plastic_th3=th3,
+            plastic_ratio=ratio,
+            theta_buffer=self.theta_buffer,
+            **common,
             **ranges,
         )
         kp.pair_force_sum(
@@ -203,21 +275,54 @@ class PairPasses:
             live_particles=live,
             force_buffer=self.force_buffer,
             force_density=s.force_density,
+            theta_buffer=self.theta_buffer,
+            plastic_ratio=ratio,
+            weighted_volume=m.weighted_volume if plastic else f1,
+            eqps=s.eqps if plastic else f1,
+            **common,
             **sums,
         )
+        if self.ductile:
+            kp.pair_ductile_break(
+                launch,
+                ks,
+                plastic_particle_count=npp,
+                pair_offsets=self.pair_offsets,
+                pair_neighbors=self.pair_neighbors,
+                pair_bond=self.pair_bond,
+                pair_reverse=self.pair_reverse,
+                pair_ne=self.pair_ne,
+                eqps=s.eqps,
+                failure_eqps=m.failure_eqps,
+                bond_alive=alive,
+            )
         self.cache_stale = True
 
-    def bond_cache(self, bond_ne) -> None:
-        """Brings the directed bond cache ``bond_ne`` (read by the energy pass, crack events, the watchdog and
-        checkpoints) up to the pairs' last dilatation pass, if it lags."""
+    def bond_cache(self, state) -> None:
+        """Brings the directed bond cache ``state.bond_ne`` (read by the energy pass, crack events, the watchdog and
+        checkpoints) and, with plasticity, the directed plastic extensions ``state.bond_plastic`` up to the pairs'
+        last step, if they lag."""
         if self.cache_stale:
             kp.bond_cache_from_pairs(
-                self.pair_count, self.pair_bond, self.pair_reverse, self.pair_ne, bond_ne, self.device
+                self.pair_count, self.pair_bond, self.pair_reverse, self.pair_ne, state.bond_ne, self.device
             )
             self.cache_stale = False
+        if self.plastic_stale:
+            kp.bond_plastic_from_pairs(
+                self.plastic_pair_count, self.pair_bond, self.pair_reverse, self.pair_plastic, state.bond_plastic,
+                self.device,
+            )  # fmt: skip
+            self.plastic_stale = False
 
-    def restore_cache(self, bond_ne) -> None:
-        """The pairs' cache from the directed one (after a checkpoint is restored), so that later mirrors of the
-        pairs that no pass visits (broken, or in rigid fragments) write back what the directed cache held."""
-        kp.pair_cache_from_bonds(self.pair_count, self.pair_bond, bond_ne, self.pair_ne, self.device)
+    def restore_cache(self, state) -> None:
+        """The pairs' cache and plastic extensions from the directed ones (after a checkpoint is restored), so that
+        later mirrors of the pairs that no pass visits (broken, or in rigid fragments) write back what the directed
+        arrays held."""
+        kp.pair_cache_from_bonds(self.pair_count, self.pair_bond, state.bond_ne, self.pair_ne, self.device)
         self.cache_stale = False
+        if self.plastic:
+            kp.pair_values_from_bonds(
+                self.plastic_pair_count, self.pair_bond, self.pair_reverse, state.bond_plastic, self.pair_plastic,
+                self.device,
+            )  # fmt: skip
+        self.plastic_stale = False

@@ -73,14 +73,16 @@ class SolverPeridynamics(PointSolver):
             bit-identical for any thread count. The debris damping runs on the same ranges, and so do the kick and
             drift of the shared kinematics where the ranges average at least MIN_POINTS_PER_THREAD (ranges.py)
             particles. On a CUDA device each pass is one launch and ``threads`` must be None or 1.
-        pairs: the form of the dilatation and force passes. ``None`` (default): on a CPU device, for scenes without
-            plasticity, each bond pair once (pdsim/peridynamics/pairs.py: the lower particle's thread scatters the
-            other's share into fixed-range buffers, summed in a fixed order), else the directed form (every bond
-            k -> j gathered by k: the GPU, where the scatter would need atomics, and plasticity, whose return
-            mapping needs a particle's whole family). ``True`` asks for the pair form (a ParameterError where it
-            is not available), ``False`` for the directed one. Both give the same forces and dilatation to float32
-            round-off (the sums run in another order) and the same broken bonds; each is bit-identical for any
-            thread count.
+        pairs: the form of the dilatation and force passes. ``None`` (default): on a CPU device each bond pair
+            once (pdsim/peridynamics/pairs.py: the lower particle's thread scatters the other's share into
+            fixed-range buffers, summed in a fixed order; with plasticity the return mapping in pair passes too),
+            else the directed form (every bond k -> j gathered by k: the GPU, where the scatter would need atomics,
+            and a scene with a yielding body and a breakable body with the rigid hand-off, since the plastic strain
+            sums bonds to the rigid particles the pair passes leave out). ``True`` asks for the pair form (a
+            ParameterError where it is not available), ``False`` for the directed one. Both give the same forces
+            and dilatation to float32 round-off (the sums run in another order) and the same broken bonds (with
+            plasticity also the same plastic extensions and equivalent plastic strain to round-off); each is
+            bit-identical for any thread count.
 
     State: displacements from the rest configuration, velocities and accelerations (pdsim/kinematics.py), so bond
     deformation is computed from displacement differences and does not depend on where the body sits. The step
@@ -154,17 +156,18 @@ class SolverPeridynamics(PointSolver):
             self.state.bond_alive = wp.clone(m.bond_alive_initial)
             self.state.stretch_min = wp.zeros(n, dtype=float, device=d)
             self._damage = wp.zeros(n, dtype=float, device=d)
-        if m.plastic:
-            self.state.bond_plastic = wp.zeros(max(m.plastic_bond_count, 1), dtype=float, device=d)
-            self.state.bond_plastic_reverse = wp.zeros(max(m.plastic_bond_count, 1), dtype=float, device=d)
-            self.state.eqps = wp.zeros(n, dtype=float, device=d)
         handoff = m.fracture and any(b.rigid_handoff is not None and b.material.breaks for b in self.bodies)
+        self._pairs = self._pair_passes(pairs, handoff)  # PairPasses, or None: the directed passes
+        if m.plastic:  # the reverse bonds' mirror only for the directed passes (the pairs hold both directions)
+            self.state.bond_plastic = wp.zeros(max(m.plastic_bond_count, 1), dtype=float, device=d)
+            mirror = max(m.plastic_bond_count, 1) if self._pairs is None else 1
+            self.state.bond_plastic_reverse = wp.zeros(mirror, dtype=float, device=d)
+            self.state.eqps = wp.zeros(n, dtype=float, device=d)
         self._kernels = pd_step.make_step_kernels(m.fracture, m.plastic, handoff)
         self._offsets_host = m.family_offsets.numpy()[: n + 1].astype(np.int64)
         self._ranges = None  # ranges over every particle (energy, damage); _bond_ranges: the bond passes'
         self._all_particles = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=d)
         self.handoff = None  # FragmentHandoff (pdsim/peridynamics/handoff.py) when a body has rigid_handoff on
-        self._pairs = self._pair_passes(pairs, handoff)  # PairPasses, or None: the directed passes
         self.threads = threads
         if handoff:
             self.handoff = FragmentHandoff(self)
@@ -239,15 +242,19 @@ class SolverPeridynamics(PointSolver):
         why = None
         if self.device.is_cuda:
             why = f"the CUDA device {self.device} (the scatter would need atomics)"
-        elif self.model.plastic:
-            why = "a yielding material (the return mapping needs a particle's whole family)"
+        elif self.model.plastic and handoff:
+            why = (
+                "a yielding material with rigid_handoff (a yielding particle's plastic strain sums its bonds to rigid"
+                " particles, which the pair passes leave out)"
+            )
         if why is not None:
             if pairs:
                 raise ParameterError("pairs", pairs, f"None or False with {why}")
             return None
         if pairs is False:
             return None
-        return PairPasses(self.model, self.model.fracture, handoff, self.device)
+        ductile = any(b.material.failure_plastic_strain is not None for b in self.bodies)
+        return PairPasses(self.model, self.model.fracture, handoff, self.device, ductile=ductile)
 
     @property
     def bond_passes(self) -> str:
@@ -257,7 +264,7 @@ class SolverPeridynamics(PointSolver):
     def bond_cache(self):
         """The bond cache (n, e) per directed bond of the last dilatation pass (state.bond_ne), complete."""
         if self._pairs is not None:
-            self._pairs.bond_cache(self.state.bond_ne)
+            self._pairs.bond_cache(self.state)
         return self.state.bond_ne
 
     # -- time step -----------------------------------------------------------------------------------------------
@@ -295,9 +302,10 @@ class SolverPeridynamics(PointSolver):
         return alive, plastic, reverse
 
     def _mirror_plastic(self):
-        """bond_plastic_reverse from bond_plastic (after a restore; the step keeps the mirror itself)."""
+        """bond_plastic_reverse from bond_plastic (after a restore; the step keeps the mirror itself) for the directed
+        passes (the pair form restores its own plastic extensions: PairPasses.restore_cache)."""
         m, s = self.model, self.state
-        if m.plastic and m.plastic_bond_count > 0:
+        if m.plastic and m.plastic_bond_count > 0 and self._pairs is None:
             pd_step.mirror_plastic(
                 m.plastic_bond_count, m.bond_reverse, s.bond_plastic, s.bond_plastic_reverse, self.device
             )
@@ -440,7 +448,7 @@ class SolverPeridynamics(PointSolver):
             assign_state(getattr(s, name), values, name)
         self._mirror_plastic()
         if self._pairs is not None:
-            self._pairs.restore_cache(s.bond_ne)
+            self._pairs.restore_cache(s)
         if self.handoff is not None:
             self.handoff.restore(state["handoff"])
         if self.contact is not None:
