@@ -1,8 +1,7 @@
 """The sliver clean-up tile by tile (pdsim/fragment_surfaces/tiles.py). A tile's result depends on its own raw
 triangles only: surfaces rebuilt with the tiles' results kept from earlier rebuilds equal, bit for bit, surfaces
 made anew at the last step (so no record crosses rebuilds or checkpoints); the shells stay closed and partition the
-solid (not yet: the chips' rebuild loses 2.3e-6 of the volume, see the xfail test); a rebuild that changes a corner
-of the body cleans a fraction of the tiles."""
+solid; a rebuild that changes a corner of the body cleans a fraction of the tiles."""
 
 from __future__ import annotations
 
@@ -48,7 +47,6 @@ def test_tiles_kept_across_rebuilds_equal_surfaces_made_anew():
     assert fractions[2] < 0.5, fractions
 
 
-@pytest.mark.xfail(strict=True, reason="the tiled clean-up loses 2.3e-6 of the box's volume at the chips' rebuild")
 def test_tiled_shells_partition_the_box():
     """The shells' signed volumes add up to the box's (relative 1e-9) after each of the three steps."""
     centre = np.array([1000.0, -500.0, 3.0])

@@ -143,7 +143,7 @@ def _collapse_round(
     """One round of edge collapses on the complex (see :func:`clean_complex`). Returns (triangles after the round
     [f, 3], mask [f] of the triangles that keep an area, number of collapses; 0: nothing left to do). With
     ``movable`` (bool [v]) only those vertices may move onto a neighbour; with ``fixed`` (bool [v]) no edge with a
-    fixed end collapses. ``shell_size``: None, or the vertex count of each shell (int [shell count]) when ``tri`` is
+    fixed end collapses, nor one that narrows a triangle holding a fixed vertex into a sliver. ``shell_size``: None, or the vertex count of each shell (int [shell count]) when ``tri`` is
     part of a larger complex (default: counted in ``tri``). ``group``: None, or the group of each vertex (int [v],
     non-decreasing in the vertex id), whose ties are broken within the group (see :func:`clean_complex`)."""
     n_v = points.shape[0]
@@ -243,6 +243,9 @@ def _collapse_round(
     dot = np.einsum("ij,ij->i", n_old, n_new)
     significant = ~sliver[check] & (length[side_edge[check]].max(axis=1) >= short_edge * spacing)
     turned = (dot <= 0.5 * np.linalg.norm(n_old, axis=1) * np.linalg.norm(n_new, axis=1)) & significant
+    if fixed is not None:  # no collapse may narrow a triangle at a fixed vertex into a sliver (no round could undo it)
+        a_new = _min_angles(t_new)
+        turned |= fixed[new[check]].any(axis=1) & (a_new < sliver_angle) & (a_new < _min_angles(t_old))
     if turned.any():
         which = np.full(n_v, -1)
         which[src] = np.arange(len(src))

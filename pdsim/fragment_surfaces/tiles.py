@@ -16,7 +16,7 @@ no record is carried across rebuilds or checkpoints.
 Three passes: the tiles, the tiles shifted by half a tile along every axis (on the first pass's result, working
 only within two rings of the vertices the first pass held fixed), and one pass over the whole complex within two
 rings of the vertices both passes held fixed (where a first-pass border crosses a second-pass border) and of the
-slivers left.
+slivers left. Every pass holds the vertices of one-sided crack faces (:func:`_one_sided`).
 """
 
 from __future__ import annotations
@@ -94,6 +94,23 @@ def _canonical(points, tri, shell, patch, fixed, settled, big_shell, plane_of_pa
     return verts, lt, cs, cp, shells, patches, settled, digest.digest()
 
 
+def _one_sided(tri, crack, vertex_count) -> np.ndarray:
+    """Bool [v]: vertices of crack triangles (``crack`` bool [f]) that no other triangle repeats in reverse (a crack
+    face with one side only, e.g. on the input surface where the region beyond is outside the solid). Moving them
+    would change one shell's volume with nothing on the other side to make up for it, so every pass holds them."""
+    t = tri[crack]
+    first = np.argmin(t, axis=1)[:, None]
+    t = np.take_along_axis(t, (first + np.arange(3)) % 3, axis=1)
+    n = np.int64(vertex_count)
+    key = (t[:, 0] * n + t[:, 1]) * n + t[:, 2]
+    rev = (t[:, 0] * n + t[:, 2]) * n + t[:, 1]
+    sk = np.sort(key)
+    paired = sk[np.minimum(np.searchsorted(sk, rev), max(len(sk) - 1, 0))] == rev if len(sk) else np.zeros(0, bool)
+    out = np.zeros(vertex_count, dtype=bool)
+    out[t[~paired].ravel()] = True
+    return out
+
+
 class TiledCleanup:
     """The tiled sliver clean-up of one body's shell complexes, keeping each tile's result for the next rebuild.
 
@@ -125,7 +142,8 @@ class TiledCleanup:
         plane_eq = np.full((len(plane_of_patch), 4), np.nan)
         planar = plane_of_patch >= 0
         plane_eq[planar] = self.plane_eq[plane_of_patch[planar]]
-        context = (big_shell, plane_of_patch, plane_eq)
+        lonely = _one_sided(tri, plane_of_patch[patch] < 0, n_v)
+        context = (big_shell, plane_of_patch, plane_eq, lonely)
         self.cleaned_tiles = self.tiles = 0
         held_a, settled = None, None
         for index, shift in enumerate((0.0, 0.5)):
@@ -140,7 +158,7 @@ class TiledCleanup:
         settled = ~_two_rings(tri, np.concatenate([np.flatnonzero(held), tri[sliver].ravel()]), n_v)
         tri, shell, patch = clean_complex(
             points, tri, shell, patch, self.spacing, surface=(*self.surface, plane_of_patch), plane_eq=plane_eq,
-            settled=settled,
+            settled=settled, fixed=lonely,
         )  # fmt: skip
         return points, tri, shell, patch
 
@@ -148,7 +166,7 @@ class TiledCleanup:
         """One pass over the tiles shifted by ``shift`` tiles: (tri, shell, patch, held) after it, ``held`` bool [v]
         the vertices it held fixed; ``points`` is changed in place. ``settled``: None, or bool [f], triangles
         left unflagged unless something near them changes."""
-        big_shell, plane_of_patch, plane_eq = context
+        big_shell, plane_of_patch, plane_eq, lonely = context
         n_v = len(points)
         cell = np.floor((points - self.anchor) / self.tile - shift).astype(np.int64)
         _, tile_of = np.unique(cell, axis=0, return_inverse=True)
@@ -157,6 +175,7 @@ class TiledCleanup:
         inside = (tt[:, 0] == tt[:, 1]) & (tt[:, 1] == tt[:, 2])
         held = np.zeros(n_v, dtype=bool)
         held[tri[~inside]] = True
+        fixed = held | lonely
         flag = _needs_work(points, tri, self.spacing, SHORT_EDGE, SLIVER_ANGLE)
         if settled is not None:
             flag &= ~settled
@@ -173,14 +192,14 @@ class TiledCleanup:
         for k in range(len(work)):
             r = rows[bounds[k] : bounds[k + 1]]
             canon = _canonical(
-                points, tri[r], shell[r], patch[r], held, None if settled is None else settled[r], big_shell,
+                points, tri[r], shell[r], patch[r], fixed, None if settled is None else settled[r], big_shell,
                 plane_of_patch,
             )  # fmt: skip
             tiles.append(canon)
             if canon[-1] not in kept:
                 todo.append(k)
         if todo:
-            self._clean_tiles(points, [tiles[k] for k in todo], held, settled is not None, kept, context)
+            self._clean_tiles(points, [tiles[k] for k in todo], fixed, settled is not None, kept, context)
         self.cleaned_tiles += len(todo)
         parts_t, parts_s, parts_p = [tri[~mine]], [shell[~mine]], [patch[~mine]]
         for verts, _, _, _, shells, patches, _, key in tiles:
@@ -194,9 +213,9 @@ class TiledCleanup:
         kept.update(new_kept)
         return np.concatenate(parts_t), np.concatenate(parts_s), np.concatenate(parts_p), held
 
-    def _clean_tiles(self, points, tiles, held, with_settled, kept, context):
+    def _clean_tiles(self, points, tiles, fixed, with_settled, kept, context):
         """Cleans the canonical tiles ``tiles`` together (independent groups) and keeps each one's result."""
-        big_shell, plane_of_patch, plane_eq = context
+        big_shell, plane_of_patch, plane_eq, _ = context
         v_off = np.concatenate([[0], np.cumsum([len(t[0]) for t in tiles])])
         s_off = np.concatenate([[0], np.cumsum([len(t[4]) for t in tiles])])
         p_off = np.concatenate([[0], np.cumsum([len(t[5]) for t in tiles])])
@@ -204,7 +223,7 @@ class TiledCleanup:
         u_tri = np.concatenate([t[1] + v_off[k] for k, t in enumerate(tiles)])
         u_shell = np.concatenate([t[2] + s_off[k] for k, t in enumerate(tiles)])
         u_patch = np.concatenate([t[3] + p_off[k] for k, t in enumerate(tiles)])
-        u_fixed = np.concatenate([held[t[0]] for t in tiles])
+        u_fixed = np.concatenate([fixed[t[0]] for t in tiles])
         u_group = np.repeat(np.arange(len(tiles)), np.diff(v_off))
         u_size = np.where(np.concatenate([big_shell[t[4]] for t in tiles]), 7, 6)
         u_plane = np.concatenate([plane_of_patch[t[5]] for t in tiles])
