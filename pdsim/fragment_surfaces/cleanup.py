@@ -650,24 +650,30 @@ def clean_complex(
             break
         sub, active = _neighbourhood(tri, flag, len(points))
         ts, ss, ps = tri[sub], shell[sub], patch[sub]
+        # with fixed vertices, the vertices outside the round's one ring (whose triangles may lack from sub) are
+        # held too: a settled triangle's short side then never collapses with half its neighbourhood seen
+        held = None if fixed is None else fixed | ~active
         new, keep, collapsed = _collapse_round(
-            points, ts, ss, ps, spacing, short_edge, sliver_angle, plane_eq, shell_size=shell_size, fixed=fixed,
+            points, ts, ss, ps, spacing, short_edge, sliver_angle, plane_eq, shell_size=shell_size, fixed=held,
             group=group,
         )  # fmt: skip
         t1, s1, p1 = new[keep], ss[keep], ps[keep]
         t0 = t1.copy()
-        t1, flipped = _flip_near_slivers(points, t1, s1, p1, sliver_angle, fixed, group)
+        t1, flipped = _flip_near_slivers(points, t1, s1, p1, sliver_angle, held, group)
         if group is not None:
             tri, shell, patch, flag, settled, origin = _group_round(
                 points, (tri, shell, patch, flag, settled, origin), sub, active, (ts, ss, ps, new, keep, t0, t1),
-                fixed, group, done, plane_eq, surface, spacing, short_edge, sliver_angle,
+                held, group, done, plane_eq, surface, spacing, short_edge, sliver_angle,
             )  # fmt: skip
             continue
         if collapsed == 0 and flipped == 0:
             # vertex moves change no connectivity: the shells stay closed
             around = np.unique(t1) if settled is not None else None
             before = None if around is None else points[around].copy()
-            if _relax_round(points, t1, p1, plane_eq, sliver_angle, max_turn=RELAX_TURN, surface=surface) == 0:
+            relax = _relax_round(
+                points, t1, p1, plane_eq, sliver_angle, max_turn=RELAX_TURN, surface=surface, fixed=held
+            )
+            if relax == 0:
                 break
             flag[sub] = _needs_work(points, t1, spacing, short_edge, sliver_angle)
             if settled is not None:

@@ -158,7 +158,7 @@ class TiledCleanup:
         settled = ~_two_rings(tri, np.concatenate([np.flatnonzero(held), tri[sliver].ravel()]), n_v)
         tri, shell, patch = clean_complex(
             points, tri, shell, patch, self.spacing, surface=(*self.surface, plane_of_patch), plane_eq=plane_eq,
-            settled=settled, fixed=lonely,
+            settled=settled, fixed=np.zeros(n_v, dtype=bool),
         )  # fmt: skip
         return points, tri, shell, patch
 
