@@ -13,10 +13,13 @@ that content: a later rebuild takes the kept result of every tile whose content 
 only the others. The result is a function of the raw complex alone, whether or not a tile's result was kept, so
 no record is carried across rebuilds or checkpoints.
 
-Three passes: the tiles, the tiles shifted by half a tile along every axis (on the first pass's result, working
-only within two rings of the vertices the first pass held fixed), and one pass over the whole complex within two
-rings of the vertices both passes held fixed (where a first-pass border crosses a second-pass border) and of the
-slivers left. Every pass holds the vertices of one-sided crack faces (:func:`_one_sided`).
+Four passes, each on a part of the complex with the vertices of triangles outside the part held fixed (so the
+work stays bounded, as a part's clean-up cannot spread beyond it): the tiles, holding the vertices of one-sided
+crack faces (:func:`_one_sided`); the tiles shifted by half a tile along every axis, on the triangles within two
+rings of the vertices the first pass held; the tiles shifted by a quarter tile, on the triangles within two rings
+of the vertices both passes held (where a first-pass border crosses a second-pass border), with the one-sided crack
+faces free again (as in the whole clean-up); and, where slivers are left, all space as one tile on the triangles
+within two rings of them.
 """
 
 from __future__ import annotations
@@ -47,10 +50,10 @@ def _plane_equations(surface) -> np.ndarray:
     return np.concatenate([normal, offset[:, None]], axis=1)
 
 
-def _canonical(points, tri, shell, patch, fixed, settled, big_shell, plane_of_patch):
+def _canonical(points, tri, shell, patch, fixed, big_shell, plane_of_patch):
     """A tile's triangles in a numbering fixed by their content: (vertex ids [k] in canonical order, triangles
     [f, 3] over them, canonical shell [f], canonical patch [f], shell ids [s] and patch ids [p] in canonical order,
-    ``settled`` [f] in canonical order (or None), digest). Vertices are ordered by position, each triangle starts at its smallest vertex, shells and patches are
+    digest). Vertices are ordered by position, each triangle starts at its smallest vertex, shells and patches are
     ordered by their smallest triangle, triangles by (shell, corners)."""
     verts, local = np.unique(tri, return_inverse=True)
     pos = points[verts]
@@ -76,7 +79,6 @@ def _canonical(points, tri, shell, patch, fixed, settled, big_shell, plane_of_pa
     patches, cp = relabel(patch)
     tri_order = np.lexsort((key3, cs))
     lt, cs, cp = lt[tri_order], cs[tri_order], cp[tri_order]
-    settled = None if settled is None else settled[tri_order]
     verts = verts[order]
     digest = hashlib.blake2b(digest_size=20)
     for part in (
@@ -87,11 +89,10 @@ def _canonical(points, tri, shell, patch, fixed, settled, big_shell, plane_of_pa
         plane_of_patch[patches],
         big_shell[shells],
         fixed[verts],
-        np.zeros(0, dtype=bool) if settled is None else settled,
     ):
         digest.update(np.ascontiguousarray(part).tobytes())
         digest.update(b"|")
-    return verts, lt, cs, cp, shells, patches, settled, digest.digest()
+    return verts, lt, cs, cp, shells, patches, digest.digest()
 
 
 def _one_sided(tri, crack, vertex_count) -> np.ndarray:
@@ -126,7 +127,7 @@ class TiledCleanup:
         self.tile = float(tile) * self.spacing
         self.anchor = np.asarray(surface[0], dtype=np.float64).min(axis=0)
         self.plane_eq = _plane_equations(surface)
-        self.kept: list[dict] = [{}, {}]  # per pass: digest -> (triangles, shells, patches, points) of the tile
+        self.kept: list[dict] = [{}, {}, {}, {}]  # per pass: digest -> (triangles, shells, patches, points) of the tile
         self.cleaned_tiles = 0  # tiles cleaned (not taken from an earlier rebuild) at the last call
         self.tiles = 0  # tiles with work at the last call
 
@@ -143,42 +144,41 @@ class TiledCleanup:
         planar = plane_of_patch >= 0
         plane_eq[planar] = self.plane_eq[plane_of_patch[planar]]
         lonely = _one_sided(tri, plane_of_patch[patch] < 0, n_v)
-        context = (big_shell, plane_of_patch, plane_eq, lonely)
+        context = (big_shell, plane_of_patch, plane_eq)
         self.cleaned_tiles = self.tiles = 0
-        held_a, settled = None, None
-        for index, shift in enumerate((0.0, 0.5)):
-            tri, shell, patch, held = self._pass(points, tri, shell, patch, shift, settled, self.kept[index], context)
-            if held_a is None:
-                held_a = held
-                settled = ~_two_rings(tri, np.flatnonzero(held), n_v)
-            else:
-                held &= held_a
-        # where both passes held vertices fixed, and at every sliver left: one pass over the whole complex
+        # the tiles, holding one-sided crack faces
+        tri, shell, patch, held_a = self._pass(points, tri, shell, patch, 0.0, None, lonely, self.kept[0], context)
+        # the shifted tiles, on the triangles within two rings of what the first pass held
+        part = _two_rings(tri, np.flatnonzero(held_a & ~lonely), n_v)
+        tri, shell, patch, held = self._pass(points, tri, shell, patch, 0.5, part, lonely, self.kept[1], context)
+        # the tiles shifted by a quarter, within two rings of what both passes held (one-sided faces free)
+        part = _two_rings(tri, np.flatnonzero(held & held_a & ~lonely), n_v)
+        nothing = np.zeros(n_v, dtype=bool)
+        tri, shell, patch, _ = self._pass(points, tri, shell, patch, 0.25, part, nothing, self.kept[2], context)
+        # one tile: within two rings of the slivers left
         sliver = _min_angles(points[tri]) < SLIVER_ANGLE
-        settled = ~_two_rings(tri, np.concatenate([np.flatnonzero(held), tri[sliver].ravel()]), n_v)
-        tri, shell, patch = clean_complex(
-            points, tri, shell, patch, self.spacing, surface=(*self.surface, plane_of_patch), plane_eq=plane_eq,
-            settled=settled, fixed=np.zeros(n_v, dtype=bool),
-        )  # fmt: skip
+        if sliver.any():
+            part = _two_rings(tri, tri[sliver].ravel(), n_v)
+            tri, shell, patch, _ = self._pass(points, tri, shell, patch, None, part, nothing, self.kept[3], context)
         return points, tri, shell, patch
 
-    def _pass(self, points, tri, shell, patch, shift, settled, kept, context):
-        """One pass over the tiles shifted by ``shift`` tiles: (tri, shell, patch, held) after it, ``held`` bool [v]
-        the vertices it held fixed; ``points`` is changed in place. ``settled``: None, or bool [f], triangles
-        left unflagged unless something near them changes."""
-        big_shell, plane_of_patch, plane_eq, lonely = context
+    def _pass(self, points, tri, shell, patch, shift, part, lonely, kept, context):
+        """One pass over the tiles shifted by ``shift`` tiles (None: all space is one tile), on the triangles ``part``
+        (bool [f]; None: all): (tri, shell, patch, held) after it, ``held`` bool [v] the vertices it held fixed (those
+        with a triangle outside the tiles' parts, and ``lonely``); ``points`` is changed in place."""
         n_v = len(points)
-        cell = np.floor((points - self.anchor) / self.tile - shift).astype(np.int64)
-        _, tile_of = np.unique(cell, axis=0, return_inverse=True)
-        tile_of = tile_of.reshape(-1)
+        if shift is None:
+            tile_of = np.zeros(n_v, dtype=np.int64)
+        else:
+            cell = np.floor((points - self.anchor) / self.tile - shift).astype(np.int64)
+            tile_of = np.unique(cell, axis=0, return_inverse=True)[1].reshape(-1)
         tt = tile_of[tri]
         inside = (tt[:, 0] == tt[:, 1]) & (tt[:, 1] == tt[:, 2])
-        held = np.zeros(n_v, dtype=bool)
+        if part is not None:
+            inside &= part
+        held = lonely.copy()
         held[tri[~inside]] = True
-        fixed = held | lonely
         flag = _needs_work(points, tri, self.spacing, SHORT_EDGE, SLIVER_ANGLE)
-        if settled is not None:
-            flag &= ~settled
         work = np.unique(tt[inside & flag, 0])
         self.tiles += len(work)
         in_work = np.zeros(int(tile_of.max()) + 1, dtype=bool)
@@ -186,23 +186,18 @@ class TiledCleanup:
         mine = inside & in_work[tt[:, 0]]
         rows = np.flatnonzero(mine)
         rows = rows[np.argsort(tt[rows, 0], kind="stable")]
-        bounds = np.searchsorted(tt[rows, 0], work)
-        bounds = np.append(bounds, len(rows))
+        bounds = np.append(np.searchsorted(tt[rows, 0], work), len(rows))
         tiles, todo, new_kept = [], [], {}
         for k in range(len(work)):
             r = rows[bounds[k] : bounds[k + 1]]
-            canon = _canonical(
-                points, tri[r], shell[r], patch[r], fixed, None if settled is None else settled[r], big_shell,
-                plane_of_patch,
-            )  # fmt: skip
-            tiles.append(canon)
-            if canon[-1] not in kept:
+            tiles.append(_canonical(points, tri[r], shell[r], patch[r], held, *context[:2]))
+            if tiles[-1][-1] not in kept:
                 todo.append(k)
         if todo:
-            self._clean_tiles(points, [tiles[k] for k in todo], fixed, settled is not None, kept, context)
+            self._clean_tiles(points, [tiles[k] for k in todo], held, kept, context)
         self.cleaned_tiles += len(todo)
         parts_t, parts_s, parts_p = [tri[~mine]], [shell[~mine]], [patch[~mine]]
-        for verts, _, _, _, shells, patches, _, key in tiles:
+        for verts, _, _, _, shells, patches, key in tiles:
             lt, ls, lp, lpos = kept[key]
             new_kept[key] = kept[key]
             points[verts] = lpos
@@ -213,9 +208,9 @@ class TiledCleanup:
         kept.update(new_kept)
         return np.concatenate(parts_t), np.concatenate(parts_s), np.concatenate(parts_p), held
 
-    def _clean_tiles(self, points, tiles, fixed, with_settled, kept, context):
+    def _clean_tiles(self, points, tiles, fixed, kept, context):
         """Cleans the canonical tiles ``tiles`` together (independent groups) and keeps each one's result."""
-        big_shell, plane_of_patch, plane_eq, _ = context
+        big_shell, plane_of_patch, plane_eq = context
         v_off = np.concatenate([[0], np.cumsum([len(t[0]) for t in tiles])])
         s_off = np.concatenate([[0], np.cumsum([len(t[4]) for t in tiles])])
         p_off = np.concatenate([[0], np.cumsum([len(t[5]) for t in tiles])])
@@ -228,10 +223,9 @@ class TiledCleanup:
         u_size = np.where(np.concatenate([big_shell[t[4]] for t in tiles]), 7, 6)
         u_plane = np.concatenate([plane_of_patch[t[5]] for t in tiles])
         u_eq = np.concatenate([plane_eq[t[5]] for t in tiles])
-        u_settled = np.concatenate([t[6] for t in tiles]) if with_settled else None
         tri, shell, patch = clean_complex(
             u_points, u_tri, u_shell, u_patch, self.spacing, surface=(*self.surface, u_plane), plane_eq=u_eq,
-            shell_size=u_size, fixed=u_fixed, group=u_group, settled=u_settled,
+            shell_size=u_size, fixed=u_fixed, group=u_group,
         )  # fmt: skip
         g = u_group[tri[:, 0]]
         order = np.argsort(g, kind="stable")
