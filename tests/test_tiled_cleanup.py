@@ -6,7 +6,6 @@ solid; a rebuild that changes a corner of the body cleans a fraction of the tile
 from __future__ import annotations
 
 import numpy as np
-import pytest
 from test_surface_reuse import H, _lattice_in, _steps
 
 import pdsim

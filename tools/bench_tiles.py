@@ -111,7 +111,8 @@ def main(argv=None) -> int:
         tiled_s += t2 - t1
         closed = bool(shells_closed(t_tri, t_shell, len(p_tiled)).all())
         print(
-            f"{i:4d}  {body}  {len(tri):6d} | {t1 - t0:5.2f} {quality(p_whole, w_tri, w_patch, kw['crack_patch'], spacing)}"
+            f"{i:4d}  {body}  {len(tri):6d} | {t1 - t0:5.2f}"
+            f" {quality(p_whole, w_tri, w_patch, kw['crack_patch'], spacing)}"
             f" | {t2 - t1:5.2f} {quality(p_tiled, t_tri, t_patch, kw['crack_patch'], spacing)} {closed}"
             f" {tiles.cleaned_tiles}/{tiles.tiles}",
             flush=True,

@@ -143,9 +143,10 @@ def _collapse_round(
     """One round of edge collapses on the complex (see :func:`clean_complex`). Returns (triangles after the round
     [f, 3], mask [f] of the triangles that keep an area, number of collapses; 0: nothing left to do). With
     ``movable`` (bool [v]) only those vertices may move onto a neighbour; with ``fixed`` (bool [v]) no edge with a
-    fixed end collapses, nor one that narrows a triangle holding a fixed vertex into a sliver. ``shell_size``: None, or the vertex count of each shell (int [shell count]) when ``tri`` is
-    part of a larger complex (default: counted in ``tri``). ``group``: None, or the group of each vertex (int [v],
-    non-decreasing in the vertex id), whose ties are broken within the group (see :func:`clean_complex`)."""
+    fixed end collapses, nor one that narrows a triangle holding a fixed vertex into a sliver. ``shell_size``:
+    None, or the vertex count of each shell (int [shell count]) when ``tri`` is part of a larger complex (default:
+    counted in ``tri``). ``group``: None, or the group of each vertex (int [v], non-decreasing in the vertex id),
+    whose ties are broken within the group (see :func:`clean_complex`)."""
     n_v = points.shape[0]
     lo, hi, side_edge = _undirected_edges(tri, n_v)
     length = np.linalg.norm(points[lo] - points[hi], axis=1)
@@ -624,7 +625,7 @@ def clean_complex(
         (tri, shell, patch) after the collapses (triangles that became degenerate removed), and the surviving
         triangles' ``origin`` when given.
     """
-    if plane_eq is None and crack_patch is not None:  # unit normal and offset of every input-plane patch (NaN: crack patches)
+    if plane_eq is None and crack_patch is not None:  # unit normal and offset of every input-plane patch (NaN: cracks)
         f_points, f_tri, f_patch = (points, tri, patch) if planes_from is None else planes_from
         p_count = max(int(patch.max()), int(f_patch.max())) + 1
         t = f_points[f_tri]

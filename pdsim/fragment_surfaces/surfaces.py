@@ -57,12 +57,12 @@ class FragmentSurfaces:
         device: Warp device of the one-off grid-near-mesh query.
         reuse: a rebuild takes the previous rebuild's clip of every region whose geometry is unchanged, bit for bit
             (default True; the shells are the same either way, False clips every region again).
-        carry_edits: a rebuild takes the last sliver clean-up's edits wherever the complex around them is unchanged
-            and cleans only the rest (default True; pdsim/fragment_surfaces/edits.py); False cleans the whole
-            complex at every rebuild.
-        clean_tiles: clean tile by tile (pdsim/fragment_surfaces/tiles.py: a tile's result depends on its own raw
-            triangles only and is taken from the last rebuild where those are unchanged) instead of the whole
-            complex; replaces ``carry_edits`` (default False).
+        carry_edits: with ``clean_tiles`` off, a rebuild takes the last sliver clean-up's edits wherever the
+            complex around them is unchanged and cleans only the rest (default True;
+            pdsim/fragment_surfaces/edits.py); False cleans the whole complex at every rebuild.
+        clean_tiles: clean tile by tile (default False; pdsim/fragment_surfaces/tiles.py: a tile's result depends
+            on its own raw triangles only and is taken from the last rebuild where those are unchanged, so nothing
+            is carried across rebuilds or checkpoints); False: the whole complex, with or without ``carry_edits``.
 
     Attributes:
         fragment_ids: fragment label of each shell (chips carry their particle's fragment label; several shells
@@ -76,7 +76,7 @@ class FragmentSurfaces:
         rebuild_seconds: wall time of the last rebuild [s].
         clips_made: regions the last rebuild clipped (the others took the previous rebuild's clips).
         clean_record: the last clean-up's record (pdsim/fragment_surfaces/edits.py: complex_record; empty when none),
-            or None when ``carry_edits`` is off.
+            or None when ``carry_edits`` is off or ``clean_tiles`` on.
     """
 
     def __init__(

@@ -14,12 +14,12 @@ only the others. The result is a function of the raw complex alone, whether or n
 no record is carried across rebuilds or checkpoints.
 
 Four passes, each on a part of the complex with the vertices of triangles outside the part held fixed (so the
-work stays bounded, as a part's clean-up cannot spread beyond it): the tiles, holding the vertices of one-sided
-crack faces (:func:`_one_sided`); the tiles shifted by half a tile along every axis, on the triangles within two
-rings of the vertices the first pass held; the tiles shifted by a quarter tile, on the triangles within two rings
-of the vertices both passes held (where a first-pass border crosses a second-pass border), with the one-sided crack
-faces free again (as in the whole clean-up); and, where slivers are left, all space as one tile on the triangles
-within two rings of them.
+work stays bounded, as a part's clean-up cannot spread beyond it): the tiles; the tiles shifted by half a tile
+along every axis, on the triangles within two rings of the vertices the first pass held; the tiles shifted by a
+quarter tile, on the triangles within two rings of the vertices both passes held (where a first-pass border crosses
+a second-pass border); and, where slivers are left, all space as one tile on the triangles within two rings of
+them. Every pass holds the vertices of one-sided crack faces (:func:`_one_sided`), so the shells still partition
+the solid exactly.
 """
 
 from __future__ import annotations
@@ -151,15 +151,14 @@ class TiledCleanup:
         # the shifted tiles, on the triangles within two rings of what the first pass held
         part = _two_rings(tri, np.flatnonzero(held_a & ~lonely), n_v)
         tri, shell, patch, held = self._pass(points, tri, shell, patch, 0.5, part, lonely, self.kept[1], context)
-        # the tiles shifted by a quarter, within two rings of what both passes held (one-sided faces free)
+        # the tiles shifted by a quarter, within two rings of what both passes held
         part = _two_rings(tri, np.flatnonzero(held & held_a & ~lonely), n_v)
-        nothing = np.zeros(n_v, dtype=bool)
-        tri, shell, patch, _ = self._pass(points, tri, shell, patch, 0.25, part, nothing, self.kept[2], context)
+        tri, shell, patch, _ = self._pass(points, tri, shell, patch, 0.25, part, lonely, self.kept[2], context)
         # one tile: within two rings of the slivers left
         sliver = _min_angles(points[tri]) < SLIVER_ANGLE
         if sliver.any():
             part = _two_rings(tri, tri[sliver].ravel(), n_v)
-            tri, shell, patch, _ = self._pass(points, tri, shell, patch, None, part, nothing, self.kept[3], context)
+            tri, shell, patch, _ = self._pass(points, tri, shell, patch, None, part, lonely, self.kept[3], context)
         return points, tri, shell, patch
 
     def _pass(self, points, tri, shell, patch, shift, part, lonely, kept, context):
