@@ -12,7 +12,8 @@ one in turn (CPU seconds of this process) and prints, for each: triangles out, t
 0.3 h or an angle under 5 degrees), crack triangles under 5 degrees and the smallest crack angle [degrees]; for the
 tiled one also whether every shell is closed and how many tiles had work and were cleaned (the others were taken
 from an earlier call). Calls before ``--first`` are run through the tiled clean-up only (to fill its tiles) and not
-timed.
+timed. ``--flags`` prints instead, for each call, why its raw triangles are flagged: crack and outer triangles
+with a side under 0.3 h, with an angle under 5 degrees, and the quartiles of the crack triangles' shortest side [h].
 """
 
 from __future__ import annotations
@@ -73,6 +74,20 @@ def quality(points, tri, patch, crack_patch, spacing) -> tuple:
     return len(tri), flagged, int((smallest[crack] < SLIVER_ANGLE).sum()), round(low, 2)
 
 
+def flags(points, tri, patch, crack_patch, spacing) -> str:
+    """Why the raw triangles are flagged: per kind (crack, outer), the count, those with a side under 0.3 h and
+    those with an angle under 5 degrees; the quartiles of the crack triangles' shortest side [spacings]."""
+    crack = np.asarray(crack_patch, dtype=bool)[patch]
+    t = points[tri]
+    side = np.linalg.norm(t[:, [1, 2, 0]] - t, axis=2).min(axis=1) / spacing
+    sliver = triangle_angles(points, tri).min(axis=1) < SLIVER_ANGLE
+    out = []
+    for name, kind in (("crack", crack), ("outer", ~crack)):
+        out.append(f"{name} {kind.sum()}: short {(kind & (side < SHORT_EDGE)).sum()}, sliver {(kind & sliver).sum()}")
+    q = np.quantile(side[crack], [0.25, 0.5, 0.75]) if crack.any() else np.zeros(3)
+    return "; ".join(out) + f"; crack shortest side quartiles {q[0]:.3f} {q[1]:.3f} {q[2]:.3f} h"
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scene", default="four_walls")
@@ -81,6 +96,7 @@ def main(argv=None) -> int:
     parser.add_argument("--calls", help="read the calls from this pickle instead of running the scene")
     parser.add_argument("--first", type=int, default=0, help="first call timed (earlier ones only fill the tiles)")
     parser.add_argument("--tile", type=float, default=TILE, help=f"tile edge [spacings] (default {TILE})")
+    parser.add_argument("--flags", action="store_true", help="print why the raw triangles are flagged, no timing")
     args = parser.parse_args(argv)
     if args.calls:
         with open(args.calls, "rb") as f:
@@ -91,6 +107,10 @@ def main(argv=None) -> int:
             with open(args.save, "wb") as f:
                 pickle.dump(calls, f)
     print(f"{len(calls)} calls, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load {os.getloadavg()[0]:.1f}")
+    if args.flags:
+        for i, (points, tri, _, patch, spacing, kw) in enumerate(calls[args.first :], start=args.first):
+            print(f"{i:4d}  {len(tri):6d}  {flags(points, tri, patch, kw['crack_patch'], spacing)}")
+        return 0
     print("call  body    tri in | whole: s, (out, flagged, crack < 5 deg, min angle) | tiled: s, (...), closed, tiles")
     bodies: dict[str, TiledCleanup] = {}
     whole_s = tiled_s = 0.0
