@@ -569,6 +569,7 @@ def clean_complex(
     shell_size=None,
     fixed=None,
     group=None,
+    still=None,
 ):
     """Removes slivers from the shell complex by edge collapses that keep every shell a closed 2-manifold.
 
@@ -620,6 +621,7 @@ def clean_complex(
         group: None, or int [v] (non-decreasing in the vertex id, every triangle's vertices in one group): the
             groups are cleaned independently, each as if it were cleaned alone (its rounds stop on their own, ties
             are broken within the group), so a group's result depends on its own triangles only.
+        still: None, or bool [v]: vertices that the vertex moves leave in place (they may still collapse).
 
     Returns:
         (tri, shell, patch) after the collapses (triangles that became degenerate removed), and the surviving
@@ -654,6 +656,7 @@ def clean_complex(
         # with fixed vertices, the vertices outside the round's one ring (whose triangles may lack from sub) are
         # held too: a settled triangle's short side then never collapses with half its neighbourhood seen
         held = None if fixed is None else fixed | ~active
+        unmoved = held if still is None else still if held is None else held | still
         new, keep, collapsed = _collapse_round(
             points, ts, ss, ps, spacing, short_edge, sliver_angle, plane_eq, shell_size=shell_size, fixed=held,
             group=group,
@@ -664,7 +667,7 @@ def clean_complex(
         if group is not None:
             tri, shell, patch, flag, settled, origin = _group_round(
                 points, (tri, shell, patch, flag, settled, origin), sub, active, (ts, ss, ps, new, keep, t0, t1),
-                held, group, done, plane_eq, surface, spacing, short_edge, sliver_angle,
+                (held, unmoved), group, done, plane_eq, surface, spacing, short_edge, sliver_angle,
             )  # fmt: skip
             continue
         if collapsed == 0 and flipped == 0:
@@ -672,7 +675,7 @@ def clean_complex(
             around = np.unique(t1) if settled is not None else None
             before = None if around is None else points[around].copy()
             relax = _relax_round(
-                points, t1, p1, plane_eq, sliver_angle, max_turn=RELAX_TURN, surface=surface, fixed=held
+                points, t1, p1, plane_eq, sliver_angle, max_turn=RELAX_TURN, surface=surface, fixed=unmoved
             )
             if relax == 0:
                 break
@@ -719,9 +722,11 @@ def _group_round(points, state, sub, active, round_, fixed, group, done, plane_e
     """One round of :func:`clean_complex` with independent groups: each group whose collapses and flips
     (``round_`` = (ts, ss, ps, new, keep, t0, t1) as in :func:`_apply_round`, with the shells and patches of ``ts``)
     changed something keeps them if its shells stay closed (else it stops, as it would alone: ``done`` is updated);
-    each other group moves vertices (:func:`_relax_round`) and stops when none moves. Returns the new state."""
+    each other group moves vertices (:func:`_relax_round`) and stops when none moves. ``fixed`` = (the vertices
+    held, those that vertex moves leave in place). Returns the new state."""
     tri, shell, patch, flag, settled, origin = state
     ts, ss, ps, new, keep, t0, t1 = round_
+    fixed, unmoved = fixed
     g_sub = group[ts[:, 0]]
     touched = ~keep | (new != ts).any(axis=1)
     touched[np.flatnonzero(keep)[(t1 != t0).any(axis=1)]] = True
@@ -753,7 +758,7 @@ def _group_round(points, state, sub, active, round_, fixed, group, done, plane_e
         before = None if around is None else points[around].copy()
         moved = _relax_round(
             points, ti, ps[idle_rows], plane_eq, sliver_angle, max_turn=RELAX_TURN, surface=surface,
-            fixed=fixed | ~idle[group], group=group,
+            fixed=unmoved | ~idle[group], group=group,
         )  # fmt: skip
         done |= idle & (moved == 0)
         flag = flag.copy()

@@ -18,8 +18,8 @@ work stays bounded, as a part's clean-up cannot spread beyond it): the tiles; th
 along every axis, on the triangles within two rings of the vertices the first pass held; the tiles shifted by a
 quarter tile, on the triangles within two rings of the vertices both passes held (where a first-pass border crosses
 a second-pass border); and, where slivers are left, all space as one tile on the triangles within two rings of
-them. Every pass holds the vertices of one-sided crack faces (:func:`_one_sided`), so the shells still partition
-the solid exactly.
+them. The first two passes hold the vertices of one-sided crack faces (:func:`_one_sided`); the last two let them
+collapse but never move them (a move would change one shell's volume alone).
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ def _plane_equations(surface) -> np.ndarray:
     return np.concatenate([normal, offset[:, None]], axis=1)
 
 
-def _canonical(points, tri, shell, patch, fixed, big_shell, plane_of_patch):
+def _canonical(points, tri, shell, patch, fixed, still, big_shell, plane_of_patch):
     """A tile's triangles in a numbering fixed by their content: (vertex ids [k] in canonical order, triangles
     [f, 3] over them, canonical shell [f], canonical patch [f], shell ids [s] and patch ids [p] in canonical order,
     digest). Vertices are ordered by position, each triangle starts at its smallest vertex, shells and patches are
@@ -89,6 +89,7 @@ def _canonical(points, tri, shell, patch, fixed, big_shell, plane_of_patch):
         plane_of_patch[patches],
         big_shell[shells],
         fixed[verts],
+        still[verts],
     ):
         digest.update(np.ascontiguousarray(part).tobytes())
         digest.update(b"|")
@@ -146,25 +147,28 @@ class TiledCleanup:
         lonely = _one_sided(tri, plane_of_patch[patch] < 0, n_v)
         context = (big_shell, plane_of_patch, plane_eq)
         self.cleaned_tiles = self.tiles = 0
+        kept = self.kept
         # the tiles, holding one-sided crack faces
-        tri, shell, patch, held_a = self._pass(points, tri, shell, patch, 0.0, None, lonely, self.kept[0], context)
+        tri, shell, patch, held_a = self._pass(points, tri, shell, patch, 0.0, None, lonely, lonely, kept[0], context)
         # the shifted tiles, on the triangles within two rings of what the first pass held
         part = _two_rings(tri, np.flatnonzero(held_a & ~lonely), n_v)
-        tri, shell, patch, held = self._pass(points, tri, shell, patch, 0.5, part, lonely, self.kept[1], context)
+        tri, shell, patch, held = self._pass(points, tri, shell, patch, 0.5, part, lonely, lonely, kept[1], context)
         # the tiles shifted by a quarter, within two rings of what both passes held
         part = _two_rings(tri, np.flatnonzero(held & held_a & ~lonely), n_v)
-        tri, shell, patch, _ = self._pass(points, tri, shell, patch, 0.25, part, lonely, self.kept[2], context)
+        free = np.zeros(n_v, dtype=bool)
+        tri, shell, patch, _ = self._pass(points, tri, shell, patch, 0.25, part, free, lonely, kept[2], context)
         # one tile: within two rings of the slivers left
         sliver = _min_angles(points[tri]) < SLIVER_ANGLE
         if sliver.any():
             part = _two_rings(tri, tri[sliver].ravel(), n_v)
-            tri, shell, patch, _ = self._pass(points, tri, shell, patch, None, part, lonely, self.kept[3], context)
+            tri, shell, patch, _ = self._pass(points, tri, shell, patch, None, part, free, lonely, kept[3], context)
         return points, tri, shell, patch
 
-    def _pass(self, points, tri, shell, patch, shift, part, lonely, kept, context):
+    def _pass(self, points, tri, shell, patch, shift, part, lonely, still, kept, context):
         """One pass over the tiles shifted by ``shift`` tiles (None: all space is one tile), on the triangles ``part``
         (bool [f]; None: all): (tri, shell, patch, held) after it, ``held`` bool [v] the vertices it held fixed (those
-        with a triangle outside the tiles' parts, and ``lonely``); ``points`` is changed in place."""
+        with a triangle outside the tiles' parts, and ``lonely``); ``still``: vertices that vertex moves leave in
+        place. ``points`` is changed in place."""
         n_v = len(points)
         if shift is None:
             tile_of = np.zeros(n_v, dtype=np.int64)
@@ -189,11 +193,11 @@ class TiledCleanup:
         tiles, todo, new_kept = [], [], {}
         for k in range(len(work)):
             r = rows[bounds[k] : bounds[k + 1]]
-            tiles.append(_canonical(points, tri[r], shell[r], patch[r], held, *context[:2]))
+            tiles.append(_canonical(points, tri[r], shell[r], patch[r], held, still, *context[:2]))
             if tiles[-1][-1] not in kept:
                 todo.append(k)
         if todo:
-            self._clean_tiles(points, [tiles[k] for k in todo], held, kept, context)
+            self._clean_tiles(points, [tiles[k] for k in todo], held, still, kept, context)
         self.cleaned_tiles += len(todo)
         parts_t, parts_s, parts_p = [tri[~mine]], [shell[~mine]], [patch[~mine]]
         for verts, _, _, _, shells, patches, key in tiles:
@@ -207,7 +211,7 @@ class TiledCleanup:
         kept.update(new_kept)
         return np.concatenate(parts_t), np.concatenate(parts_s), np.concatenate(parts_p), held
 
-    def _clean_tiles(self, points, tiles, fixed, kept, context):
+    def _clean_tiles(self, points, tiles, fixed, still, kept, context):
         """Cleans the canonical tiles ``tiles`` together (independent groups) and keeps each one's result."""
         big_shell, plane_of_patch, plane_eq = context
         v_off = np.concatenate([[0], np.cumsum([len(t[0]) for t in tiles])])
@@ -218,13 +222,14 @@ class TiledCleanup:
         u_shell = np.concatenate([t[2] + s_off[k] for k, t in enumerate(tiles)])
         u_patch = np.concatenate([t[3] + p_off[k] for k, t in enumerate(tiles)])
         u_fixed = np.concatenate([fixed[t[0]] for t in tiles])
+        u_still = np.concatenate([still[t[0]] for t in tiles])
         u_group = np.repeat(np.arange(len(tiles)), np.diff(v_off))
         u_size = np.where(np.concatenate([big_shell[t[4]] for t in tiles]), 7, 6)
         u_plane = np.concatenate([plane_of_patch[t[5]] for t in tiles])
         u_eq = np.concatenate([plane_eq[t[5]] for t in tiles])
         tri, shell, patch = clean_complex(
             u_points, u_tri, u_shell, u_patch, self.spacing, surface=(*self.surface, u_plane), plane_eq=u_eq,
-            shell_size=u_size, fixed=u_fixed, group=u_group,
+            shell_size=u_size, fixed=u_fixed, group=u_group, still=u_still,
         )  # fmt: skip
         g = u_group[tri[:, 0]]
         order = np.argsort(g, kind="stable")
