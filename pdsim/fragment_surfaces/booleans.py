@@ -246,7 +246,9 @@ def _clip(rv, rf, cuts: InputCuts, solid_id: int, spacing: float, simplify: floa
     return np.asarray(piece.vert_properties, dtype=np.float64)[:, :3], tri, outer, src
 
 
-def shared_complex(pieces, k_count: int, surface, spacing: float, *, simplify: float, clean: bool, record=None):
+def shared_complex(
+    pieces, k_count: int, surface, spacing: float, *, simplify: float, clean: bool, record=None, tiles=None
+):
     """All regions' shells as one complex (vertices shared between shells), crack faces shared by both sides and
     slivers removed (steps 5-6).
 
@@ -259,6 +261,8 @@ def shared_complex(pieces, k_count: int, surface, spacing: float, *, simplify: f
         record: None, or a dict holding the last clean-up's record (empty: none yet): its edits are applied where the
             complex is unchanged before the clean-up runs (pdsim/fragment_surfaces/edits.py), and the dict is replaced
             by this clean-up's record (emptied when no clean-up ran or it failed).
+        tiles: None, or the body's :class:`pdsim.fragment_surfaces.tiles.TiledCleanup`: the clean-up then runs tile
+            by tile (``record`` is not used).
 
     Returns:
         (points [m] [p, 3], tri [f, 3], shell [f], crack flag [f], patch [f], shared, clean_failed); a patch is an
@@ -325,6 +329,12 @@ def shared_complex(pieces, k_count: int, surface, spacing: float, *, simplify: f
         is_crack_patch[patch[across2 >= 0]] = True
         plane_of_patch = np.full(len(is_crack_patch), -1, dtype=np.int64)
         plane_of_patch[patch[across2 < 0]] = planes2[across2 < 0]
+        if tiles is not None:
+            points3, tri3, shell3, patch3 = tiles.clean(points, tri2, shell2, patch, plane_of_patch)
+            if shells_closed(tri3, shell3, len(points3)).all():
+                crack3 = is_crack_patch[patch3].astype(np.int32)
+                return points3, canonical_corners(tri3), shell3, crack3, patch3, True, False
+            return points, tri2, shell2, (across2 >= 0).astype(np.int32), patch, True, True
         raw = (points.copy(), tri2, shell2, patch, np.arange(len(tri2)), None, 0, 0)
         start = raw if previous is None else apply_edits(previous, *raw[:4], spacing)
         for first in (start, raw) if previous is not None else (raw,):

@@ -102,6 +102,12 @@ def _on_planes(inc, plane_eq, points, src, dst, spacing):
     return out
 
 
+def _rank_in_group(group_of: np.ndarray) -> np.ndarray:
+    """Int [n]: each item's index among the items of its group, for ``group_of`` [n] non-decreasing (the items of
+    one group consecutive)."""
+    return np.arange(len(group_of)) - np.searchsorted(group_of, group_of)
+
+
 def _independent_choice(rows, cols, prio, count, size) -> np.ndarray:
     """Luby-style choice of operations whose zones do not meet: operation ``rows[i]`` touches item ``cols[i]`` (items
     0..size-1), ``prio`` [count] orders them (smaller first, distinct). In passes, every open operation that is the
@@ -121,12 +127,26 @@ def _independent_choice(rows, cols, prio, count, size) -> np.ndarray:
 
 
 def _collapse_round(
-    points, tri, shell, patch, spacing, short_edge, sliver_angle, plane_eq=None, movable=None, shell_size=None
+    points,
+    tri,
+    shell,
+    patch,
+    spacing,
+    short_edge,
+    sliver_angle,
+    plane_eq=None,
+    movable=None,
+    shell_size=None,
+    fixed=None,
+    group=None,
 ):
     """One round of edge collapses on the complex (see :func:`clean_complex`). Returns (triangles after the round
     [f, 3], mask [f] of the triangles that keep an area, number of collapses; 0: nothing left to do). With
-    ``movable`` (bool [v]) only those vertices may move onto a neighbour. ``shell_size``: None, or the vertex count
-    of each shell (int [shell count]) when ``tri`` is part of a larger complex (default: counted in ``tri``)."""
+    ``movable`` (bool [v]) only those vertices may move onto a neighbour; with ``fixed`` (bool [v]) no edge with a
+    fixed end collapses, nor one that narrows a triangle holding a fixed vertex into a sliver. ``shell_size``:
+    None, or the vertex count of each shell (int [shell count]) when ``tri`` is part of a larger complex (default:
+    counted in ``tri``). ``group``: None, or the group of each vertex (int [v], non-decreasing in the vertex id),
+    whose ties are broken within the group (see :func:`clean_complex`)."""
     n_v = points.shape[0]
     lo, hi, side_edge = _undirected_edges(tri, n_v)
     length = np.linalg.norm(points[lo] - points[hi], axis=1)
@@ -157,10 +177,19 @@ def _collapse_round(
     if movable is not None:
         u_into_v &= movable[eu]
         v_into_u &= movable[ev]
+    if fixed is not None:
+        free = ~fixed[eu] & ~fixed[ev]
+        u_into_v &= free
+        v_into_u &= free
     ok = u_into_v | v_into_u
     src = np.where(u_into_v, eu, ev)[ok]
     dst = np.where(u_into_v, ev, eu)[ok]
-    prio = length[e_idx][ok] + 1e-12 * spacing * np.arange(ok.sum()) / max(ok.sum(), 1)
+    if group is None:
+        prio = length[e_idx][ok] + 1e-12 * spacing * np.arange(ok.sum()) / max(ok.sum(), 1)
+    else:  # the same tie-break within each group as on the group alone
+        g_of = group[eu[ok]]
+        count = np.bincount(g_of)[g_of]
+        prio = length[e_idx][ok] + 1e-12 * spacing * _rank_in_group(g_of) / np.maximum(count, 1)
     if src.size == 0:
         return tri, np.ones(len(tri), dtype=bool), 0
     # Independent collapses: the zones (source and its neighbours) of two chosen collapses never meet.
@@ -215,6 +244,9 @@ def _collapse_round(
     dot = np.einsum("ij,ij->i", n_old, n_new)
     significant = ~sliver[check] & (length[side_edge[check]].max(axis=1) >= short_edge * spacing)
     turned = (dot <= 0.5 * np.linalg.norm(n_old, axis=1) * np.linalg.norm(n_new, axis=1)) & significant
+    if fixed is not None:  # no collapse may narrow a triangle at a fixed vertex into a sliver (no round could undo it)
+        a_new = _min_angles(t_new)
+        turned |= fixed[new[check]].any(axis=1) & (a_new < sliver_angle) & (a_new < _min_angles(t_old))
     if turned.any():
         which = np.full(n_v, -1)
         which[src] = np.arange(len(src))
@@ -229,11 +261,12 @@ def _collapse_round(
     return new, ~degenerate, len(src)
 
 
-def _flip_round(points, tri, shell, patch, sliver_angle):
+def _flip_round(points, tri, shell, patch, sliver_angle, fixed=None, vertex_group=None):
     """One round of edge flips (see :func:`clean_complex`): the longest side ab of a sliver (a, b, c) whose twin
     (b, a, d) in the same shell lies in the same patch becomes cd, giving (c, a, d) and (d, b, c), when cd is not an
     edge of that shell yet, both new triangles keep the old orientation and the smaller angle grows. A flip is done in
-    every shell holding the pair (both sides of a crack) or in none. Returns (triangles [f, 3], number of flips)."""
+    every shell holding the pair (both sides of a crack) or in none. With ``fixed`` (bool [v]) c and d must not be
+    fixed; ``vertex_group`` as ``group`` in :func:`_collapse_round`. Returns (triangles [f, 3], number of flips)."""
     n_v = points.shape[0]
     f_count = len(tri)
     angles = triangle_angles(points, tri)
@@ -260,6 +293,8 @@ def _flip_round(points, tri, shell, patch, sliver_angle):
     t2 = np.where(found, dface[order][pos], 0)
     d = np.where(found, dapex[order][pos], 0)
     ok = found & (patch[t2] == patch[sliver]) & (c != d)
+    if fixed is not None:
+        ok &= ~fixed[c] & ~fixed[d]
     # cd must not be an edge of the shell already (either direction).
     for e0, e1 in ((c, d), (d, c)):
         ekey = (shell[sliver] * n_v + e0) * n_v + e1
@@ -287,7 +322,16 @@ def _flip_round(points, tri, shell, patch, sliver_angle):
     if cand.size == 0:
         return tri, 0
     # Each triangle in at most one flip (smallest angle first; the copies of one flip win together).
-    prio = amin[sliver][cand] + 1e-9 * group[cand] / max(group.max(), 1)
+    if vertex_group is None:
+        prio = amin[sliver][cand] + 1e-9 * group[cand] / max(group.max(), 1)
+    else:  # the same tie-break within each vertex group as on the group alone
+        g_of = vertex_group[np.minimum(a, b)]
+        first = np.full(int(g_of.max()) + 1, group.max() + 1)
+        np.minimum.at(first, g_of, group)
+        last = np.zeros(len(first), dtype=np.int64)
+        np.maximum.at(last, g_of, group)
+        local = group - first[g_of]
+        prio = amin[sliver][cand] + 1e-9 * local[cand] / np.maximum(last - first, 1)[g_of[cand]]
     faces = np.concatenate([sliver[cand], t2[cand]])
     rows = np.tile(np.arange(len(cand)), 2)
     chosen = _independent_choice(rows, faces, prio, len(cand), f_count)
@@ -313,16 +357,25 @@ def _flip_round(points, tri, shell, patch, sliver_angle):
     return out, len(pick)
 
 
-def _flip_near_slivers(points, tri, shell, patch, sliver_angle):
+def _flip_near_slivers(points, tri, shell, patch, sliver_angle, fixed=None, group=None):
     """:func:`_flip_round` on the triangles within two rings of the slivers of ``tri`` (:func:`_neighbourhood`),
     in those triangles' own vertex numbering: they hold every sliver, its twins and every edge its flip could
-    create, so the round decides as on all of ``tri``. Returns (triangles [f, 3], number of flips)."""
+    create, so the round decides as on all of ``tri``. ``fixed``, ``group``: per vertex, as in :func:`_flip_round`.
+    Returns (triangles [f, 3], number of flips)."""
     sliver = _min_angles(points[tri]) < sliver_angle
     if not sliver.any():
         return tri, 0
     sub = _neighbourhood(tri, sliver, len(points))[0]
     verts, local = np.unique(tri[sub], return_inverse=True)
-    out, flipped = _flip_round(points[verts], local.reshape(-1, 3), shell[sub], patch[sub], sliver_angle)
+    out, flipped = _flip_round(
+        points[verts],
+        local.reshape(-1, 3),
+        shell[sub],
+        patch[sub],
+        sliver_angle,
+        None if fixed is None else fixed[verts],
+        None if group is None else group[verts],
+    )
     if flipped == 0:
         return tri, 0
     tri = tri.copy()
@@ -331,7 +384,17 @@ def _flip_near_slivers(points, tri, shell, patch, sliver_angle):
 
 
 def _relax_round(
-    points, tri, patch, plane_eq, sliver_angle, max_turn=30.0, surface=None, steps=(0.25, 0.5, 1.0), caps=False
+    points,
+    tri,
+    patch,
+    plane_eq,
+    sliver_angle,
+    max_turn=30.0,
+    surface=None,
+    steps=(0.25, 0.5, 1.0),
+    caps=False,
+    fixed=None,
+    group=None,
 ):
     """One round of vertex moves against the slivers that collapses and flips leave (see :func:`clean_complex`).
 
@@ -343,15 +406,19 @@ def _relax_round(
     (input vertices [m], triangles, plane id per triangle, plane id per patch (-1: crack)) a vertex must also stay
     inside an input triangle of each of its planes (a facet's plane reaches beyond the facet). ``points`` [v, 3] is
     changed in place. With ``caps`` the candidates are instead the obtuse corners of the slivers, moved away from
-    the long side to a fifth of its length from it (where the neighbours' mean does not help a flat cap). Returns
-    the number of vertices moved."""
+    the long side to a fifth of its length from it (where the neighbours' mean does not help a flat cap). ``fixed``
+    (bool [v]): vertices that stay; ``group`` as in :func:`_collapse_round`. Returns the number of vertices moved,
+    or with ``group`` the vertices moved per group (int [group count])."""
     n_v = points.shape[0]
     angles = triangle_angles(points, tri)
     amin = angles.min(axis=1)
     sliver = np.flatnonzero(amin < sliver_angle)
+    none = 0 if group is None else np.zeros(int(group.max()) + 1, dtype=np.int64)
     if sliver.size == 0 or plane_eq is None:
-        return 0
+        return none
     cand = np.unique(tri[sliver])  # needles: the ends of the short side move; caps: the corner by the long side
+    if fixed is not None:
+        cand = cand[~fixed[cand]]
     # Input planes of each candidate (at most two allowed).
     p_count = plane_eq.shape[0]
     inc = csr_matrix((np.ones(3 * len(tri)), (tri.T.ravel(), np.tile(patch, 3))), shape=(n_v, p_count))
@@ -403,7 +470,7 @@ def _relax_round(
     target = target - np.einsum("cji,cj->ci", normals, np.einsum("cij,cj->ci", np.linalg.pinv(gram), resid))
     cand, target, own_patch = cand[keep], target[keep], own_patch[keep]
     if cand.size == 0:
-        return 0
+        return none
     # Triangles around each candidate, and the moves that help.
     vt = csr_matrix((np.ones(3 * len(tri)), (tri.T.ravel(), np.tile(np.arange(len(tri)), 3))), shape=(n_v, len(tri)))
     vt.sum_duplicates()
@@ -433,14 +500,17 @@ def _relax_round(
         best_step = np.where(better, step, best_step)
     move = best_step > 0.0
     if not move.any():
-        return 0
+        return none
     # Independent moves: no two moved vertices share a triangle (smallest angle first).
     cand, target, best_step, prio = cand[move], target[move], best_step[move], old_min[move]
     ring = vt[cand].tocoo()
-    chosen = _independent_choice(ring.row, ring.col, prio + 1e-12 * np.arange(len(cand)), len(cand), len(tri))
+    tie = np.arange(len(cand)) if group is None else _rank_in_group(group[cand])
+    chosen = _independent_choice(ring.row, ring.col, prio + 1e-12 * tie, len(cand), len(tri))
     c = cand[chosen]
     points[c] += best_step[chosen][:, None] * (target[chosen] - points[c])
-    return int(chosen.sum())
+    if group is None:
+        return int(chosen.sum())
+    return np.bincount(group[c], minlength=len(none))
 
 
 def _on_input_planes(pos, own_patch, surface) -> np.ndarray:
@@ -495,6 +565,11 @@ def clean_complex(
     planes_from=None,
     origin=None,
     settled=None,
+    plane_eq=None,
+    shell_size=None,
+    fixed=None,
+    group=None,
+    still=None,
 ):
     """Removes slivers from the shell complex by edge collapses that keep every shell a closed 2-manifold.
 
@@ -536,13 +611,23 @@ def clean_complex(
             (pdsim/fragment_surfaces/edits.py). They are not flagged until something within two rings of them
             changes, so the rounds work where the complex changed, not on what an earlier clean-up could not
             improve (short input edges, slivers of a faceted input).
+        plane_eq: None, or the unit normal and offset of each patch's input plane, float64 [patch count, 4] (NaN rows
+            for crack patches): used instead of the planes taken from ``planes_from``.
+        shell_size: None, or the vertex count of each shell [shell count] in the whole complex when ``tri`` is a
+            part of it (default: the counts within each round's triangles).
+        fixed: None, or bool [v]: vertices that keep their position and whose triangles may lack from ``tri`` (the
+            border of a part of a larger complex): no collapse, flip or move involves them beyond their triangles
+            in ``tri``, so the part stays joined to the rest.
+        group: None, or int [v] (non-decreasing in the vertex id, every triangle's vertices in one group): the
+            groups are cleaned independently, each as if it were cleaned alone (its rounds stop on their own, ties
+            are broken within the group), so a group's result depends on its own triangles only.
+        still: None, or bool [v]: vertices that the vertex moves leave in place (they may still collapse).
 
     Returns:
         (tri, shell, patch) after the collapses (triangles that became degenerate removed), and the surviving
         triangles' ``origin`` when given.
     """
-    plane_eq = None
-    if crack_patch is not None:  # unit normal and offset of every input-plane patch (NaN: crack patches)
+    if plane_eq is None and crack_patch is not None:  # unit normal and offset of every input-plane patch (NaN: cracks)
         f_points, f_tri, f_patch = (points, tri, patch) if planes_from is None else planes_from
         p_count = max(int(patch.max()), int(f_patch.max())) + 1
         t = f_points[f_tri]
@@ -557,23 +642,42 @@ def clean_complex(
     if settled is not None:
         settled = np.asarray(settled, dtype=bool)
         flag &= ~settled
+    done = None if group is None else np.zeros(int(group.max()) + 1, dtype=bool)  # groups that stopped
     for _ in range(_MAX_CLEAN_ROUNDS):
         # A round works on the triangles within two rings of the flagged ones (every triangle that holds a vertex of a
         # flagged triangle or one of its neighbours): they hold every candidate's neighbourhood in every shell, so
         # the round decides there as it would on the whole complex, and nothing outside them changes.
+        if done is not None:
+            flag &= ~done[group[tri[:, 0]]]
         if not flag.any():
             break
         sub, active = _neighbourhood(tri, flag, len(points))
         ts, ss, ps = tri[sub], shell[sub], patch[sub]
-        new, keep, collapsed = _collapse_round(points, ts, ss, ps, spacing, short_edge, sliver_angle, plane_eq)
+        # with fixed vertices, the vertices outside the round's one ring (whose triangles may lack from sub) are
+        # held too: a settled triangle's short side then never collapses with half its neighbourhood seen
+        held = None if fixed is None else fixed | ~active
+        unmoved = held if still is None else still if held is None else held | still
+        new, keep, collapsed = _collapse_round(
+            points, ts, ss, ps, spacing, short_edge, sliver_angle, plane_eq, shell_size=shell_size, fixed=held,
+            group=group,
+        )  # fmt: skip
         t1, s1, p1 = new[keep], ss[keep], ps[keep]
         t0 = t1.copy()
-        t1, flipped = _flip_near_slivers(points, t1, s1, p1, sliver_angle)
+        t1, flipped = _flip_near_slivers(points, t1, s1, p1, sliver_angle, held, group)
+        if group is not None:
+            tri, shell, patch, flag, settled, origin = _group_round(
+                points, (tri, shell, patch, flag, settled, origin), sub, active, (ts, ss, ps, new, keep, t0, t1),
+                (held, unmoved), group, done, plane_eq, surface, spacing, short_edge, sliver_angle,
+            )  # fmt: skip
+            continue
         if collapsed == 0 and flipped == 0:
             # vertex moves change no connectivity: the shells stay closed
             around = np.unique(t1) if settled is not None else None
             before = None if around is None else points[around].copy()
-            if _relax_round(points, t1, p1, plane_eq, sliver_angle, max_turn=RELAX_TURN, surface=surface) == 0:
+            relax = _relax_round(
+                points, t1, p1, plane_eq, sliver_angle, max_turn=RELAX_TURN, surface=surface, fixed=unmoved
+            )
+            if relax == 0:
                 break
             flag[sub] = _needs_work(points, t1, spacing, short_edge, sliver_angle)
             if settled is not None:
@@ -584,20 +688,88 @@ def clean_complex(
         changed = np.concatenate([ss[~keep | (new != ts).any(axis=1)], s1[(t1 != t0).any(axis=1)]])
         if not _closed_near(t1, s1, active, np.unique(changed), len(points)):
             break
-        whole = np.ones(len(tri), dtype=bool)
-        whole[sub[~keep]] = False
-        tri, flag = tri.copy(), flag.copy()
-        tri[sub[keep]] = t1
-        redo = (t1 != ts[keep]).any(axis=1)  # the others keep their flags (collapses and flips move no vertex)
-        flag[sub[keep][redo]] = _needs_work(points, t1[redo], spacing, short_edge, sliver_angle)
-        if settled is not None:  # what is within two rings of the round's changes is looked at again
-            moved = np.concatenate([ts[~keep | (new != ts).any(axis=1)].ravel(), t1[(t1 != t0).any(axis=1)].ravel()])
-            settled, flag = _unsettle(points, tri, settled, flag, moved, spacing, short_edge, sliver_angle)
-            settled = settled[whole]
-        tri, shell, patch, flag = tri[whole], shell[whole], patch[whole], flag[whole]
-        if origin is not None:
-            origin = origin[whole]
+        tri, shell, patch, flag, settled, origin = _apply_round(
+            points, (tri, shell, patch, flag, settled, origin), sub, (ts, new, keep, t0, t1), spacing, short_edge,
+            sliver_angle,
+        )  # fmt: skip
     return (tri, shell, patch) if origin is None else (tri, shell, patch, origin)
+
+
+def _apply_round(points, state, sub, round_, spacing, short_edge, sliver_angle):
+    """The complex after a round of collapses and flips on its triangles ``sub`` (ids): ``state`` = (tri, shell,
+    patch, flag, settled, origin) before, ``round_`` = (the triangles ``ts`` = tri[sub], after the collapses ``new``
+    with ``keep`` the rows that keep an area, ``t0`` = new[keep], after the flips ``t1``). Returns the new state."""
+    tri, shell, patch, flag, settled, origin = state
+    ts, new, keep, t0, t1 = round_
+    whole = np.ones(len(tri), dtype=bool)
+    whole[sub[~keep]] = False
+    tri, flag = tri.copy(), flag.copy()
+    tri[sub[keep]] = t1
+    redo = (t1 != ts[keep]).any(axis=1)  # the others keep their flags (collapses and flips move no vertex)
+    flag[sub[keep][redo]] = _needs_work(points, t1[redo], spacing, short_edge, sliver_angle)
+    if settled is not None:  # what is within two rings of the round's changes is looked at again
+        moved = np.concatenate([ts[~keep | (new != ts).any(axis=1)].ravel(), t1[(t1 != t0).any(axis=1)].ravel()])
+        settled, flag = _unsettle(points, tri, settled, flag, moved, spacing, short_edge, sliver_angle)
+        settled = settled[whole]
+    tri, shell, patch, flag = tri[whole], shell[whole], patch[whole], flag[whole]
+    if origin is not None:
+        origin = origin[whole]
+    return tri, shell, patch, flag, settled, origin
+
+
+def _group_round(points, state, sub, active, round_, fixed, group, done, plane_eq, surface, spacing, short_edge,
+                 sliver_angle):  # fmt: skip
+    """One round of :func:`clean_complex` with independent groups: each group whose collapses and flips
+    (``round_`` = (ts, ss, ps, new, keep, t0, t1) as in :func:`_apply_round`, with the shells and patches of ``ts``)
+    changed something keeps them if its shells stay closed (else it stops, as it would alone: ``done`` is updated);
+    each other group moves vertices (:func:`_relax_round`) and stops when none moves. ``fixed`` = (the vertices
+    held, those that vertex moves leave in place). Returns the new state."""
+    tri, shell, patch, flag, settled, origin = state
+    ts, ss, ps, new, keep, t0, t1 = round_
+    fixed, unmoved = fixed
+    g_sub = group[ts[:, 0]]
+    touched = ~keep | (new != ts).any(axis=1)
+    touched[np.flatnonzero(keep)[(t1 != t0).any(axis=1)]] = True
+    busy = np.zeros(len(done), dtype=bool)
+    busy[g_sub[touched]] = True
+    s1 = ss[keep]
+    if busy.any():  # closedness near the round's free vertices, per group
+        changed = np.unique(np.concatenate([ss[~keep | (new != ts).any(axis=1)], s1[(t1 != t0).any(axis=1)]]))
+        open_v = _open_near(t1, s1, active & ~fixed, changed, len(points))
+        failed = np.zeros(len(done), dtype=bool)
+        failed[group[open_v]] = True
+        failed &= busy
+        if failed.any():  # those groups keep their triangles from before the round, and stop
+            undo = failed[g_sub]
+            rows = ts.copy()
+            rows[keep] = t1
+            rows[undo] = ts[undo]
+            new = np.where(undo[:, None], ts, new)
+            keep = keep | undo
+            t1 = rows[keep]
+            t0 = np.where(undo[keep][:, None], t1, new[keep])
+            done |= failed
+            busy &= ~failed
+    idle = ~done & ~busy
+    idle_rows = idle[g_sub]
+    if idle_rows.any():  # vertex moves change no connectivity: the shells stay closed
+        ti = ts[idle_rows]
+        around = np.unique(ti) if settled is not None else None
+        before = None if around is None else points[around].copy()
+        moved = _relax_round(
+            points, ti, ps[idle_rows], plane_eq, sliver_angle, max_turn=RELAX_TURN, surface=surface,
+            fixed=unmoved | ~idle[group], group=group,
+        )  # fmt: skip
+        done |= idle & (moved == 0)
+        flag = flag.copy()
+        flag[sub[idle_rows]] = _needs_work(points, ti, spacing, short_edge, sliver_angle)
+        if settled is not None:
+            settled, flag = _unsettle(points, tri, settled, flag, around[(points[around] != before).any(axis=1)],
+                                      spacing, short_edge, sliver_angle)  # fmt: skip
+    if not busy.any():
+        return tri, shell, patch, flag, settled, origin
+    return _apply_round(points, (tri, shell, patch, flag, settled, origin), sub, (ts, new, keep, t0, t1), spacing,
+                        short_edge, sliver_angle)  # fmt: skip
 
 
 def _unsettle(points, tri, settled, flag, vertices, spacing, short_edge, sliver_angle):
@@ -638,19 +810,34 @@ def _neighbourhood(tri, flag, vertex_count):
     return np.flatnonzero(active[tri].any(axis=1)), active
 
 
-def _closed_near(tri, shell, active, shells, vertex_count) -> bool:
-    """Whether, in the shells ``shells`` (ids, ascending), every directed edge with an ``active`` end occurs once
-    among ``tri`` [f, 3] (with ``shell`` [f]) and its reverse once. ``tri`` must hold every triangle of those shells
-    that has an active vertex, so the counts are those of the whole shells (an incremental closedness check)."""
+def _open_near(tri, shell, active, shells, vertex_count) -> np.ndarray:
+    """Ids of the ``active`` vertices at which, in the shells ``shells`` (ids, ascending), a directed edge of ``tri``
+    [f, 3] (with ``shell`` [f]) occurs more than once or without its reverse. ``tri`` must hold every triangle of
+    those shells that has an active vertex, so the counts are those of the whole shells (an incremental closedness
+    check)."""
     a = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2]])
     b = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
     s = np.tile(shell, 3)
     pos = np.minimum(np.searchsorted(shells, s), max(len(shells) - 1, 0))
     sel = (active[a] | active[b]) & (shells[pos] == s) if len(shells) else np.zeros(len(a), dtype=bool)
     a, b, s = a[sel], b[sel], s[sel]
-    key = np.sort((s * vertex_count + a) * vertex_count + b)
-    if np.any(key[1:] == key[:-1]):
-        return False
+    if not len(a):
+        return np.zeros(0, dtype=np.int64)
+    key = (s * vertex_count + a) * vertex_count + b
+    order = np.argsort(key)
+    sk = key[order]
+    bad = np.zeros(len(sk), dtype=bool)
+    same = sk[1:] == sk[:-1]
+    bad[1:] |= same
+    bad[:-1] |= same
+    bad_edge = np.zeros(len(key), dtype=bool)
+    bad_edge[order] = bad
     rev = (s * vertex_count + b) * vertex_count + a
-    pos = np.minimum(np.searchsorted(key, rev), max(len(key) - 1, 0))
-    return bool(np.all(key[pos] == rev)) if len(key) else True
+    bad_edge |= sk[np.minimum(np.searchsorted(sk, rev), len(sk) - 1)] != rev
+    return np.unique(np.where(active[a[bad_edge]], a[bad_edge], b[bad_edge]))
+
+
+def _closed_near(tri, shell, active, shells, vertex_count) -> bool:
+    """Whether, in the shells ``shells`` (ids, ascending), every directed edge with an ``active`` end occurs once
+    among ``tri`` [f, 3] (with ``shell`` [f]) and its reverse once (see :func:`_open_near`)."""
+    return len(_open_near(tri, shell, active, shells, vertex_count)) == 0

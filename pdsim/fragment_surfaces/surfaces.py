@@ -22,6 +22,7 @@ from .booleans import InputCuts, clip_regions, plane_groups, refine_surface, sha
 from .drawn import DrawnSurface, drawn_surface
 from .embedding import ShellEmbedding, rigid_fit
 from .regions import LatticeGrid, build_lattice_grid, partition_regions
+from .tiles import TiledCleanup
 
 __all__ = ["DAMAGE_THRESHOLD", "FragmentSurfaces", "surface_states", "with_states"]
 
@@ -56,9 +57,12 @@ class FragmentSurfaces:
         device: Warp device of the one-off grid-near-mesh query.
         reuse: a rebuild takes the previous rebuild's clip of every region whose geometry is unchanged, bit for bit
             (default True; the shells are the same either way, False clips every region again).
-        carry_edits: a rebuild takes the last sliver clean-up's edits wherever the complex around them is unchanged
-            and cleans only the rest (default True; pdsim/fragment_surfaces/edits.py); False cleans the whole
-            complex at every rebuild.
+        carry_edits: with ``clean_tiles`` off, a rebuild takes the last sliver clean-up's edits wherever the
+            complex around them is unchanged and cleans only the rest (default True;
+            pdsim/fragment_surfaces/edits.py); False cleans the whole complex at every rebuild.
+        clean_tiles: clean tile by tile (default False; pdsim/fragment_surfaces/tiles.py: a tile's result depends
+            on its own raw triangles only and is taken from the last rebuild where those are unchanged, so nothing
+            is carried across rebuilds or checkpoints); False: the whole complex, with or without ``carry_edits``.
 
     Attributes:
         fragment_ids: fragment label of each shell (chips carry their particle's fragment label; several shells
@@ -72,7 +76,7 @@ class FragmentSurfaces:
         rebuild_seconds: wall time of the last rebuild [s].
         clips_made: regions the last rebuild clipped (the others took the previous rebuild's clips).
         clean_record: the last clean-up's record (pdsim/fragment_surfaces/edits.py: complex_record; empty when none),
-            or None when ``carry_edits`` is off.
+            or None when ``carry_edits`` is off or ``clean_tiles`` on.
     """
 
     def __init__(
@@ -91,6 +95,7 @@ class FragmentSurfaces:
         device: str = "cpu",
         reuse: bool = True,
         carry_edits: bool = True,
+        clean_tiles: bool = False,
     ):
         rest = np.asarray(rest_positions, dtype=np.float64)
         if rest.ndim != 2 or rest.shape[1] != 3 or rest.shape[0] == 0:
@@ -120,7 +125,7 @@ class FragmentSurfaces:
         self._cuts: InputCuts | None = None
         self._clips = {} if reuse else None  # the last rebuild's clips, by region (booleans.clip_regions)
         self.clips_made = 0
-        self.clean_record = {} if carry_edits else None
+        self.clean_record = {} if carry_edits and not clean_tiles else None
         self._grid: LatticeGrid | None = None
         self.device = device
         self.rebuild_seconds = 0.0
@@ -132,6 +137,7 @@ class FragmentSurfaces:
             self._surface = refine_surface(v, f, self.spacing)
         else:
             self._surface = (v, f, plane_groups(v, f))
+        self._tiles = TiledCleanup(self._surface, self.spacing) if clean_tiles else None
         n = rest.shape[0]
         self._set_topology(np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64))
 
@@ -263,6 +269,7 @@ class FragmentSurfaces:
             simplify=self.simplify,
             clean=self.clean,
             record=self.clean_record,
+            tiles=self._tiles,
         )
         if clean_failed is not None:
             self.clean_failed = clean_failed
