@@ -11,7 +11,10 @@ and load average it was measured with and:
 
 - ``step_seconds``: wall time of one step: a constant per step (the launches) of each method, and per estimated bond
   visit (elastic, with fracture, with plasticity) and per particle (peridynamics), per element (elastic, with
-  fracture) and per vertex (explicit FEM), per lattice point and per link (lattice);
+  fracture) and per vertex (explicit FEM), per lattice point and per link (lattice); and the contact between FEM
+  surfaces (pdsim.contact.MethodContact, on for an explicit FEM body that can crack or beside another FEM body): a
+  constant per step and per boundary vertex of such a body (``fem_contact_step``, ``fem_contact_vertex``; a
+  calibration measured before these terms, as the CUDA one of 2026-12-04, leaves that contact out);
 - ``frame_seconds``: per frame outside the steps (views, render surfaces, the USD writer): a constant, per point of
   each method and per surface vertex;
 - ``build_seconds``: building the solvers, per point, per estimated bond and per element, plus a constant;
@@ -35,6 +38,9 @@ from .fragment_surfaces.booleans import refine_surface
 
 DEVICE_KINDS = ("cpu", "cuda")  # the device kinds a calibration can be measured on
 HOUR = 3600.0  # a run estimated to take longer than this [s] is warned about
+FEM_CONTACT_TERMS = ("fem_contact_step", "fem_contact_vertex")
+"""The step constants of the contact between FEM surfaces: a calibration measured before them (the CUDA one of
+2026-12-04) lacks them, and its estimates leave that contact out."""
 PD_FEATURES = ("elastic", "fracture", "plastic")  # the peridynamic step's calibrated variants
 FEM_FEATURES = ("elastic", "fracture")  # the explicit FEM step's calibrated variants
 
@@ -108,10 +114,11 @@ def body_counts(body, bonds_per_particle) -> dict:
     ``bonds_per_particle(body)``) or links, elements, surface_vertices, steps (lattice steps per frame; None: the
     scene's substeps), features ("plastic": a peridynamic body with a yield stress; else "fracture" when bonds or
     elements can break; else "elastic"), calibrated (False: no
-    step calibration for this body, e.g. an implicit FEM body)."""
+    step calibration for this body, e.g. an implicit FEM body), contact_vertices (an explicit FEM body's boundary
+    vertices, which the contact between FEM surfaces works on: :func:`fem_surface_contact`)."""
     method = _method(body)
     out = {"method": method, "points": 0, "bonds": 0.0, "elements": 0, "surface_vertices": surface_vertices(body),
-           "steps": None, "features": "elastic", "calibrated": True}  # fmt: skip
+           "steps": None, "features": "elastic", "calibrated": True, "contact_vertices": 0}  # fmt: skip
     if method == "peridynamics":
         n = int(body.particle_count)
         out.update(points=n, bonds=n * float(bonds_per_particle(body)))
@@ -124,14 +131,25 @@ def body_counts(body, bonds_per_particle) -> dict:
         if getattr(body, "fractures", False):
             out["features"] = "fracture"
         out["calibrated"] = getattr(body, "integrator", "explicit") == "explicit"
+        out["contact_vertices"] = int(np.unique(body.mesh.boundary_faces()).size) if out["calibrated"] else 0
     else:
         out.update(points=int(getattr(body, "particle_count", 0)), bonds=float(getattr(body, "link_count", 0)))
         out["steps"] = int(getattr(body, "steps_per_frame", 1))
     return out
 
 
-def step_seconds(counts: dict, calibration: dict = CALIBRATION) -> float:
-    """Wall time of one step of a body [s] (a lattice step for the lattice)."""
+def fem_surface_contact(bodies: list[dict]) -> list[bool]:
+    """Per body of ``bodies`` (body_counts), whether the contact between FEM surfaces works on it each step: an
+    explicit FEM body that can crack, or every explicit FEM body where there are several (pdsim/run.py,
+    ``method_contact``; a scene with contact switched off is counted as with it on)."""
+    explicit = [b["method"] == "fem" and b["calibrated"] for b in bodies]
+    several = sum(explicit) > 1
+    return [e and (several or b["features"] == "fracture") for e, b in zip(explicit, bodies)]
+
+
+def step_seconds(counts: dict, calibration: dict = CALIBRATION, surface_contact: bool = False) -> float:
+    """Wall time of one step of a body [s] (a lattice step for the lattice); ``surface_contact``: the contact
+    between FEM surfaces works on this FEM body (:func:`fem_surface_contact`)."""
     c = calibration["step_seconds"]
     method = counts["method"]
     if method == "peridynamics":
@@ -139,7 +157,11 @@ def step_seconds(counts: dict, calibration: dict = CALIBRATION) -> float:
         return c["pd_step"] + counts["bonds"] * per_bond + counts["points"] * c["pd_particle"]
     if method == "fem":
         per_element = c[f"fem_element_{counts['features']}"]
-        return c["fem_step"] + counts["elements"] * per_element + counts["points"] * c["fem_vertex"]
+        seconds = c["fem_step"] + counts["elements"] * per_element + counts["points"] * c["fem_vertex"]
+        if surface_contact:
+            per_step, per_vertex = (c.get(term, 0.0) for term in FEM_CONTACT_TERMS)  # 0: a calibration before them
+            seconds += per_step + counts["contact_vertices"] * per_vertex
+        return seconds
     return c["lattice_step"] + counts["points"] * c["lattice_point"] + counts["bonds"] * c["lattice_link"]
 
 
@@ -158,8 +180,8 @@ def estimate_cost(bodies: list[dict], *, substeps: int, frames: int, device: str
     vertices = float(sum(b["surface_vertices"] for b in bodies))
     step = 0.0
     timed = all(b["calibrated"] for b in bodies)
-    for b in bodies:
-        step += step_seconds(b, calibration) * (substeps if b["steps"] is None else b["steps"])
+    for b, contact in zip(bodies, fem_surface_contact(bodies)):
+        step += step_seconds(b, calibration, contact) * (substeps if b["steps"] is None else b["steps"])
     points = {m: sum(b["points"] for b in bodies if b["method"] == m) for m in ("peridynamics", "fem", "lattice")}
     per_frame = step + fs["constant"] + vertices * fs["surface_vertex"]
     per_frame += sum(points[m] * fs["point"][m] for m in points)

@@ -120,13 +120,17 @@ def test_a_device_kind_without_calibration_gets_the_cpus_and_says_so(monkeypatch
 @pytest.mark.skipif("cuda" not in pdsim.cost.CALIBRATIONS, reason="no CUDA calibration in this checkout")
 def test_cuda_estimates_use_the_gpus_calibration():
     """A CUDA device's estimate comes from the calibration measured on a GPU (pdsim/cost_calibration_cuda.json), says
-    so, and differs from the CPU's: on a GPU a block of 216,000 particles steps at least 10 times faster per bond than
-    on this machine's CPU."""
+    so, and differs from the CPU's: on a GPU a block of 216,000 particles steps at least 5 times faster per bond than
+    on this machine's CPU (8.2 times with the CPU calibration of 2026-12-04 21:22 UTC, each bond pair once on the CPU;
+    16.9 times before it)."""
     from pdsim.cost import CALIBRATIONS, body_counts, estimate_cost
     from pdsim.preflight import _bonds_per_particle, format_estimate
 
     cal = CALIBRATIONS["cuda"]
-    assert cal["device"] == "cuda" and set(cal["step_seconds"]) == set(CALIBRATION["step_seconds"])
+    # every CPU constant but the FEM surface contact's, which the model gained after the CUDA calibration was measured
+    missing = set(CALIBRATION["step_seconds"]) - set(cal["step_seconds"])
+    assert cal["device"] == "cuda" and missing <= set(pdsim.cost.FEM_CONTACT_TERMS)
+    assert set(cal["step_seconds"]) <= set(CALIBRATION["step_seconds"])
     scene = _small_scene()
     report = pdsim.preflight.preflight(scene, device="cpu")
     counts = [body_counts(b, _bonds_per_particle) for b in scene.bodies]
@@ -136,7 +140,7 @@ def test_cuda_estimates_use_the_gpus_calibration():
     assert f"CUDA calibration of {cal['date']}" in format_estimate(report, 4)
     big = dict(counts[0], points=216_000, bonds=216_000 * 122.0)
     cpu_step = pdsim.cost.step_seconds(big, CALIBRATION)
-    assert pdsim.cost.step_seconds(big, cal) < cpu_step / 10.0
+    assert pdsim.cost.step_seconds(big, cal) < cpu_step / 5.0
 
 
 def test_refusals_count_the_render_surfaces(tmp_path, monkeypatch):

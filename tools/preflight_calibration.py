@@ -167,7 +167,8 @@ def cost_scene(method: str, size: int, variant) -> pdsim.Scene:
                                    spacing=h, horizon_factor=m, name="block")  # fmt: skip
     elif method == "fem":
         mesh = pdsim.box_tet_mesh((size * h,) * 3, (size,) * 3, center=(0, 0, size * h / 2 + h))
-        strength = {"tensile_strength": 1.0e9} if variant == "fracture" else {}  # checked every step, never reached
+        # checked every step, never reached; a body that can crack also carries the contact between FEM surfaces
+        strength = {"tensile_strength": 1.0e9} if variant == "fracture" else {}
         scene.add_fem_body(mesh, _material("elastic"), name="block", **strength)
     else:
         body = pdsim.LatticeBody(pdsim.Lattice.simple_cubic(h), pdsim.box((size * h,) * 3), steps_per_frame=variant,
@@ -195,7 +196,9 @@ COST_RUNS = [
     ("fem", 14, None),
     ("fem", 20, None),
     ("fem", 6, "fracture"),
+    ("fem", 10, "fracture"),
     ("fem", 14, "fracture"),
+    ("fem", 20, "fracture"),
     ("lattice", 6, 20),
     ("lattice", 12, 20),
     ("lattice", 24, 40),
@@ -301,8 +304,11 @@ def cost_calibration(device: str = "cpu", repeats: int = REPEATS) -> dict:
     rows = []
     for r in fem:
         c = r["counts"][0]
-        rows.append([1.0] + [c["elements"] * (c["features"] == f) for f in pdsim.cost.FEM_FEATURES] + [c["points"]])
-    step.update(_nnls(rows, y, ["fem_step"] + [f"fem_element_{f}" for f in pdsim.cost.FEM_FEATURES] + ["fem_vertex"]))
+        contact = pdsim.cost.fem_surface_contact(r["counts"])[0]  # the breakable blocks: contact between surfaces
+        rows.append([1.0] + [c["elements"] * (c["features"] == f) for f in pdsim.cost.FEM_FEATURES] + [c["points"]]
+                    + [float(contact), contact * c["contact_vertices"]])  # fmt: skip
+    names = ["fem_step"] + [f"fem_element_{f}" for f in pdsim.cost.FEM_FEATURES] + ["fem_vertex"]
+    step.update(_nnls(rows, y, names + ["fem_contact_step", "fem_contact_vertex"]))
     lat = [r for r in runs if r["counts"][0]["method"] == "lattice"]
     y = [r["step_seconds"] / r["counts"][0]["steps"] for r in lat]
     step.update(_nnls([[1.0, r["counts"][0]["points"], r["counts"][0]["bonds"]] for r in lat], y,
@@ -410,6 +416,8 @@ def calibration_table(d: dict) -> str:
         ("step, per element: elastic / fracture (explicit FEM)",
          f"{s['fem_element_elastic'] * 1e9:.3g} / {s['fem_element_fracture'] * 1e9:.3g} ns"),
         ("step, per FEM vertex", f"{s['fem_vertex'] * 1e9:.1f} ns"),
+        ("step, contact between FEM surfaces: per step / per boundary vertex",
+         f"{s.get('fem_contact_step', 0.0) * 1e6:.0f} us / {s.get('fem_contact_vertex', 0.0) * 1e9:.0f} ns"),
         ("lattice step, per point / per link", f"{s['lattice_point'] * 1e9:.3g} / {s['lattice_link'] * 1e9:.3g} ns"),
         ("frame outside the steps: constant", f"{f['constant'] * 1e3:.1f} ms"),
         ("frame outside the steps, per point: peridynamics / FEM / lattice",
