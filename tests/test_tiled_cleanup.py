@@ -60,3 +60,43 @@ def test_tiled_shells_partition_the_box():
             _volume(surfaces.rest_vertices, surfaces.faces[shell_of == s], centre) for s in range(shell_of.max() + 1)
         )
         assert abs(volume - np.prod(size)) < 1e-9 * np.prod(size), volume
+
+
+def test_a_tile_whose_raw_triangles_changed_is_cleaned_again():
+    """The raw complex of a broken box (captured at its last rebuild: eight chips), cleaned tile by tile; then the same complex
+    with one crack vertex of a triangle that needs work moved by 0.05 h: the clean-up that kept the first call's tiles gives, bit for bit, what a
+    new one gives on the moved complex, and that differs from the first result (a kept tile is reused only when its
+    raw content is the same)."""
+    from pdsim.fragment_surfaces.cleanup import SHORT_EDGE, SLIVER_ANGLE, _needs_work
+    from pdsim.fragment_surfaces.tiles import TiledCleanup
+
+    centre = np.array([1000.0, -500.0, 3.0])
+    shape = pdsim.box((0.4, 0.2, 0.12), center=tuple(centre))
+    rest = _lattice_in(shape)
+    surfaces = FragmentSurfaces(shape, rest, H, "b", clean_tiles=True)
+    calls = []
+    inner = surfaces._tiles.clean
+
+    def keep(*args):
+        calls.append(tuple(np.array(a, copy=True) for a in args))
+        return inner(*args)
+
+    surfaces._tiles.clean = keep
+    for labels, damage in _steps(rest, centre):
+        assert surfaces.update_topology(labels, damage)
+    points, tri, shell, patch, plane_of_patch = calls[-1]
+    crack = plane_of_patch[patch] < 0
+    on_outer = np.zeros(len(points), dtype=bool)
+    on_outer[tri[~crack].ravel()] = True
+    flagged = _needs_work(points, tri, H, SHORT_EDGE, SLIVER_ANGLE)  # in a tile with work
+    candidates = np.setdiff1d(tri[crack & flagged].ravel(), np.flatnonzero(on_outer))
+    moved = points.copy()
+    moved[candidates[len(candidates) // 2]] += 0.05 * H * np.array([0.6, 0.0, 0.8])
+
+    kept = TiledCleanup(surfaces._surface, H)
+    first = kept.clean(points, tri, shell, patch, plane_of_patch)
+    again = kept.clean(moved, tri, shell, patch, plane_of_patch)
+    fresh = TiledCleanup(surfaces._surface, H).clean(moved, tri, shell, patch, plane_of_patch)
+    for a, b in zip(again, fresh):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    assert not all(np.array_equal(a, b) for a, b in zip(first, fresh))
