@@ -63,10 +63,10 @@ def test_tiled_shells_partition_the_box():
 
 
 def test_a_tile_whose_raw_triangles_changed_is_cleaned_again():
-    """The raw complex of a broken box (captured at its last rebuild: eight chips), cleaned tile by tile; then the same complex
-    with one crack vertex of a triangle that needs work moved by 0.05 h: the clean-up that kept the first call's tiles gives, bit for bit, what a
-    new one gives on the moved complex, and that differs from the first result (a kept tile is reused only when its
-    raw content is the same)."""
+    """The raw complex of a broken box (captured at its last rebuild: eight chips), cleaned tile by tile; then the
+    same complex with one crack vertex of a triangle that needs work moved by 0.05 h: the clean-up that kept the
+    first call's tiles gives, bit for bit, what a new one gives on the moved complex, and that differs from the first
+    result (a kept tile is reused only when its raw content is the same)."""
     from pdsim.fragment_surfaces.cleanup import SHORT_EDGE, SLIVER_ANGLE, _needs_work
     from pdsim.fragment_surfaces.tiles import TiledCleanup
 

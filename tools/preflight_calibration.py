@@ -308,7 +308,7 @@ def cost_calibration(device: str = "cpu", repeats: int = REPEATS) -> dict:
         rows.append([1.0] + [c["elements"] * (c["features"] == f) for f in pdsim.cost.FEM_FEATURES] + [c["points"]]
                     + [float(contact), contact * c["contact_vertices"]])  # fmt: skip
     names = ["fem_step"] + [f"fem_element_{f}" for f in pdsim.cost.FEM_FEATURES] + ["fem_vertex"]
-    step.update(_nnls(rows, y, names + ["fem_contact_step", "fem_contact_vertex"]))
+    step.update(_nnls(rows, y, [*names, *pdsim.cost.FEM_CONTACT_TERMS]))
     lat = [r for r in runs if r["counts"][0]["method"] == "lattice"]
     y = [r["step_seconds"] / r["counts"][0]["steps"] for r in lat]
     step.update(_nnls([[1.0, r["counts"][0]["points"], r["counts"][0]["bonds"]] for r in lat], y,
