@@ -115,10 +115,12 @@ def body_counts(body, bonds_per_particle) -> dict:
     scene's substeps), features ("plastic": a peridynamic body with a yield stress; else "fracture" when bonds or
     elements can break; else "elastic"), calibrated (False: no
     step calibration for this body, e.g. an implicit FEM body), contact_vertices (an explicit FEM body's boundary
-    vertices, which the contact between FEM surfaces works on: :func:`fem_surface_contact`)."""
+    vertices, which the contact between FEM surfaces works on: :func:`fem_surface_contact`), breaks (its bonds or
+    elements can break)."""
     method = _method(body)
     out = {"method": method, "points": 0, "bonds": 0.0, "elements": 0, "surface_vertices": surface_vertices(body),
-           "steps": None, "features": "elastic", "calibrated": True, "contact_vertices": 0}  # fmt: skip
+           "steps": None, "features": "elastic", "calibrated": True, "contact_vertices": 0,
+           "breaks": bool(getattr(body, "fractures", False))}  # fmt: skip
     if method == "peridynamics":
         n = int(body.particle_count)
         out.update(points=n, bonds=n * float(bonds_per_particle(body)))
@@ -170,10 +172,11 @@ def estimate_cost(bodies: list[dict], *, substeps: int, frames: int, device: str
     """The cost of a run of ``frames`` frames of ``substeps`` steps of bodies with counts ``bodies`` (body_counts).
 
     Returns plain JSON values: seconds_per_frame, build_seconds and total_seconds [s] (None where a body has no step
-    calibration), surface_vertices (at rest), surface_bytes (host memory of the render surfaces [B]), cache_bytes
-    (the cache, frames 0..frames [B]), calibrated (False off the calibration's device: the CPU figures are given),
-    device, and the calibration's machine, date and command. ``calibration``: None takes ``device``'s
-    (:func:`calibration_for`)."""
+    calibration; the bodies at rest: the render-surface rebuilds of the frames where a body breaks are left out, and
+    ``rebuilds_left_out`` says whether a body with a render surface can break), surface_vertices (at rest),
+    surface_bytes (host memory of the render surfaces [B]), cache_bytes (the cache, frames 0..frames [B]), calibrated
+    (False off the calibration's device: the CPU figures are given), device, and the calibration's machine, date
+    and command. ``calibration``: None takes ``device``'s (:func:`calibration_for`)."""
     if calibration is None:
         calibration = calibration_for(device)
     fs, bs, cb = calibration["frame_seconds"], calibration["build_seconds"], calibration["cache_bytes"]
@@ -194,6 +197,7 @@ def estimate_cost(bodies: list[dict], *, substeps: int, frames: int, device: str
         "build_seconds": build if timed else None,
         "total_seconds": build + frames * per_frame if timed else None,
         "surface_vertices": vertices,
+        "rebuilds_left_out": any(b.get("breaks", False) and b["surface_vertices"] > 0 for b in bodies),
         "surface_bytes": vertices * calibration["memory_bytes"]["surface_vertex"],
         "cache_bytes": (frames + 1) * cache_frame,
         "calibrated": on_device,

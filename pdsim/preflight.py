@@ -597,6 +597,8 @@ def format_estimate(report: PreflightReport, frames: int) -> str:
             f"{format_seconds(e['seconds_per_frame'])} per frame, {format_seconds(e['total_seconds'])} for {frames} "
             f"frames"
         )
+        if e.get("rebuilds_left_out"):
+            time_part += " (at rest: frames where a body breaks also rebuild its render surface, not counted here)"
     return (
         f"pdsim: estimate: {report.points:,} points, {report.substeps} steps per frame: {time_part}; peak memory "
         f"{format_bytes(memory_bytes)}; cache {format_bytes(e['cache_bytes'])} (render surfaces of about "

@@ -175,3 +175,17 @@ def test_calibration_fit_recovers_known_constants():
     np.testing.assert_allclose([fit["step"], fit["bond"], fit["particle"]], truth, rtol=1e-6)
     table = tool.calibration_table(CALIBRATION)
     assert CALIBRATION["date"] in table and table.count("\n|") >= 13
+
+
+def test_the_estimate_says_when_it_leaves_out_surface_rebuilds():
+    """The estimate is of the bodies at rest: for a body that can break (and has a render surface) the line says that
+    the frames where it breaks also rebuild its surface and that this is not counted; for one that cannot, it does
+    not."""
+    from pdsim.preflight import format_estimate
+
+    clause = "frames where a body breaks also rebuild its render surface, not counted here"
+    intact = _small_scene()
+    assert clause not in format_estimate(pdsim.preflight.preflight(intact, device="cpu"), 4)
+    breaking = pdsim.Scene(frames=4)
+    breaking.add_peridynamic_body(pdsim.box((0.1, 0.1, 0.1)), pdsim.presets.glass(), spacing=0.02)
+    assert clause in format_estimate(pdsim.preflight.preflight(breaking, device="cpu"), 4)
