@@ -36,9 +36,10 @@ def flagged(monkeypatch):
 
 
 def _rebuild_both(shape, rest, steps, flagged):
-    """Yields (carrying, not carrying, flagged at the start of each one's clean-up) after each step's rebuild."""
-    on = FragmentSurfaces(shape, rest, H, "b", carry_edits=True)
-    off = FragmentSurfaces(shape, rest, H, "b", carry_edits=False)
+    """Yields (carrying, not carrying, flagged at the start of each one's clean-up) after each step's rebuild; chips
+    drawn as their cells (they then take part in the clean-up, and the shells partition the solid)."""
+    on = FragmentSurfaces(shape, rest, H, "b", carry_edits=True, chip_shape="cell")
+    off = FragmentSurfaces(shape, rest, H, "b", carry_edits=False, chip_shape="cell")
     for labels, damage in steps:
         assert on.update_topology(labels, damage)
         assert off.update_topology(labels, damage)

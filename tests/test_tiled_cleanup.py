@@ -47,12 +47,13 @@ def test_tiles_kept_across_rebuilds_equal_surfaces_made_anew():
 
 
 def test_tiled_shells_partition_the_box():
-    """The shells' signed volumes add up to the box's (relative 1e-9) after each of the three steps."""
+    """The shells' signed volumes add up to the box's (relative 1e-9) after each of the three steps (chips drawn as
+    their cells, which partition the solid with the fragments)."""
     centre = np.array([1000.0, -500.0, 3.0])
     size = (0.4, 0.2, 0.12)
     shape = pdsim.box(size, center=tuple(centre))
     rest = _lattice_in(shape)
-    surfaces = FragmentSurfaces(shape, rest, H, "b", clean_tiles=True)
+    surfaces = FragmentSurfaces(shape, rest, H, "b", clean_tiles=True, chip_shape="cell")
     for labels, damage in _steps(rest, centre):
         assert surfaces.update_topology(labels, damage)
         shell_of = surfaces.vertex_fragment[surfaces.faces[:, 0]]

@@ -23,7 +23,10 @@ steps, and the module of each:
 6. **Slivers** (cleanup.py): edge collapses, edge flips and vertex moves on the shared complex that keep every shell
    closed and every outer face on the input surface. A rebuild first applies the last clean-up's edits wherever the
    complex around them is unchanged (edits.py), so the clean-up works where the regions changed.
-7. **Damage** (surfaces.py): particles whose damage reaches ``damage_threshold`` become regions (chips) of their own.
+7. **Damage** (surfaces.py): particles whose damage reaches ``damage_threshold`` become chips. By default
+   (``chip_shape="cube"``) all chips together make one region of the partition that gets no shell, so the fragments
+   get crack faces where the chips were, and each chip is drawn as a cube of edge h around its particle;
+   ``chip_shape="cell"`` makes each chip a region of its own, clipped and cleaned with the fragments.
 8. **Motion** (embedding.py): each shell vertex follows its region's particles: the region's best-fit rigid motion
    plus moving-least-squares interpolated residuals, a sparse product per frame. Vertex velocities are the time
    derivative of this map, ``v_v = c' + w x R (X_v - Xc) + sum_k phi_vk (v_k - c' - w x R (X_k - Xc))`` with the mean
@@ -39,7 +42,9 @@ regions changed.
 
 Cost: a rebuild is one boolean per region whose geometry changed since the last rebuild (the others reuse their
 clip), each against the cut of the input near the region (booleans.py: ``InputCuts``), plus the clean-up within two
-rings of where the complex changed; a frame's vertex update is a rigid fit per shell and a sparse product. In a run
+rings of where the complex changed; chips drawn as cubes cost neither (the faces between neighbouring chips' cells
+were most of the crack triangles of a crumbling wall); a frame's vertex update is a rigid fit per shell and a
+sparse product. In a run
 the rebuild and the drawn surface of frame N are built on the run's surface thread while frame N + 1 simulates
 (pdsim/frame_worker.py).
 """

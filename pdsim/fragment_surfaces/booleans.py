@@ -247,8 +247,9 @@ def _clip(rv, rf, cuts: InputCuts, solid_id: int, spacing: float, simplify: floa
 
 
 def shared_complex(
-    pieces, k_count: int, surface, spacing: float, *, simplify: float, clean: bool, record=None, tiles=None
-):
+    pieces, k_count: int, surface, spacing: float, *, simplify: float, clean: bool, record=None, tiles=None,
+    left_out=None,
+):  # fmt: skip
     """All regions' shells as one complex (vertices shared between shells), crack faces shared by both sides and
     slivers removed (steps 5-6).
 
@@ -263,6 +264,7 @@ def shared_complex(
             by this clean-up's record (emptied when no clean-up ran or it failed).
         tiles: None, or the body's :class:`pdsim.fragment_surfaces.tiles.TiledCleanup`: the clean-up then runs tile
             by tile (``record`` is not used).
+        left_out: None, or a region without a shell (its piece empty): the crack faces towards it are one-sided.
 
     Returns:
         (points [m] [p, 3], tri [f, 3], shell [f], crack flag [f], patch [f], shared, clean_failed); a patch is an
@@ -278,6 +280,8 @@ def shared_complex(
     across = np.concatenate([p[2] for p in pieces])
     planes = np.concatenate([p[3] for p in pieces])
     crack = (across >= 0).astype(np.int32)
+    if len(tri) == 0:  # no region meets the input (e.g. every particle left out as a chip)
+        return points, tri, shell, crack, np.zeros(0, dtype=np.int64), True, None
     plane_count = int(surface[2].max()) + 1
 
     def patches(shell, across, planes):
@@ -294,7 +298,7 @@ def shared_complex(
     points = points[first]
     tri = gid[tri]
     # One triangulation per crack: the lower region's triangles, reversed, replace the higher region's.
-    primary = (across >= 0) & (shell < across)
+    primary = (across >= 0) & (shell < across) & (across != (-1 if left_out is None else left_out))
     secondary = (across >= 0) & (shell > across)
     copies = tri[primary][:, [0, 2, 1]]
     tri2 = np.concatenate([tri[~secondary], copies])

@@ -220,7 +220,7 @@ def _off_surface(pos: np.ndarray, corners: np.ndarray, grid_x: np.ndarray, dista
     return x
 
 
-def _signed_distances(shape: SolidShape, points: np.ndarray, device: str) -> np.ndarray:
+def signed_distances(shape: SolidShape, points: np.ndarray, device: str) -> np.ndarray:
     """Signed distance [m] of points [m] [n, 3] to the surface of the closed ``shape``, negative inside, float64 [n]."""
     centre = 0.5 * (shape.bounds[0] + shape.bounds[1])  # float32 relative to the shape: exact anywhere in the world
     with wp.ScopedDevice(device):
@@ -295,7 +295,7 @@ def build_lattice_grid(
         owner[cell @ strides] = np.arange(rest.shape[0])  # particles on grid vertices label their own
     surface_distance = np.full(positions.shape[0], np.nan)
     queried = np.flatnonzero(~np.any((ijk == 0) | (ijk == dims - 1), axis=1))  # the outer layer is outside
-    surface_distance[queried] = _signed_distances(shape, positions[queried], device)
+    surface_distance[queried] = signed_distances(shape, positions[queried], device)
     voted = np.flatnonzero((owner < 0) & (surface_distance <= 1.8 * h))  # inside or near (NaN compares False)
     k = min(VOTE_COUNT, rest.shape[0])
     dist, voters = cKDTree(rest).query(positions[voted], k=k)

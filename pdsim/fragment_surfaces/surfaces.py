@@ -4,9 +4,19 @@ each frame (step 9).
 
 Regions (step 7) are the fragments (connected components of live bonds), except that a particle whose damage reaches
 ``damage_threshold`` (default 0.5: about 0.38 next to a clean crack through the bulk, so clean cracks still show
-through the fragments) becomes a chip of its own. Its cell separates from its neighbours' in the frame it loses that
-share of its bonds, so a hole through a wall shows as soon as the damage crosses the wall, not when the last bond
-joining the debris breaks.
+through the fragments) becomes a chip of its own. It separates from its neighbours in the frame it loses that share
+of its bonds, so a hole through a wall shows as soon as the damage crosses the wall, not when the last bond joining
+the debris breaks. How a chip is drawn (``chip_shape``):
+
+- ``"cube"`` (default): the chips together are one region of the partition that gets no shell, so the fragments'
+  shells get crack faces where chips were (the crack smoothing rounds that hole like any crack), and each chip is a
+  cube of edge h centred on its particle's rest position that translates with it; a cube face whose centre lies at
+  the input surface (or outside it) is an outer face, the others crack faces.
+- ``"cell"``: each chip is a region of its own, clipped by the input and cleaned with the fragments' shells.
+
+The cubes keep the look (a crumbling wall's chips were cells of about a spacing) and drop the cost: next to each
+other, chips' cells share crack faces that the clean-up must coarsen at every rebuild, most of a crumbling body's
+crack triangles (docs/benchmarks.md, "Chips drawn as cubes").
 """
 
 from __future__ import annotations
@@ -21,12 +31,22 @@ from ..output.views import MeshView
 from .booleans import InputCuts, clip_regions, plane_groups, refine_surface, shared_complex
 from .drawn import DrawnSurface, drawn_surface
 from .embedding import ShellEmbedding, rigid_fit
-from .regions import LatticeGrid, build_lattice_grid, partition_regions
+from .regions import LatticeGrid, signed_distances, build_lattice_grid, partition_regions
 from .tiles import TiledCleanup
 
 __all__ = ["DAMAGE_THRESHOLD", "FragmentSurfaces", "surface_states", "with_states"]
 
 DAMAGE_THRESHOLD = 0.5  # particles with at least this damage become chips of their own (step 7 of the method)
+CHIP_SHAPES = ("cube", "cell")  # FragmentSurfaces(chip_shape=)
+# the 12 outward triangles of the unit cube whose corner i has the offsets (bits of i: x, y, z) in {-1/2, 1/2}^3
+_CUBE_CORNERS = np.array([[(i >> 0) & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=np.float64) - 0.5
+_CUBE_TRIANGLES = np.array(
+    [[0, 2, 3], [0, 3, 1], [4, 5, 7], [4, 7, 6], [0, 1, 5], [0, 5, 4],
+     [2, 6, 7], [2, 7, 3], [0, 4, 6], [0, 6, 2], [1, 3, 7], [1, 7, 5]],
+    dtype=np.int64,
+)  # fmt: skip
+_CUBE_FACE_NORMALS = np.array([[0, 0, -1], [0, 0, 1], [0, -1, 0], [0, 1, 0], [-1, 0, 0], [1, 0, 0]], np.float64)
+CHIP_OUTER_DEPTH = 0.25  # a chip cube's face whose centre lies less than this many spacings inside is an outer face
 
 
 class FragmentSurfaces:
@@ -63,6 +83,9 @@ class FragmentSurfaces:
         clean_tiles: clean tile by tile (default False; pdsim/fragment_surfaces/tiles.py: a tile's result depends
             on its own raw triangles only and is taken from the last rebuild where those are unchanged, so nothing
             is carried across rebuilds or checkpoints); False: the whole complex, with or without ``carry_edits``.
+        chip_shape: how a chip is drawn: ``"cube"`` (default), a cube of edge h around its particle, the chips
+            leaving a hole in the partition of space; ``"cell"``, its cell of the partition, clipped by the input
+            and cleaned with the fragments' shells (see :meth:`update_topology`).
 
     Attributes:
         fragment_ids: fragment label of each shell (chips carry their particle's fragment label; several shells
@@ -96,6 +119,7 @@ class FragmentSurfaces:
         reuse: bool = True,
         carry_edits: bool = True,
         clean_tiles: bool = False,
+        chip_shape: str = "cube",
     ):
         rest = np.asarray(rest_positions, dtype=np.float64)
         if rest.ndim != 2 or rest.shape[1] != 3 or rest.shape[0] == 0:
@@ -108,6 +132,9 @@ class FragmentSurfaces:
             raise ValueError(f"simplify={simplify!r} must lie in [0, 0.5] (a fraction of the spacing)")
         if not (np.isfinite(damage_threshold) and 0.0 < damage_threshold <= 1.0):
             raise ValueError(f"damage_threshold={damage_threshold!r} must lie in (0, 1]")
+        if chip_shape not in CHIP_SHAPES:
+            raise ValueError(f"chip_shape={chip_shape!r} must be one of {', '.join(map(repr, CHIP_SHAPES))}")
+        self.chip_shape = chip_shape
         self.shape = shape
         self.rest_positions = rest
         self.spacing = float(spacing)
@@ -127,6 +154,7 @@ class FragmentSurfaces:
         self.clips_made = 0
         self.clean_record = {} if carry_edits and not clean_tiles else None
         self._grid: LatticeGrid | None = None
+        self._outer_faces: np.ndarray | None = None  # _chip_outer_faces, made with the grid
         self.device = device
         self.rebuild_seconds = 0.0
         self.clean_failed = False
@@ -181,8 +209,9 @@ class FragmentSurfaces:
         """Rebuilds the shells if the regions changed since the last call.
 
         Regions are the fragments, except that every particle whose damage reaches ``damage_threshold`` is a region
-        (a chip) of its own: its cell separates from its neighbours' as soon as it loses that share of its bonds,
-        before the fragment splits, so a hole through a wall shows as soon as damage crosses the wall.
+        (a chip) of its own, drawn as ``chip_shape`` says: it separates from its neighbours as soon as it loses that
+        share of its bonds, before the fragment splits, so a hole through a wall shows as soon as damage crosses the
+        wall.
 
         Args:
             labels: fragment label per particle, int shape [particle_count] (any non-negative ints; equal labels
@@ -233,10 +262,54 @@ class FragmentSurfaces:
             tri_shell = np.zeros(len(tri), dtype=np.int64)
             tri_crack = np.zeros(len(tri), dtype=np.int32)
             shared = True
+        elif self.chip_shape == "cube" and ids[0] < 0:
+            points, tri, tri_shell, tri_crack, tri_patch, shared = self._complex_with_chip_cubes(region, ids, first)
         else:
             points, tri, tri_shell, tri_crack, tri_patch, shared = self._clipped_complex(region, k_count)
         self._split_shells(points, tri, tri_shell, tri_crack, tri_patch, labels[first], region, k_count, shared)
         self._build_interpolation()
+
+    def _complex_with_chip_cubes(self, region: np.ndarray, ids: np.ndarray, first: np.ndarray):
+        """The complex of :meth:`_clipped_complex` when some regions are chips (``ids`` [k] the sorted region keys,
+        chips first, being negative; ``region`` [n] each particle's index into them; ``first`` [k] a particle of
+        each): the fragments' shells from a partition in which all chips make one extra region that is then left
+        out (the fragments get crack faces where chips were), and each chip a cube of edge h around its particle's
+        rest position, all its faces crack faces on a patch of its own. Same returns; shells numbered as ``ids``."""
+        chips = int(np.searchsorted(ids, 0))
+        fragments = len(ids) - chips
+        if fragments:
+            part = np.where(region < chips, fragments, region - chips)  # the chips: region ``fragments``, left out
+            points, tri, shell, crack, patch, shared = self._clipped_complex(part, fragments + 1, left_out=fragments)
+            shell = shell + chips
+        else:
+            points, tri = np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+            shell, crack, patch = (np.zeros(0, dtype=np.int64),) * 3
+            shared = True
+        particle = first[:chips]
+        cube_points = (self.rest_positions[particle][:, None, :] + self.spacing * _CUBE_CORNERS[None]).reshape(-1, 3)
+        cube_tri = (_CUBE_TRIANGLES[None] + len(points) + 8 * np.arange(chips)[:, None, None]).reshape(-1, 3)
+        cube_shell = np.repeat(np.arange(chips), len(_CUBE_TRIANGLES))
+        cube_face = np.tile(np.arange(len(_CUBE_TRIANGLES)) // 2, chips)  # the cube face of each triangle
+        cube_crack = (~self._chip_outer_faces()[particle[cube_shell], cube_face]).astype(np.int32)
+        first_patch = int(patch.max()) + 1 if len(patch) else 0
+        return (
+            np.concatenate([points, cube_points]),
+            np.concatenate([tri, cube_tri]),
+            np.concatenate([shell, cube_shell]),
+            np.concatenate([crack, cube_crack]).astype(np.int32),
+            np.concatenate([patch, first_patch + 6 * cube_shell + cube_face]),
+            shared,
+        )
+
+    def _chip_outer_faces(self) -> np.ndarray:
+        """Bool [particle_count, 6]: the faces of each particle's chip cube (in the order of _CUBE_FACE_NORMALS)
+        whose centre lies outside the input or less than CHIP_OUTER_DEPTH spacings inside it; they are drawn as
+        outer faces. A Warp query, made with the label grid (in the thread that calls :meth:`deferred_view`)."""
+        if self._outer_faces is None:
+            centres = self.rest_positions[:, None, :] + 0.5 * self.spacing * _CUBE_FACE_NORMALS[None]
+            depth = signed_distances(self.shape, centres.reshape(-1, 3), self.device).reshape(-1, 6)
+            self._outer_faces = depth >= -CHIP_OUTER_DEPTH * self.spacing
+        return self._outer_faces
 
     def _lattice_grid(self) -> LatticeGrid:
         """The label grid (step 1), built on first use (a Warp query on ``device``)."""
@@ -244,14 +317,18 @@ class FragmentSurfaces:
             self._grid = build_lattice_grid(
                 self.rest_positions, self.shape, self.spacing, device=self.device, on_lattice=self.on_lattice
             )
+            if self.chip_shape == "cube":
+                self._chip_outer_faces()
         return self._grid
 
-    def _clipped_complex(self, region: np.ndarray, k_count: int):
+    def _clipped_complex(self, region: np.ndarray, k_count: int, left_out: int | None = None):
         """All regions' shells as one complex (steps 1-6): the regions of :func:`partition_regions` over the label
         grid (built once), clipped by the input surface, joined and cleaned (:func:`shared_complex`). Returns (points
         [m] [p, 3], tri [f, 3], shell [f], crack flag [f], patch [f], shared); sets ``clean_failed`` when the
-        clean-up ran."""
+        clean-up ran. Region ``left_out`` (if any) takes part in the partition but gets no shell."""
         regions = partition_regions(self._lattice_grid(), region, crack_smoothing=self.crack_smoothing)
+        if left_out is not None:
+            regions[left_out] = (np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), np.zeros(0, dtype=np.int64))
         pieces, self.clips_made = clip_regions(
             regions,
             self._input_cuts(),
@@ -270,6 +347,7 @@ class FragmentSurfaces:
             clean=self.clean,
             record=self.clean_record,
             tiles=self._tiles,
+            left_out=left_out,
         )
         if clean_failed is not None:
             self.clean_failed = clean_failed
