@@ -6,7 +6,7 @@ rounds of trimesh's midpoint subdivision (four triangles for each, the very same
 material and the drop are the same, so the two runs simulate the same thing; only the input mesh of the render
 surfaces differs. Each run is a child process (``--one``) timed from outside its import; the table gives, per mesh,
 the triangle count and the wall time of ``Scene.run`` [s]; the line above it the fragments and chips (particles
-with damage >= 0.5, each a region of the render surface) at the end.
+with damage >= 0.5, each drawn as a cube of the render surface) at the end.
 
     python tools/bench_triangle_count.py                      # 4,608 and 73,728 triangles
     python tools/bench_triangle_count.py --frames 12 --spacing 0.012
