@@ -24,6 +24,8 @@ inputs (a sphere whose facets are smaller than h) keep more slivers, since no ve
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
@@ -513,16 +515,37 @@ def _relax_round(
     return np.bincount(group[c], minlength=len(none))
 
 
+_INPUT_INDEX: OrderedDict = OrderedDict()  # id(input triangles) -> (triangles, vertices, corners, tree, reach)
+_INPUT_INDEX_SIZE = 16  # input surfaces kept (a body's is the same array object at every rebuild)
+
+
+def _input_index(sv, sf):
+    """(corners [f, 3, 3], k-d tree of the triangles' centroids, largest centroid-to-corner distance) of the input
+    triangles ``sf`` of vertices ``sv``: made once per input surface and kept (the entries hold the arrays, so their
+    ids stay theirs), since every relaxation round of every rebuild asks for them and they grow with the input
+    mesh, not with the work."""
+    key = id(sf)
+    hit = _INPUT_INDEX.get(key)
+    if hit is not None and hit[0] is sf and hit[1] is sv:
+        _INPUT_INDEX.move_to_end(key)
+        return hit[2:]
+    corners = sv[sf]
+    centroid = corners.mean(axis=1)
+    reach = float(np.linalg.norm(corners - centroid[:, None, :], axis=2).max()) * (1.0 + 1e-9) + 1e-300
+    _INPUT_INDEX[key] = (sf, sv, corners, cKDTree(centroid), reach)
+    while len(_INPUT_INDEX) > _INPUT_INDEX_SIZE:
+        _INPUT_INDEX.popitem(last=False)
+    return corners, _INPUT_INDEX[key][3], reach
+
+
 def _on_input_planes(pos, own_patch, surface) -> np.ndarray:
     """Bool [c]: each point pos [c, 3] lies in an input triangle of each of its planes (``own_patch`` [c, 2] patch
     ids, -1 for none; ``surface`` as in :func:`_relax_round`), within 1e-9 of the triangle's size. Only the triangles
     whose centroid lies within the largest centroid-to-corner distance of a point can hold it (a k-d tree query)."""
     sv, sf, splane, plane_of_patch = surface
     ok = np.ones(len(pos), dtype=bool)
-    corners = sv[sf]
-    centroid = corners.mean(axis=1)
-    reach = float(np.linalg.norm(corners - centroid[:, None, :], axis=2).max()) * (1.0 + 1e-9) + 1e-300
-    pairs = cKDTree(pos).sparse_distance_matrix(cKDTree(centroid), reach, output_type="ndarray")
+    corners, centroids, reach = _input_index(sv, sf)
+    pairs = cKDTree(pos).sparse_distance_matrix(centroids, reach, output_type="ndarray")
     near_c, near_t = pairs["i"].astype(np.int64), pairs["j"].astype(np.int64)
     for k in range(own_patch.shape[1]):
         has = own_patch[:, k] >= 0
@@ -574,8 +597,11 @@ def clean_complex(
     """Removes slivers from the shell complex by edge collapses that keep every shell a closed 2-manifold.
 
     Candidates are edges shorter than ``short_edge`` spacings and the shortest side (up to one spacing) of every
-    triangle with an angle below ``sliver_angle`` [degrees]. A collapse moves one end u onto the other end v (no new
-    positions: outer faces stay exactly on the input surface, sharp edges and corners stay put) and is allowed when
+    triangle with an angle below ``sliver_angle`` [degrees]; given ``crack_patch``, at first only those of the crack
+    triangles and of the triangles within two vertex rings of them (the input's own triangles elsewhere are kept as
+    they are, short or thin: the input's detail, at no cost that grows with the input). A collapse moves one end u
+    onto the other end v (no new positions: outer faces stay exactly on the input surface, sharp edges and corners
+    stay put) and is allowed when
 
     - every patch of u is a patch of v (u stays on its planes and cracks: interior points may move onto rims,
       creases and junctions, never the reverse), or, given ``crack_patch``, v lies on the plane of every input
@@ -639,6 +665,8 @@ def clean_complex(
         plane_eq = np.concatenate([normal, offset[:, None]], axis=1)
         plane_eq[np.asarray(crack_patch, dtype=bool)] = np.nan
     flag = _needs_work(points, tri, spacing, short_edge, sliver_angle)
+    if crack_patch is not None:  # the input's own triangles, away from the cracks, are left as the input has them
+        flag &= _near_cracks(tri, np.asarray(crack_patch, dtype=bool)[patch], len(points))
     if settled is not None:
         settled = np.asarray(settled, dtype=bool)
         flag &= ~settled
@@ -797,6 +825,15 @@ def _needs_work(points, tri, spacing, short_edge, sliver_angle) -> np.ndarray:
     t = points[tri]
     side = np.linalg.norm(t[:, [1, 2, 0]] - t, axis=2)
     return (side.min(axis=1) < short_edge * spacing) | (_min_angles(t) < sliver_angle)
+
+
+def _near_cracks(tri, crack, vertex_count) -> np.ndarray:
+    """Bool [f]: the triangle is a crack triangle (``crack`` [f]) or lies within two vertex rings of one (where the
+    clip cut input triangles and made new vertices)."""
+    near = np.zeros(vertex_count, dtype=bool)
+    near[tri[crack]] = True
+    near[tri[near[tri].any(axis=1)]] = True
+    return near[tri].any(axis=1)
 
 
 def _neighbourhood(tri, flag, vertex_count):

@@ -217,10 +217,8 @@ def apply_edits(record: dict, points, tri, shell, patch, spacing: float):
     add_patch = _lookup(patch_keys, patch_new, np.stack([add_c, cpa[add_ids]], axis=1), bad, add_c)
     # Apply the clusters that passed.
     rem_ids = np.flatnonzero(removed)
-    rem_c = cluster[rt[rem_ids, 0]]
-    rem_pos = np.searchsorted(near_r, rem_ids)
-    rem_q = near_q[q_of_r[rem_pos]]
-    drop = rem_q[~bad[rem_c]]
+    rem_ids = rem_ids[~bad[cluster[rt[rem_ids, 0]]]]  # a passed cluster's raw triangles all have their new rows
+    drop = near_q[q_of_r[np.searchsorted(near_r, rem_ids)]]
     keep = np.ones(len(tri), dtype=bool)
     keep[drop] = False
     take = ~bad[add_c]
