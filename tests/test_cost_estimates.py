@@ -1,7 +1,7 @@
 """The pre-flight's cost estimates (pdsim/cost.py, calibrated by tools/preflight_calibration.py --cost): on three
 gallery scenes of the three methods at their preview settings, and on the glass pane's first 6 preview frames (it
 cracks in each, so each rebuilds its render surface, which the estimate of the pane at rest leaves out), the
-estimated time per frame and cache size land within a factor of 2 of the run's own (the pane measured 1.02 and 1.22
+estimated time per frame and cache size land within a factor of 2 of the run's own (the pane measured 1.02-1.06 and 1.22
 on 2026-12-04); a request for a million particles prints its estimate and the one-hour warning before anything is
 allocated."""
 

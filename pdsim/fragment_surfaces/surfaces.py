@@ -31,7 +31,7 @@ from ..output.views import MeshView
 from .booleans import InputCuts, clip_regions, plane_groups, refine_surface, shared_complex
 from .drawn import DrawnSurface, drawn_surface
 from .embedding import ShellEmbedding, rigid_fit
-from .regions import LatticeGrid, signed_distances, build_lattice_grid, partition_regions
+from .regions import LatticeGrid, build_lattice_grid, partition_regions, signed_distances
 from .tiles import TiledCleanup
 
 __all__ = ["DAMAGE_THRESHOLD", "FragmentSurfaces", "surface_states", "with_states"]
@@ -274,7 +274,8 @@ class FragmentSurfaces:
         chips first, being negative; ``region`` [n] each particle's index into them; ``first`` [k] a particle of
         each): the fragments' shells from a partition in which all chips make one extra region that is then left
         out (the fragments get crack faces where chips were), and each chip a cube of edge h around its particle's
-        rest position, all its faces crack faces on a patch of its own. Same returns; shells numbered as ``ids``."""
+        rest position, each face on a patch of its own, outer where :meth:`_chip_outer_faces` says so and crack
+        elsewhere. Same returns; shells numbered as ``ids``."""
         chips = int(np.searchsorted(ids, 0))
         fragments = len(ids) - chips
         if fragments:
