@@ -1,5 +1,5 @@
-"""Kernels for fragment surfaces (pdsim/fragment_surfaces/regions.py): signed distances of grid points to a closed
-mesh."""
+"""Kernels for fragment surfaces (pdsim/fragment_surfaces/regions.py): signed distances of points to a closed mesh,
+and their nearest points on it."""
 
 import warp as wp
 
@@ -25,3 +25,30 @@ def signed_distances(mesh_id, points, max_dist: float, distance):
     """Launches :func:`signed_distance_to_solid` over ``points`` (vec3 [n]) on the current device: distance [m]
     float [n] of each point to the closed mesh ``mesh_id`` (a wp.Mesh id), negative inside."""
     wp.launch(signed_distance_to_solid, dim=len(points), inputs=[mesh_id, points, max_dist, distance])
+
+
+@wp.kernel
+def closest_point_on_solid(
+    mesh: wp.uint64,
+    points: wp.array(dtype=wp.vec3),
+    max_dist: float,
+    distance: wp.array(dtype=float),
+    closest: wp.array(dtype=wp.vec3),
+):
+    """As :func:`signed_distance_to_solid`, and closest[i] = the point [m] of the mesh's surface nearest points[i]
+    (points[i] itself where the query finds none within ``max_dist``)."""
+    i = wp.tid()
+    p = points[i]
+    q = wp.mesh_query_point_sign_winding_number(mesh, p, max_dist, 0.5, 2.0)
+    distance[i] = max_dist
+    closest[i] = p
+    if q.result:
+        c = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+        distance[i] = q.sign * wp.length(c - p)
+        closest[i] = c
+
+
+def closest_points(mesh_id, points, max_dist: float, distance, closest):
+    """Launches :func:`closest_point_on_solid` over ``points`` (vec3 [n]) on the current device: signed distance [m]
+    float [n] (negative inside) and the nearest surface point [m] vec3 [n] of each point."""
+    wp.launch(closest_point_on_solid, dim=len(points), inputs=[mesh_id, points, max_dist, distance, closest])

@@ -10,8 +10,9 @@ the debris breaks. How a chip is drawn (``chip_shape``):
 
 - ``"cube"`` (default): the chips together are one region of the partition that gets no shell, so the fragments'
   shells get crack faces where chips were (the crack smoothing rounds that hole like any crack), and each chip is a
-  cube of edge h centred on its particle's rest position that translates with it; a cube face whose centre lies at
-  the input surface (or outside it) is an outer face, the others crack faces.
+  cube of edge 0.8 h (``CHIP_EDGE``) centred on its particle's rest position that translates with it, kept within the
+  input; a cube face whose centre lies at the input surface (or outside it) is an outer face, the others crack
+  faces.
 - ``"cell"``: each chip is a region of its own, clipped by the input and cleaned with the fragments' shells.
 
 The cubes keep the look (a crumbling wall's chips were cells of about a spacing) and drop the cost: next to each
@@ -31,7 +32,7 @@ from ..output.views import MeshView
 from .booleans import InputCuts, clip_regions, plane_groups, refine_surface, shared_complex
 from .drawn import DrawnSurface, drawn_surface
 from .embedding import ShellEmbedding, rigid_fit
-from .regions import LatticeGrid, build_lattice_grid, partition_regions, signed_distances
+from .regions import LatticeGrid, build_lattice_grid, closest_points, partition_regions, signed_distances
 from .tiles import TiledCleanup
 
 __all__ = ["DAMAGE_THRESHOLD", "FragmentSurfaces", "surface_states", "with_states"]
@@ -45,8 +46,11 @@ _CUBE_TRIANGLES = np.array(
      [2, 6, 7], [2, 7, 3], [0, 4, 6], [0, 6, 2], [1, 3, 7], [1, 7, 5]],
     dtype=np.int64,
 )  # fmt: skip
-_CUBE_FACE_NORMALS = np.array([[0, 0, -1], [0, 0, 1], [0, -1, 0], [0, 1, 0], [-1, 0, 0], [1, 0, 0]], np.float64)
 CHIP_OUTER_DEPTH = 0.25  # a chip cube's face whose centre lies less than this many spacings inside is an outer face
+# edge of a chip's cube [spacings]: its volume, 0.51 h^3, about that of the hole chips leave in their fragment (the
+# crack smoothing rounds their cells: 0.55 h^3 per chip of a 3 x 3 x 3 block), and the hole's crack faces show
+# between neighbouring chips
+CHIP_EDGE = 0.8
 
 
 class FragmentSurfaces:
@@ -83,7 +87,7 @@ class FragmentSurfaces:
         clean_tiles: clean tile by tile (default False; pdsim/fragment_surfaces/tiles.py: a tile's result depends
             on its own raw triangles only and is taken from the last rebuild where those are unchanged, so nothing
             is carried across rebuilds or checkpoints); False: the whole complex, with or without ``carry_edits``.
-        chip_shape: how a chip is drawn: ``"cube"`` (default), a cube of edge h around its particle, the chips
+        chip_shape: how a chip is drawn: ``"cube"`` (default), a cube of edge 0.8 h around its particle, the chips
             leaving a hole in the partition of space; ``"cell"``, its cell of the partition, clipped by the input
             and cleaned with the fragments' shells (see :meth:`update_topology`).
 
@@ -154,7 +158,7 @@ class FragmentSurfaces:
         self.clips_made = 0
         self.clean_record = {} if carry_edits and not clean_tiles else None
         self._grid: LatticeGrid | None = None
-        self._outer_faces: np.ndarray | None = None  # _chip_outer_faces, made with the grid
+        self._cubes = None  # _chip_cubes, made with the grid
         self.device = device
         self.rebuild_seconds = 0.0
         self.clean_failed = False
@@ -273,9 +277,9 @@ class FragmentSurfaces:
         """The complex of :meth:`_clipped_complex` when some regions are chips (``ids`` [k] the sorted region keys,
         chips first, being negative; ``region`` [n] each particle's index into them; ``first`` [k] a particle of
         each): the fragments' shells from a partition in which all chips make one extra region that is then left
-        out (the fragments get crack faces where chips were), and each chip a cube of edge h around its particle's
-        rest position, each face on a patch of its own, outer where :meth:`_chip_outer_faces` says so and crack
-        elsewhere. Same returns; shells numbered as ``ids``."""
+        out (the fragments get crack faces where chips were), and each chip a cube of edge 0.8 h around its particle's
+        rest position (:meth:`_chip_cubes`: kept within the input), each face on a patch of its own, outer where
+        it lies at the input surface and crack elsewhere. Same returns; shells numbered as ``ids``."""
         chips = int(np.searchsorted(ids, 0))
         fragments = len(ids) - chips
         if fragments:
@@ -287,11 +291,12 @@ class FragmentSurfaces:
             shell, crack, patch = (np.zeros(0, dtype=np.int64),) * 3
             shared = True
         particle = first[:chips]
-        cube_points = (self.rest_positions[particle][:, None, :] + self.spacing * _CUBE_CORNERS[None]).reshape(-1, 3)
+        corners, outer = self._chip_cubes()
+        cube_points = corners[particle].reshape(-1, 3)
         cube_tri = (_CUBE_TRIANGLES[None] + len(points) + 8 * np.arange(chips)[:, None, None]).reshape(-1, 3)
         cube_shell = np.repeat(np.arange(chips), len(_CUBE_TRIANGLES))
         cube_face = np.tile(np.arange(len(_CUBE_TRIANGLES)) // 2, chips)  # the cube face of each triangle
-        cube_crack = (~self._chip_outer_faces()[particle[cube_shell], cube_face]).astype(np.int32)
+        cube_crack = (~outer[particle[cube_shell], cube_face]).astype(np.int32)
         first_patch = int(patch.max()) + 1 if len(patch) else 0
         return (
             np.concatenate([points, cube_points]),
@@ -302,15 +307,23 @@ class FragmentSurfaces:
             shared,
         )
 
-    def _chip_outer_faces(self) -> np.ndarray:
-        """Bool [particle_count, 6]: the faces of each particle's chip cube (in the order of _CUBE_FACE_NORMALS)
-        whose centre lies outside the input or less than CHIP_OUTER_DEPTH spacings inside it; they are drawn as
-        outer faces. A Warp query, made with the label grid (in the thread that calls :meth:`deferred_view`)."""
-        if self._outer_faces is None:
-            centres = self.rest_positions[:, None, :] + 0.5 * self.spacing * _CUBE_FACE_NORMALS[None]
-            depth = signed_distances(self.shape, centres.reshape(-1, 3), self.device).reshape(-1, 6)
-            self._outer_faces = depth >= -CHIP_OUTER_DEPTH * self.spacing
-        return self._outer_faces
+    def _chip_cubes(self):
+        """Each particle's chip cube in rest space: (corners [m] float64 [particle_count, 8, 3]: the cube of edge
+        CHIP_EDGE h centred on the particle, every corner outside the input moved to its nearest point of the input
+        surface, so the cube keeps within the input as the surface it replaces did; bool [particle_count, 6]: its
+        faces, the triangle pairs of _CUBE_TRIANGLES (z-, z+, y-, y+, x-, x+), whose centre then lies less than
+        CHIP_OUTER_DEPTH spacings inside the input, drawn as outer faces). Warp queries, made with the label grid
+        (in the thread that calls :meth:`deferred_view`)."""
+        if self._cubes is None:
+            n, h = self.particle_count, self.spacing
+            corners = (self.rest_positions[:, None, :] + CHIP_EDGE * h * _CUBE_CORNERS[None]).reshape(-1, 3)
+            depth, nearest = closest_points(self.shape, corners, self.device)
+            corners = np.where((depth > 0.0)[:, None], nearest, corners).reshape(n, 8, 3)
+            quads = np.array([sorted(set(_CUBE_TRIANGLES[2 * f]) | set(_CUBE_TRIANGLES[2 * f + 1])) for f in range(6)])
+            centres = corners[:, quads].mean(axis=2)  # [n, 6, 3]
+            depth = signed_distances(self.shape, centres.reshape(-1, 3), self.device).reshape(n, 6)
+            self._cubes = (corners, depth >= -CHIP_OUTER_DEPTH * h)
+        return self._cubes
 
     def _lattice_grid(self) -> LatticeGrid:
         """The label grid (step 1), built on first use (a Warp query on ``device``)."""
@@ -319,7 +332,7 @@ class FragmentSurfaces:
                 self.rest_positions, self.shape, self.spacing, device=self.device, on_lattice=self.on_lattice
             )
             if self.chip_shape == "cube":
-                self._chip_outer_faces()
+                self._chip_cubes()
         return self._grid
 
     def _clipped_complex(self, region: np.ndarray, k_count: int, left_out: int | None = None):
