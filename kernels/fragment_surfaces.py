@@ -5,29 +5,6 @@ import warp as wp
 
 
 @wp.kernel
-def signed_distance_to_solid(
-    mesh: wp.uint64,
-    points: wp.array(dtype=wp.vec3),
-    max_dist: float,
-    distance: wp.array(dtype=float),
-):
-    """distance[i] = distance [m] of points[i] [m] to the closed mesh's surface, negative inside (generalised
-    winding number > 0.5). ``max_dist`` [m] must exceed every point's distance to the mesh."""
-    i = wp.tid()
-    p = points[i]
-    q = wp.mesh_query_point_sign_winding_number(mesh, p, max_dist, 0.5, 2.0)
-    distance[i] = max_dist
-    if q.result:
-        distance[i] = q.sign * wp.length(wp.mesh_eval_position(mesh, q.face, q.u, q.v) - p)
-
-
-def signed_distances(mesh_id, points, max_dist: float, distance):
-    """Launches :func:`signed_distance_to_solid` over ``points`` (vec3 [n]) on the current device: distance [m]
-    float [n] of each point to the closed mesh ``mesh_id`` (a wp.Mesh id), negative inside."""
-    wp.launch(signed_distance_to_solid, dim=len(points), inputs=[mesh_id, points, max_dist, distance])
-
-
-@wp.kernel
 def closest_point_on_solid(
     mesh: wp.uint64,
     points: wp.array(dtype=wp.vec3),
@@ -35,8 +12,9 @@ def closest_point_on_solid(
     distance: wp.array(dtype=float),
     closest: wp.array(dtype=wp.vec3),
 ):
-    """As :func:`signed_distance_to_solid`, and closest[i] = the point [m] of the mesh's surface nearest points[i]
-    (points[i] itself where the query finds none within ``max_dist``)."""
+    """distance[i] = distance [m] of points[i] [m] to the closed mesh's surface, negative inside (generalised
+    winding number > 0.5), and closest[i] = the point [m] of that surface nearest points[i] (points[i] itself where
+    the query finds none). ``max_dist`` [m] must exceed every point's distance to the mesh."""
     i = wp.tid()
     p = points[i]
     q = wp.mesh_query_point_sign_winding_number(mesh, p, max_dist, 0.5, 2.0)
@@ -50,5 +28,6 @@ def closest_point_on_solid(
 
 def closest_points(mesh_id, points, max_dist: float, distance, closest):
     """Launches :func:`closest_point_on_solid` over ``points`` (vec3 [n]) on the current device: signed distance [m]
-    float [n] (negative inside) and the nearest surface point [m] vec3 [n] of each point."""
+    float [n] (negative inside) and the nearest surface point [m] vec3 [n] of each point to the closed mesh
+    ``mesh_id`` (a wp.Mesh id)."""
     wp.launch(closest_point_on_solid, dim=len(points), inputs=[mesh_id, points, max_dist, distance, closest])

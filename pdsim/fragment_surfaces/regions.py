@@ -222,18 +222,13 @@ def _off_surface(pos: np.ndarray, corners: np.ndarray, grid_x: np.ndarray, dista
 
 def signed_distances(shape: SolidShape, points: np.ndarray, device: str) -> np.ndarray:
     """Signed distance [m] of points [m] [n, 3] to the surface of the closed ``shape``, negative inside, float64 [n]."""
-    return _query(shape, points, device, closest=False)[0]
+    return closest_points(shape, points, device)[0]
 
 
 def closest_points(shape: SolidShape, points: np.ndarray, device: str):
     """(signed distance [m] float64 [n], nearest point of the surface [m] float64 [n, 3]) of points [m] [n, 3] to
-    the closed ``shape`` (negative inside)."""
-    return _query(shape, points, device, closest=True)
-
-
-def _query(shape: SolidShape, points: np.ndarray, device: str, *, closest: bool):
-    """The Warp query of :func:`signed_distances` and :func:`closest_points` (in float32 relative to the shape's
-    centre, so exact anywhere in the world)."""
+    the closed ``shape`` (negative inside); a Warp query in float32 relative to the shape's centre, so exact anywhere
+    in the world."""
     centre = 0.5 * (shape.bounds[0] + shape.bounds[1])
     with wp.ScopedDevice(device):
         mesh = wp.Mesh(
@@ -244,9 +239,6 @@ def _query(shape: SolidShape, points: np.ndarray, device: str, *, closest: bool)
         distance = wp.zeros(len(points), dtype=float)
         lo, hi = np.minimum(points.min(axis=0), shape.bounds[0]), np.maximum(points.max(axis=0), shape.bounds[1])
         max_dist = 2.0 * float(np.linalg.norm(hi - lo)) + 1.0
-        if not closest:
-            kf.signed_distances(mesh.id, pts, max_dist, distance)
-            return distance.numpy().astype(np.float64), None
         near = wp.zeros(len(points), dtype=wp.vec3)
         kf.closest_points(mesh.id, pts, max_dist, distance, near)
         return distance.numpy().astype(np.float64), near.numpy().astype(np.float64) + centre
