@@ -71,12 +71,29 @@ def _angle(r, q):
     return np.where(np.trace(m, axis1=1, axis2=2) > 1.0, angle, np.pi)
 
 
-@pytest.mark.parametrize("precision", ["float32", "float64"])
-def test_rotation_iterative_is_the_polar_rotation_within_its_tolerance(precision):
+def _explicit_step_samples(n, seed):
+    """n deformation gradients of an explicit step's regime: strains 1e-6 to 0.1 in a random frame, any rotation Q,
+    and warm starts turned from Q by 1e-8 to 1e-2 rad (the rotation of one step). Returns (a, q_exact, quat) as
+    _samples."""
+    rng = np.random.default_rng(seed)
+    e = rng.normal(size=(n, 3, 3)) * 10.0 ** rng.uniform(-6, -1, size=(n, 1, 1))
+    s = np.eye(3) + 0.5 * (e + e.transpose(0, 2, 1))
+    q = Rotation.random(n, random_state=rng)
+    axis = rng.normal(size=(n, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    start = Rotation.from_rotvec(axis * 10.0 ** rng.uniform(-8, -2, size=(n, 1))) * q
+    return q.as_matrix() @ s, q.as_matrix(), start.as_quat()
+
+
+SAMPLES = {"wide": lambda: _samples(4000, seed=3), "explicit_step": lambda: _explicit_step_samples(4000, seed=5)}
+
+
+def _rotations(precision, samples):
+    """(R from the kernel [n, 3, 3] float64, the exact polar rotations) for the samples."""
     dtype = wp.float64 if precision == "float64" else wp.float32
     np_dtype = np.float64 if precision == "float64" else np.float32
     _, mat33, _ = fem_types(dtype)
-    a, q_exact, quat = _samples(4000, seed=3)
+    a, q_exact, quat = SAMPLES[samples]()
     out = wp.zeros(len(a), dtype=mat33, device="cpu")
     wp.launch(
         _rotation_kernel(dtype),
@@ -88,8 +105,15 @@ def test_rotation_iterative_is_the_polar_rotation_within_its_tolerance(precision
         ],
         device="cpu",
     )
-    r = out.numpy().astype(np.float64)
+    return out.numpy().astype(np.float64), q_exact
+
+
+@pytest.mark.parametrize("samples", list(SAMPLES))
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+def test_rotation_iterative_is_the_polar_rotation_within_its_tolerance(precision, samples):
+    r, q_exact = _rotations(precision, samples)
     angle = _angle(r, q_exact)
     # float32: the tolerance plus the rounding of R and of a (a few float32 epsilons)
     allowed = TOLERANCE[precision] + (4.0 * float(np.finfo(np.float32).eps) if precision == "float32" else 1.0e-14)
-    assert angle.max() <= allowed, f"{precision}: worst angle {angle.max():.3g} rad > {allowed:.3g}"
+    assert angle.max() <= allowed, f"{precision} {samples}: worst angle {angle.max():.3g} rad > {allowed:.3g}"
+

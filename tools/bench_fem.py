@@ -44,6 +44,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 import pdsim
 from pdsim.fem import FemBody, SolverFem
 from pdsim.fem.mesh import box_tet_mesh
+from pdsim.kernels.fem import elements as ke
 from pdsim.kinematics import scene_origin
 from pdsim.solver import SolverContext
 
@@ -244,10 +245,37 @@ def _timed(table: dict, name: str, fn):
     return wrapper
 
 
+def _element_pass_rotations_given(solver, steps) -> float:
+    """Seconds of ``steps`` element passes of the corotated force math with each element's rotation given, not found:
+    pdsim's matrix-free corotated product (kernels/fem/elements.py: element_stiffness_product, rotated; the same
+    gathers, G = Du Dm^-1, R^T G, Hooke's law, R sigma and -V P Dm^-T, with four corner vectors written per element
+    instead of added onto the vertices) at the solver's displacements and last rotations. Its time bounds from
+    below what any way of finding the rotation can make of the corotated pass."""
+    m = solver.model
+    arguments = dict(
+        u=solver.kin.u,
+        tets=solver._tets,
+        **m.element_arrays,
+        rotation=solver._rotation,
+        corner_out=solver._corner,
+        dtype=solver.dtype,
+        rotated=True,
+        device=solver.device,
+    )
+    ke.element_stiffness_product(**arguments)  # loads the kernel
+    wp.synchronize_device(solver.device)
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        ke.element_stiffness_product(**arguments)
+    wp.synchronize_device(solver.device)
+    return time.perf_counter() - t0
+
+
 def step_profile(mesh, *, device, steps, warmup):
     """Where one explicit step's time goes [ms per step], each part timed around the real calls of ``steps`` steps:
     pdsim's corotated step (begin_step: velocity kicks, clock, conditions, kick-drift, colliders; loads; the element
-    pass; the kick), the element pass of the linear measure (the same pass without the rotation), and Newton's
+    pass; the kick; beside them the corotated pass with the rotations given, _element_pass_rotations_given), the
+    element pass of the linear measure (the same pass without the rotation), and Newton's
     SolverSemiImplicit per kernel launch (its particle contact off as in the headline pair; None without newton)."""
     out = {}
     for measure in ("corotated", "linear"):
@@ -263,6 +291,8 @@ def step_profile(mesh, *, device, steps, warmup):
             solver.step(dt)
         wp.synchronize_device(solver.device)
         parts["step"] = time.perf_counter() - t0
+        if measure == "corotated":
+            parts["element_pass_rotations_given"] = _element_pass_rotations_given(solver, steps)
         out[f"pdsim_{measure}"] = {name: 1e3 * s / steps for name, s in parts.items()}
     stepper = _newton_stepper(mesh, solver_name="SolverSemiImplicit", device=device, dt=dt)
     if stepper is None:

@@ -181,7 +181,9 @@ def fem_funcs(dtype):
                 return r, q
         else:
             q = q0
-        for _it in range(16):
+        it = int(0)
+        while it < 16:  # a while loop: Warp would unroll a range of 16 into 16 copies of the step
+            it += 1
             omega, w_sq, newton, kappa_sq = rotation_newton_step(a, r)
             if w_sq < polar_tolerance_sq:
                 return r, q
