@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 import pdsim
 from pdsim.fragment_labels import FragmentTracker, fragment_labels
 from pdsim.fragment_surfaces import FragmentSurfaces
-from pdsim.fragment_surfaces.surfaces import CHIP_EDGE
+from pdsim.fragment_surfaces.surfaces import CHIP_EDGE, _chip_rotations
 from pdsim.output.usd_files import world_points
 
 MATERIAL = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.25)
@@ -170,7 +170,8 @@ def test_chips_are_cubes_in_a_hole_of_the_fragments(shape_name):
     """Chips (particles whose damage reaches the threshold) drawn as cubes, the default: 1 km from the origin, a body
     with a 3 x 3 x 3 block of interior chips, a chip on the surface and a two-fragment split. Every shell is closed
     and consistently outward oriented; each chip is a cube of edge CHIP_EDGE h (0.8 h) centred on its particle's rest
-    position (its 8 corners within 1e-9 h, volume within 1e-9), or where the cube pokes out of the input, such a cube
+    position and turned by its particle's fixed turn, none lined up with the lattice (its 8 corners within 1e-9 h,
+    volume within 1e-9), or where the cube pokes out of the input, such a cube
     with its corners outside moved onto the input (then within it, a tenth of h^3 to the cube's volume); the
     fragments' shells have a hole where the chips were, of 0.7 to 1.5 times the chips' cubes' volume (the chips'
     cells in the partition with the crack smoothing's rounding: measured 1.08 (box and sphere), which CHIP_EDGE was
@@ -203,19 +204,24 @@ def test_chips_are_cubes_in_a_hole_of_the_fragments(shape_name):
     solid = trimesh.Trimesh(shape.vertices, shape.faces, process=False)
     edge = CHIP_EDGE * h
     corners = edge * (np.array(list(np.ndindex(2, 2, 2))) - 0.5)
+    turns = _chip_rotations(len(x))
+    aligned = 0
     for k, shell in enumerate(shells):
         if shell.vertices.shape[0] == 8:
             p = int(np.argmin(np.linalg.norm(x - shell.vertices.mean(axis=0), axis=1)))
             first_vertex[p] = k
-            depth = trimesh.proximity.signed_distance(solid, x[p] + corners)  # trimesh: positive inside
+            depth = trimesh.proximity.signed_distance(solid, x[p] + corners @ turns[p].T)  # trimesh: positive inside
             deep[p] = depth.min() > 0.25 * h
             if depth.min() < 1e-6 * h:  # corners at or outside the input moved onto it: within it (float32)
                 assert trimesh.proximity.signed_distance(solid, shell.vertices).min() > -1e-6 * h
                 assert 0.1 * h**3 < shell.volume <= edge**3 * (1.0 + 1e-6)
                 continue
             np.testing.assert_allclose(shell.vertices.mean(axis=0), x[p], atol=1e-9 * h)
-            np.testing.assert_allclose(np.abs(shell.vertices - x[p]), 0.5 * edge, atol=1e-9 * h)
+            expected = x[p] + corners @ turns[p].T
+            assert np.linalg.norm(shell.vertices[:, None] - expected[None], axis=2).min(axis=0).max() < 1e-9 * h
             assert shell.volume == pytest.approx(edge**3, rel=1e-9)
+            aligned += np.allclose(np.abs(shell.vertices - x[p]), 0.5 * edge, atol=1e-3 * h)
+    assert aligned == 0  # turned: none lines up with the lattice
     assert sorted(first_vertex) == sorted(chips.tolist())
     hole = (shape.volume - sum(s.volume for s in shells if s.vertices.shape[0] != 8)) / (len(chips) * edge**3)
     assert 0.7 < hole < 1.5, hole

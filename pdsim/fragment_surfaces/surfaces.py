@@ -10,9 +10,10 @@ the debris breaks. How a chip is drawn (``chip_shape``):
 
 - ``"cube"`` (default): the chips together are one region of the partition that gets no shell, so the fragments'
   shells get crack faces where chips were (the crack smoothing rounds that hole like any crack), and each chip is a
-  cube of edge 0.8 h (``CHIP_EDGE``) centred on its particle's rest position that translates with it, kept within the
-  input; a cube face whose centre lies at the input surface (or outside it) is an outer face, the others crack
-  faces.
+  cube of edge 0.8 h (``CHIP_EDGE``) centred on its particle's rest position that translates with it, turned by a
+  fixed turn of its own (so that chips side by side read as rubble, not as blocks lined up with the particles'
+  lattice) and kept within the input; a cube face whose centre lies at the input surface (or outside it) is an outer
+  face, the others crack faces.
 - ``"cell"``: each chip is a region of its own, clipped by the input and cleaned with the fragments' shells.
 
 The cubes keep the look (a crumbling wall's chips were cells of about a spacing) and drop the cost: next to each
@@ -51,6 +52,24 @@ CHIP_OUTER_DEPTH = 0.25  # a chip cube's face whose centre lies less than this m
 # crack smoothing rounds their cells: 0.55 h^3 per chip of a 3 x 3 x 3 block), and the hole's crack faces show
 # between neighbouring chips
 CHIP_EDGE = 0.8
+CHIP_TURN_SEED = 20261205  # the chips' fixed turns (_chip_rotations)
+
+
+def _chip_rotations(n: int) -> np.ndarray:
+    """[n, 3, 3] rotation matrices, one per particle, uniformly distributed and fixed (drawn from the particle's
+    index with the seed CHIP_TURN_SEED): a chip's cube is turned by its particle's, so chips side by side do not line
+    up with the particles' lattice."""
+    q = np.random.default_rng(CHIP_TURN_SEED).normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    x, y, z, w = q.T
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1),
+        ],
+        axis=1,
+    )
 
 
 class FragmentSurfaces:
@@ -309,14 +328,16 @@ class FragmentSurfaces:
 
     def _chip_cubes(self):
         """Each particle's chip cube in rest space: (corners [m] float64 [particle_count, 8, 3]: the cube of edge
-        CHIP_EDGE h centred on the particle, every corner outside the input moved to its nearest point of the input
+        CHIP_EDGE h centred on the particle and turned by its turn (_chip_rotations), every corner outside the input
+        moved to its nearest point of the input
         surface, so the cube keeps within the input as the surface it replaces did; bool [particle_count, 6]: its
-        faces, the triangle pairs of _CUBE_TRIANGLES (z-, z+, y-, y+, x-, x+), whose centre then lies less than
+        faces, the triangle pairs of _CUBE_TRIANGLES (z-, z+, y-, y+, x-, x+ before the turn), whose centre then lies less than
         CHIP_OUTER_DEPTH spacings inside the input, drawn as outer faces). Warp queries, made with the label grid
         (in the thread that calls :meth:`deferred_view`)."""
         if self._cubes is None:
             n, h = self.particle_count, self.spacing
-            corners = (self.rest_positions[:, None, :] + CHIP_EDGE * h * _CUBE_CORNERS[None]).reshape(-1, 3)
+            turned = np.einsum("kj,nij->nki", _CUBE_CORNERS, _chip_rotations(n))  # [n, 8, 3]
+            corners = (self.rest_positions[:, None, :] + CHIP_EDGE * h * turned).reshape(-1, 3)
             depth, nearest = closest_points(self.shape, corners, self.device)
             corners = np.where((depth > 0.0)[:, None], nearest, corners).reshape(n, 8, 3)
             quads = np.array([sorted(set(_CUBE_TRIANGLES[2 * f]) | set(_CUBE_TRIANGLES[2 * f + 1])) for f in range(6)])
