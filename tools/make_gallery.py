@@ -223,28 +223,8 @@ BLENDER = textwrap.dedent(
     sun.data.energy = 3.0
     sun.rotation_euler = (math.radians(40), 0.0, math.radians(-30))
     scene.collection.objects.link(sun)
-    names = {ob.name for ob in scene.objects}
-    for ob in scene.objects:  # a body's particles stay hidden where its surface is drawn (as pdsim preview does)
-        if ob.type == "POINTCLOUD" and (ob.name + "_surface" in names or ob.name + "_render" in names):
-            ob.hide_render = True
-    # A light grey for the bodies, orange for the crack faces. The crack faces are picked by the per-face attribute
-    # `crack` (1 on crack faces), which the Mesh Sequence Cache modifier reads every frame; the material indices of
-    # the cache's surface / crack subsets are read only once, at import (frame 0, no cracks yet), so one material
-    # takes every slot and mixes its colour from the attribute.
-    look = bpy.data.materials.new("surface_and_crack")
-    nodes, links = look.node_tree.nodes, look.node_tree.links
-    attribute = nodes.new("ShaderNodeAttribute")
-    attribute.attribute_name = "crack"
-    mix = nodes.new("ShaderNodeMix")
-    mix.data_type = "RGBA"
-    mix.inputs["A"].default_value = (0.7, 0.72, 0.75, 1)
-    mix.inputs["B"].default_value = (0.9, 0.35, 0.08, 1)
-    links.new(attribute.outputs["Fac"], mix.inputs["Factor"])
-    links.new(mix.outputs["Result"], nodes["Principled BSDF"].inputs["Base Color"])
-    for ob in scene.objects:
-        if ob.type == "MESH" and ob.data.materials:
-            for slot in ob.material_slots:
-                slot.material = look
+    # no node work: the cache's own materials (pdsim_outer, pdsim_crack) through its per-face material_index, and its
+    # particles as guides, not rendered (docs/cache_format.md)
     scene.frame_set(frame)
     depsgraph = bpy.context.evaluated_depsgraph_get()
     cracked = 0
@@ -278,6 +258,12 @@ def orange_pixels(path: str) -> int:
     return int(np.count_nonzero((hue >= 10.0) & (hue <= 45.0) & (hsv[..., 1] > 0.4) & (hsv[..., 2] > 0.25)))
 
 
+def blender_python() -> str:
+    """The interpreter with bpy: $PDSIM_BLENDER_PYTHON (Blender's module pins its own numpy, so it often lives in a
+    venv of its own), else this one."""
+    return os.environ.get("PDSIM_BLENDER_PYTHON") or sys.executable
+
+
 def blender_still(cache: str, frame: int, out: str) -> dict:
     """Cycles still of ``frame`` of the cache (bpy in a child process, away from usd-core's pxr); returns its render
     time, the number of crack faces on that frame and the number of orange pixels of the image. A frame with crack
@@ -290,7 +276,7 @@ def blender_still(cache: str, frame: int, out: str) -> dict:
     eye = [centre[0] - 0.7 * extent, centre[1] - 1.4 * extent, centre[2] + 0.6 * extent]
     t0 = time.perf_counter()
     proc = subprocess.run(
-        [sys.executable, "-c", BLENDER, cache, str(frame), out, *map(str, eye), *map(str, centre)],
+        [blender_python(), "-c", BLENDER, cache, str(frame), out, *map(str, eye), *map(str, centre)],
         capture_output=True,
         text=True,
         check=False,
@@ -365,7 +351,8 @@ def write_markdown(work: str, images: str, path: str) -> None:
             crack = ""
             if "blender_crack_faces" in r:
                 crack = (
-                    f"; crack faces orange through an Attribute node reading the per-face `crack` primvar: "
+                    f"; imported with no node work: the crack faces in the cache's `pdsim_crack` through its per-face "
+                    "`material_index`, the particles as guides, not rendered: "
                     f"{r['blender_crack_faces']:,} crack faces on this frame, {r['blender_orange_pixels']:,} orange "
                     "pixels"
                 )
