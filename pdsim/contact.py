@@ -794,7 +794,11 @@ class MethodContact:
         return entry
 
     def _surface_pair(self, a, b, rate: float, dt: float) -> None:
-        """The surface vertices of mesh solver ``a`` against the faces of ``b`` (of other pieces when a is b)."""
+        """The surface vertices of mesh solver ``a`` against the faces of ``b`` (of other pieces when a is b; nothing
+        to do, and no launch, while ``a`` is one piece)."""
+        if a is b and a.contact_piece_count() < 2:
+            self._scratch.pop(("pairs", id(a), id(a)), None)  # no floor pairs this step
+            return
         _, a_points, _, _, _ = self._mesh(a)
         _, b_points, b_faces, b_x, b_mesh = self._mesh(b)
         a_label, _ = a.contact_pieces()

@@ -402,7 +402,7 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
         self._implicit = BackwardEuler(self)  # its operator mass is cached per topology
         self._surfaces = None  # per body (vertex ids, faces, fragment, crack), rebuilt lazily
         self._contact_mesh = None  # (vertex ids, triangles) Warp arrays for MethodContact, rebuilt lazily
-        self._contact_pieces = None  # (topology version, vertex labels, face labels) of the contact mesh
+        self._contact_pieces = None  # (topology version, vertex labels, face labels, piece count) of the contact mesh
         self._contact_steps = None  # stable step of each vertex's smallest element (Warp array), rebuilt lazily
         self._fragments = None
 

@@ -146,6 +146,15 @@ class FemViews:
         each contact-mesh vertex int32 [v], label of each triangle int32 [f]) Warp arrays. A piece is a vertex-connected
         set of the current elements: separate bodies and the pieces a crack has cut free have different labels, the
         two sides of a crack that has not yet cut a piece free the same. Rebuilt when the topology version changes."""
+        return self._pieces_of_contact_mesh()[1:3]
+
+    def contact_piece_count(self) -> int:
+        """The number of pieces (contact_pieces) on the contact mesh: with one, no surface vertex has a face of
+        another piece to meet."""
+        return self._pieces_of_contact_mesh()[3]
+
+    def _pieces_of_contact_mesh(self):
+        """(topology version, vertex labels, face labels, piece count) of the contact mesh, cached per version."""
         ids, faces, version = self.contact_mesh()
         if self._contact_pieces is None or self._contact_pieces[0] != version:
             tets = np.asarray(self._tets_h, dtype=np.int64)
@@ -156,8 +165,9 @@ class FemViews:
                 version,
                 wp.array(vertex, dtype=wp.int32, device=self.device),
                 wp.array(face, dtype=wp.int32, device=self.device),
+                len(np.unique(vertex)),
             )
-        return self._contact_pieces[1], self._contact_pieces[2]
+        return self._contact_pieces
 
     def contact_steps(self):
         """Per point, the stable step [s] of its smallest incident element (SolverFem model ``element_dt_h``),
