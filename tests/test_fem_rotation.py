@@ -116,4 +116,3 @@ def test_rotation_iterative_is_the_polar_rotation_within_its_tolerance(precision
     # float32: the tolerance plus the rounding of R and of a (a few float32 epsilons)
     allowed = TOLERANCE[precision] + (4.0 * float(np.finfo(np.float32).eps) if precision == "float32" else 1.0e-14)
     assert angle.max() <= allowed, f"{precision} {samples}: worst angle {angle.max():.3g} rad > {allowed:.3g}"
-

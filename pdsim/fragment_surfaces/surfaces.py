@@ -329,10 +329,10 @@ class FragmentSurfaces:
     def _chip_cubes(self):
         """Each particle's chip cube in rest space: (corners [m] float64 [particle_count, 8, 3]: the cube of edge
         CHIP_EDGE h centred on the particle and turned by its turn (_chip_rotations), every corner outside the input
-        moved to its nearest point of the input
-        surface, so the cube keeps within the input as the surface it replaces did; bool [particle_count, 6]: its
-        faces, the triangle pairs of _CUBE_TRIANGLES (z-, z+, y-, y+, x-, x+ before the turn), whose centre then lies less than
-        CHIP_OUTER_DEPTH spacings inside the input, drawn as outer faces). Warp queries, made with the label grid
+        moved to its nearest point of the input surface, so the cube keeps within the input as the surface it replaces
+        did; bool [particle_count, 6]: its faces, the triangle pairs of _CUBE_TRIANGLES (z-, z+, y-, y+, x-, x+ before
+        the turn), whose centre then lies less than CHIP_OUTER_DEPTH spacings inside the input, drawn as outer
+        faces). Warp queries, made with the label grid
         (in the thread that calls :meth:`deferred_view`)."""
         if self._cubes is None:
             n, h = self.particle_count, self.spacing
