@@ -164,6 +164,47 @@ def face_side(
 
 
 @wp.kernel
+def piece_bounds(
+    m_x: wp.array(dtype=wp.vec3),
+    m_label: wp.array(dtype=wp.int32),
+    piece_lo: wp.array(dtype=wp.vec3),
+    piece_hi: wp.array(dtype=wp.vec3),
+):
+    """Bounds of each piece of a surface mesh: the component-wise min and max [m] of its vertices' positions m_x
+    (piece m_label[i] of vertex i, 0..count-1) into piece_lo and piece_hi, which start at +-inf (min and max do not
+    depend on the order of the additions: the same bounds on the CPU and the GPU)."""
+    i = wp.tid()
+    p = m_label[i]
+    wp.atomic_min(piece_lo, p, m_x[i])
+    wp.atomic_max(piece_hi, p, m_x[i])
+
+
+@wp.func
+def near_foreign_piece(
+    x: wp.vec3,
+    reach: float,
+    label: int,
+    piece_lo: wp.array(dtype=wp.vec3),
+    piece_hi: wp.array(dtype=wp.vec3),
+    piece_count: int,
+):
+    """Whether the box of half-width ``reach`` around x overlaps the bounds of a piece other than ``label`` (always,
+    with ``piece_count`` 0: no bounds given). Where it overlaps none, no face of another piece has bounds within
+    reach of x, so nearest_foreign_face finds nothing there."""
+    if piece_count == 0:
+        return True
+    for p in range(piece_count):
+        if p != label:
+            lo = piece_lo[p]
+            hi = piece_hi[p]
+            if x[0] + reach >= lo[0] and x[0] - reach <= hi[0]:
+                if x[1] + reach >= lo[1] and x[1] - reach <= hi[1]:
+                    if x[2] + reach >= lo[2] and x[2] - reach <= hi[2]:
+                        return True
+    return False
+
+
+@wp.kernel
 def vertex_face_contact(
     v_points: wp.array(dtype=wp.int32),
     v_label: wp.array(dtype=wp.int32),
@@ -202,6 +243,9 @@ def vertex_face_contact(
     v_step: wp.array(dtype=float),
     m_step: wp.array(dtype=float),
     step_safety: float,
+    piece_lo: wp.array(dtype=wp.vec3),
+    piece_hi: wp.array(dtype=wp.vec3),
+    piece_count: int,
 ):
     """Contact of surface vertex q (point v_points[q] of its solver, piece v_label[q]) with the nearest face of
     another piece (m_label[f] != v_label[q]) of the surface mesh ``mesh`` (current vertex positions m_x, triangles
@@ -214,13 +258,17 @@ def vertex_face_contact(
     none) with the face's (its first vertex's), as kernels/contact.py particle_mesh_contact. Work: the positive part
     of each side's work in the step, as kernels/contact.py particle_mesh_contact, into slot ``work_slot`` of v_work
     and m_work. Floor (module docstring): a vertex deeper than ``floor`` [m] records its face (pair_face[q], -1 for
-    none), the barycentric weights of its closest point and the contact normal for surface_floor_impulse."""
+    none), the barycentric weights of its closest point and the contact normal for surface_floor_impulse. With
+    ``piece_count`` > 0, the bounds of the mesh's pieces (piece_bounds; labels 0..piece_count-1) skip the search of a
+    vertex near no other piece (near_foreign_piece: the same result without the mesh query)."""
     q = wp.tid()
     pair_face[q] = -1
     i = v_points[q]
     x = v_rest[i] + v_u[i]
     label = v_label[q]
     reach = wp.max(band, skin)
+    if not near_foreign_piece(x, reach, label, piece_lo, piece_hi, piece_count):
+        return
     best, best_w, dist = nearest_foreign_face(mesh, x, reach, m_x, m_faces, m_label, label)
     if best < 0:
         return
@@ -374,6 +422,13 @@ def vertex_face_forces(*, dt: float, floor: float, device, **arguments):
         work_slot=WATCH_COLLIDERS,
         **arguments,
     )
+
+
+def bounds_of_pieces(*, device, **arguments):
+    """Each piece's bounds into ``piece_lo`` and ``piece_hi`` (reset to +-inf first; piece_bounds)."""
+    arguments["piece_lo"].fill_(wp.vec3(float("inf")))
+    arguments["piece_hi"].fill_(wp.vec3(float("-inf")))
+    launch(piece_bounds, arguments["m_x"].shape[0], device=device, **arguments)
 
 
 def floor_counts(*, device, **arguments):

@@ -460,6 +460,11 @@ band (one mean edge length): a surface vertex deeper than 1 % of an edge inside 
 kicks, the approach the next drift would carry (an inelastic impulse), so it sinks no deeper while the penalty of the
 one law pushes it out; above that depth the penalty acts alone."""
 
+PIECE_BOUNDS_MAX = 64
+"""Contact between FEM surfaces skips the search of a surface vertex whose neighbourhood meets the bounds of no other
+piece (kernels/surface_contact.py, near_foreign_piece) while the mesh has at most this many pieces: the test loops
+over the pieces, and past a few dozen the mesh query it spares costs less than the loop."""
+
 SURFACE_FLOOR_ITERATIONS = 4
 """Passes of the hard floor of contact between FEM surfaces per step (MethodContact.end_step): each pass divides a
 pair's impulse by the largest share of floor pairs among its points (kernels/surface_contact.py
@@ -802,7 +807,7 @@ class MethodContact:
         _, a_points, _, _, _ = self._mesh(a)
         _, b_points, b_faces, b_x, b_mesh = self._mesh(b)
         a_label, _ = a.contact_pieces()
-        _, b_label = b.contact_pieces()
+        b_vertex_label, b_label = b.contact_pieces()
         if a is not b:  # labels of different solvers never match
             a_label = self._foreign_label(a_label)
         skin_a, band_a = a.contact_skin()
@@ -810,6 +815,7 @@ class MethodContact:
         v_damping, v_friction = self._side(a)
         m_damping, m_friction = self._side(b)
         _, pair_face, pair_weights, pair_normal = self._pairs(a, b, a_points.shape[0])
+        piece_lo, piece_hi, piece_count = self._piece_bounds(b, b_x, b_vertex_label)
         ksf.vertex_face_forces(
             v_points=a_points,
             v_label=a_label,
@@ -847,8 +853,30 @@ class MethodContact:
             v_step=a.contact_steps(),
             m_step=b.contact_steps(),
             step_safety=self.step_safety,
+            piece_lo=piece_lo,
+            piece_hi=piece_hi,
+            piece_count=piece_count,
             device=a.kin.u.device,
         )
+
+    def _piece_bounds(self, solver, positions, labels):
+        """(lower, upper bounds of each piece of the solver's contact mesh at its vertices' ``positions`` with their
+        piece ``labels``, the piece count) for the
+        surface contact's skip of vertices near no other piece (kernels/surface_contact.py, piece_bounds); a count of
+        0 (no skip) above PIECE_BOUNDS_MAX pieces, where the loop over the pieces would cost more than it saves."""
+        count = solver.contact_piece_count()
+        key = ("bounds", id(solver))
+        entry = self._scratch.get(key)
+        if entry is None or entry[0].shape[0] != max(count, 1):
+            d = positions.device
+            entry = (wp.zeros(max(count, 1), dtype=wp.vec3, device=d), wp.zeros(max(count, 1), dtype=wp.vec3, device=d))
+            self._scratch[key] = entry
+        if count > PIECE_BOUNDS_MAX:
+            return entry[0], entry[1], 0
+        ksf.bounds_of_pieces(
+            m_x=positions, m_label=labels, piece_lo=entry[0], piece_hi=entry[1], device=positions.device
+        )
+        return entry[0], entry[1], count
 
     def _foreign_label(self, labels):
         """Labels that match no face label (-1 everywhere), the size of ``labels``."""

@@ -148,3 +148,49 @@ def test_a_collision_does_not_depend_on_a_small_body_elsewhere():
     beside, _ = _parting(0.0005)
     assert alone > 0.2  # they part
     assert beside == pytest.approx(alone, abs=0.05)
+
+
+def test_the_search_skipped_away_from_other_pieces_changes_nothing(monkeypatch):
+    """Contact between FEM surfaces skips the mesh query of a vertex whose neighbourhood meets the bounds of no other
+    piece (kernels/surface_contact.py, near_foreign_piece). Three cubes 1 km from the origin, two of them pressed
+    into each other and a third far away: the forces and the floor's pairs of one contact pass are the same bit for
+    bit with the bounds as without them (pdsim.contact.PIECE_BOUNDS_MAX 0: every vertex searched), there are
+    contact forces, and the bounds leave most vertices out (all of the far cube's and the far sides' of the two)."""
+    o = np.array([1000.0, -500.0, 250.0])
+    scene = pdsim.Scene(gravity=(0.0, 0.0, 0.0))
+    scene.enable_contact(restitution=0.6)
+    meshes = [
+        pdsim.box_tet_mesh((0.06,) * 3, (3, 3, 3), center=o + np.array([-0.029, 0.0, 0.0])),
+        pdsim.box_tet_mesh((0.04,) * 3, (2, 2, 2), center=o + np.array([0.019, 0.005, 0.0])),  # 1 mm into the first
+        pdsim.box_tet_mesh((0.04,) * 3, (2, 2, 2), center=o + np.array([0.0, 0.3, 0.0])),
+    ]
+    for k, mesh in enumerate(meshes):
+        scene.add_body(pdsim.FemBody(mesh, SOFT, name=f"cube{k}"))
+    (solver,) = scene.build_solvers(device="cpu")
+    coupling = method_contact(scene, [solver])
+    dt = scene.time_step_safety * solver.stable_time_step()
+
+    def one_pass():
+        solver.force.zero_()
+        coupling.apply(dt)
+        _, pair_face, pair_weights, _ = coupling._scratch[("pairs", id(solver), id(solver))]
+        return solver.force.numpy().copy(), pair_face.numpy().copy(), pair_weights.numpy().copy()
+
+    skipped = one_pass()
+    monkeypatch.setattr(pdsim.contact, "PIECE_BOUNDS_MAX", 0)
+    searched = one_pass()
+    for a, b in zip(skipped, searched, strict=True):
+        assert np.array_equal(a, b)
+    assert np.abs(skipped[0]).max() > 0.0
+    # which vertices the bounds leave to the search, in numpy: a box of one band around the vertex meets another
+    # piece's bounds
+    ids, _ = solver.contact_mesh()[:2]
+    x = solver.positions()[ids.numpy()]
+    label = solver.contact_pieces()[0].numpy()
+    band = solver.contact_skin()[1]
+    near = np.zeros(len(x), dtype=bool)
+    for p in range(solver.contact_piece_count()):
+        lo, hi = x[label == p].min(axis=0), x[label == p].max(axis=0)
+        near |= (label != p) & np.all(x + band >= lo, axis=1) & np.all(x - band <= hi, axis=1)
+    assert solver.contact_piece_count() == 3
+    assert near.sum() < 0.5 * len(x), (near.sum(), len(x))

@@ -143,7 +143,8 @@ class FemViews:
 
     def contact_pieces(self):
         """Piece labels of the contact mesh for contact between FEM surfaces (pdsim.contact.MethodContact): (label of
-        each contact-mesh vertex int32 [v], label of each triangle int32 [f]) Warp arrays. A piece is a vertex-connected
+        each contact-mesh vertex int32 [v], label of each triangle int32 [f]; labels 0..contact_piece_count() - 1) Warp
+        arrays. A piece is a vertex-connected
         set of the current elements: separate bodies and the pieces a crack has cut free have different labels, the
         two sides of a crack that has not yet cut a piece free the same. Rebuilt when the topology version changes."""
         return self._pieces_of_contact_mesh()[1:3]
@@ -159,13 +160,14 @@ class FemViews:
         if self._contact_pieces is None or self._contact_pieces[0] != version:
             tets = np.asarray(self._tets_h, dtype=np.int64)
             labels = connected_components(self.point_count, np.repeat(tets[:, :1], 3, axis=1), tets[:, 1:])
-            vertex = labels[ids.numpy()].astype(np.int32)
+            pieces, vertex = np.unique(labels[ids.numpy()], return_inverse=True)  # labels 0..count-1
+            vertex = vertex.astype(np.int32)
             face = vertex[faces.numpy().reshape(-1, 3)[:, 0]]
             self._contact_pieces = (
                 version,
                 wp.array(vertex, dtype=wp.int32, device=self.device),
                 wp.array(face, dtype=wp.int32, device=self.device),
-                len(np.unique(vertex)),
+                len(pieces),
             )
         return self._contact_pieces
 
