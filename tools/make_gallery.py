@@ -62,30 +62,34 @@ VIEWS: dict[str, dict] = {
 }
 # What the preview run shows that differs from the scene's description (seen on the gallery's own stills).
 NOTES: dict[str, str] = {}
-# The scenes' full-resolution runs where measured (CPU only, the 2-core development machine shared with other jobs, no
-# GPU): particles (and tetrahedra), steps per frame, wall time, and the command and date of the measurement.
+# The scenes' full-resolution runs where measured (CPU only, the 2-core development machine, its other core busy with
+# other work, no GPU): particles (and tetrahedra), steps per frame, wall time, and the command and date of the
+# measurement.
 FULL_RUNS: dict[str, str] = {
-    "ductile_bar": "spacing 10 mm, 36 frames: 82 s (2026-12-01, in two halves from frame 36)",
+    "ductile_bar": (
+        "2,136 particles, 330 steps per frame, 36 frames: 88 s wall, 449 MB peak memory, `/usr/bin/time -v pdsim run "
+        "scenes/ductile_bar.py --out ductile.usdc --quiet`, 2026-12-05, load average 1.8-2.4"
+    ),
     "glass_pane": (
-        "16,875 particles, 207 steps per frame: 1,111 s wall (18 min 31 s), 869 MB peak memory, `/usr/bin/time -v "
-        "pdsim run scenes/glass_pane.py --out glass.usdc --quiet`, 2026-12-02, with fracture-figure runs on the other "
-        "core (the simulation alone takes about 475 s in those; the fragments' surface rebuilds take the rest)"
+        "16,875 particles, 214 steps per frame: 294 s wall, 992 MB peak memory, `/usr/bin/time -v pdsim run "
+        "scenes/glass_pane.py --out glass.usdc --quiet`, 2026-12-05, load average 1.2-2.1 (1,111 s on 2026-12-02, "
+        "when the fragments' surface rebuilds took most of it)"
     ),
     "plank_grain": (
-        "6,400 particles, 96 steps per frame: 280 s wall, `/usr/bin/time pdsim run scenes/plank_grain.py --out "
-        "plank.usdc --quiet`, load average 1-6"
+        "6,400 particles, 96 steps per frame: 50 s wall, 627 MB peak memory, `/usr/bin/time -v pdsim run "
+        "scenes/plank_grain.py --out plank.usdc --quiet`, 2026-12-05, load average 2.4-3.1"
     ),
     "metal_dent_tear": (
-        "4,800 particles, 49 steps per frame: 91 s wall, 540 MB peak memory, `/usr/bin/time -v pdsim run "
-        "scenes/metal_dent_tear.py --out metal.usdc --quiet`, 2026-12-02, load average about 1"
+        "4,800 particles, 49 steps per frame: 34 s wall, 545 MB peak memory, `/usr/bin/time -v pdsim run "
+        "scenes/metal_dent_tear.py --out metal.usdc --quiet`, 2026-12-05, load average 1.6-2.3"
     ),
     "drop_shatter": (
-        "2,396 particles, 302 steps per frame: 273 s wall, `/usr/bin/time pdsim run scenes/drop_shatter.py --out "
-        "drop.usdc --quiet`, load average 2-5"
+        "2,396 particles, 302 steps per frame: 72 s wall, 530 MB peak memory, `/usr/bin/time -v pdsim run "
+        "scenes/drop_shatter.py --out drop.usdc --quiet`, 2026-12-05, load average 0.6-1.6"
     ),
     "mixed_methods": (
-        "1,045 particles and 11,520 tetrahedra, 198 steps per frame: 304 s wall, `/usr/bin/time pdsim run "
-        "scenes/mixed_methods.py --out mixed.usdc --quiet`, load average 1-4"
+        "1,045 particles and 11,520 tetrahedra, 198 steps per frame: 54 s wall, 504 MB peak memory, `/usr/bin/time -v "
+        "pdsim run scenes/mixed_methods.py --out mixed.usdc --quiet`, 2026-12-05, load average 2.3-3.1"
     ),
 }
 
