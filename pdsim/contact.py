@@ -462,8 +462,9 @@ one law pushes it out; above that depth the penalty acts alone."""
 
 PIECE_BOUNDS_MAX = 64
 """Contact between FEM surfaces skips the search of a surface vertex whose neighbourhood meets the bounds of no other
-piece (kernels/surface_contact.py, near_foreign_piece) while the mesh has at most this many pieces: the test loops
-over the pieces, and past a few dozen the mesh query it spares costs less than the loop."""
+piece (kernels/surface_contact.py, near_foreign_piece) while the mesh has at most this many pieces. The test loops
+over the pieces for every vertex: with the hundreds of pieces of a shattered body that loop would be the cost, so
+above this count every vertex is searched (a bound chosen, not measured)."""
 
 SURFACE_FLOOR_ITERATIONS = 4
 """Passes of the hard floor of contact between FEM surfaces per step (MethodContact.end_step): each pass divides a
@@ -861,9 +862,8 @@ class MethodContact:
 
     def _piece_bounds(self, solver, positions, labels):
         """(lower, upper bounds of each piece of the solver's contact mesh at its vertices' ``positions`` with their
-        piece ``labels``, the piece count) for the
-        surface contact's skip of vertices near no other piece (kernels/surface_contact.py, piece_bounds); a count of
-        0 (no skip) above PIECE_BOUNDS_MAX pieces, where the loop over the pieces would cost more than it saves."""
+        piece ``labels``, the piece count) for the surface contact's skip of vertices near no other piece
+        (kernels/surface_contact.py, piece_bounds); a count of 0 (no skip) above PIECE_BOUNDS_MAX pieces."""
         count = solver.contact_piece_count()
         key = ("bounds", id(solver))
         entry = self._scratch.get(key)

@@ -143,10 +143,10 @@ class FemViews:
 
     def contact_pieces(self):
         """Piece labels of the contact mesh for contact between FEM surfaces (pdsim.contact.MethodContact): (label of
-        each contact-mesh vertex int32 [v], label of each triangle int32 [f]; labels 0..contact_piece_count() - 1) Warp
-        arrays. A piece is a vertex-connected
-        set of the current elements: separate bodies and the pieces a crack has cut free have different labels, the
-        two sides of a crack that has not yet cut a piece free the same. Rebuilt when the topology version changes."""
+        each contact-mesh vertex int32 [v], label of each triangle int32 [f]) Warp arrays, the labels 0 to
+        contact_piece_count() - 1. A piece is a vertex-connected set of the current elements: separate bodies and the
+        pieces a crack has cut free have different labels, the two sides of a crack that has not yet cut a piece free
+        the same. Rebuilt when the topology version changes."""
         return self._pieces_of_contact_mesh()[1:3]
 
     def contact_piece_count(self) -> int:

@@ -56,9 +56,9 @@ CHIP_TURN_SEED = 20261205  # the chips' fixed turns (_chip_rotations)
 
 
 def _chip_rotations(n: int) -> np.ndarray:
-    """[n, 3, 3] rotation matrices, one per particle, uniformly distributed and fixed (drawn from the particle's
-    index with the seed CHIP_TURN_SEED): a chip's cube is turned by its particle's, so chips side by side do not line
-    up with the particles' lattice."""
+    """[n, 3, 3] rotation matrices, one per particle, uniformly distributed and fixed: row i of normal draws of a
+    generator seeded with CHIP_TURN_SEED, normalised to a quaternion (the same turn for particle i whatever n is). A
+    chip's cube is turned by its particle's, so chips side by side do not line up with the particles' lattice."""
     q = np.random.default_rng(CHIP_TURN_SEED).normal(size=(n, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     x, y, z, w = q.T
@@ -332,8 +332,7 @@ class FragmentSurfaces:
         moved to its nearest point of the input surface, so the cube keeps within the input as the surface it replaces
         did; bool [particle_count, 6]: its faces, the triangle pairs of _CUBE_TRIANGLES (z-, z+, y-, y+, x-, x+ before
         the turn), whose centre then lies less than CHIP_OUTER_DEPTH spacings inside the input, drawn as outer
-        faces). Warp queries, made with the label grid
-        (in the thread that calls :meth:`deferred_view`)."""
+        faces). Warp queries, made with the label grid (in the thread that calls :meth:`deferred_view`)."""
         if self._cubes is None:
             n, h = self.particle_count, self.spacing
             turned = np.einsum("kj,nij->nki", _CUBE_CORNERS, _chip_rotations(n))  # [n, 8, 3]
