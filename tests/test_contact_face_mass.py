@@ -129,6 +129,9 @@ def _vertex_face(face_masses, height: float, point_mass: float = 1.0, steps=(0.0
         v_step=_arr([steps[0]], float),
         m_step=_arr(steps[1:], float),
         step_safety=0.5,
+        piece_lo=_zeros(1, wp.vec3),
+        piece_hi=_zeros(1, wp.vec3),
+        piece_count=0,  # no bounds: the vertex is searched
         device="cpu",
         **face,
     )

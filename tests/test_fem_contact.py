@@ -30,8 +30,8 @@ def test_two_fem_cubes_collide_head_on_and_separate_conserving_momentum(origin, 
     through each other. Asserted: the bodies separate (their relative velocity along x reverses); total linear
     momentum is conserved to 1e-4 of one body's momentum (the pair forces are equal and opposite by construction,
     float32 sums); no vertex of one cube is ever more than 2.5 % of an edge (0.5 mm) inside the other (trimesh's
-    signed distance, checked every 20 steps): the contact's hard floor (pdsim.contact.SURFACE_FLOOR, 0.2 mm deep,
-    an inelastic impulse on the approach of the next drift) holds them within about one step's travel past it,
+    signed distance, checked every 20 steps): the contact's hard floor (pdsim.surface_contact.SURFACE_FLOOR, 0.2 mm
+    deep, an inelastic impulse on the approach of the next drift) holds them within about one step's travel past it,
     measured 0.38 mm; the floor that removed the approach before the step's second half kick let the press of the
     next kick through (0.59 mm; the test fails on it), and the penalty alone gave way by
     4.3 mm at this 3 m/s approach. With contact off they pass through each other (25 mm deep)."""
@@ -82,8 +82,8 @@ def test_the_pieces_of_a_cracked_fem_slab_never_end_inside_each_other(device):
 
     - no surface vertex that no collider has moved since it entered another piece (nor the points of its nearest
       face there) lies more than 2.5 % of a mean edge length (0.6 mm) inside: the floor (a vertex deeper than
-      pdsim.contact.SURFACE_FLOOR, 0.24 mm, loses the approach of the next drift) holds it within about one step's
-      travel past its depth; measured at most 0.47 mm. The floor that removed the approach before the step's second
+      pdsim.surface_contact.SURFACE_FLOOR, 0.24 mm, loses the approach of the next drift) holds it within about one
+      step's travel past its depth; measured at most 0.47 mm. The floor that removed the approach before the step's second
       half kick let a steady press sink vertices 1.70 mm (the test fails on it);
     - no vertex at all lies more than 6 % of an edge (1.45 mm) inside; measured 1.28 mm (1.70 mm before): the
       deeper vertices are pushed by the ball, whose contact moves the points it meets after the drift, each along
@@ -154,7 +154,7 @@ def test_the_search_skipped_away_from_other_pieces_changes_nothing(monkeypatch):
     """Contact between FEM surfaces skips the mesh query of a vertex whose neighbourhood meets the bounds of no other
     piece (kernels/surface_contact.py, near_foreign_piece). Three cubes 1 km from the origin, two of them pressed
     into each other and a third far away: the forces and the floor's pairs of one contact pass are the same bit for
-    bit with the bounds as without them (pdsim.contact.PIECE_BOUNDS_MAX 0: every vertex searched), there are
+    bit with the bounds as without them (pdsim.surface_contact.PIECE_BOUNDS_MAX 0: every vertex searched), there are
     contact forces, and the bounds leave most vertices out (all of the far cube's and the far sides' of the two)."""
     o = np.array([1000.0, -500.0, 250.0])
     scene = pdsim.Scene(gravity=(0.0, 0.0, 0.0))
@@ -177,7 +177,7 @@ def test_the_search_skipped_away_from_other_pieces_changes_nothing(monkeypatch):
         return solver.force.numpy().copy(), pair_face.numpy().copy(), pair_weights.numpy().copy()
 
     skipped = one_pass()
-    monkeypatch.setattr(pdsim.contact, "PIECE_BOUNDS_MAX", 0)
+    monkeypatch.setattr(pdsim.surface_contact, "PIECE_BOUNDS_MAX", 0)
     searched = one_pass()
     for a, b in zip(skipped, searched, strict=True):
         assert np.array_equal(a, b)
