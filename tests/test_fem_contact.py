@@ -83,8 +83,8 @@ def test_the_pieces_of_a_cracked_fem_slab_never_end_inside_each_other(device):
     - no surface vertex that no collider has moved since it entered another piece (nor the points of its nearest
       face there) lies more than 2.5 % of a mean edge length (0.6 mm) inside: the floor (a vertex deeper than
       pdsim.surface_contact.SURFACE_FLOOR, 0.24 mm, loses the approach of the next drift) holds it within about one
-      step's travel past its depth; measured at most 0.47 mm. The floor that removed the approach before the step's second
-      half kick let a steady press sink vertices 1.70 mm (the test fails on it);
+      step's travel past its depth; measured at most 0.47 mm. The floor that removed the approach before the step's
+      second half kick let a steady press sink vertices 1.70 mm (the test fails on it);
     - no vertex at all lies more than 6 % of an edge (1.45 mm) inside; measured 1.28 mm (1.70 mm before): the
       deeper vertices are pushed by the ball, whose contact moves the points it meets after the drift, each along
       its own normal, with no regard for the pieces' contact (docs/fem_fracture.md, "Pieces in contact").
