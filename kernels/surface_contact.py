@@ -24,10 +24,10 @@ out. Pairs that share points (a face-to-face contact is met from both sides) wou
 the surfaces apart (a single pass of full impulses, each at most reversing its pair's normal velocity, gained 26 % of
 the energy of a head-on collision of two FEM cubes): each pass shares a pair's impulse by the largest share of floor
 pairs any of its points takes (surface_floor_count: 1 per pair as the vertex, w_j as a face's vertex j), and
-pdsim.surface_contact.SURFACE_FLOOR_ITERATIONS passes converge on the correction of all pairs together. The impulses
-of a pass are summed (equal and opposite: momentum conserved exactly) and applied by ``apply_floor``. Only velocities
-change: moving the vertex back to the floor's depth would strain its elements (a 200 m/s impact on a breakable FEM
-plate gained energy that way, tools/stress.py). The impulse removes the approach of the next drift, which can be more than the
+pdsim.surface_contact.SURFACE_FLOOR_ITERATIONS passes converge on the correction of all pairs together. The impulses of
+a pass are summed (equal and opposite: momentum conserved exactly) and applied by ``apply_floor``. Only velocities
+change: moving the vertex back to the floor's depth would strain its elements (a 200 m/s impact on a breakable FEM plate
+gained energy that way, tools/stress.py). The impulse removes the approach of the next drift, which can be more than the
 approach at the step's end, so that it adds no energy is measured, not given by construction: tests/test_fem_contact.py
 (a head-on collision ends with less energy than it began, at the automatic step and a quarter of it) and
 tools/stress.py's FEM projectile cases (docs/fem_fracture.md).
