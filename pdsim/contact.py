@@ -603,6 +603,7 @@ class MethodContact(SurfacePairs):
         self.surfaces = bool(surfaces)
         self.step_safety = check_range("step_safety", step_safety, 0.0, 1.0, hi_open=False)
         self._meshes = {}  # id(solver) -> [version, points, faces, positions, wp.Mesh]
+        self._current = set()  # ids of the solvers whose mesh is at the current apply's positions (_mesh)
         self._to_force = {}  # id(solver) -> 1 / force_to_newton per point (Warp array)
         self._scratch = {}  # id(solver) -> work account of a solver without a watchdog
         self._sides = {}  # id(solver) -> (its point_contact_values, damping ratio, friction: Warp arrays)
@@ -613,6 +614,9 @@ class MethodContact(SurfacePairs):
             ms.contact_mesh()
 
     def _mesh(self, solver):
+        """[topology version, points, faces, positions, wp.Mesh] of the solver's contact mesh at its current positions:
+        rebuilt when the topology changed, else moved and refitted once per :meth:`apply` (its later calls in the same
+        apply find it current)."""
         points, faces, version = solver.contact_mesh()
         entry = self._meshes.get(id(solver))
         if entry is None or entry[0] != version:
@@ -620,9 +624,10 @@ class MethodContact(SurfacePairs):
             kc.surface_positions(points, solver.kin.rest, solver.kin.u, positions)
             entry = [version, points, faces, positions, wp.Mesh(points=positions, indices=faces)]
             self._meshes[id(solver)] = entry
-        else:
+        elif id(solver) not in self._current:
             kc.surface_positions(points, solver.kin.rest, solver.kin.u, entry[3])
             entry[4].refit()
+        self._current.add(id(solver))
         return entry
 
     def _side(self, solver) -> dict:
@@ -654,7 +659,8 @@ class MethodContact(SurfacePairs):
     def apply(self, dt: float) -> None:
         """Adds the contact forces of the current state into the solvers' force arrays (step length ``dt`` [s])."""
         rate = (CONTACT_OMEGA_DT / float(dt)) ** 2
-        for ms in self.mesh_solvers:
+        self._current = set()  # the solvers whose contact mesh is at this apply's positions (_mesh)
+        for ms in self.mesh_solvers if self.particle_solvers else ():
             _, m_points, m_faces, _, mesh = self._mesh(ms)
             m_work = self._work_account(ms)
             m_damping, m_friction = self._side(ms)
