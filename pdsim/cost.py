@@ -12,7 +12,7 @@ and load average it was measured with and:
 - ``step_seconds``: wall time of one step: a constant per step (the launches) of each method, and per estimated bond
   visit (elastic, with fracture, with plasticity) and per particle (peridynamics), per element (elastic, with
   fracture) and per vertex (explicit FEM), per lattice point and per link (lattice); and the contact between FEM
-  surfaces (pdsim.contact.MethodContact, on for an explicit FEM body that can crack or beside another FEM body): a
+  surfaces (pdsim.contact.MethodContact, working at rest on explicit FEM bodies beside another FEM body): a
   constant per step and per boundary vertex of such a body (``fem_contact_step``, ``fem_contact_vertex``; a
   calibration measured before these terms, as the CUDA one of 2026-12-04, leaves that contact out);
 - ``frame_seconds``: per frame outside the steps (views, render surfaces, the USD writer): a constant, per point of
@@ -141,12 +141,13 @@ def body_counts(body, bonds_per_particle) -> dict:
 
 
 def fem_surface_contact(bodies: list[dict]) -> list[bool]:
-    """Per body of ``bodies`` (body_counts), whether the contact between FEM surfaces works on it each step: an
-    explicit FEM body that can crack, or every explicit FEM body where there are several (pdsim/run.py,
-    ``method_contact``; a scene with contact switched off is counted as with it on)."""
+    """Per body of ``bodies`` (body_counts), whether the contact between FEM surfaces works on it each step at rest:
+    every explicit FEM body where there are several (pdsim/run.py, ``method_contact``; a scene with contact switched
+    off is counted as with it on). A body that can crack, alone, is one piece at rest, and the contact searches
+    nothing until it cracks (pdsim/surface_contact.py): like its surface rebuilds, that is left out."""
     explicit = [b["method"] == "fem" and b["calibrated"] for b in bodies]
     several = sum(explicit) > 1
-    return [e and (several or b["features"] == "fracture") for e, b in zip(explicit, bodies)]
+    return [e and several for e in explicit]
 
 
 def step_seconds(counts: dict, calibration: dict = CALIBRATION, surface_contact: bool = False) -> float:

@@ -202,3 +202,17 @@ def test_the_estimate_says_when_it_leaves_out_surface_rebuilds():
     breaking = pdsim.Scene(frames=4)
     breaking.add_peridynamic_body(pdsim.box((0.1, 0.1, 0.1)), pdsim.presets.glass(), spacing=0.02)
     assert clause in format_estimate(pdsim.preflight.preflight(breaking, device="cpu"), 4)
+
+
+def test_the_fem_surface_contact_is_charged_beside_another_fem_body_only():
+    """pdsim.cost.fem_surface_contact: the contact between FEM surfaces searches every step only where explicit FEM
+    bodies are several; a breakable FEM body alone is one piece at rest (pdsim/surface_contact.py searches nothing
+    then), and an implicit FEM body (no step calibration) or a peridynamic one is not charged."""
+    fem = {"method": "fem", "calibrated": True, "features": "elastic"}
+    breakable = dict(fem, features="fracture")
+    implicit = dict(fem, calibrated=False)
+    pd = {"method": "peridynamics", "calibrated": True, "features": "fracture"}
+    assert pdsim.cost.fem_surface_contact([breakable]) == [False]
+    assert pdsim.cost.fem_surface_contact([fem, breakable]) == [True, True]
+    assert pdsim.cost.fem_surface_contact([breakable, pd]) == [False, False]
+    assert pdsim.cost.fem_surface_contact([fem, implicit]) == [False, False]

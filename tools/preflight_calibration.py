@@ -158,7 +158,8 @@ def _material(kind: str) -> pdsim.Material:
 def cost_scene(method: str, size: int, variant) -> pdsim.Scene:
     """A block of ``size`` points (or cells) a side at rest on the ground, settling under gravity: peridynamics
     (variant: (horizon factor, "elastic", "fracture" or "plastic": with fracture)), explicit FEM (variant:
-    None or "fracture"), a lattice (variant: its steps per frame)."""
+    None, "fracture", or "pair": two elastic blocks one spacing apart, which the contact between FEM surfaces works
+    on), a lattice (variant: its steps per frame)."""
     scene = pdsim.Scene(frames=FRAMES, fps=200.0)
     h = 0.01
     if method == "pd":
@@ -166,10 +167,13 @@ def cost_scene(method: str, size: int, variant) -> pdsim.Scene:
         scene.add_peridynamic_body(pdsim.box((size * h,) * 3, center=(0, 0, size * h / 2 + h)), _material(kind),
                                    spacing=h, horizon_factor=m, name="block")  # fmt: skip
     elif method == "fem":
-        mesh = pdsim.box_tet_mesh((size * h,) * 3, (size,) * 3, center=(0, 0, size * h / 2 + h))
-        # checked every step, never reached; a body that can crack also carries the contact between FEM surfaces
+        # checked every step, never reached
         strength = {"tensile_strength": 1.0e9} if variant == "fracture" else {}
-        scene.add_fem_body(mesh, _material("elastic"), name="block", **strength)
+        # "pair": two blocks side by side, one spacing apart: the contact between FEM surfaces searches every step
+        for k in range(2 if variant == "pair" else 1):
+            x = k * (size + 1) * h
+            mesh = pdsim.box_tet_mesh((size * h,) * 3, (size,) * 3, center=(x, 0, size * h / 2 + h))
+            scene.add_fem_body(mesh, _material("elastic"), name=f"block{k}" if k else "block", **strength)
     else:
         body = pdsim.LatticeBody(pdsim.Lattice.simple_cubic(h), pdsim.box((size * h,) * 3), steps_per_frame=variant,
                                  name="block")  # fmt: skip
@@ -199,6 +203,9 @@ COST_RUNS = [
     ("fem", 10, "fracture"),
     ("fem", 14, "fracture"),
     ("fem", 20, "fracture"),
+    ("fem", 6, "pair"),
+    ("fem", 10, "pair"),
+    ("fem", 14, "pair"),
     ("lattice", 6, 20),
     ("lattice", 12, 20),
     ("lattice", 24, 40),
@@ -244,6 +251,16 @@ def measure_run(method: str, size: int, variant, device: str = "cpu") -> dict:
     }
 
 
+def _total(r) -> dict:
+    """A run's counts summed over its bodies (all of one method and features; a "pair" run has two): points, bonds,
+    elements, surface and contact vertices summed, ``bodies`` their number, the rest the first body's."""
+    out = dict(r["counts"][0])
+    for k in ("points", "bonds", "elements", "surface_vertices", "contact_vertices"):
+        out[k] = sum(c[k] for c in r["counts"])
+    out["bodies"] = len(r["counts"])
+    return out
+
+
 REPEATS = 3  # runs per configuration: the least time of each part is kept (the others' load only adds time)
 
 
@@ -285,7 +302,7 @@ def cost_calibration(device: str = "cpu", repeats: int = REPEATS) -> dict:
         runs.append(best_of(repeats, r, device))
         print(f"  measured {runs[-1]['run']}", flush=True)
     for r in runs:
-        c = r["counts"][0]
+        c = _total(r)
         print(f"{r['run']}: {c['points']} points, {c['bonds']:.3g} bonds, {c['elements']} elements, "
               f"{c['surface_vertices']:.0f} surface vertices, {r['substeps']} steps/frame: "
               f"{1e3 * r['step_seconds']:.1f} ms steps + {1e3 * r['frame_seconds']:.1f} ms rest per frame, "
@@ -295,18 +312,19 @@ def cost_calibration(device: str = "cpu", repeats: int = REPEATS) -> dict:
     pd = [r for r in runs if r["counts"][0]["method"] == "peridynamics"]
     rows = []
     for r in pd:
-        c = r["counts"][0]
-        rows.append([1.0] + [c["bonds"] * (c["features"] == f) for f in pdsim.cost.PD_FEATURES] + [c["points"]])
+        c = _total(r)
+        rows.append([c["bodies"]] + [c["bonds"] * (c["features"] == f) for f in pdsim.cost.PD_FEATURES] + [c["points"]])
     y = [r["step_seconds"] / r["substeps"] for r in pd]
     step.update(_nnls(rows, y, ["pd_step"] + [f"pd_bond_{f}" for f in pdsim.cost.PD_FEATURES] + ["pd_particle"]))
     fem = [r for r in runs if r["counts"][0]["method"] == "fem"]
     y = [r["step_seconds"] / r["substeps"] for r in fem]
     rows = []
     for r in fem:
-        c = r["counts"][0]
-        contact = pdsim.cost.fem_surface_contact(r["counts"])[0]  # the breakable blocks: contact between surfaces
-        rows.append([1.0] + [c["elements"] * (c["features"] == f) for f in pdsim.cost.FEM_FEATURES] + [c["points"]]
-                    + [float(contact), contact * c["contact_vertices"]])  # fmt: skip
+        c = _total(r)
+        contact = pdsim.cost.fem_surface_contact(r["counts"])  # the pairs: contact between surfaces, per body
+        rows.append([c["bodies"]] + [c["elements"] * (c["features"] == f) for f in pdsim.cost.FEM_FEATURES]
+                    + [c["points"], float(sum(contact)),
+                       float(sum(b["contact_vertices"] for b, on in zip(r["counts"], contact) if on))])  # fmt: skip
     names = ["fem_step"] + [f"fem_element_{f}" for f in pdsim.cost.FEM_FEATURES] + ["fem_vertex"]
     step.update(_nnls(rows, y, [*names, *pdsim.cost.FEM_CONTACT_TERMS]))
     lat = [r for r in runs if r["counts"][0]["method"] == "lattice"]
@@ -315,7 +333,7 @@ def cost_calibration(device: str = "cpu", repeats: int = REPEATS) -> dict:
                       ["lattice_step", "lattice_point", "lattice_link"]))  # fmt: skip
 
     def per_method(r):
-        c = r["counts"][0]
+        c = _total(r)
         return [1.0] + [c["points"] if c["method"] == m else 0.0 for m in METHODS] + [c["surface_vertices"]]
 
     names = ["constant", *METHODS, "surface_vertex"]
@@ -324,7 +342,7 @@ def cost_calibration(device: str = "cpu", repeats: int = REPEATS) -> dict:
     print("cache bytes per frame:")
     cb = _nnls([per_method(r) for r in runs], [r["cache_bytes"] / (r["frames"] + 1) for r in runs], names)
     print("build seconds:")
-    b = _nnls([[1.0, r["counts"][0]["points"], r["counts"][0]["bonds"], r["counts"][0]["elements"]] for r in runs],
+    b = _nnls([[1.0, _total(r)["points"], _total(r)["bonds"], _total(r)["elements"]] for r in runs],
               [r["build_seconds"] for r in runs], ["constant", "point", "bond", "element"])  # fmt: skip
     proc = subprocess.run([sys.executable, "-c", SURFACE_CHILD], capture_output=True, text=True, check=True)
     surf = json.loads(proc.stdout.strip().splitlines()[-1])
