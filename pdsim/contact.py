@@ -561,8 +561,8 @@ class MethodContact(SurfacePairs):
 
     The scene calls :meth:`apply` once per step, after every solver's ``compute_forces`` and before the kicks, and
     :meth:`end_step` after the solvers' ``end_step`` (the surface contact's hard floor). The surface mesh is rebuilt
-    when its topology version changes (fracture) and refitted to the current positions every step. Nothing is allocated
-    per step otherwise.
+    when its topology version changes (fracture) and refitted to the current positions once in a step that uses it (not
+    while a mesh solver alone is one piece and no particle method is there). Nothing is allocated per step otherwise.
 
     Args:
         particle_solvers: solvers offering ``contact_particles()`` -> (point indices int32, radii float32) Warp arrays.
@@ -659,7 +659,7 @@ class MethodContact(SurfacePairs):
     def apply(self, dt: float) -> None:
         """Adds the contact forces of the current state into the solvers' force arrays (step length ``dt`` [s])."""
         rate = (CONTACT_OMEGA_DT / float(dt)) ** 2
-        self._current = set()  # the solvers whose contact mesh is at this apply's positions (_mesh)
+        self._current.clear()  # no solver's contact mesh is at this apply's positions yet (_mesh)
         for ms in self.mesh_solvers if self.particle_solvers else ():
             _, m_points, m_faces, _, mesh = self._mesh(ms)
             m_work = self._work_account(ms)
