@@ -599,7 +599,8 @@ def clean_complex(
     Candidates are edges shorter than ``short_edge`` spacings and the shortest side (up to one spacing) of every
     triangle with an angle below ``sliver_angle`` [degrees]; given ``crack_patch``, at first only those of the crack
     triangles and of the triangles within two vertex rings of them (the input's own triangles elsewhere are kept as
-    they are, short or thin: the input's detail, at no cost that grows with the input). A collapse moves one end u
+    they are, short or thin: the input's detail, at no cost that grows with the input; their vertices are held as
+    ``fixed`` ones, so the work never spreads over the input). A collapse moves one end u
     onto the other end v (no new positions: outer faces stay exactly on the input surface, sharp edges and corners
     stay put) and is allowed when
 
@@ -616,8 +617,10 @@ def clean_complex(
     round also flips edges (:func:`_flip_round`); when neither collapses nor flips are left, the vertices of the
     remaining slivers are moved (:func:`_relax_round`; ``points`` is changed in place) and the rounds go on. Every
     round works on the triangles within two rings of the flagged ones (a side under ``short_edge`` spacings or an
-    angle under ``sliver_angle``), where every candidate's neighbourhood lies, and checks closedness only on the edges
-    near them; the result is that of rounds over the whole complex.
+    angle under ``sliver_angle``), where every candidate's neighbourhood lies: only the vertices within one ring of a
+    flagged triangle's vertices take part in its collapses, flips and moves (they alone have all their triangles in
+    the round; a collapse of a vertex beyond them would leave its other triangles behind and open the shell), and
+    closedness is checked only on the edges near them.
 
     Args:
         points: vertex positions [m], float64 [v, 3].
@@ -665,8 +668,12 @@ def clean_complex(
         plane_eq = np.concatenate([normal, offset[:, None]], axis=1)
         plane_eq[np.asarray(crack_patch, dtype=bool)] = np.nan
     flag = _needs_work(points, tri, spacing, short_edge, sliver_angle)
-    if crack_patch is not None:  # the input's own triangles, away from the cracks, are left as the input has them
-        flag &= _near_cracks(tri, np.asarray(crack_patch, dtype=bool)[patch], len(points))
+    if crack_patch is not None:  # the input's own triangles, away from the cracks, are left as the input has them:
+        near = _near_cracks(tri, np.asarray(crack_patch, dtype=bool)[patch], len(points))
+        flag &= near
+        away = np.ones(len(points), dtype=bool)  # their vertices are held, so the work never spreads over the input
+        away[tri[near]] = False
+        fixed = away if fixed is None else fixed | away
     if settled is not None:
         settled = np.asarray(settled, dtype=bool)
         flag &= ~settled
@@ -681,10 +688,11 @@ def clean_complex(
             break
         sub, active = _neighbourhood(tri, flag, len(points))
         ts, ss, ps = tri[sub], shell[sub], patch[sub]
-        # with fixed vertices, the vertices outside the round's one ring (whose triangles may lack from sub) are
-        # held too: a settled triangle's short side then never collapses with half its neighbourhood seen
-        held = None if fixed is None else fixed | ~active
-        unmoved = held if still is None else still if held is None else held | still
+        # the vertices outside the round's one ring (whose triangles may lack from sub) are held: a collapse or flip
+        # there would change triangles the round does not see and open the shell (and a settled triangle's short
+        # side never collapses with half its neighbourhood seen)
+        held = ~active if fixed is None else fixed | ~active
+        unmoved = held if still is None else held | still
         new, keep, collapsed = _collapse_round(
             points, ts, ss, ps, spacing, short_edge, sliver_angle, plane_eq, shell_size=shell_size, fixed=held,
             group=group,
