@@ -3,6 +3,8 @@ SmoothSurface over pdsim/fragment_surfaces/): flat cracks that face the pull whe
 staircase, closed shells on every frame, pieces smaller than a grid cell drawn by their elements, the unbroken and
 non-fracturing surfaces, and the cache written as before. Scenes sit away from the origin."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from test_fem_fracture import (
@@ -279,17 +281,23 @@ def test_mesh_vertices_on_grid_vertices_are_voted():
 
 
 def test_the_slab_crack_surface_is_cleaned_at_its_first_rebuild():
-    """The gallery's cracking slab at its preview mesh (scenes/fem_slab_crack.py, ``PREVIEW``) run until its smooth
-    surface is first rebuilt in pieces (frame 3): the rebuild's clean-up succeeds (``clean_failed`` False) and leaves
-    no crack triangle with an angle under the clean-up's sliver angle (measured: 126 crack triangles, smallest angle
-    11.2 degrees). The slab's input surface holds slivers of its own away from the crack; a clean-up round that
-    collapsed them with only part of their neighbourhood seen opened a shell, and the whole clean-up was dropped (262
-    raw crack triangles, 56 of them slivers down to 2.4 degrees)."""
+    """The gallery's cracking slab (scenes/fem_slab_crack.py at its PREVIEW settings) on a kept fTetWild mesh of its
+    preview edge length (tests/data/fem_slab_preview_ftetwild.vtu: 733 vertices, 2,210 elements; fTetWild's output
+    varies from run to run) run until its smooth surface is first rebuilt in pieces (frame 3): the rebuild's clean-up
+    succeeds (``clean_failed`` False) and leaves no crack triangle with an angle under the clean-up's sliver angle
+    (measured: 126 crack triangles, smallest angle 11.2 degrees; on four fresh fTetWild meshes 7.4 to 18.5 degrees).
+    The slab's input surface holds slivers of its own away from the crack; a clean-up round that collapsed them with
+    only part of their neighbourhood seen opened a shell, and the whole clean-up was dropped (on this mesh 262 raw
+    crack triangles, 56 of them slivers down to 2.4 degrees)."""
     import fem_slab_crack  # scenes/ (tests/conftest.py puts it on the path)
 
+    from pdsim.fem.mesh_files import load_tet_mesh
     from pdsim.fragment_surfaces.cleanup import SLIVER_ANGLE
 
-    scene = fem_slab_crack.build_scene(**fem_slab_crack.PREVIEW)
+    mesh = load_tet_mesh(str(Path(__file__).parent / "data" / "fem_slab_preview_ftetwild.vtu"))
+    scene = fem_slab_crack.build_scene(mesh=mesh, frames=fem_slab_crack.PREVIEW["frames"])
+    # drawn from the scene's own surface, as when the scene meshes it (a ready mesh would draw from its boundary)
+    scene.bodies[0].surface_shape = fem_slab_crack.slab_with_hole()
     (solver,) = scene.build_solvers(device="cpu")
     steps = int(np.ceil(scene.frame_time / solver.stable_time_step()))
     for _frame in range(6):
