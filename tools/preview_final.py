@@ -590,6 +590,31 @@ def stills(preset: str, case: str, spacings, path: str, *, frames=FRAMES, durati
     fig.savefig(path, dpi=100)
 
 
+def scene_figures(name: str, preview: bool, args: dict | None = None) -> list[dict]:
+    """Runs gallery scene ``name`` (scenes/<name>.py) to its last frame, at its PREVIEW settings when ``preview``
+    (else its defaults), updated with ``args``, on the CPU, stepped as :func:`run_scene` steps a case; returns the
+    figures of each peridynamic body (:func:`figures`, with ``volume`` its shape's, and :func:`drawn_figures`)."""
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from make_gallery import load_scene_module
+
+    module = load_scene_module(name)
+    kwargs = {**(dict(getattr(module, "PREVIEW", {})) if preview else {}), **(args or {})}
+    scene = module.build_scene(**kwargs)
+    solvers = scene.build_solvers(device="cpu")
+    dt = scene.time_step_safety * min(s.stable_time_step() for s in solvers)
+    substeps = max(1, math.ceil(scene.frame_time / dt - 1.0e-9))
+    coupling = method_contact(scene, solvers)
+    for _ in range(scene.frames):
+        advance_frame(solvers, scene.frame_time / substeps, substeps, coupling)
+    out = []
+    for solver in solvers:
+        for i, body in enumerate(getattr(solver, "bodies", ())) if isinstance(solver, pdsim.SolverPeridynamics) else ():
+            volume = float(np.sum(solver.masses()[solver.body_slice(i)]) / body.material.density)
+            r = figures(solver, i, volume=volume)
+            out.append({"scene": name, "body": body.name, "settings": kwargs, **r})
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--presets", nargs="+", default=list(BRITTLE))
@@ -611,8 +636,17 @@ def main(argv=None):
     ap.add_argument("--usd", help="folder: write each run's USD cache there instead (for pdsim preview)")
     ap.add_argument("--stills", help="PNG: the first preset and case at each spacing, side by side, and nothing else")
     ap.add_argument("--hertz", action="store_true", help="print hertz_load of each preset and case (animation, real)")
+    ap.add_argument(
+        "--scene", help="a gallery scene (scenes/<name>.py): the figures of its peridynamic bodies at its last frame"
+    )
+    ap.add_argument("--full", action="store_true", help="with --scene: the scene's defaults, not its PREVIEW settings")
+    ap.add_argument("--scene-args", default="{}", help="with --scene: build_scene keyword arguments (JSON)")
     args = ap.parse_args(argv)
     wp.config.quiet = True
+    if args.scene:
+        for r in scene_figures(args.scene, not args.full, json.loads(args.scene_args)):
+            print(json.dumps(r))
+        return
     if args.hertz:
         for preset in args.presets:
             for real in (False, True) if preset in pdsim.presets.TENSILE_STRENGTH else (False,):
