@@ -35,6 +35,7 @@ smaller in volume.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import math
 import os
@@ -591,13 +592,19 @@ def stills(preset: str, case: str, spacings, path: str, *, frames=FRAMES, durati
 
 
 def scene_figures(name: str, preview: bool, args: dict | None = None) -> list[dict]:
-    """Runs gallery scene ``name`` (scenes/<name>.py) to its last frame, at its PREVIEW settings when ``preview``
-    (else its defaults), updated with ``args``, on the CPU, stepped as :func:`run_scene` steps a case; returns the
-    figures of each peridynamic body (:func:`figures`, with ``volume`` its shape's, and :func:`drawn_figures`)."""
+    """Runs gallery scene ``name`` (scenes/<name>.py, or a scene script's path ending in .py) to its last frame, at
+    its PREVIEW settings when ``preview`` (else its defaults), updated with ``args``, on the CPU, stepped as
+    :func:`run_scene` steps a case; returns the figures of each peridynamic body (:func:`figures`, with ``volume``
+    its shape's, and :func:`drawn_figures`)."""
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     from make_gallery import load_scene_module
 
-    module = load_scene_module(name)
+    if name.endswith(".py"):
+        spec = importlib.util.spec_from_file_location("scene_figures_script", name)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    else:
+        module = load_scene_module(name)
     kwargs = {**(dict(getattr(module, "PREVIEW", {})) if preview else {}), **(args or {})}
     scene = module.build_scene(**kwargs)
     solvers = scene.build_solvers(device="cpu")
@@ -637,7 +644,9 @@ def main(argv=None):
     ap.add_argument("--stills", help="PNG: the first preset and case at each spacing, side by side, and nothing else")
     ap.add_argument("--hertz", action="store_true", help="print hertz_load of each preset and case (animation, real)")
     ap.add_argument(
-        "--scene", help="a gallery scene (scenes/<name>.py): the figures of its peridynamic bodies at its last frame"
+        "--scene",
+        help="a gallery scene (scenes/<name>.py) or a scene script (.py): the figures of its peridynamic bodies at "
+        "its last frame",
     )
     ap.add_argument("--full", action="store_true", help="with --scene: the scene's defaults, not its PREVIEW settings")
     ap.add_argument("--scene-args", default="{}", help="with --scene: build_scene keyword arguments (JSON)")
