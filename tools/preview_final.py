@@ -421,9 +421,9 @@ chip (pdsim/fragment_surfaces/surfaces.py, `DAMAGE_THRESHOLD`), and the drops le
 columns "drawn" count the chips, and the pieces the live bonds join between the other particles. Drawn, no drop has a
 piece over 5 % of the sphere, and 96.5 to 98.1 % of what broke out is chips or pieces under 8 particles: a heap of
 rubble, which `pdsim preview` shows (the still below). The fragments the live bonds count are that rubble, held together
-by the last of their bonds: the mean damage is 0.85 to 0.90, where a clean cut of the preview sphere into four quarters
-leaves 9.7 % of the particles at a damage of 0.5 or more and a mean damage of 0.21 (the quarters' bonds cut by hand,
-scratch measurement). Over seeds 0-4, by the live bonds, glass meets on 3, ceramic and stone on 4, plaster on 3
+by the last of their bonds, where a clean cut of the preview sphere into four quarters draws 9.7 % of it as chips and
+the quarters as four pieces (tests/test_preset_patterns.py, `test_a_clean_cut_into_quarters_draws_few_chips`). Over
+seeds 0-4, by the live bonds, glass meets on 3, ceramic and stone on 4, plaster on 3
 (docs/data/bench_2026-12-04_pairs/preset_drop_seeds.txt). A drop is chaotic at this resolution: the same glass drop at 6
 m/s x (1 +- 1e-6) gives 45.3 and 52.5 % broken out with 3 and 4 pieces, and the directed bond passes 51.1-52.2 % with
 3-4 (docs/data/bench_2026-12-04_pairs/preset_drops_speed_perturbed.jsonl), so seed 0's 26.9 % is one branch of the
@@ -434,19 +434,21 @@ of 30 cm (above), so a real sphere chips under this ball too. The animation valu
 in the same estimate, would split it, but the ball touches one or two particles of the 2 cm preview, which are crushed
 or held: a real point impact splits a body through cone and median cracks that start in a contact zone of millimetres,
 which a 2 cm spacing cannot resolve. Why the drops pulverise: the damage front crosses the sphere at the wave speed in
-the first 6 to 16 ms of the 20 ms contact (glass: 6 % of the particles chips at 6 ms, 62 % at 10 ms, 92 % at 16 ms),
-because the animation values put the impact's strain v / c at 23 times the breaking strain (`IMPACT_STRAIN_RATIO`,
-below), so the kinetic energy is (v / (c s_c))^2 = 530 times what the sphere can hold elastically at its breaking strain
-(real glass: about 1.6^2). Measured on the glass drop (`python tools/preview_final.py --presets glass --cases drop --set
-...`, the lines in docs/data/preview_final_glass_drop_drawn_2026-12-05.jsonl): a larger breaking strain at the same
-stiffness (`--set critical_stretch=S`, S = 0.0075 to 0.0175, 1.5 to 3.5 times the preset's) moves the chips from 85 to
-28 % while the broken-out share falls from 56 % to nothing (drawn: 0, 3, 4, 1 and 1 pieces over 5 %); a stiffness 100
-times the animation one (`--set youngs_modulus=7e8 critical_stretch=S debris_damping=30000`: c = 530 m/s, 10 times the
-steps) with S = 0.001 and 0.0007 (v / (c s_c) 11 and 16) gives 10 % chips and nothing broken out, or 44 % chips, 3 drawn
-pieces and 66 % of what broke out drawn as dust; the real values (`--real`, 51 s for the 40 ms) 58 % chips, and with the
-bonus cap of the gallery's glass pane (`--real --set compressive_bonus_cap=3`) 36 % chips, 4 drawn pieces and 52 % dust.
-At 15 particles across, no setting tried gives both a few clean cracks and pieces that break out. This is not met, and
-the must-show test now asks the figures as drawn (strict expected failures with the figures).
+the first 6 to 16 ms of the 20 ms contact (glass: 5.8 % of the sphere chips at 6 ms, 61.5 % at 10 ms, 92.4 % at 16 ms:
+`--presets glass --cases drop --frames 3 --duration 0.006`, `--frames 5 --duration 0.01`, `--frames 8 --duration
+0.016`), because the animation values put the impact's strain v / c at 23 times the breaking strain
+(`IMPACT_STRAIN_RATIO`, below), so the kinetic energy is (v / (c s_c))^2 = 530 times what the sphere can hold
+elastically at its breaking strain (real glass: about 1.6^2). Measured on the glass drop (`python tools/preview_final.py
+--presets glass --cases drop --set ...`, the lines in docs/data/preview_final_glass_drop_drawn_2026-12-05.jsonl): a
+larger breaking strain at the same stiffness (`--set critical_stretch=S`, S = 0.0075 to 0.0175, 1.5 to 3.5 times the
+preset's) moves the chips from 85 to 28 % while the broken-out share falls from 56 % to nothing (drawn: 0, 3, 4, 1 and 1
+pieces over 5 %); a stiffness 100 times the animation one (`--set youngs_modulus=7e8 critical_stretch=S
+debris_damping=30000`: c = 530 m/s, 10 times the steps) with S = 0.001 and 0.0007 (v / (c s_c) 11 and 16) gives 10 %
+chips and nothing broken out, or 44 % chips, 3 drawn pieces and 66 % of what broke out drawn as dust; the real values
+(`--real`, 51 s for the 40 ms) 58 % chips, and with the bonus cap of the gallery's glass pane (`--real --set
+compressive_bonus_cap=3`) 36 % chips, 4 drawn pieces and 52 % dust. At 15 particles across, no setting tried gives both
+a few clean cracks and pieces that break out. This is not met, and the must-show test now asks the figures as drawn
+(strict expected failures with the figures).
 
 Earlier measurements (with the former strains, before the crack-face contact):
 no debris damping broke out 11.2 % of the glass sphere under the ball, all of it dust, and no rate gave shards; a
