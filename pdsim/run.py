@@ -424,6 +424,7 @@ def run_scene(
         written = cache.frames_written
         prof.lap()
     prof.lap("write")  # the cache closed (and packed)
+    _warn_crumbled(solvers)
     if run.ck_path.is_file():
         run.ck_path.unlink()
     prof.finish(run.frame - start)
@@ -675,6 +676,27 @@ def _restore_run(scene, state, solvers, fingerprint, steps, frame_count):
         s.restore(state["solvers"][str(i)])
     _restore_colliders(scene.colliders, state.get("colliders", {}))
     return frame, substep, str(run["cache_run"])
+
+
+CRUMBLED_SHARE = 0.5
+"""A breakable body with at least this share of its mass drawn as chips at the end of a run is reported as crumbled
+(docs/fracture.md, "As the render draws them")."""
+
+
+def _warn_crumbled(solvers) -> None:
+    """A warning for each breakable body that ended the run with CRUMBLED_SHARE or more of its mass drawn as chips
+    (particles that lost half their bond weight: ``chip_shares`` of the particle solvers), which the artist sees as a
+    heap of rubble rather than pieces."""
+    for s in solvers:
+        for name, share in getattr(s, "chip_shares", dict)().items():
+            if share >= CRUMBLED_SHARE:
+                warnings.warn(
+                    f"body '{name}' crumbled: {100 * share:.0f} % of its mass lost half its bonds and is drawn as "
+                    "chips (rubble, not pieces). An impact that strains a brittle material many times its breaking "
+                    "strain does this; a stronger material crumbles less and breaks less (docs/guide.md, 'Shards, not "
+                    "dust')",
+                    stacklevel=3,
+                )
 
 
 def _collider_states(colliders) -> dict:

@@ -3,6 +3,7 @@ ground at 6 m/s, and the same sphere on the ground hit by a dynamic steel ball (
 6 m/s (tools/preview_final.py; docs/fracture.md, "Presets at preview and final spacing")."""
 
 import dataclasses
+import warnings
 from types import SimpleNamespace
 
 import numpy as np
@@ -249,3 +250,17 @@ def test_a_clean_cut_into_quarters_draws_few_chips():
     r = pf.drawn_figures(solver)
     assert r["chips"] == pytest.approx(0.097, abs=0.01), r
     assert r["drawn_big"] == 4, r
+
+
+def test_a_run_reports_a_body_that_crumbled(tmp_path):
+    """Scene.run warns, naming the body and its share, when a breakable body ends the run with half its mass or more
+    drawn as chips (pdsim/run.py, CRUMBLED_SHARE): the glass sphere dropped at 6 m/s (97 % chips after 40 ms), and
+    not the same sphere after 2 ms, before it breaks."""
+    drop = pf.build_case("drop", pdsim.presets.glass(), pf.PREVIEW_SPACING)
+    with pytest.warns(UserWarning, match=r"body 'sphere' crumbled: 97 % of its mass"):
+        drop.run(str(tmp_path / "drop.usdc"), progress=False)
+    early = pf.build_case("drop", pdsim.presets.glass(), pf.PREVIEW_SPACING, frames=1, duration=0.002)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        early.run(str(tmp_path / "early.usdc"), progress=False)
+    assert not [w for w in caught if "crumbled" in str(w.message)]

@@ -39,7 +39,7 @@ import warp as wp
 from ..contact import ParticleContact, material_contact_values
 from ..errors import ParameterError
 from ..fragment_labels import FragmentTracker
-from ..fragment_surfaces import FragmentSurfaces, surface_states, with_states
+from ..fragment_surfaces import DAMAGE_THRESHOLD, FragmentSurfaces, surface_states, with_states
 from ..kernels.peridynamics import bonds as kb
 from ..kernels.peridynamics import damping as pd_damping
 from ..kernels.peridynamics import step as pd_step
@@ -649,6 +649,19 @@ class SolverPeridynamics(PointSolver):
     def body_slice(self, index: int) -> slice:
         """Rows of the solver's body ``index`` (in ``self.bodies`` order) in the concatenated particle arrays."""
         return slice(int(self.model.body_offsets[index]), int(self.model.body_offsets[index + 1]))
+
+    def chip_shares(self) -> dict[str, float]:
+        """Per body that can break (name -> share): the share of its mass in particles whose damage reaches
+        DAMAGE_THRESHOLD, the particles its render surfaces draw as chips; empty when no body can break."""
+        if not self.model.fracture:
+            return {}
+        damage, mass = self.damage(), self.masses()
+        out = {}
+        for i, body in enumerate(self.bodies):
+            sl = self.body_slice(i)
+            if body.fractures:
+                out[body.name] = float(mass[sl][damage[sl] >= DAMAGE_THRESHOLD].sum() / mass[sl].sum())
+        return out
 
 
 def _directed_passes(solver: SolverPeridynamics, alive, live) -> None:
