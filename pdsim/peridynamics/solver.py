@@ -651,17 +651,22 @@ class SolverPeridynamics(PointSolver):
         return slice(int(self.model.body_offsets[index]), int(self.model.body_offsets[index + 1]))
 
     def chip_shares(self) -> dict[str, float]:
-        """Per body that can break (name -> share): the share of its mass in particles whose damage reaches
-        DAMAGE_THRESHOLD, the particles its render surfaces draw as chips; empty when no body can break."""
-        if not self.model.fracture:
-            return {}
-        damage, mass = self.damage(), self.masses()
-        out = {}
-        for i, body in enumerate(self.bodies):
-            sl = self.body_slice(i)
-            if body.fractures:
-                out[body.name] = float(mass[sl][damage[sl] >= DAMAGE_THRESHOLD].sum() / mass[sl].sum())
-        return out
+        """Per body that can break (name -> share): the share of its mass drawn as chips (:func:`_chip_shares`)."""
+        return _chip_shares(self)
+
+
+def _chip_shares(solver: SolverPeridynamics) -> dict[str, float]:
+    """Per body of ``solver`` that can break (name -> share): the share of its mass in particles whose damage reaches
+    DAMAGE_THRESHOLD, the particles its render surfaces draw as chips; empty when no body can break."""
+    if not solver.model.fracture:
+        return {}
+    damage, mass = solver.damage(), solver.masses()
+    out = {}
+    for i, body in enumerate(solver.bodies):
+        sl = solver.body_slice(i)
+        if body.fractures:
+            out[body.name] = float(mass[sl][damage[sl] >= DAMAGE_THRESHOLD].sum() / mass[sl].sum())
+    return out
 
 
 def _directed_passes(solver: SolverPeridynamics, alive, live) -> None:
