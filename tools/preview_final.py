@@ -112,15 +112,21 @@ def run_scene(scene, *, device="cpu"):
     """Runs every frame of ``scene`` (one peridynamic solver, and the dynamic rigid ball if any, stepped together by
     pdsim.run.advance_frame) at the scene's time step; returns (solver, wall [s])."""
     solvers = scene.build_solvers(device=device)
-    solver = solvers[0]
-    dt = scene.time_step_safety * solver.stable_time_step()
+    t0 = time.perf_counter()
+    run_frames(scene, solvers)
+    return solvers[0], time.perf_counter() - t0
+
+
+def run_frames(scene, solvers) -> None:
+    """Every frame of ``scene`` on its built ``solvers``, stepped together by pdsim.run.advance_frame at the scene's
+    time-step safety times the smallest stable step, with each solver's state checked after every frame."""
+    dt = scene.time_step_safety * min(s.stable_time_step() for s in solvers)
     substeps = max(1, math.ceil(scene.frame_time / dt - 1.0e-9))
     coupling = method_contact(scene, solvers)
-    t0 = time.perf_counter()
     for _ in range(scene.frames):
         advance_frame(solvers, scene.frame_time / substeps, substeps, coupling)
-        solver.check_state(1.0e3)
-    return solver, time.perf_counter() - t0
+        for s in solvers:
+            s.check_state(1.0e3)
 
 
 def _n80(masses) -> int:
@@ -606,8 +612,8 @@ def stills(preset: str, case: str, spacings, path: str, *, frames=FRAMES, durati
 
 def scene_figures(name: str, preview: bool, args: dict | None = None) -> list[dict]:
     """Runs gallery scene ``name`` (scenes/<name>.py, or a scene script's path ending in .py) to its last frame, at
-    its PREVIEW settings when ``preview`` (else its defaults), updated with ``args``, on the CPU, stepped as
-    :func:`run_scene` steps a case; returns the figures of each peridynamic body (:func:`figures`, with ``volume``
+    its PREVIEW settings when ``preview`` (else its defaults), updated with ``args``, on the CPU (:func:`run_frames`);
+    returns the figures of each peridynamic body (:func:`figures`, with ``volume``
     its shape's, and :func:`drawn_figures`)."""
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     from make_gallery import load_scene_module
@@ -621,11 +627,7 @@ def scene_figures(name: str, preview: bool, args: dict | None = None) -> list[di
     kwargs = {**(dict(getattr(module, "PREVIEW", {})) if preview else {}), **(args or {})}
     scene = module.build_scene(**kwargs)
     solvers = scene.build_solvers(device="cpu")
-    dt = scene.time_step_safety * min(s.stable_time_step() for s in solvers)
-    substeps = max(1, math.ceil(scene.frame_time / dt - 1.0e-9))
-    coupling = method_contact(scene, solvers)
-    for _ in range(scene.frames):
-        advance_frame(solvers, scene.frame_time / substeps, substeps, coupling)
+    run_frames(scene, solvers)
     out = []
     for solver in solvers:
         for i, body in enumerate(getattr(solver, "bodies", ())) if isinstance(solver, pdsim.SolverPeridynamics) else ():
