@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
+from scipy.spatial import cKDTree
 
 from .checks import check_range
 from .errors import ParameterError
@@ -81,6 +82,16 @@ class Material:
             shape's bounding box, turned back by the body's ``material_rotation``). Weak spots then have a material
             size and sit at the same places in the body at every spacing and wherever the body is placed. None
             (default): one factor per bond. Needs ``strength_weibull_modulus``.
+        strength_cell_size: L [m] > 0: the body is split into cells, the Voronoi cells of random points (a Poisson
+            process of one point per L^3, drawn from ``strength_seed`` over the body's bounding box grown by L, in
+            the body's rest frame as the strength field), and every bond whose two particles lie in the same cell is
+            ``strength_cell_ratio`` times stronger: cracks then run along the cell walls, and a body that breaks
+            everywhere breaks into pieces of about the cell's size, at every spacing and wherever the body is placed
+            (pdsim.materials.strength_cells). A flaw network given in advance, as a pre-fractured rigid-body shot's
+            Voronoi pieces; the pieces are shaped by the cells, not by the load, until a load exceeds the cells'
+            interior strength. None (default): no cells. Needs a material that breaks.
+        strength_cell_ratio: the cells' interior bonds' strength over the walls' bonds' [-], in [1, 1000] (default
+            5); used with ``strength_cell_size``.
         debris_damping: rate c [1/s] >= 0 at which particles that lost most of their bonds (damage above
             ``debris_damage``) are pulled towards the mean velocity of the neighbours they are still bonded to, or,
             once loose, of their reference family (the material they broke from): a = c (v_bar - v)
@@ -126,6 +137,8 @@ class Material:
     debris_damping: float = 0.0
     debris_damage: float = 0.7
     strength_correlation_length: float | None = None
+    strength_cell_size: float | None = None
+    strength_cell_ratio: float = 5.0
     sampling_jitter: float | None = None
     contact_restitution: float | None = None
     contact_friction: float | None = None
@@ -198,6 +211,11 @@ class Material:
                 )
             ell = check_range("strength_correlation_length", self.strength_correlation_length, 0.0, None)
             object.__setattr__(self, "strength_correlation_length", ell)
+        if self.strength_cell_size is not None:
+            size = check_range("strength_cell_size", self.strength_cell_size, 0.0, None)
+            object.__setattr__(self, "strength_cell_size", size)
+        ratio = check_range("strength_cell_ratio", self.strength_cell_ratio, 1.0, 1000.0, lo_open=False, hi_open=False)
+        object.__setattr__(self, "strength_cell_ratio", ratio)
         if self.sampling_jitter is not None:
             jitter = check_range("sampling_jitter", self.sampling_jitter, 0.0, 1.0, hi_open=False)
             object.__setattr__(self, "sampling_jitter", jitter)
@@ -207,6 +225,12 @@ class Material:
         if self.contact_friction is not None:
             mu = check_range("contact_friction", self.contact_friction, 0.0, None, lo_open=False)
             object.__setattr__(self, "contact_friction", mu)
+        if self.strength_cell_size is not None and not self.breaks:
+            raise ParameterError(
+                "strength_cell_size",
+                self.strength_cell_size,
+                "None for a material that never breaks (give critical_stretch or fracture_energy)",
+            )
         scatter = self.strength_weibull_modulus is not None or self.debris_damping > 0.0
         if self.sampling_jitter is not None and not self.breaks:
             raise ParameterError(
@@ -315,6 +339,34 @@ def strength_factors(material: Material, points, *, device="cpu") -> np.ndarray:
     )
     return out.numpy()[: len(p)].astype(np.float64)
 
+
+def cell_points(material: Material, bounds) -> np.ndarray:
+    """The random points whose Voronoi cells are ``material``'s cells (``strength_cell_size`` L) in a body whose
+    shape has the bounding box ``bounds`` [m] (2 x 3): a Poisson process of mean density 1 / L^3 drawn from
+    ``strength_seed`` over the box of half-size (bounds[1] - bounds[0]) / 2 + L, in the body's rest frame (relative
+    to the box's centre, as :func:`strength_factors`), so that they depend on the material, the seed and the shape's
+    size alone: not on the spacing, nor on where the body is placed. float64 [count, 3]."""
+    if material.strength_cell_size is None:
+        raise ParameterError("material", material.name, "a material with a strength_cell_size")
+    size = material.strength_cell_size
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+    half = 0.5 * (hi - lo) + size
+    rng = np.random.default_rng([material.strength_seed, CELL_STREAM])
+    count = max(1, int(rng.poisson(np.prod(2.0 * half) / size**3)))
+    return (2.0 * rng.random((count, 3)) - 1.0) * half
+
+
+def strength_cells(material: Material, bounds, points) -> np.ndarray:
+    """The cell of each of ``points`` [m], shape [n, 3] in the body's rest frame: the index of the nearest of
+    :func:`cell_points` (``bounds``: the shape's bounding box [m], 2 x 3). int64 [n]."""
+    seeds = cell_points(material, bounds)
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3 or not np.all(np.isfinite(p)):
+        raise ParameterError("points", f"shape {p.shape}", "finite points of shape [n, 3]")
+    return cKDTree(seeds).query(p)[1].astype(np.int64)
+
+
+CELL_STREAM = 0x63656C6C  # the random stream of the cell points, apart from the other uses of strength_seed
 
 # A few presets with round numbers; soft enough that animation time steps stay affordable.
 RUBBER = Material(density=1100.0, youngs_modulus=5.0e6, poisson_ratio=0.45, name="rubber")

@@ -20,14 +20,17 @@ Break pattern. The brittle presets (glass, porcelain, ceramic, stone, concrete, 
 tests/test_preset_patterns.py records which drops and hits meet that (docs/fracture.md, "Presets at preview and final
 spacing"): a strength field with a material correlation length (``strength_weibull_modulus``,
 ``strength_correlation_length``: the weak spots are the material's, the same at every spacing), jittered particles
-(``sampling_jitter`` 0.5: no lattice planes for cracks to follow), debris damping (:data:`DEBRIS_DAMPING` per second
-of the animation values for glass and porcelain, less for the others, a fixed rate so that it acts alike at every
-spacing) and the full compressive bonus capped at 1.5 s_c (:data:`SHARD_BONUS`, :data:`SHARD_BONUS_CAP`; 2 to 2.5
-s_c for ceramic, stone and plaster). Each preset's docstring gives its values and why. ``pattern=False`` gives the
-plain material (uniform strength, lattice sampling, no debris damping, the compressive bonus
-:data:`COMPRESSIVE_BONUS`), whose breaking strain at the reference spacing is exactly the stated one. The other
-presets have no pattern settings (wood splits by its grain; clay, steel and aluminium tear by plasticity; rubber never
-breaks), so ``pattern`` changes nothing for them.
+(``sampling_jitter`` 0.5: no lattice planes for cracks to follow), cells of :data:`CELL_SIZE` whose interior bonds
+are :data:`CELL_RATIO` times stronger than their walls (``strength_cell_size``, ``strength_cell_ratio``: cracks run
+along the walls, and a body that breaks all over breaks into pieces of about the cell's size; change the size with
+``dataclasses.replace(pdsim.presets.glass(), strength_cell_size=0.05)`` for smaller shards), debris damping
+(:data:`DEBRIS_DAMPING` per second of the animation values for glass and porcelain, less for the others, a fixed rate
+so that it acts alike at every spacing) and the full compressive bonus capped at 1.5 s_c (:data:`SHARD_BONUS`,
+:data:`SHARD_BONUS_CAP`; 2 to 2.5 s_c for ceramic, stone and plaster). Each preset's docstring gives its values and
+why. ``pattern=False`` gives the plain material (uniform strength, no cells, lattice sampling, no debris damping, the
+compressive bonus :data:`COMPRESSIVE_BONUS`), whose breaking strain at the reference spacing is exactly the stated
+one. The other presets have no pattern settings (wood splits by its grain; clay, steel and aluminium tear by
+plasticity; rubber never breaks), so ``pattern`` changes nothing for them.
 
 Contact. Every preset carries a ``contact_restitution`` and a ``contact_friction`` (:data:`CONTACT`), the values its
 contacts bring to a pair (combined with the other side's, pdsim/contact.py combine_restitution, combine_friction).
@@ -78,6 +81,14 @@ SHARD_BONUS = 1.0
 SHARD_BONUS_CAP = 1.5
 DEBRIS_DAMPING = 3000.0  # glass and porcelain; concrete half; ceramic, stone and plaster as tuned (their docstrings)
 SAMPLING_JITTER = 0.5
+# The brittle presets' cells (pattern=True; Material.strength_cell_size, strength_cell_ratio): bonds inside a cell of
+# about 20 cm are 5 times stronger than those across its walls, so a body that breaks all over breaks along the walls
+# into pieces of about that size, alike at every spacing. Without the cells the animation values' drops (an impact
+# strain 23 times the breaking strain) left 93 to 97 % of a 30 cm sphere with half its bonds broken (drawn as chips):
+# rubble; with cells of 20 cm, 19 to 37 % over strength seeds 0-4 at the 2 cm preview spacing, and 8 % at 1 cm
+# (docs/fracture.md, "Cells"). Cells of 15 cm gave 29 to 41 % and fewer pieces drawn; a ratio of 3, 39 to 43 %.
+CELL_SIZE = 0.2
+CELL_RATIO = 5.0
 # The animation values' impact strain over breaking strain, v / (c s_c) at v = 6 m/s (a 1.8 m fall), of glass (c =
 # 53 m/s, s_c = 0.005 at the reference spacing): ceramic, stone and plaster take the critical stretch (at the
 # reference spacing) that gives them the same ratio
@@ -171,6 +182,8 @@ def _brittle(
             "compressive_bonus_cap": bonus_cap,
             "strength_weibull_modulus": weibull_modulus,
             "strength_correlation_length": correlation_length,
+            "strength_cell_size": CELL_SIZE,
+            "strength_cell_ratio": CELL_RATIO,
             "debris_damping": debris_damping / math.sqrt(STIFFNESS_SCALE) if real else debris_damping,
             "sampling_jitter": SAMPLING_JITTER,
         }

@@ -293,6 +293,27 @@ def init_bond_fracture(
 
 
 @wp.kernel
+def strengthen_cell_interiors(
+    family_offsets: wp.array(dtype=wp.int32),
+    family_neighbors: wp.array(dtype=wp.int32),
+    cell: wp.array(dtype=wp.int32),
+    cell_ratio: wp.array(dtype=float),
+    bond_critical_stretch: wp.array(dtype=float),
+):
+    """Multiplies the critical stretch of each bond of particle k whose two particles lie in the same cell
+    (cell[k] == cell[j] >= 0; a particle of a body without cells has -1) by the body's cell_ratio[k] (both directed
+    copies: the test is symmetric and the ratio is the body's)."""
+    k = wp.tid()
+    c = cell[k]
+    if c < 0:
+        return
+    r = cell_ratio[k]
+    for q in range(family_offsets[k], family_offsets[k + 1]):
+        if cell[family_neighbors[q]] == c:
+            bond_critical_stretch[q] = bond_critical_stretch[q] * r
+
+
+@wp.kernel
 def scale_anisotropic_stiffness(
     family_offsets: wp.array(dtype=wp.int32),
     bond_geom: wp.array(dtype=wp.vec4),
@@ -364,6 +385,11 @@ def directional_bond_weights(count, *, device, **arguments):
 def bond_strengths(count, *, device, **arguments):
     """Writes the critical stretch of every bond [-] (init_bond_fracture)."""
     launch(init_bond_fracture, count, device=device, **arguments)
+
+
+def cell_strengths(count, *, device, **arguments):
+    """Strengthens the bonds inside each cell of ``count`` particles (strengthen_cell_interiors)."""
+    launch(strengthen_cell_interiors, count, device=device, **arguments)
 
 
 def strength_field(count, *, device, **arguments):

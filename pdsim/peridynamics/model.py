@@ -12,6 +12,7 @@ import warp as wp
 from ..kernels import neighbors as kn
 from ..kernels.peridynamics import bonds as kb
 from ..kernels.peridynamics import step as pd_step
+from ..materials import strength_cells
 from ..regions import BoxRegion
 from .body import PeridynamicBody
 
@@ -193,6 +194,25 @@ def _strength_fields(bodies, counts, device) -> dict:
     }
 
 
+def _strength_cells(bodies, counts) -> tuple[np.ndarray, np.ndarray]:
+    """Each particle's cell (pdsim.materials.strength_cells of its body's rest positions in the body's frame, as
+    _strength_fields; numbered apart for each body; -1 for a body without cells) and its body's strength_cell_ratio
+    (1 without cells)."""
+    cells, ratios, base = [], [], 0
+    for c, b in zip(counts, bodies, strict=True):  # per body (a handful), not per particle
+        material = b.material
+        if material.strength_cell_size is None:
+            cells.append(np.full(c, -1, dtype=np.int64))
+            ratios.append(np.ones(c))
+            continue
+        centre = 0.5 * (b.shape.bounds[0] + b.shape.bounds[1])
+        label = strength_cells(material, b.shape.bounds, (b.rest_positions - centre) @ b.material_rotation)
+        cells.append(base + label)
+        ratios.append(np.full(c, material.strength_cell_ratio))
+        base += int(label.max()) + 1
+    return np.concatenate(cells).astype(np.int32), np.concatenate(ratios)
+
+
 def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -> PeridynamicModel:
     """Concatenates the bodies, builds their families and per-bond / per-particle constants (all in kernels)."""
     counts = [b.particle_count for b in bodies]
@@ -343,6 +363,17 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
             bond_critical_stretch=bond_sc,
             device=device,
         )
+        if any(b.material.strength_cell_size is not None for b in bodies):
+            cell, ratio = _strength_cells(bodies, counts)
+            kb.cell_strengths(
+                n,
+                family_offsets=offsets,
+                family_neighbors=neighbors,
+                cell=wp.array(cell, dtype=wp.int32, device=device),
+                cell_ratio=arr(ratio),
+                bond_critical_stretch=bond_sc,
+                device=device,
+            )
         alive = wp.array(np.ones(max(bond_count, 1), dtype=np.uint8), dtype=wp.uint8, device=device)
         for c, b, lo in zip(counts, bodies, body_offsets[:-1]):
             for cut in b.notches:
