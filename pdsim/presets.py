@@ -85,8 +85,9 @@ SAMPLING_JITTER = 0.5
 # about 20 cm are 5 times stronger than those across its walls, so a body that breaks all over breaks along the walls
 # into pieces of about that size, alike at every spacing. Without the cells the animation values' drops (an impact
 # strain 23 times the breaking strain) left 93 to 97 % of a 30 cm sphere with half its bonds broken (drawn as chips):
-# rubble; with cells of 20 cm, 19 to 37 % over strength seeds 0-4 at the 2 cm preview spacing, and 8 % at 1 cm
-# (docs/fracture.md, "Cells"). Cells of 15 cm gave 29 to 41 % and fewer pieces drawn; a ratio of 3, 39 to 43 %.
+# rubble; with cells of 20 cm, 19 to 37 % over strength seeds 0-4 at the 2 cm preview spacing, and 6 to 10 % at 1 cm
+# over seeds 0-2 (docs/fracture.md, "Presets at preview and final spacing"). Cells of 15 cm gave 29 to 41 % and fewer
+# pieces drawn; a ratio of 10 or 20 (only the walls break), 18.6 to 18.8 %: the walls' own band at 2 cm.
 CELL_SIZE = 0.2
 CELL_RATIO = 5.0
 # The animation values' impact strain over breaking strain, v / (c s_c) at v = 6 m/s (a 1.8 m fall), of glass (c =

@@ -358,13 +358,18 @@ tables above are of the presets with their cells. What they change, at seed 0:
   unbreakable in effect (`--set strength_cell_ratio=10` or `20`: only the walls break) 18.6 to 18.8 % of the sphere
   is still drawn as chips and 28.7 to 35.0 % of what breaks out, and a clean cut into quarters draws 9.7 %. Larger
   cells draw fewer chips but break less: 25 cm cells give 13.5 to 27.8 % chips and 26 to 34 % of what broke out, with 1
-  to 4 pieces; 30 cm cells leave seed 0's spheres whole. 15 cm cells give 29 to 41 % chips over the seeds (their
-  figures in the same file's first lines).
+  to 4 pieces; 30 cm cells leave seed 0's spheres whole. 15 cm cells give 29 to 41 % chips over seeds 0-4, with 3 or
+  4 drawn pieces (`--seeds 5 --cases drop --set strength_cell_size=0.15`,
+  docs/data/preset_drop_seeds_cells15cm_2026-12-05.txt).
 - **At the final spacing (1 cm) the drops meet the shard figures as drawn too**: 8.8 to 12.8 % of what breaks out is
-  chips (5.8 to 8.4 % of the sphere), with 4 or 5 drawn pieces over 5 % (glass, ceramic, stone and plaster).
+  chips (5.8 to 8.4 % of the sphere), with 4 or 5 drawn pieces over 5 % (glass, ceramic, stone and plaster). Over
+  strength seeds 0-2 every drop meets as drawn, with 6 to 10 % chips and 4 to 7 drawn pieces (`--seeds 3 --cases
+  drop --spacings 0.01`, docs/data/preset_drop_seeds_cells_10mm_2026-12-05.txt).
 - **Preview and final break alike**: n80 4 / 4, 4 / 2, 3 / 2 and 3 / 3 (ratios 1.0, 2.0, 1.5 and 1.0: the ceramic drop
   misses the 1.5), the broken-out share 55.6 / 41.1, 64.6 / 50.1, 64.6 / 50.1 and 55.7 / 50.1 % (-26, -22, -22 and -10
-  %: all within +-30 %). Before the cells the n80 ratios were 1.6 to 4.3 and two drops missed the +-30 %.
+  %: all within +-30 %). Before the cells the n80 ratios were 1.6 to 4.3 and two drops missed the +-30 %. Seed by
+  seed the ceramic drop breaks out 65, 63 and 61 % at 2 cm and 50, 77 and 60 % at 1 cm (seeds 0-2), with 5, 6 and 5
+  fragments over 5 % against 3, 7 and 5: seed 0's n80 of 4 against 2 is one draw of that spread.
 - **The hits break out nothing** (chips 1 to 12 % of the sphere around the contact): the argument below (the ball's
   elastic force against the splitting load) stands.
 
