@@ -345,7 +345,9 @@ def cell_points(material: Material, bounds) -> np.ndarray:
     shape has the bounding box ``bounds`` [m] (2 x 3): a Poisson process of mean density 1 / L^3 drawn from
     ``strength_seed`` over the box of half-size (bounds[1] - bounds[0]) / 2 + L, in the body's rest frame (relative
     to the box's centre, as :func:`strength_factors`), so that they depend on the material, the seed and the shape's
-    size alone: not on the spacing, nor on where the body is placed. float64 [count, 3]."""
+    size alone: not on the spacing, nor on where the body is placed. A body turned by a ``material_rotation`` can
+    reach past that box at its corners; the particles there take the cells of the points nearest them, at the box's
+    edge. float64 [count, 3]."""
     if material.strength_cell_size is None:
         raise ParameterError("material", material.name, "a material with a strength_cell_size")
     size = material.strength_cell_size

@@ -82,12 +82,10 @@ SHARD_BONUS_CAP = 1.5
 DEBRIS_DAMPING = 3000.0  # glass and porcelain; concrete half; ceramic, stone and plaster as tuned (their docstrings)
 SAMPLING_JITTER = 0.5
 # The brittle presets' cells (pattern=True; Material.strength_cell_size, strength_cell_ratio): bonds inside a cell of
-# about 20 cm are 5 times stronger than those across its walls, so a body that breaks all over breaks along the walls
-# into pieces of about that size, alike at every spacing. Without the cells the animation values' drops (an impact
-# strain 23 times the breaking strain) left 93 to 97 % of a 30 cm sphere with half its bonds broken (drawn as chips):
-# rubble; with cells of 20 cm, 19 to 37 % over strength seeds 0-4 at the 2 cm preview spacing, and 6 to 10 % at 1 cm
-# over seeds 0-2 (docs/fracture.md, "Presets at preview and final spacing"). Cells of 15 cm gave 29 to 41 % and fewer
-# pieces drawn; a ratio of 10 or 20 (only the walls break), 18.6 to 18.8 %: the walls' own band at 2 cm.
+# about 20 cm are 5 times stronger than those across its walls, so a body that breaks all over (a 6 m/s drop strains
+# the animation values 23 times their breaking strain) breaks along the walls into pieces of about that size, alike
+# at every spacing, instead of crumbling (docs/fracture.md, "Presets at preview and final spacing", measures the
+# sizes and ratios tried).
 CELL_SIZE = 0.2
 CELL_RATIO = 5.0
 # The animation values' impact strain over breaking strain, v / (c s_c) at v = 6 m/s (a 1.8 m fall), of glass (c =
