@@ -84,8 +84,9 @@ FULL_RUNS: dict[str, str] = {
         "scenes/metal_dent_tear.py --out metal.usdc --quiet`, 2026-12-05, load average 1.6-2.3"
     ),
     "drop_shatter": (
-        "2,396 particles, 302 steps per frame: 72 s wall, 530 MB peak memory, `/usr/bin/time -v pdsim run "
-        "scenes/drop_shatter.py --out drop.usdc --quiet`, 2026-12-05, load average 0.6-1.6"
+        "2,396 particles, 302 steps per frame: 80 s wall, 487 MB peak memory, `/usr/bin/time -v pdsim run "
+        "scenes/drop_shatter.py --out drop.usdc --quiet`, 2026-12-05 08:57 UTC, load average 0.9 (with its cells; "
+        "before them 72 s and 530 MB, load average 0.6-1.6)"
     ),
     "mixed_methods": (
         "1,045 particles and 11,520 tetrahedra, 198 steps per frame: 54 s wall, 504 MB peak memory, `/usr/bin/time -v "
