@@ -13,6 +13,9 @@ from .checks import check_range
 from .errors import ParameterError
 from .kernels.peridynamics import bonds as kb
 
+# the damage at which a broken particle is drawn as a chip of its own by default (Material.chip_damage)
+CHIP_DAMAGE = 0.5
+
 
 @dataclass(frozen=True)
 class Anisotropy:
@@ -100,6 +103,13 @@ class Material:
             step must keep c dt < 1. Needs a material that breaks.
         debris_damage: damage threshold in (0, 1) above which ``debris_damping`` acts (default 0.7: a particle on a
             clean crack face has lost about half its bonds and is left alone).
+        chip_damage: the damage in (0, 1] at which the rendered surface of a peridynamic body of this material draws
+            a particle as a chip of its own instead of inside its piece's shell (pdsim.fragment_surfaces, step 7).
+            The default :data:`CHIP_DAMAGE` (0.5) draws a crumbling region as chips as soon as half its bonds are
+            gone, while a particle next to one clean crack face (damage about 0.38 on the lattice at the default
+            horizon) stays in its piece. A particle on the edge where two flat crack faces meet at a right angle has
+            damage about 0.62 and one at a corner of three 0.77: 0.7, as the brittle presets with cells take, keeps
+            the edges of their cell-shaped pieces in the pieces. Needs a material that breaks.
         sampling_jitter: the particle jitter, in (0, 1] of the spacing, that a peridynamic body of this material
             takes when its ``sampling`` is not given (pdsim.PeridynamicBody: sampling="jittered" with this jitter);
             None (default): the lattice. Needs a material that breaks (it keeps cracks off the lattice planes).
@@ -136,6 +146,7 @@ class Material:
     strength_seed: int = 0
     debris_damping: float = 0.0
     debris_damage: float = 0.7
+    chip_damage: float = CHIP_DAMAGE
     strength_correlation_length: float | None = None
     strength_cell_size: float | None = None
     strength_cell_ratio: float = 5.0
@@ -202,6 +213,8 @@ class Material:
             self, "debris_damping", check_range("debris_damping", self.debris_damping, 0.0, None, lo_open=False)
         )
         object.__setattr__(self, "debris_damage", check_range("debris_damage", self.debris_damage, 0.0, 1.0))
+        chip = check_range("chip_damage", self.chip_damage, 0.0, 1.0, hi_open=False)
+        object.__setattr__(self, "chip_damage", chip)
         if self.strength_correlation_length is not None:
             if self.strength_weibull_modulus is None:
                 raise ParameterError(
@@ -232,6 +245,13 @@ class Material:
                 "None for a material that never breaks (give critical_stretch or fracture_energy)",
             )
         scatter = self.strength_weibull_modulus is not None or self.debris_damping > 0.0
+        if self.chip_damage != CHIP_DAMAGE and not self.breaks:
+            raise ParameterError(
+                "chip_damage",
+                self.chip_damage,
+                f"{CHIP_DAMAGE} (the default) for a material that never breaks "
+                "(give critical_stretch or fracture_energy)",
+            )
         if self.sampling_jitter is not None and not self.breaks:
             raise ParameterError(
                 "sampling_jitter",

@@ -23,14 +23,15 @@ spacing"): a strength field with a material correlation length (``strength_weibu
 (``sampling_jitter`` 0.5: no lattice planes for cracks to follow), cells of :data:`CELL_SIZE` whose interior bonds
 are :data:`CELL_RATIO` times stronger than their walls (``strength_cell_size``, ``strength_cell_ratio``: cracks run
 along the walls, and a body that breaks all over breaks into pieces of about the cell's size; change the size with
-``dataclasses.replace(pdsim.presets.glass(), strength_cell_size=0.05)`` for smaller shards), debris damping
+``dataclasses.replace(pdsim.presets.glass(), strength_cell_size=0.05)`` for smaller shards), particles drawn as
+chips only from damage :data:`CHIP_DAMAGE` (``chip_damage``: the pieces' edges stay in the pieces), debris damping
 (:data:`DEBRIS_DAMPING` per second of the animation values for glass and porcelain, less for the others, a fixed rate
 so that it acts alike at every spacing) and the full compressive bonus capped at 1.5 s_c (:data:`SHARD_BONUS`,
 :data:`SHARD_BONUS_CAP`; 2 to 2.5 s_c for ceramic, stone and plaster). Each preset's docstring gives its values and
-why. ``pattern=False`` gives the plain material (uniform strength, no cells, lattice sampling, no debris damping, the
-compressive bonus :data:`COMPRESSIVE_BONUS`), whose breaking strain at the reference spacing is exactly the stated
-one. The other presets have no pattern settings (wood splits by its grain; clay, steel and aluminium tear by
-plasticity; rubber never breaks), so ``pattern`` changes nothing for them.
+why. ``pattern=False`` gives the plain material (uniform strength, no cells, chips from the default damage 0.5,
+lattice sampling, no debris damping, the compressive bonus :data:`COMPRESSIVE_BONUS`), whose breaking strain at the
+reference spacing is exactly the stated one. The other presets have no pattern settings (wood splits by its grain;
+clay, steel and aluminium tear by plasticity; rubber never breaks), so ``pattern`` changes nothing for them.
 
 Contact. Every preset carries a ``contact_restitution`` and a ``contact_friction`` (:data:`CONTACT`), the values its
 contacts bring to a pair (combined with the other side's, pdsim/contact.py combine_restitution, combine_friction).
@@ -88,6 +89,10 @@ SAMPLING_JITTER = 0.5
 # sizes and ratios tried).
 CELL_SIZE = 0.2
 CELL_RATIO = 5.0
+# The damage at which the brittle presets' particles are drawn as chips (pattern=True; Material.chip_damage): their
+# pieces are cells whose flat faces meet at edges, where a particle still in its piece has lost about 0.62 of its
+# bonds; at the default 0.5 every such edge is drawn as a lining of chips (docs/fracture.md measures both).
+CHIP_DAMAGE = 0.7
 # The animation values' impact strain over breaking strain, v / (c s_c) at v = 6 m/s (a 1.8 m fall), of glass (c =
 # 53 m/s, s_c = 0.005 at the reference spacing): ceramic, stone and plaster take the critical stretch (at the
 # reference spacing) that gives them the same ratio
@@ -183,6 +188,7 @@ def _brittle(
             "strength_correlation_length": correlation_length,
             "strength_cell_size": CELL_SIZE,
             "strength_cell_ratio": CELL_RATIO,
+            "chip_damage": CHIP_DAMAGE,
             "debris_damping": debris_damping / math.sqrt(STIFFNESS_SCALE) if real else debris_damping,
             "sampling_jitter": SAMPLING_JITTER,
         }

@@ -685,16 +685,16 @@ CRUMBLED_SHARE = 0.5
 
 def _warn_crumbled(solvers) -> None:
     """A warning for each breakable body that ended the run with CRUMBLED_SHARE or more of its mass drawn as chips
-    (particles that lost half their bond weight: ``chip_shares`` of the particle solvers), which the artist sees as a
-    heap of rubble rather than pieces."""
+    (particles whose damage reaches their material's chip_damage: ``chip_shares`` of the particle solvers), which the
+    artist sees as a heap of rubble rather than pieces."""
     for s in solvers:
         for name, share in getattr(s, "chip_shares", dict)().items():
             if share >= CRUMBLED_SHARE:
                 warnings.warn(
-                    f"body '{name}' crumbled: {100 * share:.0f} % of its mass lost half its bonds and is drawn as "
-                    "chips (rubble, not pieces). An impact that strains a brittle material many times its breaking "
-                    "strain does this; a stronger material crumbles less and breaks less (docs/guide.md, 'Shards, not "
-                    "dust')",
+                    f"body '{name}' crumbled: {100 * share:.0f} % of its mass reached its material's chip_damage "
+                    "and is drawn as chips (rubble, not pieces). An impact that strains a brittle material many "
+                    "times its breaking strain does this; a stronger material crumbles less and breaks less "
+                    "(docs/guide.md, 'Shards, not dust')",
                     stacklevel=3,
                 )
 

@@ -29,6 +29,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..geometry import SolidShape
+from ..materials import CHIP_DAMAGE
 from ..output.views import MeshView
 from .booleans import InputCuts, clip_regions, plane_groups, refine_surface, shared_complex
 from .drawn import DrawnSurface, drawn_surface
@@ -38,7 +39,9 @@ from .tiles import TiledCleanup
 
 __all__ = ["DAMAGE_THRESHOLD", "FragmentSurfaces", "surface_states", "with_states"]
 
-DAMAGE_THRESHOLD = 0.5  # particles with at least this damage become chips of their own (step 7 of the method)
+# particles with at least this damage become chips of their own (step 7 of the method) unless a body's material
+# says otherwise (Material.chip_damage)
+DAMAGE_THRESHOLD = CHIP_DAMAGE
 CHIP_SHAPES = ("cube", "cell")  # FragmentSurfaces(chip_shape=)
 # the 12 outward triangles of the unit cube whose corner i has the offsets (bits of i: x, y, z) in {-1/2, 1/2}^3
 _CUBE_CORNERS = np.array([[(i >> 0) & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=np.float64) - 0.5

@@ -39,7 +39,7 @@ import warp as wp
 from ..contact import ParticleContact, material_contact_values
 from ..errors import ParameterError
 from ..fragment_labels import FragmentTracker
-from ..fragment_surfaces import DAMAGE_THRESHOLD, FragmentSurfaces, surface_states, with_states
+from ..fragment_surfaces import FragmentSurfaces, surface_states, with_states
 from ..kernels.peridynamics import bonds as kb
 from ..kernels.peridynamics import damping as pd_damping
 from ..kernels.peridynamics import step as pd_step
@@ -533,7 +533,14 @@ class SolverPeridynamics(PointSolver):
             values["plastic_strain"] = self.plastic_strain()
         if self.write_surfaces and self._surfaces is None:
             self._surfaces = [
-                FragmentSurfaces(b.shape, b.rest_positions, b.spacing, b.name, device=str(self.device))
+                FragmentSurfaces(
+                    b.shape,
+                    b.rest_positions,
+                    b.spacing,
+                    b.name,
+                    damage_threshold=b.material.chip_damage,
+                    device=str(self.device),
+                )
                 for b in self.bodies
             ]
             with_states(self._surfaces, self._surface_states)
@@ -657,7 +664,7 @@ class SolverPeridynamics(PointSolver):
 
 def _chip_shares(solver: SolverPeridynamics) -> dict[str, float]:
     """Per body of ``solver`` that can break (name -> share): the share of its mass in particles whose damage reaches
-    DAMAGE_THRESHOLD, the particles its render surfaces draw as chips; empty when no body can break."""
+    its material's chip_damage, the particles its render surfaces draw as chips; empty when no body can break."""
     if not solver.model.fracture:
         return {}
     damage, mass = solver.damage(), solver.masses()
@@ -665,7 +672,7 @@ def _chip_shares(solver: SolverPeridynamics) -> dict[str, float]:
     for i, body in enumerate(solver.bodies):
         sl = solver.body_slice(i)
         if body.fractures:
-            out[body.name] = float(mass[sl][damage[sl] >= DAMAGE_THRESHOLD].sum() / mass[sl].sum())
+            out[body.name] = float(mass[sl][damage[sl] >= body.material.chip_damage].sum() / mass[sl].sum())
     return out
 
 
