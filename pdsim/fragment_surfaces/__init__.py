@@ -23,10 +23,11 @@ steps, and the module of each:
 6. **Slivers** (cleanup.py): edge collapses, edge flips and vertex moves on the shared complex that keep every shell
    closed and every outer face on the input surface. A rebuild first applies the last clean-up's edits wherever the
    complex around them is unchanged (edits.py), so the clean-up works where the regions changed.
-7. **Damage** (surfaces.py): particles whose damage reaches ``damage_threshold`` become chips. By default
-   (``chip_shape="cube"``) all chips together make one region of the partition that gets no shell, so the fragments
-   get crack faces where the chips were, and each chip is drawn as a cube of edge 0.8 h around its particle;
-   ``chip_shape="cell"`` makes each chip a region of its own, clipped and cleaned with the fragments.
+7. **Damage** (surfaces.py): particles whose damage reaches ``damage_threshold`` (a peridynamic body's
+   ``Material.chip_damage``) become chips. By default (``chip_shape="cube"``) all chips together make one region of the
+   partition that gets no shell, so the fragments get crack faces where the chips were, and each chip is drawn as a cube
+   of edge 0.8 h around its particle; ``chip_shape="cell"`` makes each chip a region of its own, clipped and cleaned
+   with the fragments.
 8. **Motion** (embedding.py): each shell vertex follows its region's particles: the region's best-fit rigid motion
    plus moving-least-squares interpolated residuals, a sparse product per frame. Vertex velocities are the time
    derivative of this map, ``v_v = c' + w x R (X_v - Xc) + sum_k phi_vk (v_k - c' - w x R (X_k - Xc))`` with the mean

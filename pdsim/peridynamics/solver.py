@@ -532,17 +532,7 @@ class SolverPeridynamics(PointSolver):
         if self.model.plastic:
             values["plastic_strain"] = self.plastic_strain()
         if self.write_surfaces and self._surfaces is None:
-            self._surfaces = [
-                FragmentSurfaces(
-                    b.shape,
-                    b.rest_positions,
-                    b.spacing,
-                    b.name,
-                    damage_threshold=b.material.chip_damage,
-                    device=str(self.device),
-                )
-                for b in self.bodies
-            ]
+            self._surfaces = [_body_surfaces(b, str(self.device)) for b in self.bodies]
             with_states(self._surfaces, self._surface_states)
         reactions = self.reaction_forces()
         out = []
@@ -660,6 +650,12 @@ class SolverPeridynamics(PointSolver):
     def chip_shares(self) -> dict[str, float]:
         """Per body that can break (name -> share): the share of its mass drawn as chips (:func:`_chip_shares`)."""
         return _chip_shares(self)
+
+
+def _body_surfaces(body, device: str) -> FragmentSurfaces:
+    """The render surfaces of a peridynamic ``body``, its particles drawn as chips from its material's chip_damage."""
+    b, chip = body, body.material.chip_damage
+    return FragmentSurfaces(b.shape, b.rest_positions, b.spacing, b.name, damage_threshold=chip, device=device)
 
 
 def _chip_shares(solver: SolverPeridynamics) -> dict[str, float]:
