@@ -4,6 +4,7 @@ the field."""
 
 import numpy as np
 import pytest
+from bond_helpers import break_bonds_across_planes
 
 import pdsim
 from pdsim.errors import ParameterError
@@ -22,16 +23,8 @@ def _box_cut_into_quarters(chip_damage):
     )
     body = pdsim.PeridynamicBody(pdsim.box((0.16, 0.16, 0.16), center=tuple(CENTRE)), material, H)
     solver = pdsim.SolverPeridynamics([body])
-    m = solver.model
-    offsets, neighbours = m.family_offsets.numpy(), m.family_neighbors.numpy()
-    first = np.repeat(np.arange(len(offsets) - 1), np.diff(offsets))
     x = body.rest_positions - CENTRE
-    across = np.zeros(len(neighbours), dtype=bool)
-    for axis in (0, 1):
-        across |= (x[first, axis] > 0.0) != (x[neighbours, axis] > 0.0)
-    alive = solver.state.bond_alive.numpy()
-    alive[: len(across)] &= ~across
-    solver.state.bond_alive.assign(alive)
+    break_bonds_across_planes(solver, x, axes=(0, 1))
     return solver, x
 
 

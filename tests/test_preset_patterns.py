@@ -9,6 +9,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from bond_helpers import bond_ends, break_bonds_across_planes
 
 import pdsim
 from pdsim.rigid import RigidBody
@@ -88,13 +89,11 @@ def test_a_dropped_sphere_cracks_along_its_cells_walls():
     for ratio in (pdsim.presets.CELL_RATIO, 1.0):
         scene = pf.build_case("drop", dataclasses.replace(pdsim.presets.glass(), strength_cell_ratio=ratio), 0.02)
         solver, _ = pf.run_scene(scene)
-        off = solver.model.family_offsets.numpy().astype(np.int64)
-        k = np.repeat(np.arange(solver.model.particle_count), np.diff(off))
-        j = solver.model.family_neighbors.numpy()[: off[-1]]
+        k, j = bond_ends(solver.model)
         body = scene.bodies[0]
         cell, _ = _strength_cells([body], [body.particle_count])
         wall = cell[k] != cell[j]
-        broken = solver.state.bond_alive.numpy()[: off[-1]] == 0
+        broken = solver.state.bond_alive.numpy()[: len(k)] == 0
         shares[ratio] = (wall[broken].mean(), wall.mean(), broken.mean())
     walls, everywhere, broken = shares[pdsim.presets.CELL_RATIO]
     assert walls > 0.6 and walls > 1.5 * everywhere, shares
@@ -276,16 +275,7 @@ def test_a_clean_cut_into_quarters_draws_few_chips(chip_damage, chips):
     material = dataclasses.replace(pdsim.presets.glass(), chip_damage=chip_damage)
     scene = pf.build_case("drop", material, pf.PREVIEW_SPACING)
     solver = scene.build_solvers(device="cpu")[0]
-    m = solver.model
-    offsets, neighbours = m.family_offsets.numpy(), m.family_neighbors.numpy()
-    first = np.repeat(np.arange(len(offsets) - 1), np.diff(offsets))
-    x = m.rest_positions.numpy() - pf.CENTRE
-    across = np.zeros(len(neighbours), dtype=bool)
-    for axis in (0, 1):
-        across |= (x[first, axis] > 0.0) != (x[neighbours, axis] > 0.0)
-    alive = solver.state.bond_alive.numpy()
-    alive[: len(across)] &= ~across
-    solver.state.bond_alive.assign(alive)
+    break_bonds_across_planes(solver, solver.model.rest_positions.numpy() - pf.CENTRE, axes=(0, 1))
     r = pf.drawn_figures(solver)
     assert r["chips"] == pytest.approx(chips, abs=0.003), r
     assert r["drawn_big"] == 4, r

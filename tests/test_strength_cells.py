@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from bond_helpers import bond_ends
 from scipy.spatial import cKDTree
 
 import pdsim
@@ -38,11 +39,9 @@ def _bonds(material, spacing, *, centre=(0.0, 0.0, 0.0)):
     shape = pdsim.box((0.12, 0.12, 0.12), center=centre)
     body = pdsim.PeridynamicBody(shape, material, spacing)
     model = build_model([body], "cpu", origin=body.rest_positions.mean(axis=0))
-    off = model.family_offsets.numpy().astype(np.int64)
-    k = np.repeat(np.arange(model.particle_count), np.diff(off))
-    j = model.family_neighbors.numpy()[: off[-1]].astype(np.int64)
+    k, j = bond_ends(model)
     local = body.rest_positions - np.asarray(centre)
-    factors = model.bond_critical_stretch.numpy()[: off[-1]].astype(np.float64) / SC
+    factors = model.bond_critical_stretch.numpy()[: len(k)].astype(np.float64) / SC
     return local, k, j, factors, shape.bounds
 
 

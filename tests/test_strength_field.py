@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from bond_helpers import bond_ends
 from scipy.spatial import cKDTree
 from scipy.special import log_ndtr
 
@@ -95,12 +96,10 @@ def _bond_midpoints_and_factors(material, spacing, *, centre=(0.0, 0.0, 0.0)):
     shape = pdsim.box((0.12, 0.12, 0.12), center=centre)
     body = pdsim.PeridynamicBody(shape, material, spacing)
     model = build_model([body], "cpu", origin=body.rest_positions.mean(axis=0))
-    off = model.family_offsets.numpy().astype(np.int64)
-    k = np.repeat(np.arange(model.particle_count), np.diff(off))
-    j = model.family_neighbors.numpy()[: off[-1]].astype(np.int64)
+    k, j = bond_ends(model)
     local = body.rest_positions - np.asarray(centre)
     mid = 0.5 * (local[k] + local[j])
-    return mid, model.bond_critical_stretch.numpy()[: off[-1]].astype(np.float64) / SC
+    return mid, model.bond_critical_stretch.numpy()[: len(k)].astype(np.float64) / SC
 
 
 def test_bonds_take_the_field_at_their_midpoint_at_every_spacing_and_place():
