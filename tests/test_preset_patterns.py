@@ -129,6 +129,24 @@ def test_plain_presets_fail_the_shard_figures():
     assert r["dust"] > 0.20 or r["big"] < 3, r
 
 
+@pytest.mark.parametrize("case", pf.CASES)
+def test_the_cases_break_alike_far_from_the_origin(case):
+    """The glass drop and hit at the preview spacing, moved 1.1 km away ((1000, -500, 250) m, the ground plane
+    with them), give the figures of the cases at the origin: broken out, dust, the drawn chips and drawn dust within
+    1e-3, the fragment counts, n80 and drawn pieces exact (measured: the same to the fourth decimal)."""
+    figures = []
+    for offset in ((0.0, 0.0, 0.0), (1000.0, -500.0, 250.0)):
+        scene = pf.build_case(case, pdsim.presets.glass(), pf.PREVIEW_SPACING, offset=offset)
+        solver, _ = pf.run_scene(scene)
+        figures.append(pf.figures(solver))
+    near, far = figures
+    for key in ("broken_out", "dust", "chips", "drawn_dust"):
+        assert far[key] == pytest.approx(near[key], abs=1.0e-3), (key, near, far)
+    for key in ("fragments", "big", "n80", "drawn_big"):
+        assert far[key] == near[key], (key, near, far)
+    assert near["broken_out"] > 0.3, near  # the case breaks: the comparison is of a broken sphere
+
+
 def test_hit_ball_is_dynamic_and_bounces():
     """The hit's ball is a dynamic rigid body of steel (7850 kg/m^3, 5 cm radius: 4.11 kg) at 22 m/s: after the 40 ms
     of the run on a glass sphere it moves up (it bounced off: 2.5 m/s), where a kinematic ball would still come down
