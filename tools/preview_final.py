@@ -423,10 +423,12 @@ of the presets as they ship now: with their cells (next paragraph) and two chang
   out, 5 drawn pieces each). The live bonds, the physics and the fragments do not change.
 - **The hit.** The ball (4.1 kg steel, 10 cm across) now comes down at 22 m/s (`HIT_SPEED`) instead of 6 m/s. At 6
   m/s its elastic (Hertz) peak force was 0.2 of the drop's (`--hertz`): it loaded the sphere five times less and
-  broke out nothing, rightly (the figures are in the git history of this page; `--hit-speed 6` gives them again). At
+  broke out nothing, rightly (`--cases hit --spacings 0.02 0.01 --hit-speed 6`, docs/data/preview_final_hit6ms.json:
+  0.0 % at 2 cm, at most 5 % at 1 cm). At
   22 m/s the peak force is 0.93 of the glass drop's (ceramic 1.00, stone 0.90, plaster 1.41): the same load by
-  another path. A ball at 18 m/s (`--cases hit --spacings 0.02 0.01 --hit-speed 18`) breaks the stone and plaster
-  spheres little at 2 cm (30 and 9 %) and much at 1 cm (64 and 50 %); at 25 m/s all four break at 2 cm (26 to 63 %).
+  another path. A ball at 18 m/s (`--hit-speed 18`, docs/data/preview_final_hit18ms.json) breaks the stone and
+  plaster spheres little at 2 cm (30 and 9 %) and much at 1 cm (64 and 50 %); at 25 m/s (`--hit-speed 25`,
+  docs/data/preview_final_hit25ms.json) all four break at 2 cm (26 to 63 %).
 
 What the tables show at seed 0 (the presets' own):
 
