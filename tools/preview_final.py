@@ -421,14 +421,14 @@ of the presets as they ship now: with their cells (next paragraph) and two chang
   (`pdsim.presets.CHIP_DAMAGE`, the same value as their `debris_damage`): a clean cut into quarters draws 0.5 % of
   the sphere as chips instead of 9.7 %, and the drops draw 3.7 to 13.4 % (drawn dust 5.9 to 17.7 % of what breaks
   out, 5 drawn pieces each). The live bonds, the physics and the fragments do not change.
-- **The hit.** The ball (4.1 kg steel, 10 cm across) now comes down at 22 m/s (`HIT_SPEED`) instead of 6 m/s. At 6
-  m/s its elastic (Hertz) peak force was 0.2 of the drop's (`--hertz`): it loaded the sphere five times less and
-  broke out nothing, rightly (`--cases hit --spacings 0.02 0.01 --hit-speed 6`, docs/data/preview_final_hit6ms.json:
-  0.0 % at 2 cm, at most 5 % at 1 cm). At
-  22 m/s the peak force is 0.93 of the glass drop's (ceramic 1.00, stone 0.90, plaster 1.41): the same load by
-  another path. A ball at 18 m/s (`--hit-speed 18`, docs/data/preview_final_hit18ms.json) breaks the stone and
-  plaster spheres little at 2 cm (30 and 9 %) and much at 1 cm (64 and 50 %); at 25 m/s (`--hit-speed 25`,
-  docs/data/preview_final_hit25ms.json) all four break at 2 cm (26 to 63 %).
+- **The hit.** The ball (4.1 kg steel, 10 cm across) now comes down at 22 m/s (`HIT_SPEED`) instead of 6 m/s. At 6 m/s
+  its elastic (Hertz) peak force was 0.2 of the drop's (`--hertz`): it loaded the sphere five times less and broke out
+  nothing, rightly (`--cases hit --spacings 0.02 0.01 --hit-speed 6`, docs/data/preview_final_hit6ms.json: 0.0 % at 2
+  cm, at most 5 % at 1 cm). At 22 m/s the peak force is 0.93 of the drop's for glass (for each of the others against its
+  own drop: ceramic 1.00, stone 0.90, plaster 1.41): the same load by another path. A ball at 18 m/s (`--hit-speed 18`,
+  docs/data/preview_final_hit18ms.json) breaks the stone and plaster spheres little at 2 cm (30 and 9 %) and much at 1
+  cm (64 and 50 %); at 25 m/s (`--hit-speed 25`, docs/data/preview_final_hit25ms.json) all four break at 2 cm (26 to 63
+  %).
 
 What the tables show at seed 0 (the presets' own):
 
