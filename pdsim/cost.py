@@ -13,8 +13,13 @@ and load average it was measured with and:
   visit (elastic, with fracture, with plasticity) and per particle (peridynamics), per element (elastic, with
   fracture) and per vertex (explicit FEM), per lattice point and per link (lattice); and the contact between FEM
   surfaces (pdsim.contact.MethodContact, working at rest on explicit FEM bodies beside another FEM body): a
-  constant per step and per boundary vertex of such a body (``fem_contact_step``, ``fem_contact_vertex``; a
-  calibration measured before these terms, as the CUDA one of 2026-12-04, leaves that contact out);
+  constant per step and per boundary vertex of such a body (``fem_contact_step``, ``fem_contact_vertex``); a
+  lattice that can lose links: a constant per step and per link more (``lattice_fracture_step``,
+  ``lattice_fracture_link``: the link-loss pass); boundary conditions on a peridynamic or FEM solver's bodies: a
+  constant per step of that solver (``conditions_step``: the conditions' state and the work of the supports). A
+  calibration measured before one of these terms (:data:`LATER_TERMS`; the CUDA one of 2026-12-04 lacks them all)
+  leaves that cost out. The FEM blocks measured spin, so that each step turns every element's corotated frame (one
+  Newton step of the polar rotation, the common case of a moving body), where a body at rest would skip it;
 - ``frame_seconds``: per frame outside the steps (views, render surfaces, the USD writer): a constant, per point of
   each method and per surface vertex;
 - ``build_seconds``: building the solvers, per point, per estimated bond and per element, plus a constant;
@@ -38,9 +43,12 @@ from .fragment_surfaces.booleans import refine_surface
 
 DEVICE_KINDS = ("cpu", "cuda")  # the device kinds a calibration can be measured on
 HOUR = 3600.0  # a run estimated to take longer than this [s] is warned about
-FEM_CONTACT_TERMS = ("fem_contact_step", "fem_contact_vertex")
-"""The step constants of the contact between FEM surfaces: a calibration measured before them (the CUDA one of
-2026-12-04) lacks them, and its estimates leave that contact out."""
+FEM_CONTACT_TERMS = ("fem_contact_step", "fem_contact_vertex")  # the contact between FEM surfaces
+LATTICE_FRACTURE_TERMS = ("lattice_fracture_step", "lattice_fracture_link")  # a lattice's link-loss pass
+CONDITIONS_TERM = "conditions_step"  # the boundary conditions of a peridynamic or FEM solver, per step
+LATER_TERMS = (*FEM_CONTACT_TERMS, *LATTICE_FRACTURE_TERMS, CONDITIONS_TERM)
+"""Step constants added to the model after the first calibrations: a calibration measured before one (the CUDA one of
+2026-12-04 lacks them all) counts it as 0, and its estimates leave that cost out."""
 PD_FEATURES = ("elastic", "fracture", "plastic")  # the peridynamic step's calibrated variants
 FEM_FEATURES = ("elastic", "fracture")  # the explicit FEM step's calibrated variants
 
@@ -115,12 +123,13 @@ def body_counts(body, bonds_per_particle) -> dict:
     scene's substeps), features ("plastic": a peridynamic body with a yield stress; else "fracture" when bonds or
     elements can break; else "elastic"), calibrated (False: no
     step calibration for this body, e.g. an implicit FEM body), contact_vertices (an explicit FEM body's boundary
-    vertices, which the contact between FEM surfaces works on: :func:`fem_surface_contact`), breaks (its bonds or
-    elements can break)."""
+    vertices, which the contact between FEM surfaces works on: :func:`fem_surface_contact`), breaks (its bonds,
+    elements or links can break), conditions (its boundary conditions; a lattice's grips are its own kinds, 0)."""
     method = _method(body)
     out = {"method": method, "points": 0, "bonds": 0.0, "elements": 0, "surface_vertices": surface_vertices(body),
            "steps": None, "features": "elastic", "calibrated": True, "contact_vertices": 0,
-           "breaks": bool(getattr(body, "fractures", False))}  # fmt: skip
+           "breaks": bool(getattr(body, "fractures", False)),
+           "conditions": len(getattr(body, "conditions", ()))}  # fmt: skip
     if method == "peridynamics":
         n = int(body.particle_count)
         out.update(points=n, bonds=n * float(bonds_per_particle(body)))
@@ -137,6 +146,8 @@ def body_counts(body, bonds_per_particle) -> dict:
     else:
         out.update(points=int(getattr(body, "particle_count", 0)), bonds=float(getattr(body, "link_count", 0)))
         out["steps"] = int(getattr(body, "steps_per_frame", 1))
+        if getattr(body, "fracture", None) is not None:
+            out.update(features="fracture", breaks=True)
     return out
 
 
@@ -162,10 +173,22 @@ def step_seconds(counts: dict, calibration: dict = CALIBRATION, surface_contact:
         per_element = c[f"fem_element_{counts['features']}"]
         seconds = c["fem_step"] + counts["elements"] * per_element + counts["points"] * c["fem_vertex"]
         if surface_contact:
-            per_step, per_vertex = (c.get(term, 0.0) for term in FEM_CONTACT_TERMS)  # 0: a calibration before them
+            per_step, per_vertex = (c.get(term, 0.0) for term in FEM_CONTACT_TERMS)
             seconds += per_step + counts["contact_vertices"] * per_vertex
         return seconds
-    return c["lattice_step"] + counts["points"] * c["lattice_point"] + counts["bonds"] * c["lattice_link"]
+    seconds = c["lattice_step"] + counts["points"] * c["lattice_point"] + counts["bonds"] * c["lattice_link"]
+    if counts["features"] == "fracture":
+        per_step, per_link = (c.get(term, 0.0) for term in LATTICE_FRACTURE_TERMS)
+        seconds += per_step + counts["bonds"] * per_link
+    return seconds
+
+
+def conditions_seconds(bodies: list[dict], calibration: dict = CALIBRATION) -> float:
+    """Wall time per scene step [s] of the boundary conditions: ``conditions_step`` once for each solver (the
+    peridynamic one, the explicit FEM one) with a body that has a boundary condition."""
+    per_step = calibration["step_seconds"].get(CONDITIONS_TERM, 0.0)
+    held = {b["method"] for b in bodies if b.get("conditions", 0) and b["method"] in ("peridynamics", "fem")}
+    return per_step * len(held)
 
 
 def estimate_cost(bodies: list[dict], *, substeps: int, frames: int, device: str,
@@ -186,6 +209,7 @@ def estimate_cost(bodies: list[dict], *, substeps: int, frames: int, device: str
     timed = all(b["calibrated"] for b in bodies)
     for b, contact in zip(bodies, fem_surface_contact(bodies)):
         step += step_seconds(b, calibration, contact) * (substeps if b["steps"] is None else b["steps"])
+    step += conditions_seconds([b for b in bodies if b["calibrated"]], calibration) * substeps
     points = {m: sum(b["points"] for b in bodies if b["method"] == m) for m in ("peridynamics", "fem", "lattice")}
     per_frame = step + fs["constant"] + vertices * fs["surface_vertex"]
     per_frame += sum(points[m] * fs["point"][m] for m in points)

@@ -23,8 +23,9 @@ SCENES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))
 # frames run: the slab's cracks open from its second frame on, and a frame that splits elements costs several times
 # a steady one (docs/benchmarks.md): its first frame is measured
 # The cache estimate is of a body's surface at rest, without the crack faces and chips it grows: the tile of
-# drop_shatter's 24 preview frames wrote 3.05 MB against 1.76 MB estimated (1.73x) once its cracks ran along cells;
-# crumbling to chips before them, 3.77 MB against 1.67 MB (2.26x, 2026-12-04), past the factor.
+# drop_shatter's 24 preview frames wrote 3.05 MB against 1.68 MB estimated (1.81x, the calibration of 2026-12-05 13:32
+# UTC) once its cracks ran along cells; crumbling to chips before them, 3.77 MB against 1.67 MB (2.26x, 2026-12-04),
+# past the factor.
 FRAMES = {"cantilever": 3, "fem_slab_crack": 1, "lattice_3d_tear": 8, "glass_pane": 6, "drop_shatter": 24}
 FACTOR = 2.0
 BUSY = 1.5  # load average per core above which the wall times say more about other work than about the run
@@ -133,9 +134,9 @@ def test_cuda_estimates_use_the_gpus_calibration():
     from pdsim.preflight import _bonds_per_particle, format_estimate
 
     cal = CALIBRATIONS["cuda"]
-    # every CPU constant but the FEM surface contact's, which the model gained after the CUDA calibration was measured
+    # every CPU constant but those the model gained after the CUDA calibration was measured (pdsim.cost.LATER_TERMS)
     missing = set(CALIBRATION["step_seconds"]) - set(cal["step_seconds"])
-    assert cal["device"] == "cuda" and missing <= set(pdsim.cost.FEM_CONTACT_TERMS)
+    assert cal["device"] == "cuda" and missing <= set(pdsim.cost.LATER_TERMS)
     assert set(cal["step_seconds"]) <= set(CALIBRATION["step_seconds"])
     scene = _small_scene()
     report = pdsim.preflight.preflight(scene, device="cpu")
@@ -209,3 +210,42 @@ def test_the_fem_surface_contact_is_charged_beside_another_fem_body_only():
     assert pdsim.cost.fem_surface_contact([fem, breakable]) == [True, True]
     assert pdsim.cost.fem_surface_contact([breakable, pd]) == [False, False]
     assert pdsim.cost.fem_surface_contact([fem, implicit]) == [False, False]
+
+
+def test_link_loss_and_boundary_conditions_are_charged():
+    """A lattice that can lose links is counted with fracture and steps dearer by the calibration's link-loss terms
+    (per step and per link); a peridynamic or FEM solver whose bodies hold boundary conditions pays conditions_step
+    once a step, however many conditions and bodies, and a lattice's grips (its own kinds) pay nothing; a
+    calibration without these terms (as the CUDA one of 2026-12-04) charges nothing for them."""
+    from pdsim.cost import body_counts, conditions_seconds, step_seconds
+    from pdsim import Lattice, LatticeBody, LatticeFracture
+    from pdsim.preflight import _bonds_per_particle
+
+    shape = pdsim.box((0.06, 0.06, 0.06))
+    whole = body_counts(LatticeBody(Lattice.simple_cubic(0.01), shape), _bonds_per_particle)
+    tearing = body_counts(LatticeBody(Lattice.simple_cubic(0.01), shape, fracture=LatticeFracture((0.013,))),
+                          _bonds_per_particle)  # fmt: skip
+    assert (whole["features"], whole["breaks"], tearing["features"], tearing["breaks"]) == (
+        "elastic", False, "fracture", True)  # fmt: skip
+    c = CALIBRATION["step_seconds"]
+    extra = c["lattice_fracture_step"] + tearing["bonds"] * c["lattice_fracture_link"]
+    assert extra > 0.0 and tearing["bonds"] == whole["bonds"] > 0
+    assert step_seconds(tearing) - step_seconds(whole) == pytest.approx(extra, rel=1e-12)
+
+    material = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)
+    a = pdsim.PeridynamicBody(pdsim.box((0.1, 0.1, 0.1)), material, spacing=0.02, name="a")
+    b = pdsim.PeridynamicBody(pdsim.box((0.1, 0.1, 0.1), center=(0.3, 0, 0)), material, spacing=0.02, name="b")
+    free = [body_counts(x, _bonds_per_particle) for x in (a, b)]
+    assert conditions_seconds(free) == 0.0 and conditions_seconds([whole, tearing]) == 0.0
+    a.fix(pdsim.BoxRegion(lo=(-1, -1, -1), hi=(-0.04, 1, 1)))
+    a.set_velocity(pdsim.BoxRegion(lo=(0.04, -1, -1), hi=(1, 1, 1)), (0.01, 0.0, 0.0))
+    b.fix(pdsim.BoxRegion(lo=(0.2, -1, -1), hi=(0.26, 1, 1)))
+    held = [body_counts(x, _bonds_per_particle) for x in (a, b)]
+    assert [h["conditions"] for h in held] == [2, 1]
+    assert conditions_seconds(held) == c["conditions_step"] > 0.0
+    fem = dict(held[0], method="fem")
+    assert conditions_seconds([*held, fem]) == pytest.approx(2.0 * c["conditions_step"], rel=1e-12)
+    before = {k: dict(v) if isinstance(v, dict) else v for k, v in CALIBRATION.items()}
+    for term in pdsim.cost.LATER_TERMS:
+        before["step_seconds"].pop(term)
+    assert conditions_seconds(held, before) == 0.0 and step_seconds(tearing, before) == step_seconds(whole, before)

@@ -16,19 +16,19 @@ c_p at horizon factors 1.5 / 3.015 / 6 (about 0.3 m h / c_p); fill_solid 60 to 6
     python tools/preflight_calibration.py --compare [SCENE ...] [--device cuda]   # the estimates against gallery runs
     python tools/preflight_calibration.py --table [--device cuda]   # a calibration as a markdown table
 
-``--cost`` runs small blocks of each method (peridynamics elastic, with fracture, with plasticity; explicit FEM
-elastic and with fracture; a lattice) for a few frames each with the run's profile (pdsim/profile.py), three times
-each (the least time of each part kept, as other work on the machine only adds time), and fits with non-negative
-least squares, against the pre-flight's own counts (pdsim.cost.body_counts): the step's wall time per step, per
-estimated bond visit and per particle, per element and vertex, per lattice point and link; the per-frame time outside
-the steps (views, render surfaces, writer) per point of each method and per surface vertex; the build time; cache
-bytes per frame; and, in a child process, the host memory of the render surfaces per surface vertex (the peak of
+``--cost`` runs small blocks of each method (peridynamics elastic, with fracture, with plasticity; explicit FEM elastic
+and with fracture; a lattice) for a few frames each with the run's profile (pdsim/profile.py), three times each (the
+least time of each part kept, as other work on the machine only adds time), and fits with non-negative least squares of
+the relative residuals (a small run counts as much as a large one; the build time's of the residuals themselves, as
+builds of a few ms are noise), against the pre-flight's own counts (pdsim.cost.body_counts): the step's wall time per
+step, per estimated bond visit and per particle, per element and vertex, per lattice point and link; the per-frame time
+outside the steps (views, render surfaces, writer) per point of each method and per surface vertex; the build time;
+cache bytes per frame; and, in a child process, the host memory of the render surfaces per surface vertex (the peak of
 numpy's traced allocations while the first views with their surfaces are built). ``--device cuda`` runs the blocks on
 the GPU, with larger blocks added (on a GPU the small ones only time the launches). ``--write`` stores them in the
 device kind's file, pdsim/cost_calibration_cpu.json or pdsim/cost_calibration_cuda.json (``--out PATH``: elsewhere),
 with the machine, date, command and load average; the worst ratio of each fit is printed. Rerun it (and ``python
-tools/errors_catalogue.py``, whose disk message quotes an estimate) on a quiet machine.
-"""
+tools/errors_catalogue.py``, whose disk message quotes an estimate) on a quiet machine."""
 
 from __future__ import annotations
 
@@ -155,28 +155,47 @@ def _material(kind: str) -> pdsim.Material:
     return pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3, **extra)
 
 
+def _spin(body, center) -> None:
+    """Sets ``body`` spinning at SPIN about the vertical axis through ``center`` [m]."""
+    r = body.point_rest_positions - center
+    body.set_initial_velocity(SPIN * np.column_stack([-r[:, 1], r[:, 0], np.zeros(len(r))]))
+
+
 def cost_scene(method: str, size: int, variant) -> pdsim.Scene:
-    """A block of ``size`` points (or cells) a side at rest on the ground, settling under gravity: peridynamics
-    (variant: (horizon factor, "elastic", "fracture" or "plastic": with fracture)), explicit FEM (variant:
-    None, "fracture", or "pair": two elastic blocks one spacing apart, which the contact between FEM surfaces works
-    on), a lattice (variant: its steps per frame)."""
+    """A block of ``size`` points (or cells) a side on the ground, settling under gravity and spinning about its
+    vertical axis at SPIN, as a body in a shot moves (every frame writes new positions, and every FEM step turns its
+    elements' corotated frames): peridynamics (variant: (horizon factor, "elastic", "fracture" or "plastic": with
+    fracture)), explicit FEM (variant: None, "fracture", "pair": two elastic blocks one spacing apart, which the
+    contact between FEM surfaces works on, or "held": one end fixed and the other pulled, the boundary conditions'
+    cost); or a lattice pulled at one end (variant: (steps per frame, "elastic" or "fracture": links that can be
+    lost, never stretched that far))."""
     scene = pdsim.Scene(frames=FRAMES, fps=200.0)
     h = 0.01
     if method == "pd":
         m, kind = variant
-        scene.add_peridynamic_body(pdsim.box((size * h,) * 3, center=(0, 0, size * h / 2 + h)), _material(kind),
-                                   spacing=h, horizon_factor=m, name="block")  # fmt: skip
+        body = scene.add_peridynamic_body(pdsim.box((size * h,) * 3, center=(0, 0, size * h / 2 + h)),
+                                          _material(kind), spacing=h, horizon_factor=m, name="block")  # fmt: skip
+        _spin(body, np.array([0.0, 0.0, size * h / 2 + h]))
     elif method == "fem":
         # checked every step, never reached
         strength = {"tensile_strength": 1.0e9} if variant == "fracture" else {}
         # "pair": two blocks side by side, one spacing apart: the contact between FEM surfaces searches every step
         for k in range(2 if variant == "pair" else 1):
             x = k * (size + 1) * h
-            mesh = pdsim.box_tet_mesh((size * h,) * 3, (size,) * 3, center=(x, 0, size * h / 2 + h))
-            scene.add_fem_body(mesh, _material("elastic"), name=f"block{k}" if k else "block", **strength)
+            center = np.array([x, 0.0, size * h / 2 + h])
+            mesh = pdsim.box_tet_mesh((size * h,) * 3, (size,) * 3, center=tuple(center))
+            body = scene.add_fem_body(mesh, _material("elastic"), name=f"block{k}" if k else "block", **strength)
+            _spin(body, center)
+            if variant == "held":
+                lo, hi = center - size * h, center + size * h
+                body.fix(pdsim.BoxRegion(lo=tuple(lo), hi=(center[0] - 0.4 * size * h, hi[1], hi[2])))
+                body.set_velocity(pdsim.BoxRegion(lo=(center[0] + 0.4 * size * h, lo[1], lo[2]), hi=tuple(hi)),
+                                  (1.0e-3, 0.0, 0.0))  # fmt: skip
     else:
-        body = pdsim.LatticeBody(pdsim.Lattice.simple_cubic(h), pdsim.box((size * h,) * 3), steps_per_frame=variant,
-                                 name="block")  # fmt: skip
+        steps, kind = variant
+        fracture = pdsim.LatticeFracture((10.0 * h,)) if kind == "fracture" else None
+        body = pdsim.LatticeBody(pdsim.Lattice.simple_cubic(h), pdsim.box((size * h,) * 3), steps_per_frame=steps,
+                                 fracture=fracture, name="block")  # fmt: skip
         x = body.rest_positions[: body.body_count, 0]
         body.clamp(x < x.min() + 1.5 * h)
         body.add_leaders(x > x.max() - 1.5 * h, velocity=(0.001 * h, 0.0, 0.0))
@@ -206,10 +225,16 @@ COST_RUNS = [
     ("fem", 6, "pair"),
     ("fem", 10, "pair"),
     ("fem", 14, "pair"),
-    ("lattice", 6, 20),
-    ("lattice", 12, 20),
-    ("lattice", 24, 40),
+    ("fem", 6, "held"),
+    ("fem", 12, "held"),
+    ("lattice", 6, (20, "elastic")),
+    ("lattice", 12, (20, "elastic")),
+    ("lattice", 24, (40, "elastic")),
+    ("lattice", 6, (20, "fracture")),
+    ("lattice", 12, (20, "fracture")),
+    ("lattice", 24, (40, "fracture")),
 ]
+SPIN = 2.0  # [rad/s]: the blocks' spin about their vertical axis
 METHODS = ("peridynamics", "fem", "lattice")
 
 
@@ -223,7 +248,8 @@ CUDA_RUNS = [
     ("fem", 30, None),
     ("fem", 40, None),
     ("fem", 30, "fracture"),
-    ("lattice", 60, 40),
+    ("lattice", 60, (40, "elastic")),
+    ("lattice", 60, (40, "fracture")),
 ]
 
 
@@ -273,13 +299,16 @@ def best_of(repeats: int, config, device: str = "cpu") -> dict:
     return best
 
 
-def _nnls(rows, y, names):
+def _nnls(rows, y, names, relative: bool = True):
+    """Non-negative least squares of ``rows`` x = ``y``, of the relative residuals (a small run counts as much as a
+    large one) or, with ``relative`` False, of the residuals themselves (the large runs decide)."""
     from scipy.optimize import nnls
 
     a = np.asarray(rows, dtype=float)
     y = np.asarray(y, dtype=float)
-    scale = np.maximum(np.abs(a).max(axis=0), 1.0e-30)  # columns of similar size for the solver
-    x, _ = nnls(a / scale, y)
+    weight = 1.0 / np.maximum(np.abs(y), 1.0e-30)[:, None] if relative else np.ones((len(y), 1))
+    scale = np.maximum(np.abs(a * weight).max(axis=0), 1.0e-30)  # columns of similar size for the solver
+    x, _ = nnls(a * weight / scale, y * weight[:, 0])
     x = x / scale
     fit = a @ x
     worst = float(np.max(np.maximum(fit / y, y / np.maximum(fit, 1.0e-30))))
@@ -294,7 +323,7 @@ def cost_calibration(device: str = "cpu", repeats: int = REPEATS) -> dict:
     kind = pdsim.cost.device_kind(device)
     for method in ("pd", "fem", "lattice"):
         for variant in {"pd": [(3.015, "plastic"), (3.015, "fracture"), (3.015, "elastic")], "fem": [None, "fracture"],
-                        "lattice": [2]}[method]:  # fmt: skip
+                        "lattice": [(2, "elastic"), (2, "fracture")]}[method]:  # fmt: skip
             measure_run(method, 6, variant, device=device)  # kernels loaded (and, on CUDA, compiled)
     configs = COST_RUNS + (CUDA_RUNS if kind == "cuda" else [])
     runs = []
@@ -325,12 +354,17 @@ def cost_calibration(device: str = "cpu", repeats: int = REPEATS) -> dict:
         rows.append([c["bodies"]] + [c["elements"] * (c["features"] == f) for f in pdsim.cost.FEM_FEATURES]
                     + [c["points"], float(sum(contact)),
                        float(sum(b["contact_vertices"] for b, on in zip(r["counts"], contact) if on))])  # fmt: skip
+        rows[-1].append(float(any(b["conditions"] for b in r["counts"])))  # one FEM solver: its conditions
     names = ["fem_step"] + [f"fem_element_{f}" for f in pdsim.cost.FEM_FEATURES] + ["fem_vertex"]
-    step.update(_nnls(rows, y, [*names, *pdsim.cost.FEM_CONTACT_TERMS]))
+    step.update(_nnls(rows, y, [*names, *pdsim.cost.FEM_CONTACT_TERMS, pdsim.cost.CONDITIONS_TERM]))
     lat = [r for r in runs if r["counts"][0]["method"] == "lattice"]
     y = [r["step_seconds"] / r["counts"][0]["steps"] for r in lat]
-    step.update(_nnls([[1.0, r["counts"][0]["points"], r["counts"][0]["bonds"]] for r in lat], y,
-                      ["lattice_step", "lattice_point", "lattice_link"]))  # fmt: skip
+    rows = []
+    for r in lat:
+        c = r["counts"][0]
+        cut = float(c["features"] == "fracture")
+        rows.append([1.0, c["points"], c["bonds"], cut, cut * c["bonds"]])
+    step.update(_nnls(rows, y, ["lattice_step", "lattice_point", "lattice_link", *pdsim.cost.LATTICE_FRACTURE_TERMS]))
 
     def per_method(r):
         c = _total(r)
@@ -343,7 +377,8 @@ def cost_calibration(device: str = "cpu", repeats: int = REPEATS) -> dict:
     cb = _nnls([per_method(r) for r in runs], [r["cache_bytes"] / (r["frames"] + 1) for r in runs], names)
     print("build seconds:")
     b = _nnls([[1.0, _total(r)["points"], _total(r)["bonds"], _total(r)["elements"]] for r in runs],
-              [r["build_seconds"] for r in runs], ["constant", "point", "bond", "element"])  # fmt: skip
+              [r["build_seconds"] for r in runs], ["constant", "point", "bond", "element"],
+              relative=False)  # fmt: skip  # builds of a few ms are noise; the long ones matter
     proc = subprocess.run([sys.executable, "-c", SURFACE_CHILD], capture_output=True, text=True, check=True)
     surf = json.loads(proc.stdout.strip().splitlines()[-1])
     per_vertex = surf["bytes"] / surf["estimated"]
@@ -436,7 +471,11 @@ def calibration_table(d: dict) -> str:
         ("step, per FEM vertex", f"{s['fem_vertex'] * 1e9:.1f} ns"),
         ("step, contact between FEM surfaces: per step / per boundary vertex",
          f"{s.get('fem_contact_step', 0.0) * 1e6:.0f} us / {s.get('fem_contact_vertex', 0.0) * 1e9:.0f} ns"),
+        ("step, boundary conditions: per step of a solver holding some",
+         f"{s.get('conditions_step', 0.0) * 1e6:.0f} us"),
         ("lattice step, per point / per link", f"{s['lattice_point'] * 1e9:.3g} / {s['lattice_link'] * 1e9:.3g} ns"),
+        ("lattice step with link loss, more: per step / per link",
+         f"{s.get('lattice_fracture_step', 0.0) * 1e6:.0f} us / {s.get('lattice_fracture_link', 0.0) * 1e9:.3g} ns"),
         ("frame outside the steps: constant", f"{f['constant'] * 1e3:.1f} ms"),
         ("frame outside the steps, per point: peridynamics / FEM / lattice",
          f"{p['peridynamics'] * 1e6:.2f} / {p['fem'] * 1e6:.2f} / {p['lattice'] * 1e6:.2f} us"),
