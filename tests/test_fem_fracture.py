@@ -66,6 +66,44 @@ def test_single_element_cannot_split():
     assert solver.vertex_count == 4
 
 
+def test_elements_that_cannot_split_are_left_out_without_changing_the_splits():
+    """pdsim.fem.fracture.can_split: a box of 3 x 2 x 2 cells, a lone element and a pair of elements beside it, every
+    element over its strength with random crack normals and stresses (three draws, some corners already on a crack
+    plane): choose_splits picks the same splits, bit for bit, from all the elements as from those can_split keeps;
+    it drops the lone element and the pair (no corner with 2 MIN_SIDE elements around it) and keeps the box's
+    elements that have such a corner."""
+    from pdsim.fem.fracture import MIN_SIDE, can_split, choose_splits
+
+    box = box_tet_mesh((0.3, 0.2, 0.2), (3, 2, 2))
+    lone = np.array([[1.0, 0, 0], [1.1, 0, 0], [1.0, 0.1, 0], [1.0, 0, 0.1]])
+    pair = np.array([[2.0, 0, 0], [2.1, 0, 0], [2.0, 0.1, 0], [2.0, 0, 0.1], [2.1, 0.1, 0.1]])
+    rest = np.concatenate([box.vertices, lone, pair])
+    n0, n1 = len(box.vertices), len(box.vertices) + 4
+    tets = np.concatenate([box.tets, [[n0, n0 + 1, n0 + 2, n0 + 3]], [[n1, n1 + 1, n1 + 2, n1 + 3],
+                                                                       [n1 + 1, n1 + 2, n1 + 3, n1 + 4]]])  # fmt: skip
+    centroids = rest[tets].mean(axis=1)
+    elements = np.arange(len(tets))
+    keep = can_split(tets, elements, len(rest))
+    counts = np.bincount(tets.ravel(), minlength=len(rest))
+    np.testing.assert_array_equal(keep, (counts[tets] >= 2 * MIN_SIDE).any(axis=1))
+    assert not keep[-3:].any() and keep[: len(box.tets)].sum() >= len(box.tets) // 2
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        directions = rng.normal(size=(len(tets), 3))
+        directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+        stresses = rng.uniform(1.0, 2.0, len(tets)) * STRENGTH
+        crack_vertex = rng.random(len(rest)) < 0.2
+        crack_plane = np.full((len(rest), 6), np.nan)
+        crack_plane[crack_vertex, :3] = rest[crack_vertex]
+        crack_plane[crack_vertex, 3:] = directions[: int(crack_vertex.sum())]
+        common = (crack_vertex, crack_plane)
+        every = choose_splits(tets, rest, centroids, elements, directions, stresses, *common)
+        some = choose_splits(tets, rest, centroids, elements[keep], directions[keep], stresses[keep], *common)
+        assert len(every[0]) > 0
+        for a, b in zip(every, some, strict=True):
+            np.testing.assert_array_equal(a, b)
+
+
 def _notched_bar(cells=30, across=3):
     """A 1 m x 0.1 m x 0.1 m bar along x with a notch (one cell wide, one cell deep, from the top) at x = 0.3 m."""
     h = 1.0 / cells

@@ -79,6 +79,7 @@ SEPARATION_RINGS = 2  # vertex rings of elements over which the stress is averag
 __all__ = [
     "best_offsets",
     "boundary_faces",
+    "can_split",
     "choose_splits",
     "closed_surface_defects",
     "element_pieces",
@@ -105,6 +106,15 @@ def vertex_incidence(tets: np.ndarray, vertex_count: int):
     offsets = np.zeros(vertex_count + 1, dtype=np.int64)
     np.cumsum(counts, out=offsets[1:])
     return offsets, slots
+
+
+def can_split(tets: np.ndarray, elements: np.ndarray, vertex_count: int) -> np.ndarray:
+    """Whether each of ``elements`` [k] has a corner with at least 2 MIN_SIDE elements around it (bool [k]). A split
+    keeps MIN_SIDE of its corner's elements on each side of its plane (:func:`choose_splits`), so an element without
+    such a corner (a lone element, one of a small group) never splits, whatever its stress: leaving it out of
+    choose_splits changes none of the splits it picks."""
+    counts = np.bincount(np.asarray(tets, dtype=np.int64).ravel(), minlength=vertex_count)
+    return (counts[np.asarray(tets)[np.asarray(elements, dtype=np.int64)]] >= 2 * MIN_SIDE).any(axis=1)
 
 
 def _expand_incident(vertices: np.ndarray, offsets: np.ndarray, slots: np.ndarray):

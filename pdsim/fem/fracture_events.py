@@ -15,6 +15,7 @@ from ..regions import region_mask
 from .body import FemBody, face_point_forces
 from .fracture import (
     best_offsets,
+    can_split,
     choose_splits,
     griffith_filter,
     make_manifold,
@@ -78,10 +79,11 @@ class FemFractureEvents:
         if int(self._over_count.numpy()[0]) == 0:
             return False
         principal = self._principal.numpy().astype(np.float64)
+        nv = self.point_count
         over = np.flatnonzero(principal[:, 3] > self._strength_h)
+        over = over[can_split(self._tets_h, over, nv)]  # the others would be refused by choose_splits
         if over.size == 0:
             return False
-        nv = self.point_count
         rest, centroids = self._rest_local_h, self.model.centroids_h
         directions = separation_directions(
             self._tets_h, over, self._element_stresses, self.model.volume_h, principal[over, :3]
