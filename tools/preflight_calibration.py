@@ -227,12 +227,7 @@ COST_RUNS = [
     ("fem", 14, "pair"),
     ("fem", 6, "held"),
     ("fem", 12, "held"),
-    ("lattice", 6, (20, "elastic")),
-    ("lattice", 12, (20, "elastic")),
-    ("lattice", 24, (40, "elastic")),
-    ("lattice", 6, (20, "fracture")),
-    ("lattice", 12, (20, "fracture")),
-    ("lattice", 24, (40, "fracture")),
+    *[("lattice", n, (steps, kind)) for kind in ("elastic", "fracture") for n, steps in ((6, 20), (12, 20), (24, 40))],
 ]
 SPIN = 2.0  # [rad/s]: the blocks' spin about their vertical axis
 METHODS = ("peridynamics", "fem", "lattice")
