@@ -1,12 +1,14 @@
 """The gallery's cracking slab (scenes/fem_slab_crack.py at its PREVIEW settings: 24 frames, fTetWild edge 5 cm) on
 other tetrahedral meshes of the same surface: fTetWild's output varies from run to run and with its thread count,
 and a mesh with one small element forces a much smaller stable step. For each mesh the tool prints its element
-count, its smallest element height over the median (the run's step follows the smallest), its stable step, and how
-far the preview run gets (every frame, or the watchdog's stop with its frame and reason).
+count, its smallest element height over the median (the run's step follows the smallest), its stable step, how far
+the preview run gets (every frame, or the watchdog's stop with its frame and reason), its face-connected pieces at
+the last frame (and how many are single elements) and its wall time.
 
     python tools/fem_slab_meshes.py --mesh docs/data/fem_slab_small_element.vtu   # the kept mesh (one run, minutes)
     python tools/fem_slab_meshes.py --make 6 --threads 16 --keep /tmp/slabs        # new meshes, each run
     python tools/fem_slab_meshes.py --mesh docs/data/fem_slab_small_element.vtu --contact off
+    python tools/fem_slab_meshes.py --make 4 --threads 1 --frames 8                  # the pieces after 8 frames
 
 docs/data/fem_slab_small_element.vtu is such a mesh (2,721 elements, smallest height 0.028 of the median, made by
 fTetWild with 16 threads on a 2-core machine); docs/fem_fracture.md, "Pieces in contact", gives its runs.
@@ -28,14 +30,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scenes"))
 import fem_slab_crack  # scenes/ (put on the path above)
 
 from pdsim.errors import InstabilityError
+from pdsim.fem.fracture import element_pieces
 from pdsim.fem.mesh import element_heights, tetrahedralize, write_tet_mesh
 from pdsim.fem.mesh_files import load_tet_mesh
 
 
-def run_mesh(mesh, contact: bool = True) -> dict:
-    """The preview run of the slab on ``mesh``: its figures and outcome."""
+def run_mesh(mesh, contact: bool = True, frames: int | None = None) -> dict:
+    """The preview run of the slab on ``mesh`` (``frames``: that many of its frames; None: all 24): its figures, its
+    outcome and its face-connected pieces at the last frame (count, and how many are single elements)."""
     heights = element_heights(mesh.vertices, mesh.tets)
-    scene = fem_slab_crack.build_scene(mesh=mesh, frames=fem_slab_crack.PREVIEW["frames"])
+    scene = fem_slab_crack.build_scene(mesh=mesh, frames=frames or fem_slab_crack.PREVIEW["frames"])
     if not contact:
         scene.enable_contact(False)
     (solver,) = scene.build_solvers(device="cpu")
@@ -44,14 +48,22 @@ def run_mesh(mesh, contact: bool = True) -> dict:
         "smallest_height_over_median": float(heights.min() / np.median(heights)),
         "stable_step": float(solver.stable_time_step()),
     }
+    last = {}
+
+    def pieces(frame, solvers):
+        _, labels = element_pieces(solvers[0].tets)
+        sizes = np.bincount(labels)
+        last.update(pieces=len(sizes), single=int((sizes == 1).sum()))
+
     start = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         try:
-            scene.run(os.path.join(tmp, "slab.usdc"), progress=False)
+            scene.run(os.path.join(tmp, "slab.usdc"), progress=False, on_frame=pieces)
             row["outcome"] = f"all {scene.frames} frames"
         except InstabilityError as error:
             row["outcome"] = f"stopped: {str(error).split(';')[0]}"
     row["seconds"] = time.perf_counter() - start
+    row.update(last)
     return row
 
 
@@ -62,6 +74,7 @@ def main(argv=None) -> None:
     parser.add_argument("--threads", type=int, default=0, help="fTetWild threads for --make (0: all cores)")
     parser.add_argument("--keep", help="folder to keep the new meshes in (.vtu)")
     parser.add_argument("--contact", choices=("on", "off"), default="on")
+    parser.add_argument("--frames", type=int, help="run only this many of the preview's 24 frames")
     args = parser.parse_args(argv)
     meshes = [(path, load_tet_mesh(path, name="slab")) for path in args.mesh]
     for k in range(args.make):
@@ -74,13 +87,15 @@ def main(argv=None) -> None:
             label = os.path.join(args.keep, f"slab_{k}.vtu")
             write_tet_mesh(mesh, label)
         meshes.append((label, mesh))
-    print("| mesh | elements | smallest height / median | stable step [s] | contact | preview run | wall [s] |")
-    print("|---|---:|---:|---:|---|---|---:|")
+    print("| mesh | elements | smallest height / median | stable step [s] | contact | preview run | pieces "
+          "(single elements) | wall [s] |")  # fmt: skip
+    print("|---|---:|---:|---:|---|---|---:|---:|")
     for label, mesh in meshes:
-        r = run_mesh(mesh, contact=args.contact == "on")
+        r = run_mesh(mesh, contact=args.contact == "on", frames=args.frames)
         print(
             f"| {label} | {r['elements']} | {r['smallest_height_over_median']:.3f} | {r['stable_step']:.3g} | "
-            f"{args.contact} | {r['outcome']} | {r['seconds']:.0f} |",
+            f"{args.contact} | {r['outcome']} | {r.get('pieces', '-')} ({r.get('single', '-')}) | "
+            f"{r['seconds']:.0f} |",
             flush=True,
         )
 
