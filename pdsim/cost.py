@@ -18,8 +18,9 @@ and load average it was measured with and:
   ``lattice_fracture_link``: the link-loss pass); boundary conditions on a peridynamic or FEM solver's bodies: a
   constant per step of that solver (``conditions_step``: the conditions' state and the work of the supports). A
   calibration measured before one of these terms (:data:`LATER_TERMS`; the CUDA one of 2026-12-04 lacks them all)
-  leaves that cost out. The FEM blocks measured spin, so that each step turns every element's corotated frame (one
-  Newton step of the polar rotation, the common case of a moving body), where a body at rest would skip it;
+  leaves that cost out. The blocks measured spin, as a body in a shot moves: every frame writes new positions, and
+  every FEM step turns each element's corotated frame (one Newton step of the polar rotation), which a body at rest
+  would skip;
 - ``frame_seconds``: per frame outside the steps (views, render surfaces, the USD writer): a constant, per point of
   each method and per surface vertex;
 - ``build_seconds``: building the solvers, per point, per estimated bond and per element, plus a constant;
