@@ -4,10 +4,10 @@ Each surface vertex (a sphere of radius ``skin``) looks for the nearest face of 
 bounds come within ``band`` of it (``wp.mesh_query_aabb``), skipping the faces of its own piece (same label: faces and
 vertices of one connected piece of the current mesh, so a body's own surface and the two sides of a crack that has not
 yet cut a piece free never touch). With the signed distance s of the vertex from that face (the side from the face's
-outward normal, or, where the nearest point is on an edge or a corner, from the sum of the unit normals of that
-piece's faces sharing it: one face's normal does not tell the side there) and the overlap d = skin - s, a vertex
-with d > 0 and s > -band is pushed out by the contact law (kernels/colliders.py, penalty_force) and the face's three
-vertices take the reaction in proportion to their barycentric weights, so each pair conserves momentum exactly.
+outward normal, or, where the nearest point is on an edge or a corner, from the angle-weighted pseudo-normal of that
+piece's faces sharing it: one face's normal does not tell the side there; face_side) and the overlap d = skin - s, a
+vertex with d > 0 and s > -band is pushed out by the contact law (kernels/colliders.py, penalty_force) and the face's
+three vertices take the reaction in proportion to their barycentric weights, so each pair conserves momentum exactly.
 Both orders (vertices of A on faces of B and of B on faces of A) are launched: face-to-face contact is then
 symmetric. Edges crossing edges with no vertex inside a face are not detected.
 
@@ -119,6 +119,23 @@ def nearest_foreign_face(
 
 
 @wp.func
+def corner_angle(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3):
+    """The interior angle of triangle abc at its corner nearest to p [rad]."""
+    da = wp.length(p - a)
+    db = wp.length(p - b)
+    dc = wp.length(p - c)
+    u = b - a
+    v = c - a
+    if db < da and db <= dc:
+        u = a - b
+        v = c - b
+    elif dc < da and dc < db:
+        u = a - c
+        v = b - c
+    return wp.acos(wp.clamp(wp.dot(wp.normalize(u), wp.normalize(v)), -1.0, 1.0))
+
+
+@wp.func
 def face_side(
     mesh: wp.uint64,
     m_x: wp.array(dtype=wp.vec3),
@@ -130,9 +147,12 @@ def face_side(
     reach: float,
 ):
     """(unit normal of face ``best``, the side of x: +1 outside its piece, -1 inside), the side from the face's
-    normal, or where the closest point (weights best_w) is on an edge or a corner, from the summed unit normals of
-    the faces of that piece sharing it (a pseudo-normal: one face's normal does not tell the side there); (0, 0)
-    for a degenerate face."""
+    normal, or where the closest point (weights best_w) is on an edge or a corner, from the pseudo-normal of the faces
+    of that piece sharing it (one face's normal does not tell the side there): on an edge the sum of its faces' unit
+    normals, on a corner the sum weighted by each face's angle at the corner. The angle weights make the side exact
+    on a closed surface (Baerentzen and Aanaes, IEEE TVCG 11(3), 2005); an unweighted sum at a corner whose faces
+    fan unevenly (a crack's staircase of element faces) can point away from the piece and take a vertex outside it
+    for one a whole band deep inside. (0, 0) for a degenerate face."""
     a = m_x[m_faces[3 * best + 0]]
     b = m_x[m_faces[3 * best + 1]]
     c = m_x[m_faces[3 * best + 2]]
@@ -145,6 +165,7 @@ def face_side(
     side = face_n
     if wp.min(best_w) <= 0.0:
         side = wp.vec3(0.0)
+        on_corner = int(best_w[0] > 0.0) + int(best_w[1] > 0.0) + int(best_w[2] > 0.0) == 1
         tol = 1.0e-5 * reach
         again = wp.mesh_query_aabb(mesh, closest - wp.vec3(tol), closest + wp.vec3(tol))
         g = int(0)
@@ -156,7 +177,10 @@ def face_side(
             gc = m_x[m_faces[3 * g + 2]]
             gw = triangle_closest_weights(closest, ga, gb, gc)
             if wp.length(closest - (gw[0] * ga + gw[1] * gb + gw[2] * gc)) <= tol:
-                side += wp.normalize(wp.cross(gb - ga, gc - ga))
+                weight = float(1.0)
+                if on_corner:
+                    weight = corner_angle(closest, ga, gb, gc)
+                side += weight * wp.normalize(wp.cross(gb - ga, gc - ga))
     sign = float(1.0)
     if wp.dot(x - closest, side) < 0.0:
         sign = -1.0
