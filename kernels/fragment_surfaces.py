@@ -12,12 +12,13 @@ def closest_point_on_solid(
     distance: wp.array(dtype=float),
     closest: wp.array(dtype=wp.vec3),
 ):
-    """distance[i] = distance [m] of points[i] [m] to the closed mesh's surface, negative inside (generalised
-    winding number > 0.5), and closest[i] = the point [m] of that surface nearest points[i] (points[i] itself where
-    the query finds none). ``max_dist`` [m] must exceed every point's distance to the mesh."""
+    """distance[i] = distance [m] of points[i] [m] to the closed mesh's surface, negative inside (the side by
+    ``wp.mesh_query_point``: the orientation of the nearest face hit by three axis-aligned rays, a majority vote, exact
+    on a closed surface), and closest[i] = the point [m] of that surface nearest points[i] (points[i] itself where the
+    query finds none). ``max_dist`` [m] must exceed every point's distance to the mesh."""
     i = wp.tid()
     p = points[i]
-    q = wp.mesh_query_point_sign_winding_number(mesh, p, max_dist, 0.5, 2.0)
+    q = wp.mesh_query_point(mesh, p, max_dist)
     distance[i] = max_dist
     closest[i] = p
     if q.result:
