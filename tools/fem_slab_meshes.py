@@ -1,14 +1,16 @@
 """The gallery's cracking slab (scenes/fem_slab_crack.py at its PREVIEW settings: 24 frames, fTetWild edge 5 cm) on
 other tetrahedral meshes of the same surface: fTetWild's output varies from run to run and with its thread count,
-and a mesh with one small element forces a much smaller stable step. For each mesh the tool prints its element
-count, its smallest element height over the median (the run's step follows the smallest), its stable step, how far
+and a mesh with one small element forces a much smaller stable step unless the mass scaling lifts it (FemBody
+mass_scaling; ``--mass-scaling 0`` runs without). For each mesh the tool prints its element count, its smallest
+element height over the median, its stable step (the smallest element's, or the mass scaling's floor), how far
 the preview run gets (every frame, or the watchdog's stop with its frame and reason), its face-connected pieces at
 the last frame (and how many are single elements) and its wall time.
 
-    python tools/fem_slab_meshes.py --mesh docs/data/fem_slab_small_element.vtu   # the kept mesh (one run, minutes)
+    python tools/fem_slab_meshes.py --mesh docs/data/fem_slab_small_element.vtu   # the kept mesh
     python tools/fem_slab_meshes.py --make 6 --threads 16 --keep /tmp/slabs        # new meshes, each run
     python tools/fem_slab_meshes.py --mesh docs/data/fem_slab_small_element.vtu --contact off
     python tools/fem_slab_meshes.py --make 4 --threads 1 --frames 8                  # the pieces after 8 frames
+    python tools/fem_slab_meshes.py --mesh tests/data/fem_slab_small_elements_ftetwild.vtu --mass-scaling 0
 
 docs/data/fem_slab_small_element.vtu is such a mesh (2,721 elements, smallest height 0.028 of the median, made by
 fTetWild with 16 threads on a 2-core machine); docs/fem_fracture.md, "Pieces in contact", gives its runs.
@@ -29,17 +31,21 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scenes"))
 
 import fem_slab_crack  # scenes/ (put on the path above)
 
+from pdsim.checks import check_range
 from pdsim.errors import InstabilityError
 from pdsim.fem.fracture import element_pieces
 from pdsim.fem.mesh import element_heights, tetrahedralize, write_tet_mesh
 from pdsim.fem.mesh_files import load_tet_mesh
 
 
-def run_mesh(mesh, contact: bool = True, frames: int | None = None) -> dict:
-    """The preview run of the slab on ``mesh`` (``frames``: that many of its frames; None: all 24): its figures, its
-    outcome and its face-connected pieces at the last frame (count, and how many are single elements)."""
+def run_mesh(mesh, contact: bool = True, frames: int | None = None, mass_scaling: float | None = None) -> dict:
+    """The preview run of the slab on ``mesh`` (``frames``: that many of its frames; None: all 24; ``mass_scaling``:
+    the slab's FemBody mass_scaling, None for its default): its figures, its outcome and its face-connected pieces at
+    the last frame (count, and how many are single elements)."""
     heights = element_heights(mesh.vertices, mesh.tets)
     scene = fem_slab_crack.build_scene(mesh=mesh, frames=frames or fem_slab_crack.PREVIEW["frames"])
+    if mass_scaling is not None:
+        scene.bodies[0].mass_scaling = check_range("mass_scaling", mass_scaling, 0.0, 1.0, lo_open=False)
     if not contact:
         scene.enable_contact(False)
     (solver,) = scene.build_solvers(device="cpu")
@@ -75,6 +81,7 @@ def main(argv=None) -> None:
     parser.add_argument("--keep", help="folder to keep the new meshes in (.vtu)")
     parser.add_argument("--contact", choices=("on", "off"), default="on")
     parser.add_argument("--frames", type=int, help="run only this many of the preview's 24 frames")
+    parser.add_argument("--mass-scaling", type=float, help="the slab's FemBody mass_scaling (default: its own)")
     args = parser.parse_args(argv)
     meshes = [(path, load_tet_mesh(path, name="slab")) for path in args.mesh]
     for k in range(args.make):
@@ -91,7 +98,7 @@ def main(argv=None) -> None:
           "(single elements) | wall [s] |")  # fmt: skip
     print("|---|---:|---:|---:|---|---|---:|---:|")
     for label, mesh in meshes:
-        r = run_mesh(mesh, contact=args.contact == "on", frames=args.frames)
+        r = run_mesh(mesh, contact=args.contact == "on", frames=args.frames, mass_scaling=args.mass_scaling)
         print(
             f"| {label} | {r['elements']} | {r['smallest_height_over_median']:.3f} | {r['stable_step']:.3g} | "
             f"{args.contact} | {r['outcome']} | {r.get('pieces', '-')} ({r.get('single', '-')}) | "

@@ -23,6 +23,7 @@ INTEGRATORS = ("explicit", "implicit")
 PRECISIONS = ("float32", "float64")
 STIFFNESS_MODES = ("matrix_free", "assembled")
 CRACK_SURFACES = ("smooth", "elements")
+MASS_SCALING = 0.2  # FemBody.mass_scaling's default: elements under 0.2 of the median height take added mass
 
 
 @dataclass(frozen=True)
@@ -68,6 +69,13 @@ class FemBody(PointBody):
             energy is then taken from the motion around the crack (pdsim/fem/fracture.py). Needs tensile_strength.
         damping: mass-proportional damping c [1/s], >= 0 (a = f / m + g - c v).
         implicit_step_ratio: implicit integrator: the step the scene uses, as a multiple of the explicit limit, >= 1.
+        mass_scaling: elements whose height (3 V / largest face area) is below this fraction of the body's median
+            element height take a density (fraction x median / height)^2 times the material's, so that their stable
+            step is that of an element of that height (selective mass scaling, :func:`mass_scaling_factors`); in
+            [0, 1), 0 for none. The default, MASS_SCALING = 0.2, leaves fTetWild's usual meshes untouched (their
+            smallest element is 0.26 to 0.30 of the median) and lifts the step of a mesh holding a few elements far
+            smaller than the rest about tenfold for about 1e-4 of the body's mass; the run's summary states what it
+            added.
         render_mesh: a high-resolution surface embedded in the tetrahedra (barycentric) and output as its own mesh
             view ("<name>_render") that follows them; True embeds ``shape`` itself (surfaces only). It is not cut by
             cracks: where the body fractures, its triangles stretch across the gap. Default None.
@@ -98,6 +106,7 @@ class FemBody(PointBody):
         fracture_energy: float = 0.0,
         damping: float = 0.0,
         implicit_step_ratio: float = 10.0,
+        mass_scaling: float = MASS_SCALING,
         render_mesh: SolidShape | bool | None = None,
         name: str | None = None,
         min_quality: float = DEFAULT_MIN_QUALITY,
@@ -145,6 +154,7 @@ class FemBody(PointBody):
             raise ParameterError("fracture_energy", fracture_energy, "0 without a tensile_strength (no fracture)")
         self.damping = check_range("damping", damping, 0.0, None, lo_open=False)
         self.implicit_step_ratio = check_range("implicit_step_ratio", implicit_step_ratio, 1.0, None, lo_open=False)
+        self.mass_scaling = check_range("mass_scaling", mass_scaling, 0.0, 1.0, lo_open=False)
         self.name = name or shape.name
         self.crack_surfaces = crack_surfaces
         # the closed input surface smooth crack surfaces are drawn from; None where element faces are drawn
@@ -182,8 +192,10 @@ class FemBody(PointBody):
         return self.mesh.vertices
 
     def point_masses(self) -> np.ndarray:
-        """Lumped vertex masses [kg]: a quarter of rho V of each incident element, float64 [vertex_count]."""
-        return lumped_masses(self.mesh.vertices, self.mesh.tets, self.material.density)
+        """Lumped vertex masses [kg]: a quarter of rho V of each incident element (rho with its mass scaling),
+        float64 [vertex_count]."""
+        factors = mass_scaling_factors(self.mesh.element_heights, self.mass_scaling)
+        return lumped_masses(self.mesh.vertices, self.mesh.tets, self.material.density * factors)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """World bounding box (lo, hi) [m] of the rest vertices, float64 [3] each."""
@@ -216,6 +228,19 @@ def mesh_surface(mesh: TetMesh, name: str) -> SolidShape:
         )
     used, local = np.unique(faces, return_inverse=True)
     return SolidShape(vertices=mesh.vertices[used], faces=local.reshape(-1, 3).astype(np.int32), name=name)
+
+
+def mass_scaling_factors(heights: np.ndarray, fraction: float) -> np.ndarray:
+    """Density factors of selective mass scaling, float64 [m]: (fraction x median(heights) / height)^2 for the
+    elements whose height [m] is below that fraction of the median, 1 for the others (and for all with fraction 0).
+    An element's explicit stable step, proportional to its height over its wave speed, grows as the square root of its
+    density: the scaled elements take the step of an element of height fraction x median, the mesh's step is at
+    least that, and the mass added is sum (factor - 1) rho V."""
+    heights = np.asarray(heights, dtype=np.float64)
+    if fraction <= 0.0 or len(heights) == 0:
+        return np.ones(len(heights))
+    floor = fraction * float(np.median(heights))
+    return np.maximum(1.0, (floor / heights) ** 2)
 
 
 def lumped_masses(vertices: np.ndarray, tets: np.ndarray, density) -> np.ndarray:

@@ -20,7 +20,7 @@ import warp as wp
 from scipy.spatial import cKDTree
 
 from ..kernels.fem import elements as ke
-from .body import FemBody
+from .body import FemBody, mass_scaling_factors
 from .mesh import TET_EDGES, boundary_faces, element_heights
 
 EXPLICIT_STEP_FACTOR = 0.5  # dt_stable = 0.5 h_min / c_p (see pdsim/fem/solver.py's module docstring)
@@ -79,16 +79,19 @@ class FemModel:
     ``fracture_energy_h``.
 
     ``dtype``, ``np_dtype`` and ``device`` are those given. Host arrays (float64 unless noted):
-    ``element_offsets`` [bodies + 1] and ``element_body`` [m] (int64), ``volume_h`` [m^3], ``density_h`` [kg/m^3],
-    ``centroids_h`` (local frame, fracture's crack planes), ``strength_h`` (tensile strength per element [Pa], inf on
-    bodies without fracture, None when no body fractures; the solver retires split elements in its own copy),
+    ``element_offsets`` [bodies + 1] and ``element_body`` [m] (int64), ``volume_h`` [m^3], ``density_h``
+    [kg/m^3] (with the mass scaling), ``centroids_h`` (local frame, fracture's crack planes), ``strength_h``
+    (tensile strength per element [Pa], inf on bodies without fracture, None when no body fractures; the solver retires
+    split elements in its own copy),
     ``fracture_energy_h`` (G_c per element [J/m^2], None when no body fractures),
     ``surface_face_ids`` (the boundary faces 4 e + k of the input meshes: every other boundary face is a crack face),
     ``widths`` (half the mean edge length of each body [m], the PointsView widths), ``element_dt_h`` (each element's
-    own stable step 0.5 h / c_p [s]), ``explicit_dt`` (their smallest, 0.5 h_min / c_p [s]); Warp arrays
-    ``dm_inv``, ``volume``, ``lame`` ((lambda, mu) per element [Pa]; the three also as the dict ``element_arrays``,
-    keyed by the kernels' parameter names) and ``plastic_params`` ((yield strain, creep, max strain) per element; None
-    without plasticity); ``render``: a :class:`RenderEmbedding` per body with a render mesh.
+    own stable step 0.5 h / c_p [s], times the square root of its mass-scaling factor), ``explicit_dt`` (their
+    smallest [s]), ``unscaled_dt`` (0.5 h_min / c_p [s], the step without mass scaling); per body, ``body_mass``
+    (rho V [kg]), ``added_mass`` (the mass scaling's [kg]) and ``scaled_elements`` (how many elements it scaled);
+    Warp arrays ``dm_inv``, ``volume``, ``lame`` ((lambda, mu) per element [Pa]; the three also as the dict
+    ``element_arrays``, keyed by the kernels' parameter names) and ``plastic_params`` ((yield strain, creep, max strain)
+    per element; None without plasticity); ``render``: a :class:`RenderEmbedding` per body with a render mesh.
 
     Input vertex data (the solver's initial topology): ``rest`` (world rest positions [m]), ``rest_local64`` (local
     rest positions, float64: the stable step and the lumped masses), ``rest_local`` (the local rest positions as the
@@ -125,13 +128,29 @@ class FemModel:
         dm = np.stack([x[:, 1] - x[:, 0], x[:, 2] - x[:, 0], x[:, 3] - x[:, 0]], axis=-1)  # columns
         self.volume_h = np.linalg.det(dm) / 6.0
         dm_inv = np.linalg.inv(dm)
-        self.density_h = per_element([m.density for m in mats])
         lam = per_element([m.lame_lambda for m in mats])
         mu = per_element([m.shear_modulus for m in mats])
         cp = per_element([m.p_wave_speed for m in mats])
         heights = element_heights(self.rest_local64, tets)
-        self.element_dt_h = EXPLICIT_STEP_FACTOR * heights / cp
+        # selective mass scaling (FemBody.mass_scaling): the density of each body's smallest elements is raised so
+        # that their step is that of an element of the body's floor height; the step grows as sqrt(density)
+        factors = np.concatenate(
+            [
+                mass_scaling_factors(heights[lo:hi], b.mass_scaling)
+                for b, lo, hi in zip(bodies, self.element_offsets[:-1], self.element_offsets[1:])
+            ]
+        )
+        material_density = per_element([m.density for m in mats])
+        self.density_h = material_density * factors
+        self.element_dt_h = EXPLICIT_STEP_FACTOR * heights * np.sqrt(factors) / cp
         self.explicit_dt = float(np.min(self.element_dt_h))
+        self.unscaled_dt = float(np.min(EXPLICIT_STEP_FACTOR * heights / cp))
+        added = (factors - 1.0) * material_density * np.abs(self.volume_h)
+        self.added_mass = np.bincount(self.element_body, weights=added, minlength=len(bodies))
+        self.body_mass = np.bincount(
+            self.element_body, weights=material_density * np.abs(self.volume_h), minlength=len(bodies)
+        )
+        self.scaled_elements = np.bincount(self.element_body, weights=factors > 1.0, minlength=len(bodies))
         self.centroids_h = x.mean(axis=1)  # local frame (fracture's crack planes)
         self.plastic = any(b.plasticity is not None for b in bodies)
         self.fracture = any(b.tensile_strength is not None for b in bodies)

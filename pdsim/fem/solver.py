@@ -440,8 +440,19 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
             )
 
     def summary(self) -> str:
-        """One line for run reports: vertices and elements simulated."""
-        return f"{self.point_count} FEM vertices, {self.element_count} tetrahedra"
+        """One line for run reports: vertices and elements simulated, and what the mass scaling added (FemBody
+        ``mass_scaling``) where it scaled some element."""
+        line = f"{self.point_count} FEM vertices, {self.element_count} tetrahedra"
+        m = self.model
+        for body, count, added, mass in zip(self.bodies, m.scaled_elements, m.added_mass, m.body_mass):
+            if count > 0:
+                line += (
+                    f"; '{body.name}': mass scaling gave {int(count)} elements under {body.mass_scaling:g} of the "
+                    f"median element height {100.0 * added / mass:.2g} % more mass"
+                )
+        if m.explicit_dt > m.unscaled_dt:
+            line += f" (explicit step {m.explicit_dt:.3g} s instead of {m.unscaled_dt:.3g} s)"
+        return line
 
     # -- host-side state and diagnostics (vectorised numpy) -----------------------------------------------------------
     @property
