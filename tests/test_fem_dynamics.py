@@ -8,6 +8,8 @@ import pdsim
 from pdsim.fem import FemBody, SolverFem
 from pdsim.fem.mesh import box_tet_mesh
 
+from fem_helpers import critical_step
+
 MAT = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.3)
 EPS32 = float(np.finfo(np.float32).eps)
 
@@ -24,19 +26,9 @@ def _excited(solver, mesh, seed=0):
 
 
 def _critical_step(mesh, material):
-    """2 / sqrt(largest eigenvalue of M^-1 K) [s] for the lumped-mass linear system (scipy, assembled)."""
-    import scipy.sparse as sp
-    from scipy.sparse.linalg import eigsh
-
+    """The critical step [s] of the linear, float64 solver of ``mesh`` (tests/fem_helpers.py)."""
     solver = SolverFem([FemBody(mesh, material, measure="linear")], precision="float64")
-    k = solver.element_stiffness()
-    idx = (3 * mesh.tets[:, :, None] + np.arange(3)).reshape(-1, 12)
-    rows = np.repeat(idx, 12, axis=1).ravel()
-    cols = np.tile(idx, (1, 12)).ravel()
-    kg = sp.csr_matrix((k.ravel(), (rows, cols)))
-    minv_sqrt = sp.diags(np.repeat(1.0 / np.sqrt(solver.masses()), 3))
-    lmax = eigsh(minv_sqrt @ kg @ minv_sqrt, k=1, which="LA", return_eigenvectors=False)[0]
-    return 2.0 / np.sqrt(lmax)
+    return critical_step(solver, mesh.tets)
 
 
 @pytest.mark.parametrize("nu", [0.0, 0.3, 0.45])
