@@ -9,8 +9,9 @@ cut into ``substeps = ceil(frame_time / step)`` equal steps, so the step used is
 chosen step.
 
 Before the solvers exist (the pre-flight), the stable step is estimated from the bodies: 0.3 m h / c_p for a
-peridynamic body (m = horizon / spacing), 0.5 h_min / c_p for an FEM body (times ``implicit_step_ratio`` with the
-implicit integrator), no limit for the lattice.
+peridynamic body (m = horizon / spacing), 0.5 h_min / c_p for an FEM body, h_min its smallest element height after
+the mass scaling (pdsim.fem.body.mass_scaled_heights; times ``implicit_step_ratio`` with the implicit integrator), no
+limit for the lattice.
 """
 
 from __future__ import annotations
@@ -23,7 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .colliders import RigidProjectile, rotation_between
+from .fem.body import mass_scaled_heights
 from .fem.mesh import element_heights
+from .fem.model import EXPLICIT_STEP_FACTOR
 
 MAX_SUBSTEPS_PER_FRAME = 10_000_000
 # most a projectile's surface may travel in one automatic step [spacings of the finest body]: a particle a projectile
@@ -160,8 +163,8 @@ def estimated_stable_step(body) -> float:
     if method == "peridynamics":
         return PD_STEP_COEFFICIENT * body.horizon_factor * body.spacing / cp
     if method == "fem":
-        h_min = float(np.min(element_heights(body.mesh.vertices, body.mesh.tets)))
-        dt = 0.5 * h_min / cp
+        heights = mass_scaled_heights(element_heights(body.mesh.vertices, body.mesh.tets), body.mass_scaling)
+        dt = EXPLICIT_STEP_FACTOR * float(np.min(heights)) / cp
         if getattr(body, "integrator", "explicit") == "implicit":
             dt *= float(getattr(body, "implicit_step_ratio", 1.0))
         return dt

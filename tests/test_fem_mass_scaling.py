@@ -13,6 +13,7 @@ import pdsim
 from pdsim.fem import FemBody, SolverFem
 from pdsim.fem.mesh import box_tet_mesh
 from pdsim.fem.mesh_files import load_tet_mesh
+from pdsim.timestep import estimated_stable_step
 
 from fem_helpers import critical_step
 
@@ -39,7 +40,8 @@ def test_mass_scaling_lifts_the_step_of_small_elements_for_the_mass_it_states():
     """By default (mass_scaling 0.2) the step is 0.5 x 0.2 x the median height / c_p, 8.1 times the unscaled step
     0.5 h_min / c_p; the lumped masses sum to rho V plus sum (factor - 1) rho V with factor (0.2 median / h)^2 for the
     44 elements under the floor (about 1e-4 of the body's mass), computed here from the corners; the body's own point
-    masses (loads) agree; the run's summary states it. mass_scaling 0 gives the unscaled step and rho V exactly."""
+    masses (loads) agree; the run's summary states it; the pre-flight's step estimate (pdsim.timestep) is the solver's.
+    mass_scaling 0 gives the unscaled step and rho V exactly."""
     mesh = _mesh()
     volume, h = _volumes_and_heights(mesh)
     floor = 0.2 * np.median(h)
@@ -57,8 +59,12 @@ def test_mass_scaling_lifts_the_step_of_small_elements_for_the_mass_it_states():
     assert "mass scaling gave 44 elements under 0.2 of the median element height 0.0095 % more mass" in (
         solver.summary()
     )
-    plain = SolverFem([FemBody(mesh, MAT, mass_scaling=0.0)], precision="float64")
+    plain_body = FemBody(mesh, MAT, mass_scaling=0.0)
+    plain = SolverFem([plain_body], precision="float64")
     assert plain.explicit_time_step() == pytest.approx(0.5 * h.min() / MAT.p_wave_speed, rel=1e-9)
+    # the pre-flight's estimate (before any solver exists: the step count, the cost) is the solver's step
+    for b, s in ((body, solver), (plain_body, plain)):
+        assert estimated_stable_step(b) == pytest.approx(s.explicit_time_step(), rel=1e-12)
     assert plain.masses().sum() == pytest.approx(mass, rel=1e-12)
     assert "mass scaling" not in plain.summary()
 

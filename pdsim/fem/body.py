@@ -230,17 +230,23 @@ def mesh_surface(mesh: TetMesh, name: str) -> SolidShape:
     return SolidShape(vertices=mesh.vertices[used], faces=local.reshape(-1, 3).astype(np.int32), name=name)
 
 
+def mass_scaled_heights(heights: np.ndarray, fraction: float) -> np.ndarray:
+    """The heights [m] that set the elements' explicit steps under selective mass scaling, float64 [m]: each element's
+    height, raised to fraction x median(heights) where it is below (unchanged with fraction 0)."""
+    heights = np.asarray(heights, dtype=np.float64)
+    if fraction <= 0.0 or len(heights) == 0:
+        return heights
+    return np.maximum(heights, fraction * float(np.median(heights)))
+
+
 def mass_scaling_factors(heights: np.ndarray, fraction: float) -> np.ndarray:
     """Density factors of selective mass scaling, float64 [m]: (fraction x median(heights) / height)^2 for the
     elements whose height [m] is below that fraction of the median, 1 for the others (and for all with fraction 0).
     An element's explicit stable step, proportional to its height over its wave speed, grows as the square root of its
-    density: the scaled elements take the step of an element of height fraction x median, the mesh's step is at
-    least that, and the mass added is sum (factor - 1) rho V."""
+    density: the scaled elements take the step of an element of height fraction x median
+    (:func:`mass_scaled_heights`), and the mass added is sum (factor - 1) rho V."""
     heights = np.asarray(heights, dtype=np.float64)
-    if fraction <= 0.0 or len(heights) == 0:
-        return np.ones(len(heights))
-    floor = fraction * float(np.median(heights))
-    return np.maximum(1.0, (floor / heights) ** 2)
+    return (mass_scaled_heights(heights, fraction) / heights) ** 2
 
 
 def lumped_masses(vertices: np.ndarray, tets: np.ndarray, density) -> np.ndarray:

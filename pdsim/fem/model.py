@@ -20,7 +20,7 @@ import warp as wp
 from scipy.spatial import cKDTree
 
 from ..kernels.fem import elements as ke
-from .body import FemBody, mass_scaling_factors
+from .body import FemBody, mass_scaled_heights, mass_scaling_factors
 from .mesh import TET_EDGES, boundary_faces, element_heights
 
 EXPLICIT_STEP_FACTOR = 0.5  # dt_stable = 0.5 h_min / c_p (see pdsim/fem/solver.py's module docstring)
@@ -142,7 +142,16 @@ class FemModel:
         )
         material_density = per_element([m.density for m in mats])
         self.density_h = material_density * factors
-        self.element_dt_h = EXPLICIT_STEP_FACTOR * heights * np.sqrt(factors) / cp
+        self.element_dt_h = (
+            EXPLICIT_STEP_FACTOR
+            * np.concatenate(
+                [
+                    mass_scaled_heights(heights[lo:hi], b.mass_scaling)
+                    for b, lo, hi in zip(bodies, self.element_offsets[:-1], self.element_offsets[1:])
+                ]
+            )
+            / cp
+        )
         self.explicit_dt = float(np.min(self.element_dt_h))
         self.unscaled_dt = float(np.min(EXPLICIT_STEP_FACTOR * heights / cp))
         added = (factors - 1.0) * material_density * np.abs(self.volume_h)
