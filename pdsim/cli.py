@@ -193,7 +193,27 @@ def _preview(args) -> int:
         colour = f", {args.color} {result.color_range[0]:.4g}..{result.color_range[1]:.4g}"
     h, w = result.images[0].shape[:2]
     print(f"pdsim: wrote {args.out}: {span}, {w}x{h}{colour}, {sum(result.seconds) / len(frames):.2f} s/frame")
+    empty = [f for f, covered in zip(frames, result.coverage) if not covered.any()]
+    if empty:
+        which = f"frame {empty[0]}" if len(empty) == 1 else f"{len(empty)} of its frames ({empty[0]}..{empty[-1]})"
+        how = (
+            "the camera given does not see them"
+            if args.camera is not None
+            else f"the automatic camera (--fit {args.fit}) frames {FIT_VIEWS[args.fit]}, and they left it; "
+            "--fit all frames every frame of the cache, --fit selected the frames drawn"
+        )
+        verb = "shows" if len(empty) == 1 else "show"
+        print(f"pdsim: {which} of {args.out} {verb} nothing of the bodies: {how}")
     return 0
+
+
+# what the preview's automatic camera frames, by --fit (pdsim.preview.render_cache)
+FIT_VIEWS = {
+    "auto": "the bodies' rest pose and half its size around it",
+    "all": "the bodies over every frame",
+    "selected": "the bodies over the frames drawn",
+    "first": "the bodies' rest pose",
+}
 
 
 def _add_run_options(r: argparse.ArgumentParser):

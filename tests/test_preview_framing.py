@@ -89,3 +89,46 @@ def test_default_camera_frames_the_object_and_the_action_near_it(tmp_path):
     assert np.linalg.norm(auto.camera.eye - auto.camera.target) < 0.1 * np.linalg.norm(
         whole.camera.eye - whole.camera.target
     )
+
+
+def _falling_cube_stage(path, offset):
+    """A Z-up stage 1 km from the origin (``offset``): a 10 cm cube that falls 5 m by frame 2 (no ground: a scene
+    without one)."""
+    from pxr import Gf, Usd, UsdGeom, Vt
+
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(2)
+    UsdGeom.Xform.Define(stage, "/World")
+    mesh = UsdGeom.Mesh.Define(stage, "/World/block_surface")
+    faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    mesh.GetFaceVertexCountsAttr().Set([4] * 6)
+    mesh.GetFaceVertexIndicesAttr().Set([i for f in faces for i in f])
+    for frame, drop in enumerate((0.0, 1.0, 5.0)):
+        pts = np.array(_box_points((0.0, 0.0, 0.0), (0.1, 0.1, 0.1))) + offset - np.array([0.0, 0.0, drop])
+        mesh.GetPointsAttr().Set(Vt.Vec3fArray([Gf.Vec3f(*p) for p in pts]), frame)
+    stage.GetRootLayer().Save()
+    return str(path)
+
+
+def test_the_preview_says_when_the_bodies_left_the_automatic_camera(tmp_path):
+    """A body that falls 5 m (a scene with no ground) leaves the default camera (the rest pose and half its size
+    around it): the still of frame 2 is empty, and ``pdsim preview`` says so and names the --fit options that frame
+    it; with ``--fit selected`` the frame shows the body and nothing is said."""
+    import subprocess
+    import sys
+
+    path = _falling_cube_stage(tmp_path / "falling.usda", np.array([1000.0, -500.0, 0.0]))
+    assert not render_cache(path, [2], size=(64, 48)).coverage[0].any()
+    assert render_cache(path, [2], size=(64, 48), fit="selected").coverage[0].any()
+
+    def preview(*options):
+        out = tmp_path / "still.png"
+        args = [sys.executable, "-m", "pdsim.cli", "preview", path, "--frames", "2", "--size", "64x48", "--out", out]
+        done = subprocess.run([*map(str, args), *options], capture_output=True, text=True, check=True)
+        return done.stdout
+
+    said = preview()
+    assert "frame 2 of" in said and "shows nothing of the bodies" in said and "--fit all" in said, said
+    assert "nothing of the bodies" not in preview("--fit", "selected")
