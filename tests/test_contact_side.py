@@ -79,3 +79,48 @@ def test_the_side_of_a_point_near_a_cracked_piece_matches_the_winding_number(see
     assert (winding[judged] != 0.0).all()
     wrong = judged & (side != winding)
     assert wrong.sum() == 0, f"{wrong.sum()} points on the wrong side, up to {distance[wrong].max():.3f} m deep"
+
+
+@wp.kernel
+def _nearest_two_ways(
+    mesh: wp.uint64,
+    m_x: wp.array(dtype=wp.vec3),
+    m_faces: wp.array(dtype=wp.int32),
+    m_label: wp.array(dtype=wp.int32),
+    points: wp.array(dtype=wp.vec3),
+    reach: float,
+    faces: wp.array(dtype=wp.vec2i),
+    distances: wp.array(dtype=wp.vec2),
+):
+    t = wp.tid()
+    f0, _, d0 = ksf.nearest_foreign_face(mesh, points[t], reach, m_x, m_faces, m_label, -1)
+    f1, _, d1 = ksf.foreign_face_within(mesh, points[t], reach, m_x, m_faces, m_label, -1)
+    faces[t] = wp.vec2i(f0, f1)
+    distances[t] = wp.vec2(d0, d1)
+
+
+def test_the_nearest_face_search_looks_near_first_and_finds_the_same_face():
+    """nearest_foreign_face looks within a quarter of its reach first and within the whole reach only where that finds
+    nothing as near: for points from on the surface to beyond the reach of a cracked piece (over a fifth of them
+    farther than the quarter, some beyond the reach), it returns the same face at the same distance as one search of
+    the whole reach."""
+    vertices, faces = _cut_piece(0)
+    rng = np.random.default_rng(7)
+    on_surface = vertices[np.unique(faces)]
+    points = on_surface[rng.integers(0, len(on_surface), POINTS)] + rng.normal(0.0, BAND / 2.0, (POINTS, 3))
+    m_x = wp.array(vertices.astype(np.float32), dtype=wp.vec3, device="cpu")
+    m_faces = wp.array(faces.ravel().astype(np.int32), dtype=wp.int32, device="cpu")
+    mesh = wp.Mesh(points=m_x, indices=m_faces)
+    found = wp.zeros(POINTS, dtype=wp.vec2i, device="cpu")
+    distance = wp.zeros(POINTS, dtype=wp.vec2, device="cpu")
+    labels = wp.zeros(len(faces), dtype=wp.int32, device="cpu")
+    points_wp = wp.array(points.astype(np.float32), dtype=wp.vec3, device="cpu")
+    wp.launch(
+        _nearest_two_ways, POINTS, [mesh.id, m_x, m_faces, labels, points_wp, BAND, found, distance], device="cpu"
+    )
+    found, distance = found.numpy(), distance.numpy()
+    hit = found[:, 1] >= 0
+    far = hit & (distance[:, 1] > 0.25 * BAND)
+    assert hit.sum() > 0.8 * POINTS and far.sum() > 0.2 * POINTS and (~hit).sum() > 0
+    np.testing.assert_array_equal(found[:, 0], found[:, 1])
+    np.testing.assert_array_equal(distance[hit, 0], distance[hit, 1])
