@@ -23,7 +23,7 @@ POINTS = 4000
 
 
 @wp.kernel
-def _sides(
+def _probe(
     mesh: wp.uint64,
     m_x: wp.array(dtype=wp.vec3),
     m_faces: wp.array(dtype=wp.int32),
@@ -32,18 +32,42 @@ def _sides(
     reach: float,
     side: wp.array(dtype=float),
     winding_sign: wp.array(dtype=float),
-    distance: wp.array(dtype=float),
+    faces: wp.array(dtype=wp.vec2i),
+    distances: wp.array(dtype=wp.vec2),
 ):
+    """Per point: the contact's side of the nearest face (0: none), the winding number's sign, and the nearest face
+    and its distance found by nearest_foreign_face and by one search of the whole reach (foreign_face_within)."""
     t = wp.tid()
     x = points[t]
     side[t] = 0.0
     best, weights, dist = ksf.nearest_foreign_face(mesh, x, reach, m_x, m_faces, m_label, -1)
-    distance[t] = dist
+    whole, _, whole_dist = ksf.foreign_face_within(mesh, x, reach, m_x, m_faces, m_label, -1)
+    faces[t] = wp.vec2i(best, whole)
+    distances[t] = wp.vec2(dist, whole_dist)
     if best >= 0:
         _, sign = ksf.face_side(mesh, m_x, m_faces, m_label, best, weights, x, reach)
         side[t] = sign
     query = wp.mesh_query_point_sign_winding_number(mesh, x, 10.0 * reach)
     winding_sign[t] = query.sign
+
+
+def _probe_points(vertices, faces, points) -> dict:
+    """The kernel _probe over ``points`` against the closed surface (``vertices``, ``faces``), one piece: numpy
+    arrays side, winding [n], faces [n, 2], distances [n, 2]."""
+    m_x = wp.array(vertices.astype(np.float32), dtype=wp.vec3, device="cpu")
+    m_faces = wp.array(faces.ravel().astype(np.int32), dtype=wp.int32, device="cpu")
+    mesh = wp.Mesh(points=m_x, indices=m_faces, support_winding_number=True)
+    n = len(points)
+    out = {
+        "side": wp.zeros(n, dtype=float, device="cpu"),
+        "winding": wp.zeros(n, dtype=float, device="cpu"),
+        "faces": wp.zeros(n, dtype=wp.vec2i, device="cpu"),
+        "distances": wp.zeros(n, dtype=wp.vec2, device="cpu"),
+    }
+    labels = wp.zeros(len(faces), dtype=wp.int32, device="cpu")
+    points_wp = wp.array(points.astype(np.float32), dtype=wp.vec3, device="cpu")
+    wp.launch(_probe, n, [mesh.id, m_x, m_faces, labels, points_wp, BAND, *out.values()], device="cpu")
+    return {name: array.numpy() for name, array in out.items()}
 
 
 def _cut_piece(seed: int):
@@ -65,38 +89,14 @@ def test_the_side_of_a_point_near_a_cracked_piece_matches_the_winding_number(see
     rng = np.random.default_rng(100 + seed)
     on_surface = vertices[np.unique(faces)]
     points = on_surface[rng.integers(0, len(on_surface), POINTS)] + rng.normal(0.0, BAND / 2.5, (POINTS, 3))
-    m_x = wp.array(vertices.astype(np.float32), dtype=wp.vec3, device="cpu")
-    m_faces = wp.array(faces.ravel().astype(np.int32), dtype=wp.int32, device="cpu")
-    mesh = wp.Mesh(points=m_x, indices=m_faces, support_winding_number=True)
-    side, winding, distance = (wp.zeros(POINTS, dtype=float, device="cpu") for _ in range(3))
-    labels = wp.zeros(len(faces), dtype=wp.int32, device="cpu")
-    points_wp = wp.array(points.astype(np.float32), dtype=wp.vec3, device="cpu")
-    wp.launch(_sides, POINTS, [mesh.id, m_x, m_faces, labels, points_wp, BAND, side, winding, distance], device="cpu")
-    side, winding, distance = side.numpy(), winding.numpy(), distance.numpy()
+    probe = _probe_points(vertices, faces, points)
+    side, winding, distance = probe["side"], probe["winding"], probe["distances"][:, 0]
     # the points the contact judges: within the band of the surface, off it (on it the side does not matter)
     judged = (side != 0.0) & (distance > 1.0e-4) & (distance < BAND)
     assert judged.sum() > 0.9 * POINTS
     assert (winding[judged] != 0.0).all()
     wrong = judged & (side != winding)
     assert wrong.sum() == 0, f"{wrong.sum()} points on the wrong side, up to {distance[wrong].max():.3f} m deep"
-
-
-@wp.kernel
-def _nearest_two_ways(
-    mesh: wp.uint64,
-    m_x: wp.array(dtype=wp.vec3),
-    m_faces: wp.array(dtype=wp.int32),
-    m_label: wp.array(dtype=wp.int32),
-    points: wp.array(dtype=wp.vec3),
-    reach: float,
-    faces: wp.array(dtype=wp.vec2i),
-    distances: wp.array(dtype=wp.vec2),
-):
-    t = wp.tid()
-    f0, _, d0 = ksf.nearest_foreign_face(mesh, points[t], reach, m_x, m_faces, m_label, -1)
-    f1, _, d1 = ksf.foreign_face_within(mesh, points[t], reach, m_x, m_faces, m_label, -1)
-    faces[t] = wp.vec2i(f0, f1)
-    distances[t] = wp.vec2(d0, d1)
 
 
 def test_the_nearest_face_search_looks_near_first_and_finds_the_same_face():
@@ -108,17 +108,8 @@ def test_the_nearest_face_search_looks_near_first_and_finds_the_same_face():
     rng = np.random.default_rng(7)
     on_surface = vertices[np.unique(faces)]
     points = on_surface[rng.integers(0, len(on_surface), POINTS)] + rng.normal(0.0, BAND / 2.0, (POINTS, 3))
-    m_x = wp.array(vertices.astype(np.float32), dtype=wp.vec3, device="cpu")
-    m_faces = wp.array(faces.ravel().astype(np.int32), dtype=wp.int32, device="cpu")
-    mesh = wp.Mesh(points=m_x, indices=m_faces)
-    found = wp.zeros(POINTS, dtype=wp.vec2i, device="cpu")
-    distance = wp.zeros(POINTS, dtype=wp.vec2, device="cpu")
-    labels = wp.zeros(len(faces), dtype=wp.int32, device="cpu")
-    points_wp = wp.array(points.astype(np.float32), dtype=wp.vec3, device="cpu")
-    wp.launch(
-        _nearest_two_ways, POINTS, [mesh.id, m_x, m_faces, labels, points_wp, BAND, found, distance], device="cpu"
-    )
-    found, distance = found.numpy(), distance.numpy()
+    probe = _probe_points(vertices, faces, points)
+    found, distance = probe["faces"], probe["distances"]
     hit = found[:, 1] >= 0
     far = hit & (distance[:, 1] > 0.25 * BAND)
     assert hit.sum() > 0.8 * POINTS and far.sum() > 0.2 * POINTS and (~hit).sum() > 0
