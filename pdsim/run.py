@@ -683,18 +683,23 @@ CRUMBLED_SHARE = 0.5
 (docs/fracture.md, "As the render draws them")."""
 
 
+PD_CHIP_MEANING = "reached its material's chip_damage and is drawn as chips"
+"""What a peridynamic solver's ``chip_shares`` count; a solver with its own sense says it in ``CHIP_MEANING`` (the FEM:
+the mass in pieces of one or two elements)."""
+
+
 def _warn_crumbled(solvers) -> None:
-    """A warning for each breakable body that ended the run with CRUMBLED_SHARE or more of its mass drawn as chips
-    (particles whose damage reaches their material's chip_damage: ``chip_shares`` of the particle solvers), which the
-    artist sees as a heap of rubble rather than pieces."""
+    """A warning for each breakable body that ended the run with CRUMBLED_SHARE or more of its mass as rubble
+    (``chip_shares`` of the solvers: a peridynamic body's particles whose damage reaches their material's chip_damage,
+    an FEM body's pieces of one or two elements), which the artist sees as a heap of rubble rather than pieces."""
     for s in solvers:
+        meaning = getattr(s, "CHIP_MEANING", PD_CHIP_MEANING)
         for name, share in getattr(s, "chip_shares", dict)().items():
             if share >= CRUMBLED_SHARE:
                 warnings.warn(
-                    f"body '{name}' crumbled: {100 * share:.0f} % of its mass reached its material's chip_damage "
-                    "and is drawn as chips (rubble, not pieces). An impact that strains a brittle material many "
-                    "times its breaking strain does this; a stronger material crumbles less and breaks less "
-                    "(docs/guide.md, 'Shards, not dust')",
+                    f"body '{name}' crumbled: {100 * share:.0f} % of its mass {meaning} (rubble, not pieces). An "
+                    "impact that strains a brittle material many times its breaking strain does this; a stronger "
+                    "material crumbles less and breaks less (docs/guide.md, 'Shards, not dust')",
                     stacklevel=3,
                 )
 

@@ -81,13 +81,15 @@ from ..solver import PointSolver, SolverContext, register_solver
 from .body import PRECISIONS, STIFFNESS_MODES, FemBody, lumped_masses
 from .cg import CgReport, FemCg
 from .checkpoint import FemCheckpoint
-from .fracture import vertex_incidence
+from .fracture import element_pieces, vertex_incidence
 from .fracture_events import FemFractureEvents
 from .implicit import BackwardEuler
 from .model import FemModel
 from .static import StaticSolveReport
 from .step import FemStep
 from .views import FemViews
+
+RUBBLE_ELEMENTS = 2  # a piece of at most this many elements is rubble (chip_shares: the crumbled report)
 
 
 @register_solver
@@ -438,6 +440,25 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
                 "(the implicit step solves before contact forces are known); use integrator='explicit' or "
                 "scene.enable_contact(False)"
             )
+
+    CHIP_MEANING = f"lies in pieces of at most {RUBBLE_ELEMENTS} elements"  # what chip_shares counts (run reports)
+
+    def chip_shares(self) -> dict[str, float]:
+        """Per body that can break (name -> share): the share of its mass (its material's density, without mass
+        scaling) in face-connected pieces of at most RUBBLE_ELEMENTS elements, which the artist sees as rubble;
+        empty when no body can break."""
+        if not self.fracture:
+            return {}
+        m = self.model
+        _, labels = element_pieces(self._tets_h)
+        rubble = np.bincount(labels)[labels] <= RUBBLE_ELEMENTS
+        mass = np.array([b.material.density for b in self.bodies])[m.element_body] * np.abs(m.volume_h)
+        crushed = np.bincount(m.element_body, weights=mass * rubble, minlength=len(self.bodies))
+        return {
+            b.name: float(crushed[i] / m.body_mass[i])
+            for i, b in enumerate(self.bodies)
+            if b.tensile_strength is not None
+        }
 
     def summary(self) -> str:
         """One line for run reports: vertices and elements simulated, and what the mass scaling added (FemBody
