@@ -20,7 +20,7 @@ import warp as wp
 from scipy.spatial import cKDTree
 
 from ..kernels.fem import elements as ke
-from .body import FemBody, mass_scaled_heights, mass_scaling_factors
+from .body import FemBody, mass_scaled_heights
 from .mesh import TET_EDGES, boundary_faces, element_heights
 
 EXPLICIT_STEP_FACTOR = 0.5  # dt_stable = 0.5 h_min / c_p (see pdsim/fem/solver.py's module docstring)
@@ -134,24 +134,16 @@ class FemModel:
         heights = element_heights(self.rest_local64, tets)
         # selective mass scaling (FemBody.mass_scaling): the density of each body's smallest elements is raised so
         # that their step is that of an element of the body's floor height; the step grows as sqrt(density)
-        factors = np.concatenate(
+        scaled_heights = np.concatenate(
             [
-                mass_scaling_factors(heights[lo:hi], b.mass_scaling)
+                mass_scaled_heights(heights[lo:hi], b.mass_scaling)
                 for b, lo, hi in zip(bodies, self.element_offsets[:-1], self.element_offsets[1:])
             ]
         )
+        factors = (scaled_heights / heights) ** 2  # pdsim.fem.body.mass_scaling_factors, per body
         material_density = per_element([m.density for m in mats])
         self.density_h = material_density * factors
-        self.element_dt_h = (
-            EXPLICIT_STEP_FACTOR
-            * np.concatenate(
-                [
-                    mass_scaled_heights(heights[lo:hi], b.mass_scaling)
-                    for b, lo, hi in zip(bodies, self.element_offsets[:-1], self.element_offsets[1:])
-                ]
-            )
-            / cp
-        )
+        self.element_dt_h = EXPLICIT_STEP_FACTOR * scaled_heights / cp
         self.explicit_dt = float(np.min(self.element_dt_h))
         self.unscaled_dt = float(np.min(EXPLICIT_STEP_FACTOR * heights / cp))
         added = (factors - 1.0) * material_density * np.abs(self.volume_h)
