@@ -24,7 +24,7 @@ spacing"): a strength field with a material correlation length (``strength_weibu
 are :data:`CELL_RATIO` times stronger than their walls (``strength_cell_size``, ``strength_cell_ratio``: cracks run
 along the walls, and a body that breaks all over breaks into pieces of about the cell's size; change the size with
 ``dataclasses.replace(pdsim.presets.glass(), strength_cell_size=0.05)`` for smaller shards), particles drawn as
-chips only from damage :data:`CHIP_DAMAGE` (``chip_damage``: the pieces' edges stay in the pieces), debris damping
+chips only from damage :data:`CHIP_DAMAGE` (``chip_damage``: the pieces' edges and corners stay in them), debris damping
 (:data:`DEBRIS_DAMPING` per second of the animation values for glass and porcelain, less for the others, a fixed rate
 so that it acts alike at every spacing) and the full compressive bonus capped at 1.5 s_c (:data:`SHARD_BONUS`,
 :data:`SHARD_BONUS_CAP`; 2 to 2.5 s_c for ceramic, stone and plaster). Each preset's docstring gives its values and
@@ -90,9 +90,12 @@ SAMPLING_JITTER = 0.5
 CELL_SIZE = 0.2
 CELL_RATIO = 5.0
 # The damage at which the brittle presets' particles are drawn as chips (pattern=True; Material.chip_damage): their
-# pieces are cells whose flat faces meet at edges, where a particle still in its piece has lost about 0.62 of its
-# bonds; at the default 0.5 every such edge is drawn as a lining of chips (docs/fracture.md measures both).
-CHIP_DAMAGE = 0.7
+# pieces are cells whose flat faces meet at edges and corners, where a particle still in its piece has lost about 0.62
+# (an edge) and 0.75 (a corner of three faces) of its bonds; at the default 0.5 every such edge is drawn as a lining of
+# chips. Below 0.8 a particle moves with the neighbours it is still bonded to (its median distance from where they
+# place it is at most 0.22 spacings in every preset's drop and hit at 2 and 1 cm); from 0.8 up the hits' crushed
+# particles come loose from them (docs/fracture.md, "Presets at preview and final spacing", measures both).
+CHIP_DAMAGE = 0.8
 # The animation values' impact strain over breaking strain, v / (c s_c) at v = 6 m/s (a 1.8 m fall), of glass (c =
 # 53 m/s, s_c = 0.005 at the reference spacing): ceramic, stone and plaster take the critical stretch (at the
 # reference spacing) that gives them the same ratio

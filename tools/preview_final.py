@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import itertools
 import json
 import math
 import os
@@ -188,6 +189,58 @@ def chips_at_contact(solver, radius: float = CONTACT_CAP) -> float:
     return float(mass[chip & near].sum()) / total if total > 0 else 0.0
 
 
+def stray(solver, body_index: int = 0) -> np.ndarray:
+    """Each particle's distance from where its bonded neighbours place it, in spacings: the non-affine residual
+    sqrt(D2min / n) of its n live bonds (Falk and Langer 1998), D2min = min over F of sum |dx - F dX|^2 over the bonds'
+    current (dx) and rest (dX) vectors. A particle that moves with its neighbours, however they stretch, shear and
+    turn, has ~0; one that has come loose from them has about its offset. NaN for a particle with fewer than 4 live
+    bonds or with bonds in one plane (its F is not determined)."""
+    sl = solver.body_slice(body_index)
+    lo, h = sl.start, solver.bodies[body_index].spacing
+    rest = solver.model.rest_positions.numpy()[sl].astype(np.float64)
+    x = rest + solver.displacements()[sl].astype(np.float64)
+    n = len(rest)
+    offsets, neighbours = solver.model.family_offsets.numpy(), solver.model.family_neighbors.numpy()
+    first = np.repeat(np.arange(len(offsets) - 1), np.diff(offsets))
+    keep = solver.bond_alive() & (first >= lo) & (first < lo + n)
+    i, j = first[keep] - lo, neighbours[keep] - lo
+    d_rest, d_now = rest[j] - rest[i], x[j] - x[i]
+    a, b = np.zeros((n, 3, 3)), np.zeros((n, 3, 3))
+    np.add.at(a, i, d_rest[:, :, None] * d_rest[:, None, :])
+    np.add.at(b, i, d_now[:, :, None] * d_rest[:, None, :])
+    square = np.bincount(i, (d_now * d_now).sum(axis=1), minlength=n)
+    count = np.bincount(i, minlength=n)
+    out = np.full(n, np.nan)
+    ok = (count >= 4) & (np.abs(np.linalg.det(a)) > 1.0e-9 * h**6)
+    fitted = np.einsum("nij,njk,nik->n", b[ok], np.linalg.inv(a[ok]), b[ok])  # tr(B A^-1 B^T)
+    out[ok] = np.sqrt(np.maximum(square[ok] - fitted, 0.0) / count[ok]) / h
+    return out
+
+
+CHIP_BANDS = (0.0, 0.5, 0.6, 0.7, 0.75, 0.8, 0.85, 0.9, 0.95, 1.0)  # damage bands of stray_by_damage
+
+
+def stray_by_damage(solver, body_index: int = 0) -> list[dict]:
+    """:func:`stray` of the body's particles by damage band (CHIP_BANDS, the last band closed): per band the particle
+    count, the median and 90th percentile of the particles with a defined value, and the count without one."""
+    damage = solver.damage()[solver.body_slice(body_index)]
+    value = stray(solver, body_index)
+    out = []
+    for k, (lo, hi) in enumerate(itertools.pairwise(CHIP_BANDS)):
+        band = (damage >= lo) & ((damage < hi) if k < len(CHIP_BANDS) - 2 else (damage <= hi))
+        fit = band & np.isfinite(value)
+        out.append(
+            {
+                "band": (lo, hi),
+                "particles": int(band.sum()),
+                "median": float(np.median(value[fit])) if fit.any() else float("nan"),
+                "p90": float(np.percentile(value[fit], 90.0)) if fit.any() else float("nan"),
+                "undetermined": int((band & ~fit).sum()),
+            }
+        )
+    return out
+
+
 def figures(solver, body_index: int = 0, *, volume=math.pi / 6.0 * DIAMETER**3) -> dict:
     """The module docstring's figures of one body at the solver's current state (with :func:`drawn_figures`);
     ``volume`` [m^3]: the body's (the sphere's by default), which turns PIECE_SIZE into a mass."""
@@ -218,6 +271,17 @@ def figures(solver, body_index: int = 0, *, volume=math.pi / 6.0 * DIAMETER**3) 
     }
 
 
+def preset_material(preset: str, *, real=False, **overrides) -> pdsim.Material:
+    """The preset's material (``real``: its real values) with Material ``overrides``; a ``critical_stretch`` among
+    them replaces the preset's fracture energy."""
+    import dataclasses
+
+    material = pdsim.presets.preset(preset, real=real)
+    if "critical_stretch" in overrides:  # a stretch fixed at every spacing in place of the preset's fracture energy
+        overrides = {"fracture_energy": None, **overrides}
+    return dataclasses.replace(material, **overrides) if overrides else material
+
+
 def measure(
     preset: str,
     case: str,
@@ -231,17 +295,10 @@ def measure(
     real=False,
     **overrides,
 ) -> dict:
-    """Runs one preset (pdsim.presets, with Material ``overrides``; a ``critical_stretch`` among them replaces the
-    preset's fracture energy) in one case at ``spacing`` [m] (``horizon`` [m]: the body's horizon, None for the
-    default; ``ball_radius`` [m] and ``hit_speed`` [m/s]: the hit's ball; ``real``: the preset's real values); its
-    figures."""
-    import dataclasses
-
-    material = pdsim.presets.preset(preset, real=real)
-    if "critical_stretch" in overrides:  # a stretch fixed at every spacing in place of the preset's fracture energy
-        overrides = {"fracture_energy": None, **overrides}
-    if overrides:
-        material = dataclasses.replace(material, **overrides)
+    """Runs one preset in one case at ``spacing`` [m] with the preset's material (:func:`preset_material`, with
+    Material ``overrides``; ``real``: its real values); ``horizon`` [m]: the body's horizon, None for the default;
+    ``ball_radius`` [m] and ``hit_speed`` [m/s]: the hit's ball. Returns its figures."""
+    material = preset_material(preset, real=real, **overrides)
     scene = build_case(
         case,
         material,
@@ -409,16 +466,41 @@ HEADING = "## Presets at preview and final spacing"  # a section of docs/fractur
 
 # The prose after the table (what the figures show, what is not met and why; the pane's note).
 NOTES = """\
-**Chips from damage 0.7, and a hit that loads the sphere as the drop does (2026-12-05, later).** The tables above are
-of the presets as they ship now: with their cells (next paragraph) and two changes.
+**Chips from damage 0.8 (2026-12-05, later still).** The tables above are of the presets as they ship now: with their
+cells (below), the ball at 22 m/s (the next paragraph) and chips from damage 0.8 (`pdsim.presets.CHIP_DAMAGE`; 0.7
+before). A chip is a particle the render draws loose; what it should keep in the pieces is every particle that still
+moves with the neighbours it is bonded to. `python tools/preview_final.py --chip-bands --spacings 0.02` (and `0.01`;
+docs/data/chip_bands_2026-12-05.txt) measures, for each particle, its distance from where its bonded neighbours place
+it (`stray`: the non-affine residual of its live bonds, in spacings; 0 for any stretch, shear or turn of the
+neighbourhood), by damage band:
+
+- below 0.8 the median is at most 0.22 spacings in every band of every case at both spacings (0.01 to 0.10 for the
+  undamaged particles): those particles move with their pieces, like the ones of damage 0.5 to 0.7 that the presets
+  already kept;
+- from 0.8 up, the hits' particles come loose: the band 0.8-0.85 has medians of 0.07 to 0.38 spacings at 2 cm and
+  0.20 to 0.47 at 1 cm, the bands above 0.9 0.22 to 0.90. They are the crushed material under the ball (58 to 64 % of
+  the chips lie within 10 cm of the point the ball hits at 2 cm, 84 to 90 % at 1 cm; plaster 31 and 40 %);
+- a particle at the corner where three flat crack faces meet has lost 0.75 of its bonds (tests/test_chip_damage.py, a
+  box cut into eighths): at 0.7 every corner of every piece was drawn as a chip.
+
+With 0.8 the drops draw 0.6 to 6.3 % of the sphere as chips at 2 cm (3.7 to 13.4 % with 0.7) and the hits 5.0 to
+15.5 % (11.0 to 27.2 %); the live bonds, the physics and the fragments do not change. The glass hit at 2 cm, frame 2,
+with 0.7 (left) and 0.8 (right): the crack faces keep their edges, and the loose cubes left are the crushed zone under
+the ball (`python tools/preview_final.py --presets glass --cases hit --usd DIR --set chip_damage=C`, then `pdsim
+preview DIR/glass_hit_20mm.usdc --size 480x400 --camera "eye=0.5,-0.6,0.5:target=0,0,0.12"`, the two side by side):
+
+![the glass hit at 2 cm with chips from damage 0.7 (left) and 0.8 (right)](presets_chip_damage_glass_hit.png)
+
+**Chips from damage 0.7, and a hit that loads the sphere as the drop does (2026-12-05, later).** Two changes before
+that one (the figures in this paragraph are of chips from 0.7).
 
 - **The chips.** The render draws a particle as a chip of its own once its damage reaches its material's
   `chip_damage` (pdsim/fragment_surfaces, step 7). The default, 0.5, suits material that crumbles; but the presets'
   pieces are cells with flat faces, and a particle on the edge where two faces meet at a right angle, firmly in its
-  piece, has lost 0.60 to 0.62 of its bonds (0.38 beside one face, 0.77 at a corner of three;
+  piece, has lost 0.60 to 0.62 of its bonds (0.38 beside one face, 0.75 at a corner of three;
   tests/test_chip_damage.py measures 0.60 on a box cut into quarters). At 0.5 every edge of every piece was drawn as a
-  lining of chips: 19 to 35 % of the sphere at 2 cm. The brittle presets now take `chip_damage` 0.7
-  (`pdsim.presets.CHIP_DAMAGE`, the same value as their `debris_damage`): a clean cut into quarters draws 0.5 % of
+  lining of chips: 19 to 35 % of the sphere at 2 cm. The brittle presets then took `chip_damage` 0.7
+  (the same value as their `debris_damage`): a clean cut into quarters draws 0.5 % of
   the sphere as chips instead of 9.7 %, and the drops draw 3.7 to 13.4 % (drawn dust 5.9 to 17.7 % of what breaks
   out, 5 drawn pieces each). The live bonds, the physics and the fragments do not change.
 - **The hit.** The ball (4.1 kg steel, 10 cm across) now comes down at 22 m/s (`HIT_SPEED`) instead of 6 m/s. At 6 m/s
@@ -434,12 +516,13 @@ What the tables show at seed 0 (the presets' own):
 
 - **By the live bonds every case meets the shard figures**: dust 0.0 to 0.8 % of what broke out, 4 to 6 fragments
   over 5 %.
-- **As drawn, the four drops and the stone hit meet them at 2 cm** (drawn dust 5.9 to 17.7 %, 5 pieces); the glass,
-  ceramic and plaster hits do not: 22.0, 20.4 and 32.2 % of what broke out is drawn as chips or pieces under 8
-  particles. The ball crushes the material under it: 11 to 27 % of the sphere is chips, and 42 to 44 % of them lie
-  within 10 cm of the point the ball hits (plaster 24 %; at 1 cm 72 to 73 %, plaster 32 %), a cap of 11 % of the
-  sphere (`chips_at_contact` in the JSON files): a crushed zone, as under a real impact. At 1 cm every case meets
-  as drawn (1.0 to 19.0 % drawn dust).
+- **As drawn, seven of the eight cases meet them at 2 cm** (drawn dust 0.9 to 11.3 %, 4 to 6 pieces); the plaster hit
+  does not: 22.6 % of what broke out is drawn as chips or pieces under 8 particles (15.5 % of the sphere as chips; with
+  chips from 0.7 the glass, ceramic and plaster hits missed, at 22.0, 20.4 and 32.2 %). The ball comes down at two
+  thirds of plaster's animation wave speed (22 against 33 m/s; glass's is 53 m/s) and squashes the plaster sphere
+  into a bowl under it: the crushed material, loose from its neighbours (the bands above), is drawn as chips, spread
+  over the bowl (31 % of them within 10 cm of the point hit). At 1 cm every case meets as drawn (0.1 to 14.7 % drawn
+  dust).
 - **Preview against final**: the n80 within 1.5x for seven of the eight cases (the ceramic drop: 4 / 2), the broken-out
   share within +-30 % for all eight.
 - **Far from the origin**: the glass drop and hit moved 1.1 km away (`build_case(..., offset=(1000, -500, 250))`)
@@ -447,13 +530,14 @@ What the tables show at seed 0 (the presets' own):
   `test_the_cases_break_alike_far_from_the_origin`).
 
 Over strength seeds 0-4 at both spacings (`python tools/preview_final.py --seeds 5 --spacings 0.02 0.01`,
+docs/data/preset_seeds_chip08_hit22_2026-12-05.txt; with chips from 0.7:
 docs/data/preset_seeds_chip07_hit22_2026-12-05.txt):
 
 - by the live bonds, 38 of the 40 cases meet the shard figures at 2 cm (the plaster drop and hit miss on one seed
   each) and all 40 at 1 cm;
-- as drawn at 2 cm, the drops meet on 19 of their 20 seeds (glass seed 3: 29 % drawn dust) and the hits on 2 of 20
-  (stone seeds 0 and 2; the others draw 20 to 46 % of what breaks out as dust); at 1 cm 39 of the 40 (one plaster
-  hit misses);
+- as drawn at 2 cm, the drops meet on all 20 seeds and the hits on 11 of 20 (stone 5, ceramic 4, glass 2, plaster 0;
+  the others draw 20 to 26 % of what breaks out as dust, the plaster hit 21 to 30 %); with chips from 0.7 19 and 2;
+  at 1 cm all 40 (39 with 0.7);
 - preview against final, over the seeds' means: the n80 agree within 1.5x in seven of the eight cases (the glass
   hit 3.0 / 4.6: 1.53) and the broken-out share within +-30 % in five (the ceramic hit +33 %, the plaster drop +34 %
   and the plaster hit +164 %: 17.5 % at 2 cm, 46.1 % at 1 cm); seed by seed, 25 of the 40 pairs meet both. Where they
@@ -680,19 +764,19 @@ sphere split into pieces, with the chips of the crushed zone under it). Both cac
 imported into Blender 5.0.1 through `bpy` (`wm.usd_import` with its defaults, Cycles, frame 2; a scratch script, not
 kept), render with the crack material on the crack faces and no particle spheres.
 
-What the presets do not do: shards from a hit as the render draws them at the preview spacing (the glass, ceramic and
-plaster hits draw 20.4 to 32.2 % of what breaks out as chips at 2 cm, the crushed zone under the ball; at 1 cm they
-meet); break from a light hit (the ball at 6 m/s loads the sphere five times less than the drop, and breaks out nothing,
-above); pieces shaped by the load: a body that breaks all over breaks along its cells' walls into pieces of about the
-cell's size (20 cm: a 30 cm figurine hit by a ball loses one or two large pieces; set `strength_cell_size` for smaller
-shards), and a crack crosses a cell only where the load exceeds the interior's strength; the same figures on every seed
-(two cases of forty miss by the live bonds); concrete in a drop (its breaking strain puts v / (c s_c) at 86): it still
-crumbles, 66.8 % of the sphere drawn as chips, 26.6 % broken out with 11.5 % of it dust and 2 fragments over 5 %
-(`--presets porcelain concrete --cases drop`; porcelain drops as glass does: 55.6 %, 0.0 %, 5 fragments, 12.4 % chips, 4
-drawn pieces); the break pattern's strengths scatter on purpose, so a body breaks first at its weakest spot, not where
-the load is largest; debris damping is a numerical remedy (not paired: a chip's neighbours feel no reaction); and the
-full bonus makes the material stronger in shear than a real brittle solid. Wood, clay, steel, aluminium and rubber carry
-no break pattern, and wood keeps a critical stretch fixed in strain.
+What the presets do not do: shards from every hit as the render draws them at the preview spacing (the plaster hit draws
+22.6 % of what breaks out as chips at 2 cm, the crushed zone under a ball at two thirds of its wave speed, and the glass
+and ceramic hits miss on some seeds; at 1 cm they meet); break from a light hit (the ball at 6 m/s loads the sphere five
+times less than the drop, and breaks out nothing, above); pieces shaped by the load: a body that breaks all over breaks
+along its cells' walls into pieces of about the cell's size (20 cm: a 30 cm figurine hit by a ball loses one or two
+large pieces; set `strength_cell_size` for smaller shards), and a crack crosses a cell only where the load exceeds the
+interior's strength; the same figures on every seed (two cases of forty miss by the live bonds); concrete in a drop (its
+breaking strain puts v / (c s_c) at 86): it still crumbles, 56.9 % of the sphere drawn as chips, 26.6 % broken out with
+11.5 % of it dust and 2 fragments over 5 % (`--presets porcelain concrete --cases drop`; porcelain drops as glass does:
+55.6 %, 0.0 %, 5 fragments, 5.4 % chips, 5 drawn pieces); the break pattern's strengths scatter on purpose, so a body
+breaks first at its weakest spot, not where the load is largest; debris damping is a numerical remedy (not paired: a
+chip's neighbours feel no reaction); and the full bonus makes the material stronger in shear than a real brittle solid.
+Wood, clay, steel, aluminium and rubber carry no break pattern, and wood keeps a critical stretch fixed in strain.
 
 Glass pane (scenes/glass_pane.py, with its own glass: the real stiffness in slow motion, not the preset). `python
 tools/pane_deflection.py` runs it frame by frame and measures the pane's deflection around the ball (the mean
@@ -747,6 +831,28 @@ def section(results: list[dict], meta: dict, notes: str) -> str:
         f"{table(results)}\n\nMeasured with `{meta['command']}` on {meta['machine']}, {meta['date']} (the machine's 2 "
         f"cores shared with other jobs: the run times are wall times under that load).\n\n{notes}"
     )
+
+
+def chip_band_table(presets, cases, spacings, overrides: dict) -> str:
+    """A markdown table of :func:`stray_by_damage` for each preset, case and spacing (runs of :func:`build_case`
+    with the preset's material and ``overrides``): per damage band the particles and the median (90th percentile)
+    stray in spacings."""
+    bands = list(itertools.pairwise(CHIP_BANDS))
+    rows = [
+        "| preset | case | spacing | " + " | ".join(f"damage {lo:g}-{hi:g}" for lo, hi in bands) + " |",
+        "|---|---|---|" + "---|" * len(bands),
+    ]
+    for spacing in spacings:
+        for preset in presets:
+            for case in cases:
+                solver, _ = run_scene(build_case(case, preset_material(preset, **overrides), spacing))
+                cells = [
+                    f"{b['particles']}: {b['median']:.2f} ({b['p90']:.2f})" if b["particles"] else "0"
+                    for b in stray_by_damage(solver)
+                ]
+                rows.append(f"| {preset} | {case} | {spacing * 1000:.0f} mm | " + " | ".join(cells) + " |")
+                print(rows[-1], file=sys.stderr, flush=True)
+    return "\n".join(rows)
 
 
 def stills(preset: str, case: str, spacings, path: str, *, frames=FRAMES, duration=DURATION) -> None:
@@ -848,6 +954,12 @@ def main(argv=None):
     ap.add_argument(
         "--real", action="store_true", help="the presets' real values (real=True) in place of the animation ones"
     )
+    ap.add_argument(
+        "--chip-bands",
+        action="store_true",
+        help="print each run's stray_by_damage: how far its particles lie from where their bonded neighbours place "
+        "them, by damage band (what a chip_damage keeps in the pieces)",
+    )
     args = ap.parse_args(argv)
     wp.config.quiet = True
     if args.scene:
@@ -866,6 +978,9 @@ def main(argv=None):
                     )
         return
     overrides = {k: (int(v) if k == "strength_seed" else float(v)) for k, v in (a.split("=", 1) for a in args.set)}
+    if args.chip_bands:
+        print(chip_band_table(args.presets, args.cases, args.spacings, overrides))
+        return
     if args.stills:
         stills(args.presets[0], args.cases[0], args.spacings, args.stills, frames=args.frames, duration=args.duration)
         return
@@ -910,7 +1025,7 @@ def main(argv=None):
             for preset in args.presets:
                 for case in args.cases:
                     if args.usd:
-                        material = pdsim.presets.preset(preset)
+                        material = preset_material(preset, real=args.real, **overrides)
                         scene = build_case(case, material, spacing, frames=args.frames, duration=args.duration)
                         os.makedirs(args.usd, exist_ok=True)
                         out = os.path.join(args.usd, f"{preset}_{case}_{spacing * 1000:.0f}mm.usdc")
