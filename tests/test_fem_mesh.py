@@ -172,3 +172,19 @@ def test_mesh_cache_makes_meshing_reproducible(tmp_path):
     assert len(list(tmp_path.glob("*.vtu"))) == 1
     np.testing.assert_array_equal(a.vertices, b.vertices)
     np.testing.assert_array_equal(a.tets, b.tets)
+
+
+def test_stable_order_is_numpys_stable_argsort():
+    """pdsim.fem.mesh.stable_order gives numpy's stable argsort exactly (equal keys in index order): on keys with many
+    repeats (the vertex of each element corner, the triple of each face), on an empty array, and on keys too large
+    for the unique-key form (the stable sort itself)."""
+    from pdsim.fem.mesh import stable_order
+
+    rng = np.random.default_rng(7)
+    for keys in (
+        rng.integers(0, 50, 10_000),
+        rng.integers(0, 2**40, 5_000),
+        np.zeros(0, dtype=np.int64),
+        np.array([2**62, 3, 2**62, 0], dtype=np.int64),
+    ):
+        assert np.array_equal(stable_order(keys), np.argsort(keys, kind="stable"))

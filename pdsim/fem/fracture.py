@@ -67,7 +67,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..fragment_labels import connected_components
-from .mesh import TET_EDGES, TET_FACES, boundary_faces, interior_face_pairs
+from .mesh import TET_EDGES, TET_FACES, boundary_faces, interior_face_pairs, stable_order
 
 MIN_SIDE = 2  # elements each side of a crack plane must keep around the split vertex
 NEAR_CRACK = 2.0  # an over-stressed element continues a crack whose vertex is within this many element sizes
@@ -101,7 +101,7 @@ def vertex_incidence(tets: np.ndarray, vertex_count: int):
     """CSR list of the corner slots (4 e + a) of each vertex: (offsets [vertex_count + 1], slots [4 element_count]),
     slots of a vertex in increasing order."""
     flat = np.asarray(tets, dtype=np.int64).ravel()
-    slots = np.argsort(flat, kind="stable")
+    slots = stable_order(flat)
     counts = np.bincount(flat, minlength=vertex_count)
     offsets = np.zeros(vertex_count + 1, dtype=np.int64)
     np.cumsum(counts, out=offsets[1:])
@@ -308,7 +308,7 @@ def best_offsets(tets, rest, centroids, vertices, normals, anchors, search):
     )
     # (split, element) -> entry, for the neighbours across the faces containing the vertex
     key = rep * m + elem
-    order = np.argsort(key, kind="stable")
+    order = stable_order(key)
     sub = np.unique(elem)
     local = np.full(m, -1, dtype=np.int64)
     local[sub] = np.arange(len(sub))

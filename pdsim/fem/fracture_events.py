@@ -25,7 +25,6 @@ from .fracture import (
     split_vertices,
     triangle_areas,
 )
-from .mesh import boundary_faces
 
 GRIFFITH_ROUNDS = 4  # fracture: rounds of the Griffith test before a step's remaining splits are made untested
 
@@ -237,7 +236,7 @@ class FemFractureEvents:
     def _split_bodies(self) -> list:
         """Per body: its :class:`SplitBody` on the current vertices and element corners (what the kinematics read
         from the bodies after fracture split their vertices)."""
-        faces, fid = boundary_faces(self._tets_h, return_face_ids=True)
+        faces, fid = self._boundary_faces_h()
         original = np.isin(fid, self.model.surface_face_ids)
         face_body = self.element_body[fid // 4]
         proxies = []

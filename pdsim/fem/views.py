@@ -122,6 +122,16 @@ class FemViews:
             for i, b in enumerate(self.bodies)
         ]
 
+    def _boundary_faces_h(self):
+        """(boundary faces int32 [k, 3], face ids 4 e + k int64 [k]) of the current element corners
+        (pdsim.fem.mesh.boundary_faces), computed once per topology: the corners array is replaced, never changed in
+        place, when fracture splits vertices."""
+        cached = getattr(self, "_boundary_cache", None)
+        if cached is None or cached[0] is not self._tets_h:
+            cached = (self._tets_h, *boundary_faces(self._tets_h, return_face_ids=True))
+            self._boundary_cache = cached
+        return cached[1], cached[2]
+
     def contact_mesh(self):
         """The closed surface of every piece of every body, for contact with particle methods
         (pdsim.contact.MethodContact): (vertex ids int32 [v], triangles int32 [3 f] indexing those ids, both Warp
@@ -133,7 +143,7 @@ class FemViews:
                 "(its kernels are float32 only); use precision='float32'"
             )
         if self._contact_mesh is None:
-            faces = boundary_faces(self._tets_h)
+            faces, _ = self._boundary_faces_h()
             ids, local = np.unique(faces, return_inverse=True)
             self._contact_mesh = (
                 wp.array(ids.astype(np.int32), dtype=wp.int32, device=self.device),
@@ -205,7 +215,7 @@ class FemViews:
         """Per body: (vertex ids [k], triangles [f, 3] into those ids, fragment per face, crack flag per face),
         rebuilt when the topology changed."""
         if self._surfaces is None:
-            faces, fid = boundary_faces(self._tets_h, return_face_ids=True)
+            faces, fid = self._boundary_faces_h()
             elem = fid // 4
             face_body = self.element_body[elem]
             fragment = self._element_fragments()[elem]
