@@ -151,6 +151,8 @@ def choose_splits(
     stresses: np.ndarray,
     crack_vertex: np.ndarray,
     crack_plane: np.ndarray,
+    *,
+    incidence=None,
 ):
     """Picks the vertex and plane of each split.
 
@@ -164,6 +166,7 @@ def choose_splits(
         crack_vertex: vertices already on a crack surface, bool [vertex_count].
         crack_plane: per vertex, the crack plane it was split on: (point [m], unit normal), [vertex_count, 6] (NaN
             rows: not split on a plane).
+        incidence: :func:`vertex_incidence` of ``tets`` when the caller has it (computed otherwise).
 
     Returns:
         (vertices [s], normals [s, 3], elements [s], anchors [s, 3], new_crack [s]): at most one split per vertex, in
@@ -174,7 +177,7 @@ def choose_splits(
     if k == 0:
         empty = np.zeros(0, dtype=np.int64)
         return empty, np.zeros((0, 3)), empty, np.zeros((0, 3)), np.zeros(0, dtype=bool)
-    offsets, slots = vertex_incidence(tets, len(rest))
+    offsets, slots = vertex_incidence(tets, len(rest)) if incidence is None else incidence
     elements = np.asarray(elements, dtype=np.int64)
     cand = np.asarray(tets[elements], dtype=np.int64)  # [k, 4]
     n = np.asarray(directions, dtype=np.float64).copy()
@@ -242,7 +245,9 @@ def choose_splits(
     return chosen[keep], normals[keep], source[keep], anchor[keep], new_crack[keep]
 
 
-def separation_directions(tets: np.ndarray, elements: np.ndarray, stress_of, volumes: np.ndarray, own: np.ndarray):
+def separation_directions(
+    tets: np.ndarray, elements: np.ndarray, stress_of, volumes: np.ndarray, own: np.ndarray, *, incidence=None
+):
     """Crack-plane normals of ``elements`` [k]: the direction of the largest principal stress of the volume-weighted
     mean stress over each element's neighbourhood (the elements sharing a vertex with it, each counted once per shared
     vertex), a nonlocal average in the spirit of O'Brien and Hodgins' separation tensor, averaged at the nodes. The
@@ -254,6 +259,7 @@ def separation_directions(tets: np.ndarray, elements: np.ndarray, stress_of, vol
         stress_of: callable, element ids [r] -> their Cauchy stresses in the rest frame [Pa], [r, 3, 3].
         volumes: element volumes [m^3], [m].
         own: the elements' own principal directions [k, 3] (the signs of the result follow them).
+        incidence: :func:`vertex_incidence` of ``tets`` when the caller has it (computed otherwise).
 
     Returns unit normals [k, 3]."""
     elements = np.asarray(elements, dtype=np.int64)
@@ -262,7 +268,7 @@ def separation_directions(tets: np.ndarray, elements: np.ndarray, stress_of, vol
         return np.zeros((0, 3))
     tets = np.asarray(tets, dtype=np.int64)
     m = len(tets)
-    offsets, slots = vertex_incidence(tets, int(tets.max()) + 1)
+    offsets, slots = vertex_incidence(tets, int(tets.max()) + 1) if incidence is None else incidence
     group, elem = np.arange(k), elements
     for _ in range(SEPARATION_RINGS):
         corners = tets[elem]  # [p, 4]
@@ -279,7 +285,7 @@ def separation_directions(tets: np.ndarray, elements: np.ndarray, stress_of, vol
     return out * sign[:, None]
 
 
-def best_offsets(tets, rest, centroids, vertices, normals, anchors, search):
+def best_offsets(tets, rest, centroids, vertices, normals, anchors, search, *, incidence=None):
     """The plane point of each split, chosen among the crack plane moved along its normal by PLANE_SHIFTS times the
     vertex's star size (RMS distance of its elements' centroids from it): the one whose opened surface (the faces
     around the vertex between elements on different sides) has its vector area closest to the plane's normal, the
@@ -289,7 +295,8 @@ def best_offsets(tets, rest, centroids, vertices, normals, anchors, search):
     that start a crack (``search``, bool [s]) move their plane; the crack then keeps it. Returns the plane
     points [s, 3] (:func:`split_vertices`' ``anchors``) and whether each split has a valid plane (bool [s]: each
     side keeps at least MIN_SIDE elements). A plane that leaves a side in several groups (connected through faces
-    containing the vertex) loses 1 of its score per extra group: the extra groups become chips or side cracks."""
+    containing the vertex) loses 1 of its score per extra group: the extra groups become chips or side cracks.
+    ``incidence``: :func:`vertex_incidence` of ``tets`` when the caller has it (computed otherwise)."""
     vertices = np.asarray(vertices, dtype=np.int64)
     k = len(vertices)
     normals = np.asarray(normals, dtype=np.float64)
@@ -298,7 +305,7 @@ def best_offsets(tets, rest, centroids, vertices, normals, anchors, search):
         return anchors, np.zeros(0, dtype=bool)
     tets = np.asarray(tets, dtype=np.int64)
     m = len(tets)
-    offsets, slots = vertex_incidence(tets, len(rest))
+    offsets, slots = vertex_incidence(tets, len(rest)) if incidence is None else incidence
     rep, inc_slots = _expand_incident(vertices, offsets, slots)
     elem, corner = inc_slots // 4, inc_slots % 4
     c_off = centroids[elem] - rest[vertices][rep]
@@ -353,11 +360,19 @@ def best_offsets(tets, rest, centroids, vertices, normals, anchors, search):
 
 
 def split_vertices(
-    tets: np.ndarray, rest: np.ndarray, centroids: np.ndarray, vertices: np.ndarray, normals, anchors=None
+    tets: np.ndarray,
+    rest: np.ndarray,
+    centroids: np.ndarray,
+    vertices: np.ndarray,
+    normals,
+    anchors=None,
+    *,
+    incidence=None,
 ):
     """Duplicates each vertex v_s for the elements around it whose rest centroid lies on the positive side of the
     plane through ``anchors[s]`` (default: v_s itself) normal to n_s. Returns (new tets, parent): parent[i] is the
-    original vertex of vertex i (identity for the old ones; v_s for the copy vertex_count + s)."""
+    original vertex of vertex i (identity for the old ones; v_s for the copy vertex_count + s). ``incidence``:
+    :func:`vertex_incidence` of ``tets`` when the caller has it (computed otherwise)."""
     tets = np.array(tets, dtype=np.int64)
     nv = len(rest)
     vertices = np.asarray(vertices, dtype=np.int64)
@@ -365,7 +380,7 @@ def split_vertices(
     if len(vertices) == 0:
         return tets, parent
     origin = rest[vertices] if anchors is None else np.asarray(anchors, dtype=np.float64)
-    offsets, slots = vertex_incidence(tets, nv)
+    offsets, slots = vertex_incidence(tets, nv) if incidence is None else incidence
     rep, inc_slots = _expand_incident(vertices, offsets, slots)
     c = centroids[inc_slots // 4]
     side = plane_side(c - origin[rep], np.asarray(normals)[rep], rest[vertices][rep] - c)

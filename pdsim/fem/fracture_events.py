@@ -24,6 +24,7 @@ from .fracture import (
     separation_directions,
     split_vertices,
     triangle_areas,
+    vertex_incidence,
 )
 
 GRIFFITH_ROUNDS = 4  # fracture: rounds of the Griffith test before a step's remaining splits are made untested
@@ -84,8 +85,9 @@ class FemFractureEvents:
         if over.size == 0:
             return False
         rest, centroids = self._rest_local_h, self.model.centroids_h
+        incidence = vertex_incidence(self._tets_h, nv)  # the corners of each vertex, shared by the passes below
         directions = separation_directions(
-            self._tets_h, over, self._element_stresses, self.model.volume_h, principal[over, :3]
+            self._tets_h, over, self._element_stresses, self.model.volume_h, principal[over, :3], incidence=incidence
         )
         verts, normals, sources, anchors, new_crack = choose_splits(
             self._tets_h,
@@ -96,10 +98,13 @@ class FemFractureEvents:
             principal[over, 3],
             self._crack_vertex_h,
             self._crack_plane_h,
+            incidence=incidence,
         )
         if len(verts) == 0:
             return False
-        origins, fits = best_offsets(self._tets_h, rest, centroids, verts, normals, anchors, new_crack)
+        origins, fits = best_offsets(
+            self._tets_h, rest, centroids, verts, normals, anchors, new_crack, incidence=incidence
+        )
         if not fits.all():
             verts, normals, sources, anchors, origins = (a[fits] for a in (verts, normals, sources, anchors, origins))
             if len(verts) == 0:
@@ -107,7 +112,7 @@ class FemFractureEvents:
         gc = self.model.fracture_energy_h
         energy = None
         for round_ in range(GRIFFITH_ROUNDS + 1):
-            tets1, parent1 = split_vertices(self._tets_h, rest, centroids, verts, normals, origins)
+            tets1, parent1 = split_vertices(self._tets_h, rest, centroids, verts, normals, origins, incidence=incidence)
             copies = np.arange(nv, len(parent1))
             tets2, parent2 = make_manifold(tets1, len(parent1), np.concatenate([verts, copies]))
             if round_ == GRIFFITH_ROUNDS or not gc[sources].any():
