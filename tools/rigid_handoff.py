@@ -37,6 +37,7 @@ VIEWS = {
     "four_walls": {"fit": "first"},
     "glass_pane": {"camera": "-35,15", "fit": "first"},
     "drop_shatter": {"camera": "-60,30", "fit": "first"},
+    "shot_sphere_drop": {"camera": "-60,30"},
 }
 
 
@@ -48,11 +49,15 @@ def preview_settings(module) -> dict:
     return {**dict(getattr(module, "PREVIEW", {})), **SCENE_OPTIONS}
 
 
+SCRIPTS = {}  # scene scripts given by path (--scenes path/to/script.py): their name -> path
+
+
 def load_scene_module(name: str):
-    """Imports scenes/<name>.py (with scenes/ on sys.path)."""
+    """Imports scenes/<name>.py (with scenes/ on sys.path), or the scene script registered as ``name`` in SCRIPTS."""
     if SCENES not in sys.path:
         sys.path.insert(0, SCENES)
-    spec = importlib.util.spec_from_file_location(f"handoff_{name}", os.path.join(SCENES, f"{name}.py"))
+    path = SCRIPTS.get(name, os.path.join(SCENES, f"{name}.py"))
+    spec = importlib.util.spec_from_file_location(f"handoff_{name}", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -186,12 +191,16 @@ def strains(name: str, cache: str, frames: int | None) -> list[str]:
                     eps, limit = f["eps"][top], f["threshold"][top]
                     share = f["kinetic"][top] / max(f["kinetic"][top] + f["elastic"][top], 1e-300)
                     remainder = f"{f['size'][top]} | {eps:.2e} | {limit:.1e} | {eps / limit:.2f} | {100 * share:.0f} %"
-                else:  # the remainder is a static fragment
+                elif (s.kin.point_condition_host[s.body_slice(i)] >= 0).any():  # the remainder is a static fragment
                     remainder = "asleep | - | - | - | -"
+                else:  # no particle of the body is held: every fragment is free
+                    remainder = "none | - | - | - | -"
+                loud_energy = f["kinetic"][loud].sum() + f["elastic"][loud].sum()
+                loud_kinetic = f"{100 * f['kinetic'][loud].sum() / loud_energy:.0f} %" if loud_energy > 0 else "-"
                 rows.append(
                     f"| {name} | {frame} | {b.name} | {remainder} | {len(out)} | {int(f['size'][out].sum())} |"
                     f" {int((f['size'][out] == 1).sum())} | {len(loud)} ({int(f['size'][loud].sum())} particles) |"
-                    f" {touching} |"
+                    f" {loud_kinetic} | {touching} |"
                     f" {f['eps'][out].max(initial=0.0):.2e} | {int((f['constrained'][out] > 0).sum())} |"
                     f" {int(rigid[s.body_slice(i)].sum())} |"
                 )
@@ -305,7 +314,9 @@ def stills(name: str, caches: dict, frame: int, folder: str) -> str:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenes", nargs="+", default=["glass_pane", "four_walls"])
+    parser.add_argument(
+        "--scenes", nargs="+", default=["glass_pane", "four_walls"], help="gallery scenes, or scene scripts (.py)"
+    )
     parser.add_argument("--frames", type=int, default=None, help="frames to run (default: the preview's)")
     parser.add_argument("--page", default=None, help="the page written in docs/ (default: the mode's)")
     parser.add_argument(
@@ -330,6 +341,11 @@ def main(argv=None) -> None:
         "--options", nargs="+", default=[], help="build_scene keywords over the preview's, as KEY=VALUE (numbers)"
     )
     args = parser.parse_args(argv)
+    shown = " ".join(args.scenes)  # as given, for the pages' commands
+    for k, scene in enumerate(args.scenes):  # a script's path: its file name stands for it in the pages and stills
+        if scene.endswith(".py"):
+            args.scenes[k] = os.path.splitext(os.path.basename(scene))[0]
+            SCRIPTS[args.scenes[k]] = os.path.abspath(scene)
     for item in args.options:
         key, _, value = item.partition("=")
         SCENE_OPTIONS[key] = int(value) if value.lstrip("-").isdigit() else float(value)
@@ -340,23 +356,25 @@ def main(argv=None) -> None:
         lines = [
             "# Rigid hand-off: the fragments' equivalent strain by frame",
             "",
-            f"`python tools/rigid_handoff.py --strains --scenes {' '.join(args.scenes)}{options}` on {when}"
+            f"`python tools/rigid_handoff.py --strains --scenes {shown}{options}` on {when}"
             f" ({platform.machine()}, Warp {wp.__version__} CPU): each scene at its preview settings (with the"
             " options) and the hand-off"
             " on (`RigidHandoff(fixed=True)` on its brittle bodies); at the end of each frame, for each brittle body,"
             " the equivalent strain eps = sqrt(2 (K_int + E_el) / (M c_p^2)) of its deformable fragments"
             " (pdsim/peridynamics/handoff.py) against the threshold (DEFAULT_STRAIN_FRACTION x s_c). Remainder: the"
             " body's deformable fragment that holds the clamped rim (its eps counts its whole kinetic energy; asleep: a"
-            " static fragment; kinetic: the kinetic energy's share of the energy in its eps, the rest elastic);"
+            " static fragment; none: the body holds no particle, every fragment is free; kinetic: the kinetic energy's"
+            " share of the energy in its eps, the rest elastic);"
             " broken-out: its other deformable"
-            " fragments; loud: those at or above the threshold (touching: with a particle within one spacing of another"
+            " fragments; loud: those at or above the threshold (their kinetic: the kinetic share of the energy in their"
+            " eps; touching: with a particle within one spacing of another"
             " fragment's); constrained: those holding particles under a"
             " boundary condition; rigid: the body's particles in rigid fragments.",
             "",
             "| scene | frame | body | remainder particles | remainder eps | threshold | eps / threshold | kinetic |"
-            " broken-out fragments | their particles | single particles | loud | loud touching | largest eps |"
-            " constrained | rigid particles |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+            " broken-out fragments | their particles | single particles | loud | loud: kinetic | loud touching |"
+            " largest eps | constrained | rigid particles |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         with tempfile.TemporaryDirectory() as tmp:
             for name in args.scenes:
@@ -403,7 +421,7 @@ def main(argv=None) -> None:
         lines = [
             "# Rigid hand-off: the step cost at the last frame",
             "",
-            f"`python tools/rigid_handoff.py --interleaved --scenes {' '.join(args.scenes)}"
+            f"`python tools/rigid_handoff.py --interleaved --scenes {shown}"
             + (f" --page {args.page}" if args.page else "")
             + f"{options}` on {when}"
             f" ({platform.machine()}, {os.cpu_count()} cores, Warp {wp.__version__} CPU, one bond thread): each scene"
@@ -443,7 +461,7 @@ def main(argv=None) -> None:
         lines = [
             "# Rigid hand-off: measured",
             "",
-            f"`python tools/rigid_handoff.py --scenes {' '.join(args.scenes)}"
+            f"`python tools/rigid_handoff.py --scenes {shown}"
             + (f" --page {args.page}" if args.page else "")
             + (f" --frames {args.frames}" if args.frames else "")
             + f"{options}`"
