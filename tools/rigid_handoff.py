@@ -356,7 +356,9 @@ def main(argv=None) -> None:
         lines = [
             "# Rigid hand-off: the fragments' equivalent strain by frame",
             "",
-            f"`python tools/rigid_handoff.py --strains --scenes {shown}{options}` on {when}"
+            f"`python tools/rigid_handoff.py --strains --scenes {shown}"
+            + (f" --page {args.page}" if args.page else "")
+            + f"{options}` on {when}"
             f" ({platform.machine()}, Warp {wp.__version__} CPU): each scene at its preview settings (with the"
             " options) and the hand-off"
             " on (`RigidHandoff(fixed=True)` on its brittle bodies); at the end of each frame, for each brittle body,"
