@@ -521,8 +521,11 @@ What the tables show at seed 0 (the presets' own):
   chips from 0.7 the glass, ceramic and plaster hits missed, at 22.0, 20.4 and 32.2 %). The ball comes down at two
   thirds of plaster's animation wave speed (22 against 33 m/s; glass's is 53 m/s) and squashes the plaster sphere
   into a bowl under it: the crushed material, loose from its neighbours (the bands above), is drawn as chips, spread
-  over the bowl (31 % of them within 10 cm of the point hit). At 1 cm every case meets as drawn (0.1 to 14.7 % drawn
-  dust).
+  over the bowl (31 % of them within 10 cm of the point hit; frame 2 below, made with `--presets plaster --cases hit
+  --usd DIR`, then `pdsim preview DIR/plaster_hit_20mm.usdc --frames 2 --size 480x360 --camera
+  "eye=0.5,-0.6,0.5:target=0,0,0.12"`). At 1 cm every case meets as drawn (0.1 to 14.7 % drawn dust).
+
+  ![the plaster hit at 2 cm, frame 2: the sphere squashed into a bowl](presets_plaster_hit_20mm.png)
 - **Preview against final**: the n80 within 1.5x for seven of the eight cases (the ceramic drop: 4 / 2), the broken-out
   share within +-30 % for all eight.
 - **Far from the origin**: the glass drop and hit moved 1.1 km away (`build_case(..., offset=(1000, -500, 250))`)
