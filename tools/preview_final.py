@@ -487,7 +487,8 @@ With 0.8 the drops draw 0.6 to 6.3 % of the sphere as chips at 2 cm (3.7 to 13.4
 15.5 % (11.0 to 27.2 %); the live bonds, the physics and the fragments do not change. The glass hit at 2 cm, frame 2,
 with 0.7 (left) and 0.8 (right): the crack faces keep their edges, and the loose cubes left are the crushed zone under
 the ball (`python tools/preview_final.py --presets glass --cases hit --usd DIR --set chip_damage=C`, then `pdsim
-preview DIR/glass_hit_20mm.usdc --size 480x400 --camera "eye=0.5,-0.6,0.5:target=0,0,0.12"`, the two side by side):
+preview DIR/glass_hit_20mm.usdc --out C.png --size 480x400 --camera "eye=0.5,-0.6,0.5:target=0,0,0.12"`, the two side
+by side with `imageio`):
 
 ![the glass hit at 2 cm with chips from damage 0.7 (left) and 0.8 (right)](presets_chip_damage_glass_hit.png)
 
@@ -522,8 +523,8 @@ What the tables show at seed 0 (the presets' own):
   thirds of plaster's animation wave speed (22 against 33 m/s; glass's is 53 m/s) and squashes the plaster sphere
   into a bowl under it: the crushed material, loose from its neighbours (the bands above), is drawn as chips, spread
   over the bowl (31 % of them within 10 cm of the point hit; frame 2 below, made with `--presets plaster --cases hit
-  --usd DIR`, then `pdsim preview DIR/plaster_hit_20mm.usdc --frames 2 --size 480x360 --camera
-  "eye=0.5,-0.6,0.5:target=0,0,0.12"`). At 1 cm every case meets as drawn (0.1 to 14.7 % drawn dust).
+  --usd DIR`, then `pdsim preview DIR/plaster_hit_20mm.usdc --out docs/presets_plaster_hit_20mm.png --frames 2
+  --size 480x360 --camera "eye=0.5,-0.6,0.5:target=0,0,0.12"`). At 1 cm every case meets as drawn (0.1 to 14.7 % drawn dust).
 
   ![the plaster hit at 2 cm, frame 2: the sphere squashed into a bowl](presets_plaster_hit_20mm.png)
 - **Preview against final**: the n80 within 1.5x for seven of the eight cases (the ceramic drop: 4 / 2), the broken-out
