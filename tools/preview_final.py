@@ -524,7 +524,8 @@ What the tables show at seed 0 (the presets' own):
   into a bowl under it: the crushed material, loose from its neighbours (the bands above), is drawn as chips, spread
   over the bowl (31 % of them within 10 cm of the point hit; frame 2 below, made with `--presets plaster --cases hit
   --usd DIR`, then `pdsim preview DIR/plaster_hit_20mm.usdc --out docs/presets_plaster_hit_20mm.png --frames 2
-  --size 480x360 --camera "eye=0.5,-0.6,0.5:target=0,0,0.12"`). At 1 cm every case meets as drawn (0.1 to 14.7 % drawn dust).
+  --size 480x360 --camera "eye=0.5,-0.6,0.5:target=0,0,0.12"`). At 1 cm every case meets as drawn (0.1 to 14.7 %
+  drawn dust).
 
   ![the plaster hit at 2 cm, frame 2: the sphere squashed into a bowl](presets_plaster_hit_20mm.png)
 - **Preview against final**: the n80 within 1.5x for seven of the eight cases (the ceramic drop: 4 / 2), the broken-out
