@@ -232,7 +232,7 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
         """The scene-level requests, plus per body: plasticity (FemPlasticity), fracture (tensile_strength), loads,
         and the Material fields the FEM does not read (yield_stress, hardening_modulus, failure_plastic_strain,
         fracture_energy, critical_stretch, compressive_bonus, compressive_bonus_cap, strength_weibull_modulus,
-        debris_damping, anisotropy:
+        debris_damping, anisotropy, retardation_time:
         peridynamic settings with FEM counterparts named by :meth:`instead`)."""
         asked = super().requested_features(bodies, context)
         for b in bodies:
@@ -256,6 +256,10 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
                     asked.setdefault("material_fracture", f"body '{b.name}': Material.{field}={getattr(m, field)!r}")
             if getattr(m, "anisotropy", None) is not None:
                 asked.setdefault("anisotropy", f"body '{b.name}': Material.anisotropy")
+            if getattr(m, "retardation_time", 0.0):
+                asked.setdefault(
+                    "material_damping", f"body '{b.name}': Material.retardation_time={m.retardation_time!r}"
+                )
         if getattr(context.ground, "restitution", None) is not None:
             asked["ground_restitution"] = f"the ground plane's restitution={context.ground.restitution!r}"
         return asked
@@ -277,6 +281,8 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
             "material_fracture": "FEM fracture is set on the body: FemBody(..., tensile_strength=... [Pa], "
             "fracture_energy=... [J/m^2]); remove the Material field",
             "anisotropy": "the FEM material is isotropic; remove Material.anisotropy or use a PeridynamicBody",
+            "material_damping": "the FEM's damping is set on the body, FemBody(..., damping=... [1/s], "
+            "mass-proportional); remove Material.retardation_time or use a PeridynamicBody",
             "ground_restitution": "FEM vertices meet the ground by inelastic projection (they have no radius for the "
             "ground's penalty contact): add the ground plane without restitution, or use a PeridynamicBody",
         }.get(feature, super().instead(feature))

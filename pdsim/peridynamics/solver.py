@@ -288,7 +288,11 @@ class SolverPeridynamics(PointSolver):
         ok = s > 0
         if not ok.any():
             return math.inf
-        dt_bonds = float(np.sqrt(2.0 * m.density_host[ok] / s[ok]).min())
+        dt_particle = np.sqrt(2.0 * m.density_host[ok] / s[ok])
+        if m.retardation is not None:  # Material.retardation_time: central differences with damping ratio z
+            z = m.retardation.numpy().astype(np.float64)[ok] / dt_particle
+            dt_particle = dt_particle * (np.sqrt(1.0 + z * z) - z)
+        dt_bonds = float(dt_particle.min())
         return dt_bonds if self.contact is None else min(dt_bonds, self.contact.stable_time_step())
 
     # -- stepping ------------------------------------------------------------------------------------------------
@@ -323,8 +327,24 @@ class SolverPeridynamics(PointSolver):
         self._other_forces(alive)
 
     def _other_forces(self, alive) -> None:
-        """Debris damping, contact, the ground and the loads, added to the bonds' force density."""
+        """Internal and debris damping, contact, the ground and the loads, added to the bonds' force density."""
         m, s = self.model, self.state
+        if m.retardation is not None:  # Material.retardation_time: the bond passes' particles and ranges
+            pd_damping.bond_viscosity(
+                self._bond_ranges.launch,
+                particles=self.handoff.live if self.handoff is not None else self._all_particles,
+                family_offsets=m.family_offsets,
+                family_neighbors=m.family_neighbors,
+                bond_geom=m.bond_geom,
+                bond_wv_dev=m.bond_wv_dev,
+                bond_alive=alive,
+                live_bonds=int(m.fracture),
+                displacements=self.kin.u,
+                velocities=self.kin.v,
+                dev_b=m.dev_b,
+                retardation=m.retardation,
+                force_density=s.force_density,
+            )
         if m.debris_rate is not None:  # Material.debris_damping: all particles on the ranges, or the hand-off's list
             damped = self._all_particles if self.handoff is None else self.handoff.damped
             pd_damping.debris_damping(
@@ -583,8 +603,11 @@ class SolverPeridynamics(PointSolver):
         self._refresh_accelerations()
 
     def set_velocities(self, velocities: np.ndarray):
-        """Overwrites velocities [m/s], shape [particle_count, 3]."""
+        """Overwrites velocities [m/s], shape [particle_count, 3]; recomputes forces and accelerations when the
+        bonds' forces read the velocities (internal or debris damping)."""
         self.kin.set_velocities(self._particle_vectors("velocities", velocities))
+        if self.model.retardation is not None or self.model.debris_rate is not None:
+            self._refresh_accelerations()
 
     def dilatation(self) -> np.ndarray:
         """theta per particle at the current positions [-]."""
