@@ -190,3 +190,20 @@ def test_rigid_fragments_are_not_damped():
     s.set_velocities(0.1 * (x - x.mean(axis=0)))
     assert before > 1.0e3
     assert np.abs(s.force_density()).max() == 0.0
+
+
+def test_a_ringing_fragment_calms_down_and_is_handed_off():
+    """The stretched half of tests/test_rigid_handoff.py, let go, rings above the hand-off's threshold for 10 frames
+    without damping (that test); with a retardation time of 1e-6 s (damping ratio 0.06 at its 19 kHz first mode, z =
+    0.18) its vibration falls below the threshold and it is handed off by frame 8."""
+    from test_rigid_handoff import _stretched_half
+
+    s, half = _stretched_half(tau=1.0e-6)
+    dt = 0.5 * s.stable_time_step()
+    handed = None
+    for frame in range(1, 11):
+        s.simulate(dt, 47)
+        s.handoff.update()
+        if handed is None and s.handoff.rigid_particles()[half].all():
+            handed = frame
+    assert handed is not None and handed <= 8

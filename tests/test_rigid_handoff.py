@@ -220,3 +220,43 @@ def test_debris_damping_still_acts_on_rigid_particles_above_the_threshold():
     assert np.all(got[~damped] == 0.0)
     scale = np.abs(expected).max()
     assert scale > 0.0 and np.abs(got - expected).max() < 1e-4 * scale
+
+
+def _stretched_half(tau=0.0, frames=2):
+    """The notched block with the half x > 0 stretched by 2e-3 (0.6e-3 across) and both halves at rest; a material
+    with retardation time ``tau`` [s]; the hand-off at strain 1e-4 over ``frames`` frames."""
+    material = pdsim.Material(
+        density=2500.0, youngs_modulus=5.0e9, poisson_ratio=0.25, critical_stretch=2.0e-3, retardation_time=tau
+    )
+    body = _notched_block((0.0, 0.0, 0.0), pdsim.RigidHandoff(strain=1.0e-4, frames=frames))
+    body.material = material
+    s = SolverPeridynamics([body], threads=1)
+    x = s.positions()
+    half = x[:, 0] > 0.0
+    u = np.zeros_like(x)
+    u[half] = 2.0e-3 * (x[half] - x[half].mean(axis=0)) * np.array([1.0, 0.3, 0.3])
+    s.set_displacements(u)
+    return s, half
+
+
+def test_a_strained_fragment_at_rest_is_quiet_and_a_ringing_one_is_not():
+    """The test reads the motion (K_int), not the strain: at rest, the stretched half (elastic energy 0.91 J, an
+    equivalent strain of 2.2e-3 had the test counted it) is handed off at once with the other, keeping its shape, and
+    its elastic energy goes to ``released``. Let go, it rings (first mode about 19 kHz, frame ends every 127 us): its
+    eps stays above 5e-4 at every frame end for 10 frames, and it is never handed off, where the half at rest is after
+    the 2 frames asked."""
+    s, half = _stretched_half(frames=1)
+    e0 = s.strain_energy()
+    x0 = s.positions()
+    assert s.handoff.update() == 2 and s.handoff.rigid_particles().all()
+    assert abs(s.handoff.released["elastic"] - e0) < 1e-6 * e0 and e0 > 0.5
+    np.testing.assert_array_equal(s.positions(), x0)
+    s, half = _stretched_half(frames=2)
+    dt = 0.5 * s.stable_time_step()
+    for frame in range(1, 11):
+        s.simulate(dt, 47)
+        eps = s.handoff.fragment_strains()["eps"]
+        handed = s.handoff.update()
+        assert not s.handoff.rigid_particles()[half].any()
+        assert eps.max() > 5.0e-4
+        assert s.handoff.rigid_particles()[~half].all() == (frame >= 2) and handed == (frame == 2)

@@ -9,6 +9,7 @@ are all free (docs/fracture.md, "Rigid hand-off"):
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 
@@ -20,8 +21,15 @@ import preview_final  # tools/
 PREVIEW = {"frames": 48}
 
 
-def build_scene(frames: int = 48, preset: str = "glass", spacing: float = preview_final.PREVIEW_SPACING) -> pdsim.Scene:
-    """The drop: the preset ``preset`` (pdsim.presets) at particle ``spacing`` [m], ``frames`` frames at 24 fps."""
-    return preview_final.build_case(
-        "drop", pdsim.presets.preset(preset), spacing, frames=frames, duration=frames / 24.0
-    )
+def build_scene(
+    frames: int = 48,
+    preset: str = "glass",
+    spacing: float = preview_final.PREVIEW_SPACING,
+    retardation_time: float | None = None,
+) -> pdsim.Scene:
+    """The drop: the preset ``preset`` (pdsim.presets) at particle ``spacing`` [m], ``frames`` frames at 24 fps;
+    ``retardation_time`` [s]: the material's internal damping over the preset's (Material.retardation_time)."""
+    material = pdsim.presets.preset(preset)
+    if retardation_time is not None:
+        material = dataclasses.replace(material, retardation_time=retardation_time)
+    return preview_final.build_case("drop", material, spacing, frames=frames, duration=frames / 24.0)

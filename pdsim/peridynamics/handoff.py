@@ -1,17 +1,21 @@
 """Rigid hand-off: a fragment of a breakable peridynamic body that has stopped deforming becomes a rigid body.
 
 A fragment (a connected set of particles over live bonds, pdsim/fragment_labels.py) is handed off when, at the end of
-``frames`` consecutive frames, its equivalent strain
+``frames`` consecutive frames, the equivalent strain of its vibration
 
-    eps = sqrt(2 (K_int + E_el) / (M c_p^2))
+    eps = sqrt(4 K_int / (M c_p^2))
 
 stays below ``strain`` [-]. K_int [J] is the kinetic energy of its particles not in rigid motion (K - 1/2 M v^2 -
-1/2 w . L, with v the velocity of the centre of mass, L the angular momentum about it and w = I^+ L), E_el [J] its
-elastic energy, M [kg] its mass and c_p [m/s] its material's P-wave speed: a plane wave of strain eps carries a
-kinetic and an elastic energy density of 1/2 rho c_p^2 eps^2 each, so eps is the root-mean-square strain of the
-fragment's vibration. Only fragments of a body with the setting on, in a body that has broken into more than one
-fragment, are handed off: fragments of free particles only (no boundary condition) as rigid fragments, and (with
-``RigidHandoff(fixed=True)``; off by default) fragments held by fixed boundary conditions as static fragments.
+1/2 w . L, with v the velocity of the centre of mass, L the angular momentum about it and w = I^+ L), M [kg] its
+mass and c_p [m/s] its material's P-wave speed: a plane wave of strain eps carries a kinetic and an elastic energy
+density of 1/2 rho c_p^2 eps^2 each, so a vibration of root-mean-square strain eps has, over a period, the mean
+kinetic energy 1/4 M c_p^2 eps^2. The test reads the motion only: a fragment at rest that holds a static strain (its
+own weight on a few contact points, a crack jammed shut inside it) is quiet, and one that vibrates shows it at every
+frame end but at the turning points, which ``frames`` consecutive frames do not all meet. Its elastic energy E_el
+[J] is measured for the books (``released``). Only fragments of a body with the setting on, in a body that has
+broken into more than one fragment, are handed off: fragments of free particles only (no boundary condition) as
+rigid fragments, and (with ``RigidHandoff(fixed=True)``; off by default) fragments held by fixed boundary conditions
+as static fragments.
 
 A static fragment is one whose constrained particles are all held by ``fix`` on all three axes, from a start already
 passed and never released, and none of whose particles carries a load or a velocity kick still to come (a prescribed
@@ -42,10 +46,10 @@ From the hand-off on (kernels/peridynamics/handoff.py):
   motion, with its velocity and angular velocity (``RigidPieces``; docs/cache_format.md); a static fragment's
   transform stays at its centre of mass at the hand-off, unrotated, with zero velocities.
 
-At the hand-off a free fragment keeps its linear and angular momentum exactly; the energy K_int + E_el (at most
-1/2 M c_p^2 strain^2) is dropped (``released``: ``internal_kinetic``, which holds a static fragment's whole K, and
-``elastic``). The fragment no longer breaks further, and its internal vibration is
-gone (docs/fracture.md).
+At the hand-off a free fragment keeps its linear and angular momentum exactly; the energy K_int + E_el is dropped
+(``released``: ``internal_kinetic``, at most 1/4 M c_p^2 strain^2, which holds a static fragment's whole K, and
+``elastic``, the strain it holds: its shape at the hand-off is kept). The fragment no longer breaks further, and its
+internal vibration is gone (docs/fracture.md).
 """
 
 from __future__ import annotations
@@ -73,8 +77,8 @@ class RigidHandoff:
     """The rigid hand-off setting of a peridynamic body (``PeridynamicBody(rigid_handoff=...)``).
 
     Args:
-        strain: threshold of the equivalent strain eps (module docstring) [-], > 0; None: DEFAULT_STRAIN_FRACTION
-            times the material's critical stretch at the body's horizon.
+        strain: threshold of the equivalent strain of the vibration eps (module docstring) [-], > 0; None:
+            DEFAULT_STRAIN_FRACTION times the material's critical stretch at the body's horizon.
         frames: consecutive frames a fragment must stay below it, integer >= 1.
         fixed: also hand off the fragments held by fixed boundary conditions, as static fragments (module
             docstring); False (default): only fragments of free particles. Off by default because a static fragment
@@ -352,7 +356,7 @@ class FragmentHandoff:
         anchored = np.zeros(len(ids), dtype=bool)
         np.logical_or.at(anchored, inverse, anchor[idx])
         props["counted_kinetic"] = np.where(anchored, props["kinetic"], props["internal_kinetic"])  # the K in eps
-        eps = np.sqrt(2.0 * np.maximum(props["counted_kinetic"] + e_el, 0.0) / (props["mass"] * c2))
+        eps = np.sqrt(4.0 * np.maximum(props["counted_kinetic"], 0.0) / (props["mass"] * c2))
         return idx, inverse, props, e_el, eps, limit, x
 
     def fragment_strains(self) -> dict:
@@ -536,7 +540,7 @@ def rigid_properties(x, v, mass, group, count: int) -> dict:
     m_tot = np.bincount(group, weights=mass, minlength=count)
 
     def gsum(values):
-        values = values.reshape(len(group), -1)
+        values = values.reshape(len(group), int(np.prod(values.shape[1:])))  # also for no points
         return np.stack([np.bincount(group, weights=values[:, i], minlength=count) for i in range(values.shape[1])], 1)
 
     centre = gsum(mass[:, None] * x) / m_tot[:, None]
