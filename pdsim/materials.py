@@ -102,7 +102,7 @@ class Material:
             that a brittle crack sheds without touching intact material (damage 0). 0 (default): off. The
             step must keep c dt < 1. Needs a material that breaks.
         retardation_time: tau [s] >= 0 of the material's internal damping (a Kelvin-Voigt solid: the viscous stress is
-            tau times the elastic stress of the strain rate; peridynamic bodies, kernels/peridynamics/damping.py).
+            tau times the elastic stress of the strain rate; peridynamic bodies, kernels/peridynamics/step.py).
             A vibration of frequency f [Hz] has the damping ratio pi f tau, so its amplitude falls tenfold in
             ln(10) / (2 pi^2 f^2 tau) seconds: a piece's high notes die first, and its rigid motion is never damped.
             It calms pieces that would otherwise ring for the whole shot (a freed piece then comes to rest and can

@@ -1,5 +1,5 @@
 """The internal (Kelvin-Voigt) damping of peridynamic bodies, Material.retardation_time
-(kernels/peridynamics/damping.py).
+(a term of the force pass, kernels/peridynamics/step.py and pairs.py).
 
 Covered: a free bar's first longitudinal mode decays with the damping ratio omega tau / 2 (Poisson's ratio 1/4,
 where the damping is stiffness-proportional), near the origin and 1 km away; linear and angular momentum are kept

@@ -307,7 +307,7 @@ def stripped_check(n: int, device: str, launches: int = 20, rounds: int = 8) -> 
             bond_ne=ne, bond_wv_dil=m.bond_wv_dil, bond_wv_dev=m.bond_wv_dev, bp=bp, bond_alive=u8,
             bond_critical_stretch=f1, compressive_bonus=f1, compressive_stretch_floor=f1, stretch_min=f1, eqps=f1,
             failure_eqps=f1, plastic_bond_count=0, bond_plastic=f1, bond_plastic_reverse=f1, live_particles=i1,
-            force_density=force)  # fmt: skip
+            velocities=u, damping_b=f1, force_density=force)  # fmt: skip
 
     def stripped(o):
         theta, bp, ne, force = o

@@ -515,7 +515,7 @@ def main(argv=None) -> None:
             s_off, s_on = last_third(off["steps"]), last_third(on["steps"])
             f_off, f_on = last_third(off["frames"]), last_third(on["frames"])
             frames = on["report"].frames_written - 1
-            stem = name if args.page is None else f"{name}_{os.path.splitext(args.page)[0]}"
+            stem = name if args.page is None else f"{name}_{os.path.splitext(os.path.basename(args.page))[0]}"
             png = stills(stem, caches, frames, folder)
             diff = pixel_difference(*(os.path.join(folder, f"{stem}_{m}.png") for m in ("off", "on")))
             rows.append(

@@ -1,18 +1,5 @@
-"""Damping of peridynamic bodies: the material's internal (Kelvin-Voigt) damping (Material.retardation_time) and
-the debris damping of brittle bodies (Material.debris_damping).
-
-Internal damping. Each live bond carries, beside its elastic force, a viscous force on its extension rate
-e_dot = (v_j - v_k) . n (n the deformed bond's direction), with the stiffness of the elastic model's bond term:
-
-    f_k += sum_j 2 w V beta G^dev (tau_k b_k + tau_j b_j) e_dot n
-
-(kernels/peridynamics/bonds.py for b_k and the weights; tau the retardation time [s]). This is tau times the elastic
-force's b term evaluated on the velocities: where the elastic model has no c0 term (c0 = kappa / 2 - 5 mu / 6 = 0
-at Poisson's ratio 1/4) the damping is exactly stiffness-proportional, a linear vibration of angular frequency
-omega then has the damping ratio omega tau / 2, and the continuum limit is a Kelvin-Voigt solid whose viscous stress
-is tau times the elastic stress of the strain rate. At another Poisson's ratio the shear viscosity is tau mu and the
-bulk viscosity 5 tau mu / 3 (tau kappa at 1/4). The force is central and equal and opposite on the two ends of a
-bond, so it conserves linear and angular momentum exactly, and it vanishes under any rigid motion (e_dot = 0).
+"""Debris damping of brittle peridynamic bodies (Material.debris_damping; the material's internal damping,
+Material.retardation_time, is a term of the force pass: kernels/peridynamics/step.py).
 
 A brittle crack sheds particles that lost most of their bonds; released from a strained neighbourhood they carry a
 share of its elastic energy as high-frequency motion that no coarse discretisation resolves (chips that fly off
@@ -33,53 +20,6 @@ effect). Stability of the explicit step needs c dt < 1.
 import warp as wp
 
 from ..launch import range_inputs
-
-
-@wp.kernel
-def add_bond_viscosity(
-    first: int,
-    particles: wp.array(dtype=wp.int32),
-    family_offsets: wp.array(dtype=wp.int32),
-    family_neighbors: wp.array(dtype=wp.int32),
-    bond_geom: wp.array(dtype=wp.vec4),
-    bond_wv_dev: wp.array(dtype=float),
-    bond_alive: wp.array(dtype=wp.uint8),
-    live_bonds: int,
-    displacements: wp.array(dtype=wp.vec3),
-    velocities: wp.array(dtype=wp.vec3),
-    dev_b: wp.array(dtype=float),
-    retardation: wp.array(dtype=float),
-    force_density: wp.array(dtype=wp.vec3),
-):
-    """Adds the internal damping force density [N/m^3] (module docstring) of each listed particle k =
-    particles[first + tid] over its live bonds (every bond when ``live_bonds`` is 0: a body that cannot break), a
-    gather that writes only k's row. A particle of retardation time 0 is skipped (a body's particles share it)."""
-    k = particles[first + wp.tid()]
-    tk = retardation[k]
-    if tk <= 0.0:
-        return
-    tbk = tk * dev_b[k]
-    uk = displacements[k]
-    vk = velocities[k]
-    f = wp.vec3(0.0)
-    for q in range(family_offsets[k], family_offsets[k + 1]):
-        if live_bonds != 0:
-            if bond_alive[q] == wp.uint8(0):
-                continue
-        j = family_neighbors[q]
-        g = bond_geom[q]
-        eta = wp.vec3(g[0], g[1], g[2]) * g[3] + (displacements[j] - uk)
-        n = wp.normalize(eta)
-        rate = wp.dot(velocities[j] - vk, n)
-        f += (2.0 * bond_wv_dev[q] * (tbk + retardation[j] * dev_b[j]) * rate) * n
-    force_density[k] = force_density[k] + f
-
-
-def bond_viscosity(launch, **arguments):
-    """Adds the internal damping to force_density [N/m^3] of the particles of the list ``particles`` through
-    ``launch(kernel, inputs)`` over the list's positions (a range launch, as :func:`debris_damping`)
-    (add_bond_viscosity)."""
-    launch(add_bond_viscosity, range_inputs(add_bond_viscosity, arguments))
 
 
 # add_debris_damping repeats compute_damage's sums of live and total bond weight (kernels/peridynamics/step.py) on

@@ -39,14 +39,18 @@ from .bonds import deformed_bond, deviatoric_norm_term, returned_plastic_extensi
 _cache = {}
 
 
-def make_pair_kernels(fracture: bool, handoff: bool = False, plastic: bool = False, ductile: bool = False):
+def make_pair_kernels(
+    fracture: bool, handoff: bool = False, plastic: bool = False, ductile: bool = False, damped: bool = False
+):
     """Pair kernels (dilatation, its sum, force, its sum; with ``plastic`` also the return mapping's norm pass and
     its sum, and with ``ductile`` the ductile breaking test) for the feature set, built once and cached. With
     ``handoff`` thread t of a launch computes particle live_particles[first + t] (as the directed kernels), else
     particle first + t; ``pair_slot`` is indexed like the particles of the launch (list entry or particle). The
     plastic variants have no hand-off form (a yielding particle's plastic strain sums the bonds to rigid particles,
     which the live list leaves out)."""
-    key = (bool(fracture), bool(handoff), bool(plastic), bool(ductile) and bool(plastic) and bool(fracture))
+    key = (
+        bool(fracture), bool(handoff), bool(plastic), bool(ductile) and bool(plastic) and bool(fracture), bool(damped)
+    )  # fmt: skip
     if key in _cache:
         return _cache[key]
     if key[1] and key[2]:
@@ -54,6 +58,7 @@ def make_pair_kernels(fracture: bool, handoff: bool = False, plastic: bool = Fal
     FRACTURE = key[0]
     HANDOFF = key[1]
     PLASTIC = key[2]  # key[3], ductile failure: the launches add the ductile_break pass (it has no other variant)
+    DAMPED = key[4]  # the internal damping in the force pass (kernels/peridynamics/step.py)
 
     @wp.kernel(module="unique")
     def pair_dilatation(
@@ -301,15 +306,18 @@ def make_pair_kernels(fracture: bool, handoff: bool = False, plastic: bool = Fal
         plastic_ratio: wp.array(dtype=float),
         plastic_sum: wp.array(dtype=wp.vec2),
         theta_buffer: wp.array(dtype=float),
+        velocities: wp.array(dtype=wp.vec3),
+        damping_b: wp.array(dtype=float),
     ):
-        """For particle k: each live pair's force terms, k's 2 (w^dil (P_k + P_j) + w^dev (b_k + b_j) e) n into
-        force_density[k] and j's (with the weights of j -> k, direction -n) into j's slot of the range's
-        force_buffer [N/m^3]; then, with fracture, the breaking test of the directed force kernel, clearing both
-        directed flags of a broken pair (it takes effect from the next pass). With plasticity the return mapping of
-        both ends comes first (each end whose plastic_ratio r >= 0 yields: e^p <- returned_plastic_extension, on
-        live pairs; the pair's (e^p_kj, e^p_jk) in pair_plastic), the deviatoric term is b_k (e - e^p_kj) +
-        b_j (e - e^p_jk), the stretch test compares e - (e^p_kj + e^p_jk) / 2, and a yielding end's sum
-        w V beta (e^p)^2 over all its pairs, live or broken, goes into plastic_sum[k][0] (k) or theta_buffer (j)."""
+        """For particle k: each live pair's force terms (with ``damped`` the deviatoric term's internal damping (tau_k
+        b_k + tau_j b_j) e_dot, ``damping_b`` = tau b per particle, kernels/peridynamics/step.py), k's 2 (w^dil (P_k +
+        P_j) + w^dev (b_k + b_j) e) n into force_density[k] and j's (with the weights of j -> k, direction -n) into j's
+        slot of the range's force_buffer [N/m^3]; then, with fracture, the breaking test of the directed force kernel,
+        clearing both directed flags of a broken pair (it takes effect from the next pass). With plasticity the return
+        mapping of both ends comes first (each end whose plastic_ratio r >= 0 yields: e^p <- returned_plastic_extension,
+        on live pairs; the pair's (e^p_kj, e^p_jk) in pair_plastic), the deviatoric term is b_k (e - e^p_kj) + b_j (e -
+        e^p_jk), the stretch test compares e - (e^p_kj + e^p_jk) / 2, and a yielding end's sum w V beta (e^p)^2 over all
+        its pairs, live or broken, goes into plastic_sum[k][0] (k) or theta_buffer (j)."""
         t = first + wp.tid()
         k = t
         if wp.static(HANDOFF):
@@ -334,6 +342,11 @@ def make_pair_kernels(fracture: bool, handoff: bool = False, plastic: bool = Fal
                 rk = plastic_ratio[k]
                 th3k = plastic_th3[k]
         ep2 = float(0.0)
+        vk = wp.vec3(0.0)
+        tbk = float(0.0)
+        if wp.static(DAMPED):
+            vk = velocities[k]
+            tbk = damping_b[k]
         for p in range(pair_offsets[k], pair_offsets[k + 1]):
             q = int(0)
             live = int(1)
@@ -378,6 +391,8 @@ def make_pair_kernels(fracture: bool, handoff: bool = False, plastic: bool = Fal
             dil = bpk[1] + bpj[1]
             w = pair_weights[p]
             n = wp.vec3(c[0], c[1], c[2])
+            if wp.static(DAMPED):
+                dev = dev + (tbk + damping_b[j]) * wp.dot(velocities[j] - vk, n)
             f += (2.0 * (w[0] * dil + w[2] * dev)) * n
             force_buffer[shift + j] -= (2.0 * (w[1] * dil + w[3] * dev)) * n
             if wp.static(FRACTURE):

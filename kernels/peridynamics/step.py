@@ -21,6 +21,15 @@ Formulas (kernels/peridynamics/bonds.py gives the notation and the elastic model
   The return mapping runs in the dilatation kernel, right after a yielding particle's family sums (its bonds'
   (n, e) are then still in cache, and the volumetric sums of theta_p come with the dilatation's loop); the CPU's pair
   form runs the same arithmetic in pair passes (kernels/peridynamics/pairs.py).
+- Internal damping (Material.retardation_time tau, a Kelvin-Voigt solid): each live bond's deviatoric term also
+  carries (tau_k b_k + tau_j b_j) e_dot, e_dot = (v_j - v_k) . n its extension rate (``damping_b`` = tau_k b_k per
+  particle), so f_k += sum_j 2 w V beta G^dev (tau_k b_k + tau_j b_j) e_dot n: tau times the b term of the elastic
+  force evaluated on the velocities. Where the elastic model has no c0 term (Poisson's ratio 1/4) the damping is
+  exactly stiffness-proportional: a linear vibration of angular frequency omega has the damping ratio omega tau / 2,
+  and the continuum limit is a solid whose viscous stress is tau times the elastic stress of the strain rate; at
+  another Poisson's ratio the shear viscosity is tau mu and the bulk viscosity 5 tau mu / 3 (tau kappa at 1/4). The
+  force is central and equal and opposite on a bond's two ends (momentum and angular momentum are kept) and vanishes
+  under any rigid motion. It is not part of the breaking test (the stretch is).
 - Fracture: a live bond breaks for good when its stretch (its elastic stretch, s - (e^p_kj + e^p_jk) / (2 L), for
   a yielding material) exceeds s_c,kj - alpha min(s_min,k, s_min,j) (Silling-Askari compressive bonus, s_min the
   particle's most compressive live stretch, <= 0, from this step's dilatation pass; alpha is
@@ -45,7 +54,7 @@ from .bonds import deformed_bond, deviatoric_norm_term, returned_plastic_extensi
 _cache = {}
 
 
-def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
+def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False, damped: bool = False):
     """Kernels (dilatation with the fused plastic update, force, energy) for the given feature set, built once and
     cached. With ``handoff`` the dilatation and force passes run over a compacted list of particles,
     ``live_particles`` (ascending indices): thread t of a launch computes particle live_particles[first + t], so the
@@ -55,13 +64,16 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
     the kernels never read and thread t computes particle first + t. Every kernel takes the first entry of its launch
     (``first``): a launch covers the particles (or list entries) first .. first + dim - 1, and each writes only its
     particles' rows and their bonds' rows (bonds are stored per particle family; the plastic mirror is the one
-    exception, module docstring), so launches over disjoint ranges of one pass can run at the same time."""
-    key = (bool(fracture), bool(plastic), bool(handoff))
+    exception, module docstring), so launches over disjoint ranges of one pass can run at the same time. With
+    ``damped`` the force pass adds the internal damping (module docstring; ``velocities`` and ``damping_b``, else
+    placeholders it never reads)."""
+    key = (bool(fracture), bool(plastic), bool(handoff), bool(damped))
     if key in _cache:
         return _cache[key]
     FRACTURE = key[0]
     PLASTIC = key[1]
     HANDOFF = key[2]
+    DAMPED = key[3]
 
     # tools/feature_cost.py holds a deliberate stripped copy of the elastic dilatation and force below (it measures
     # what the feature branches cost an elastic scene): keep it in step (tests/test_bench_tools.py checks the bits).
@@ -205,12 +217,15 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
         bond_plastic: wp.array(dtype=float),
         bond_plastic_reverse: wp.array(dtype=float),
         live_particles: wp.array(dtype=wp.int32),
+        velocities: wp.array(dtype=wp.vec3),
+        damping_b: wp.array(dtype=float),
         force_density: wp.array(dtype=wp.vec3),
     ):
-        """Force density [N/m^3] at particle k = first + tid over live bonds, with plastic extensions where the
-        material yields; then, with fracture, the breaking test of each live bond (it takes effect from the next
-        pass). The test reads only quantities both directed copies of a bond share, so both break in the same step.
-        It compares extensions, e - (e^p_kj + e^p_jk) / 2 > s_c L, rather than stretches (no division per bond)."""
+        """Force density [N/m^3] at particle k = first + tid over live bonds, with plastic extensions where the material
+        yields and, where compiled in, the internal damping; then, with fracture, the breaking test of each live bond
+        (it takes effect from the next pass). The test reads only quantities both directed copies of a bond share, so
+        both break in the same step. It compares extensions, e - (e^p_kj + e^p_jk) / 2 > s_c L, rather than stretches
+        (no division per bond)."""
         k = first + wp.tid()
         if wp.static(HANDOFF):
             k = live_particles[k]
@@ -221,6 +236,11 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
         floor_k = float(0.0)
         eqps_k = float(0.0)
         fail_k = float(0.0)
+        vk = wp.vec3(0.0)
+        tbk = float(0.0)
+        if wp.static(DAMPED):
+            vk = velocities[k]
+            tbk = damping_b[k]
         if wp.static(FRACTURE):
             smin_k = stretch_min[k]
             bonus_k = compressive_bonus[k]
@@ -243,8 +263,11 @@ def make_step_kernels(fracture: bool, plastic: bool, handoff: bool = False):
                     ep_j = bond_plastic_reverse[q]  # e^p_jk, kept beside bond q (no gather)
                     dev = dev - bpk[0] * ep_k - bpj[0] * ep_j
                     ep_sum = ep_k + ep_j
+            n = wp.vec3(c[0], c[1], c[2])
+            if wp.static(DAMPED):
+                dev = dev + (tbk + damping_b[j]) * wp.dot(velocities[j] - vk, n)
             s = bond_wv_dil[q] * (bpk[1] + bpj[1]) + bond_wv_dev[q] * dev
-            f += (2.0 * s) * wp.vec3(c[0], c[1], c[2])
+            f += (2.0 * s) * n
             if wp.static(FRACTURE):
                 broke = int(0)
                 if wp.static(PLASTIC):

@@ -53,7 +53,9 @@ class PairPasses:
         self.model = model
         self.plastic = bool(model.plastic)
         self.ductile = bool(ductile) and self.plastic and fracture
-        self.kernels = kp.make_pair_kernels(fracture, handoff, self.plastic, self.ductile)
+        self.kernels = kp.make_pair_kernels(
+            fracture, handoff, self.plastic, self.ductile, damped=model.damping_b is not None
+        )
         self.fracture = fracture
         n = model.particle_count
         offsets = model.family_offsets.numpy()[: n + 1]
@@ -150,11 +152,12 @@ class PairPasses:
         self.launcher = ParticleRanges(cost, len(spans) - 1, d, bounds=spans)
 
     # -- the passes --------------------------------------------------------------------------------------------------
-    def dilatation_and_forces(self, s, m, displacements, alive, live, f1) -> None:
-        """One step's dilatation (theta, bp, the most compressive stretch), with plasticity the return mapping
-        (the plastic extensions, the equivalent plastic strain), and force density (with the breaking tests) into
-        the state ``s`` of the model ``m`` at ``displacements``; ``alive`` the live flags (or a placeholder),
-        ``live`` the hand-off's live list (or a placeholder), ``f1`` a float placeholder."""
+    def dilatation_and_forces(self, s, m, displacements, velocities, alive, live, f1) -> None:
+        """One step's dilatation (theta, bp, the most compressive stretch), with plasticity the return mapping (the
+        plastic extensions, the equivalent plastic strain), and force density (with the breaking tests and the
+        internal damping, which reads ``velocities``) into the state ``s`` of the model ``m`` at ``displacements``;
+        ``alive`` the live flags (or a placeholder), ``live`` the hand-off's live list (or a placeholder), ``f1`` a
+        float placeholder."""
         launch, ks = self.launcher.launch, self.kernels
         ranges = {"range_lo": self.range_lo, "buffer_base": self.buffer_base}
         sums = {"range_count": self.range_count, "range_hi": self.range_hi, **ranges}
@@ -266,6 +269,8 @@ class PairPasses:
             plastic_th3=th3,
             plastic_ratio=ratio,
             theta_buffer=self.theta_buffer,
+            velocities=velocities,
+            damping_b=m.damping_b if m.damping_b is not None else f1,
             **common,
             **ranges,
         )

@@ -163,7 +163,7 @@ class SolverPeridynamics(PointSolver):
             mirror = max(m.plastic_bond_count, 1) if self._pairs is None else 1
             self.state.bond_plastic_reverse = wp.zeros(mirror, dtype=float, device=d)
             self.state.eqps = wp.zeros(n, dtype=float, device=d)
-        self._kernels = pd_step.make_step_kernels(m.fracture, m.plastic, handoff)
+        self._kernels = pd_step.make_step_kernels(m.fracture, m.plastic, handoff, m.damping_b is not None)
         self._offsets_host = m.family_offsets.numpy()[: n + 1].astype(np.int64)
         self._ranges = None  # ranges over every particle (energy, damage); _bond_ranges: the bond passes'
         self._all_particles = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32, device=d)
@@ -321,30 +321,14 @@ class SolverPeridynamics(PointSolver):
         alive = self._feature_arrays()[0]
         live = self.handoff.live if self.handoff is not None else self._dummy_i
         if self._pairs is not None:
-            self._pairs.dilatation_and_forces(s, m, self.kin.u, alive, live, self._dummy_f)
+            self._pairs.dilatation_and_forces(s, m, self.kin.u, self.kin.v, alive, live, self._dummy_f)
         else:
             _directed_passes(self, alive, live)
         self._other_forces(alive)
 
     def _other_forces(self, alive) -> None:
-        """Internal and debris damping, contact, the ground and the loads, added to the bonds' force density."""
+        """Debris damping, contact, the ground and the loads, added to the bonds' force density."""
         m, s = self.model, self.state
-        if m.retardation is not None:  # Material.retardation_time: the bond passes' particles and ranges
-            pd_damping.bond_viscosity(
-                self._bond_ranges.launch,
-                particles=self.handoff.live if self.handoff is not None else self._all_particles,
-                family_offsets=m.family_offsets,
-                family_neighbors=m.family_neighbors,
-                bond_geom=m.bond_geom,
-                bond_wv_dev=m.bond_wv_dev,
-                bond_alive=alive,
-                live_bonds=int(m.fracture),
-                displacements=self.kin.u,
-                velocities=self.kin.v,
-                dev_b=m.dev_b,
-                retardation=m.retardation,
-                force_density=s.force_density,
-            )
         if m.debris_rate is not None:  # Material.debris_damping: all particles on the ranges, or the hand-off's list
             damped = self._all_particles if self.handoff is None else self.handoff.damped
             pd_damping.debris_damping(
@@ -761,6 +745,8 @@ def _directed_passes(solver: SolverPeridynamics, alive, live) -> None:
         bond_plastic=plastic,
         bond_plastic_reverse=s.bond_plastic_reverse if m.plastic else f1,
         live_particles=live,
+        velocities=solver.kin.v,  # read only with the internal damping (Material.retardation_time)
+        damping_b=m.damping_b if m.damping_b is not None else f1,
         force_density=s.force_density,
     )
 
