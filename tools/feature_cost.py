@@ -11,7 +11,8 @@ built once elastic only (the baseline) and once per feature with that one featur
 - anisotropy: stiffness ratio 0.8 about z (the bond weights change at build time; fracture off);
 - contact: particle contact on (one unbreakable body: only the surface particles take part);
 - colliders: a sphere projectile pressing on the top face; ground plane: a plane under the block;
-- loads: a traction on the +x face; boundary conditions: the -x face held; gravity; damping;
+- loads: a traction on the +x face; boundary conditions: the -x face held; gravity; damping (the body's
+  mass-proportional drag); internal damping (Material.retardation_time INTERNAL_DAMPING, a term of the force pass);
 - everything above together (fracture without breaking);
 - watchdog: not a material feature: the divergence watchdog Scene.run attaches (pdsim.watchdog.Watchdog, a check
   every 16 steps: Scene.run's default ``check_interval``), on the elastic block.
@@ -150,6 +151,8 @@ def build(n: int, feature: str, device: str, steps: int):
         kw["critical_stretch"] = 1.0
     if feature == "fracture_breaking":
         kw["critical_stretch"] = lp.FRACTURE_CRITICAL_STRETCH
+    if feature == "internal_damping" or every:
+        kw["retardation_time"] = INTERNAL_DAMPING
     if feature == "anisotropy" or every:
         kw["anisotropy"] = pdsim.Anisotropy(axis=(0.0, 0.0, 1.0), stiffness_ratio=0.8, strength_ratio=1.0)
     material = pdsim.Material(**kw)
@@ -187,6 +190,8 @@ def build(n: int, feature: str, device: str, steps: int):
 
 
 WATCHDOG_INTERVAL = 16
+INTERNAL_DAMPING = 2.0e-8
+"""Material.retardation_time of the internal-damping feature [s]: about 2 % of the block's undamped stable step."""
 """Steps between the watchdog's checks (Scene.run's default check_interval)."""
 
 FEATURES = (
@@ -202,6 +207,7 @@ FEATURES = (
     "boundary_conditions",
     "gravity",
     "damping",
+    "internal_damping",
     "all",
 )
 
