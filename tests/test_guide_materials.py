@@ -77,10 +77,12 @@ def test_brittle_presets_break_clean_at_their_breaking_strain(name):
 
     - 2 v / c = 0.8 s0: no bond breaks within two wave transits (the breaking strain is above 0.8 s0).
     - 2 v / c = 1.5 s0: nothing breaks while a single wave (0.75 s0) runs (before 0.9 transits), then the bar breaks
-      in two halves (each half of the particles, +-1 particle layer) within 4 transits, with the damage (> 0.2) only
+      in two halves (each half of the particles, +-1 particle layer) within 4.5 transits, with the damage (> 0.2) only
       in the two particle layers on each side of the middle and no plasticity anywhere (the model has none: brittle).
     So the breaking strain lies between 0.8 s0 and 1.5 s0 (-20 % / +50 %). Measured: glass and concrete split
-    160/160 at about 3 transits; 0.3 s and 2.5 s (glass, its step is smaller) on a quiet machine. The plain material
+    160/160 at about 3.5 transits without internal damping; the presets' (Material.retardation_time 5e-6 s) resists
+    the opening crack and they split by 4 (glass) and 4.5 transits (concrete); 0.3 s and 2.5 s (glass, its step is
+    smaller) on a quiet machine. The plain material
     (pattern=False): the break pattern's strength field scatters the breaking strain on purpose."""
     material = presets.preset(name, pattern=False)
     s_c = material.critical_stretch_for(presets.REFERENCE_HORIZON_FACTOR * H)
@@ -96,7 +98,7 @@ def test_brittle_presets_break_clean_at_their_breaking_strain(name):
     assert "plasticity" not in solver.features and "fracture" in solver.features
     solver.simulate(dt, int(0.9 * transit / dt))
     assert solver.damage().max() == 0.0
-    solver.simulate(dt, round(3.1 * transit / dt))
+    solver.simulate(dt, round(3.6 * transit / dt))
     pieces = _pieces(solver)
     n = body.particle_count
     layer = n // round(LENGTH / H)
@@ -171,9 +173,10 @@ def test_wood_splits_along_the_grain_at_a_fraction_of_the_load_across_it():
 
 def test_preset_step_costs_and_spacing_for_strength():
     """The numbers the guide's table quotes. At h = 1 cm (a block of 8 x 8 x 8 particles) the automatic step of each
-    animation preset fits a 1/24 s frame in 250 to 420 substeps (measured: glass 408, porcelain 417, ceramic 335,
-    stone 324, concrete 278, plaster 260, wood 297, clay 256, steel 387, aluminium 388, rubber 400; the brittle presets'
-    jittered particles shorten the step a little), the real values need more than 25,000 (measured 25,934 to 41,602)
+    animation preset fits a 1/24 s frame in 250 to 440 substeps (measured: glass 422, porcelain 431, ceramic 345,
+    stone 333, concrete 285, plaster 266, wood 297, clay 256, steel 387, aluminium 388, rubber 400; the brittle presets'
+    jittered particles and internal damping shorten the step a little), the real values need more than 25,000
+    (measured 26,505 to 43,081)
     except clay's and rubber's, which are soft already. spacing_for_strength
     is the inverse of Material.critical_stretch_for (E s_c(delta) equals the tensile strength to 1e-9): concrete's is
     11 cm within 5 %, glass's 0.08 mm within 5 %. Bad names and materials raise ParameterError naming the field."""
@@ -186,7 +189,7 @@ def test_preset_step_costs_and_spacing_for_strength():
         return math.ceil((1.0 / 24.0) / (0.7 * solver.stable_time_step()))
 
     for name in presets.PRESETS:
-        assert 250 <= substeps(presets.preset(name)) <= 420, name
+        assert 250 <= substeps(presets.preset(name)) <= 440, name
         if name not in ("clay", "rubber"):
             assert substeps(presets.preset(name, real=True)) > 25_000, name
     for name, expected in (("concrete", 0.11), ("glass", 7.6e-5)):
