@@ -197,12 +197,17 @@ def strains(name: str, cache: str, frames: int | None) -> list[str]:
                     remainder = "none | - | - | - | -"
                 loud_energy = f["kinetic"][loud].sum() + f["elastic"][loud].sum()
                 loud_kinetic = f"{100 * f['kinetic'][loud].sum() / loud_energy:.0f} %" if loud_energy > 0 else "-"
+                strained = out[
+                    (f["eps"][out] < f["threshold"][out]) & (f["elastic_strain"][out] >= f["threshold"][out])
+                ]
                 rows.append(
                     f"| {name} | {frame} | {b.name} | {remainder} | {len(out)} | {int(f['size'][out].sum())} |"
                     f" {int((f['size'][out] == 1).sum())} | {len(loud)} ({int(f['size'][loud].sum())} particles) |"
                     f" {loud_kinetic} | {touching} |"
                     f" {f['eps'][out].max(initial=0.0):.2e} | {int((f['constrained'][out] > 0).sum())} |"
                     f" {int(rigid[s.body_slice(i)].sum())} |"
+                    f" {len(strained)} ({int(f['size'][strained].sum())} particles) |"
+                    f" {f['elastic_strain'][strained].max(initial=0.0):.2e} |"
                 )
                 print(rows[-1], flush=True)
 
@@ -370,12 +375,14 @@ def main(argv=None) -> None:
             " broken-out: its other deformable fragments; loud: those at or above the threshold (their kinetic: the"
             " kinetic share of their kinetic and elastic energy; touching: with a particle within one spacing of"
             " another fragment's); constrained: those holding particles under a"
-            " boundary condition; rigid: the body's particles in rigid fragments.",
+            " boundary condition; rigid: the body's particles in rigid fragments; quiet but strained: broken-out"
+            " fragments below the threshold whose elastic energy alone, as sqrt(2 E_el / (M c_p^2)), is at or above it"
+            " (the test counted it before 2026-12-05 and kept them deformable), and the largest such strain.",
             "",
             "| scene | frame | body | remainder particles | remainder eps | threshold | eps / threshold | kinetic |"
             " broken-out fragments | their particles | single particles | loud | loud: kinetic | loud touching |"
-            " largest eps | constrained | rigid particles |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+            " largest eps | constrained | rigid particles | quiet but strained | their largest elastic strain |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         with tempfile.TemporaryDirectory() as tmp:
             for name in args.scenes:

@@ -362,7 +362,9 @@ class FragmentHandoff:
     def fragment_strains(self) -> dict:
         """The deformable fragments of the bodies with the hand-off on, now (for measurements): per fragment its
         ``body`` (index in the solver), ``size`` (particles), ``eps`` [-] and ``threshold`` [-] (module docstring),
-        ``constrained`` (particles under a boundary condition), the ``kinetic`` and ``elastic`` energy in eps [J];
+        ``constrained`` (particles under a boundary condition), the ``kinetic`` energy in eps and the ``elastic``
+        energy [J], ``elastic_strain`` sqrt(2 E_el / (M c_p^2)) [-] (the strain of the elastic energy, which eps does
+        not count);
         ``labels``: the global fragment id per particle
         (its body's fragment id plus the body's first particle), ``ids``: each fragment's."""
         s = self.solver
@@ -370,6 +372,8 @@ class FragmentHandoff:
         mask = self.enabled & (self.fragment_of < 0)
         idx, inverse, props, e_el, eps, limit, _ = self._strains(mask, labels, self._points()[1])
         count = len(eps)
+        c2 = np.zeros(count)
+        c2[inverse] = self.wave_speed[idx] ** 2
         constrained = s.kin.point_condition_host[idx] >= 0
         body = np.zeros(count, dtype=np.int64)
         body[inverse] = self.body_of[idx]
@@ -385,6 +389,7 @@ class FragmentHandoff:
             "constrained": np.bincount(inverse, weights=constrained, minlength=count).astype(np.int64),
             "kinetic": props["counted_kinetic"],
             "elastic": e_el,
+            "elastic_strain": np.sqrt(2.0 * np.maximum(e_el, 0.0) / (props["mass"] * c2)),
         }
 
     def _hand_off(self, idx, inverse, ready, static, props, x) -> None:
