@@ -175,7 +175,10 @@ def test_debris_damping_leaves_intact_material_alone():
 
 def test_debris_damping_slows_a_loose_particle():
     """A particle cut free (all its bonds start broken) and shot at 5 m/s in a body at rest: with c = 500 / s its
-    speed decays as exp(-c t) (its family is at rest) within 3 %; without damping it keeps its speed."""
+    speed decays as exp(-c t) (its family is at rest) within 3 %; without damping it keeps its speed. The step is a
+    tenth of the stable one (c dt = 0.027): the drag acts on the half-step velocity, so the integration decays by
+    (1 - c dt) a step instead of exp(-c dt), about (c dt / 2) c t = 1.4 % off exp(-c t) at c t = 1 here (at 0.7 of the
+    stable step, c dt = 0.19, it is 10 % off)."""
     speeds = {}
     for c in (0.0, 500.0):
         mat = pdsim.Material(
@@ -191,7 +194,7 @@ def test_debris_damping_slows_a_loose_particle():
         v = np.zeros((body.particle_count, 3))
         v[k] = (0.0, 0.0, 5.0)
         solver.set_velocities(v)
-        dt = 0.7 * solver.stable_time_step()
+        dt = 0.1 * solver.stable_time_step()
         steps = round(2.0e-3 / dt)
         solver.simulate(dt, steps)
         speeds[c] = (np.linalg.norm(solver.velocities()[k]), solver.time)

@@ -289,9 +289,8 @@ class SolverPeridynamics(PointSolver):
         if not ok.any():
             return math.inf
         dt_particle = np.sqrt(2.0 * m.density_host[ok] / s[ok])
-        if m.retardation is not None:  # Material.retardation_time: central differences with damping ratio z
-            z = m.retardation.numpy().astype(np.float64)[ok] / dt_particle
-            dt_particle = dt_particle * (np.sqrt(1.0 + z * z) - z)
+        if m.retardation is not None:  # Material.retardation_time
+            dt_particle = damped_step(dt_particle, m.retardation.numpy().astype(np.float64)[ok])
         dt_bonds = float(dt_particle.min())
         return dt_bonds if self.contact is None else min(dt_bonds, self.contact.stable_time_step())
 
@@ -587,8 +586,7 @@ class SolverPeridynamics(PointSolver):
         self._refresh_accelerations()
 
     def set_velocities(self, velocities: np.ndarray):
-        """Overwrites velocities [m/s], shape [particle_count, 3]; recomputes forces and accelerations when the
-        bonds' forces read the velocities (internal or debris damping)."""
+        """Overwrites velocities [m/s], shape [particle_count, 3] (and the accelerations where damping reads them)."""
         self.kin.set_velocities(self._particle_vectors("velocities", velocities))
         if self.model.retardation is not None or self.model.debris_rate is not None:
             self._refresh_accelerations()
@@ -677,6 +675,13 @@ def _chip_shares(solver: SolverPeridynamics) -> dict[str, float]:
         if body.fractures:
             out[body.name] = float(mass[sl][damage[sl] >= body.material.chip_damage].sum() / mass[sl].sum())
     return out
+
+
+def damped_step(dt, tau):
+    """The stable step [s] of central differences whose highest mode, of undamped stable step ``dt`` [s], has the
+    damping ratio z = tau / dt (a Kelvin-Voigt retardation time ``tau`` [s]): dt (sqrt(1 + z^2) - z)."""
+    z = tau / dt
+    return dt * (np.sqrt(1.0 + z * z) - z)
 
 
 def _directed_passes(solver: SolverPeridynamics, alive, live) -> None:
