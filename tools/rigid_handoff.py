@@ -80,15 +80,43 @@ def broken_out(solver) -> np.ndarray:
     return out
 
 
+def pieces(solver) -> list:
+    """(particles, centre of mass [m]) of each fragment of at least 5 particles of the solver's brittle bodies,
+    largest first."""
+    labels, x, mass = solver.fragment_ids(), solver.positions(), solver.masses()
+    out = []
+    for i, b in enumerate(solver.bodies):
+        if not brittle(b):
+            continue
+        sl = solver.body_slice(i)
+        _, inverse, counts = np.unique(labels[sl], return_inverse=True, return_counts=True)
+        m = np.bincount(inverse, weights=mass[sl])
+        centre = np.stack([np.bincount(inverse, weights=mass[sl] * x[sl][:, d]) for d in range(3)], axis=1)
+        keep = counts >= 5
+        out += list(zip(counts[keep].tolist(), centre[keep] / m[keep, None]))
+    return sorted(out, key=lambda p: -p[0])
+
+
+def piece_shift(off: list, on: list) -> str:
+    """Table cells: the pieces of both runs (:func:`pieces` at the last frame) and, where their sizes are the same,
+    the median and largest distance between the centres of the pieces paired by size [m]."""
+    count = f"{len(off)} / {len(on)}"
+    if [c for c, _ in off] != [c for c, _ in on]:
+        return f"{count} (sizes differ) | - |"
+    d = np.array([np.linalg.norm(a - b) for (_, a), (_, b) in zip(off, on)])
+    return f"{count} | {np.median(d):.3f} / {d.max(initial=0.0):.3f} |"
+
+
 def run(name: str, handoff: bool, cache: str, frames: int | None) -> dict:
-    """One preview run of scene ``name``; per frame: stepping and frame CPU times [s], broken-out and rigid counts."""
+    """One preview run of scene ``name``; per frame: stepping and frame CPU times [s], broken-out and rigid counts;
+    the pieces at the last frame (:func:`pieces`)."""
     module = load_scene_module(name)
     scene = module.build_scene(**preview_settings(module))
     if handoff:
         for b in scene.bodies:
             if brittle(b):
                 b.rigid_handoff = RigidHandoff(fixed=True)
-    steps, frame_ends, rows = [], [], []
+    steps, frame_ends, rows, last = [], [], [], []
     original = pdrun.advance_frame
 
     def timed(*args, **kwargs):
@@ -106,6 +134,7 @@ def run(name: str, handoff: bool, cache: str, frames: int | None) -> dict:
                 rows.append(
                     (frame, int(out.sum()), int((out & rigid).sum()), int(rigid.sum()), rows_visited, s.particle_count)
                 )
+                last[:] = pieces(s)
 
     os.environ["PDSIM_THREADS"] = "1"
     pdrun.advance_frame = timed
@@ -116,7 +145,10 @@ def run(name: str, handoff: bool, cache: str, frames: int | None) -> dict:
         pdrun.advance_frame = original
     frame_times = np.diff([t0, *frame_ends])
     total_bonds = report.bond_count
-    return {"report": report, "steps": np.asarray(steps), "frames": frame_times, "rows": rows, "bonds": total_bonds}
+    return {
+        "report": report, "steps": np.asarray(steps), "frames": frame_times, "rows": rows, "bonds": total_bonds,
+        "pieces": last,
+    }  # fmt: skip
 
 
 def interleaved(name: str, cache: str, frames: int | None, rounds: int = 7, steps: int = 40) -> dict:
@@ -482,8 +514,8 @@ def main(argv=None) -> None:
             "",
             "| scene | frames | particles | broken-out (off / on) | in rigid fragments (on) | bond rows visited (on) |"
             " step off [s] | step on [s] | step speed-up | frame off [s] | frame on [s] | frame speed-up |"
-            " pixels differing |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+            " pixels differing | pieces (off / on) | their centres apart: median / largest [m] |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
             *rows,
             "",
             "Bond rows visited: the share of the bonds the dilatation and force passes still visit at the last frame"
@@ -493,7 +525,10 @@ def main(argv=None) -> None:
             " the step much faster (docs/rigid_handoff_scaling.md measures the step against the rigid share): the"
             " rest is the clamped remainder, which sleeps as a static fragment only once its equivalent strain has"
             " stayed below the threshold for 3 frames (docs/rigid_handoff_strains.md measures it by frame). Pixels"
-            " differing: the share of the stills' pixels whose largest channel differs by more than 25/255.",
+            " differing: the share of the stills' pixels whose largest channel differs by more than 25/255. Pieces:"
+            " the brittle bodies' fragments of at least 5 particles at the last frame, in both runs; where their sizes"
+            " are the same, the distances between the centres of mass of the pieces paired by size (largest first),"
+            " which the stills show only within the picture.",
             "",
             "Rigid / broken-out particles by frame (hand-off on), and in brackets all particles in rigid or static"
             " fragments:",
@@ -529,7 +564,7 @@ def main(argv=None) -> None:
                 f"| {name} | {frames} | {last[5]} | {off['rows'][-1][1]} / {last[1]} | {last[2]} ({100 * share:.0f} %)"
                 f" | {100 * last[4] / on['bonds']:.0f} % |"
                 f" {s_off:.3f} | {s_on:.3f} | {s_off / s_on:.2f}x | {f_off:.3f} | {f_on:.3f} | {f_off / f_on:.2f}x |"
-                f" {100 * diff:.2f} % |"
+                f" {100 * diff:.2f} % | {piece_shift(off['pieces'], on['pieces'])}"
             )
             pictures.append((name, png, frames))
             series = ", ".join(f"{r[0]}: {r[2]}/{r[1]} ({r[3]})" for r in on["rows"][:: max(1, len(on["rows"]) // 10)])
