@@ -9,6 +9,7 @@ step shrinks by sqrt(1 + z^2) - z and the undamped step is unstable with a stron
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 
@@ -218,3 +219,22 @@ def test_a_ringing_fragment_calms_down_and_is_handed_off():
         if handed is None and s.handoff.rigid_particles()[half].all():
             handed = frame
     assert handed is not None and handed <= 8
+
+
+def _damped_pieces(frames=16):
+    """tests/test_rigid_handoff.py's notched block thrown at the ground, its material with a retardation time of
+    2e-6 s (z = tau / dt0 of about 0.05)."""
+    from test_rigid_handoff import _pieces
+
+    scene = _pieces(frames)
+    for body in scene.bodies:
+        body.material = dataclasses.replace(body.material, retardation_time=2.0e-6)
+    return scene
+
+
+def test_resume_with_internal_damping_is_bit_identical(tmp_path):
+    """Stopped after frame 1 (the halves still deformable and damped; they go rigid at frame 2), then resumed: the
+    cache equals the uninterrupted run's bit for bit (the force pass reads the velocities the checkpoint restores)."""
+    from test_resume_cache import _assert_resume_is_bit_identical
+
+    _assert_resume_is_bit_identical(_damped_pieces, tmp_path, 1, 16)
