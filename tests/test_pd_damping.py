@@ -182,6 +182,7 @@ def test_damping_force_is_tau_times_the_elastic_force_of_the_velocities(pairs):
     f_elastic = tau * elastic.force_density() / scale
     assert np.abs(f_damping).max() > 0.0
     np.testing.assert_allclose(f_damping, f_elastic, rtol=0, atol=1.0e-3 * np.abs(f_elastic).max())
+    assert "internal_damping" in damped.features and "internal_damping" not in elastic.features  # --explain lists it
 
 
 def test_rigid_fragments_are_not_damped():

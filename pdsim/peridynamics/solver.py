@@ -193,19 +193,13 @@ class SolverPeridynamics(PointSolver):
         self._surfaces = None  # FragmentSurfaces per body, built on the first views() call
         self._surface_states = None  # their checkpoint states from restore(), put back when they are built
         self._fragments = None  # FragmentTracker, created on first use when some body can break
-        self.features = {"elastic"} | self.kin.features
-        if ground is not None:
-            self.features.add("ground_plane")
-        if m.fracture:
-            self.features.add("fracture")
-        if m.plastic:
-            self.features.add("plasticity")
-        if any(b.material.anisotropy is not None for b in self.bodies):
-            self.features.add("anisotropy")
-        if self.contact is not None:
-            self.features.add("contact")
-        if self.colliders:
-            self.features.add("colliders")
+        live = {
+            "ground_plane": ground is not None, "fracture": m.fracture, "plasticity": m.plastic,
+            "anisotropy": any(b.material.anisotropy is not None for b in self.bodies),
+            "contact": self.contact is not None, "colliders": bool(self.colliders),
+            "internal_damping": m.damping_b is not None,
+        }  # fmt: skip
+        self.features = {"elastic"} | self.kin.features | {name for name, on in live.items() if on}
         self.time = 0.0
         self.step_count = 0
         self._step_dt = None  # the last step [s]: the ground's penalty form is tied to it (none before a step)
