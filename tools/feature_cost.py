@@ -192,7 +192,7 @@ def build(n: int, feature: str, device: str, steps: int):
 WATCHDOG_INTERVAL = 16
 """Steps between the watchdog's checks (Scene.run's default check_interval)."""
 INTERNAL_DAMPING = 2.0e-8
-"""Material.retardation_time of the internal-damping feature [s]: 2.6 % of the block's undamped stable step."""
+"""Material.retardation_time of the internal-damping feature [s]: a few per cent of the block's undamped stable step."""
 
 FEATURES = (
     "watchdog",
