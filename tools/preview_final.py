@@ -495,10 +495,10 @@ neighbourhood), by damage band:
 
 With 0.8 the drops draw 0.6 to 6.3 % of the sphere as chips at 2 cm (3.7 to 13.4 % with 0.7) and the hits 5.0 to
 15.5 % (11.0 to 27.2 %); the live bonds, the physics and the fragments do not change. The glass hit at 2 cm, frame 2,
-with 0.7 (left) and 0.8 (right): the crack faces keep their edges, and the loose cubes left are the crushed zone under
-the ball (`python tools/preview_final.py --presets glass --cases hit --usd DIR --set chip_damage=C`, then `pdsim
-preview DIR/glass_hit_20mm.usdc --out C.png --size 480x400 --camera "eye=0.5,-0.6,0.5:target=0,0,0.12"`, the two side
-by side with `imageio`):
+with 0.7 (left) and 0.8 (right), made before the internal damping: the crack faces keep their edges, and the loose cubes
+left are the crushed zone under the ball (`python tools/preview_final.py --presets glass --cases hit --usd DIR --set
+chip_damage=C`, then `pdsim preview DIR/glass_hit_20mm.usdc --out C.png --size 480x400 --camera
+"eye=0.5,-0.6,0.5:target=0,0,0.12"`, the two side by side with `imageio`):
 
 ![the glass hit at 2 cm with chips from damage 0.7 (left) and 0.8 (right)](presets_chip_damage_glass_hit.png)
 
