@@ -59,7 +59,7 @@ class PeridynamicModel:
     bond_reverse: object = None  # index of bond j -> k for each plastic bond k -> j
     debris_rate: object = None  # debris damping rate c per particle [1/s] (None: no body damps its debris)
     debris_damage: object = None  # damage above which debris damping acts, per particle [-]
-    retardation: object = None  # Material.retardation_time tau per particle [s] (None: no body has internal damping)
+    retardation: np.ndarray = None  # Material.retardation_time tau per particle [s], host (None: no internal damping)
     damping_b: object = None  # tau_k b_k per particle [Pa s/m^5]: the force pass's internal damping (None: none)
     density_host: np.ndarray = field(repr=False, default=None)
     volumes_host: np.ndarray = field(repr=False, default=None)
@@ -398,7 +398,7 @@ def build_model(bodies: list[PeridynamicBody], device, origin=(0.0, 0.0, 0.0)) -
             )
     if any(b.material.retardation_time > 0.0 for b in bodies):  # the force pass (kernels/peridynamics/step.py)
         tau_h = per_particle([b.material.retardation_time for b in bodies])
-        extra["retardation"] = arr(tau_h)
+        extra["retardation"] = np.asarray(tau_h, dtype=np.float64)  # the stable step's, on the host
         extra["damping_b"] = arr(tau_h * b_k)
     plastic_bodies = [b for b in bodies if b.material.yields]
     if plastic_bodies:

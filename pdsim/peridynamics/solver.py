@@ -284,7 +284,7 @@ class SolverPeridynamics(PointSolver):
             return math.inf
         dt_particle = np.sqrt(2.0 * m.density_host[ok] / s[ok])
         if m.retardation is not None:  # Material.retardation_time
-            dt_particle = damped_step(dt_particle, m.retardation.numpy().astype(np.float64)[ok])
+            dt_particle = damped_step(dt_particle, m.retardation[ok])
         dt_bonds = float(dt_particle.min())
         return dt_bonds if self.contact is None else min(dt_bonds, self.contact.stable_time_step())
 
