@@ -195,13 +195,20 @@ def test_kalthoff_winkler_zero_width_notch_crack_angle_ignores_contact_but_not_t
     assert np.all(np.abs(former - off) > 2.0), (former, off)  # the former rule pushes the faces apart
 
 
-def _ground_solver(size_cells, center_z, velocity, *, restitution, friction, gravity, device="cpu"):
-    """A PD block of ``size_cells`` particles per axis (h = 1 cm, E = 1 MPa) above a ground plane at z = 0."""
+def _ground_solver(size_cells, center_z, velocity, *, restitution, friction, gravity, device="cpu", halves=False):
+    """A PD block of ``size_cells`` particles per axis (h = 1 cm, E = 1 MPa) above a ground plane at z = 0;
+    ``halves``: breakable and cut in two at x = 0 by a notch, with the rigid hand-off on (any strain is quiet)."""
     from pdsim.colliders import GroundPlane
 
     size = np.asarray(size_cells, dtype=np.float64) * H
-    mat = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.25)
-    body = pdsim.PeridynamicBody(pdsim.box(tuple(size), center=(0.0, 0.0, center_z)), mat, H, name="block")
+    breaks = {"critical_stretch": 0.5} if halves else {}
+    mat = pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.25, **breaks)
+    handoff = pdsim.RigidHandoff(strain=1.0, frames=1) if halves else None
+    body = pdsim.PeridynamicBody(
+        pdsim.box(tuple(size), center=(0.0, 0.0, center_z)), mat, H, name="block", rigid_handoff=handoff
+    )
+    if halves:
+        body.add_notch(pdsim.BoxRegion(lo=(-1.0e-3, -1.0, -1.0), hi=(1.0e-3, 1.0, 1.0)))
     body.set_initial_velocity(velocity)
     ground = GroundPlane(restitution=restitution, friction=friction)
     return pdsim.SolverPeridynamics([body], ground=ground, gravity=gravity, device=device, threads=1)
@@ -234,14 +241,20 @@ def test_drop_rebounds_at_the_restitution_set_on_the_ground(e):
     assert abs(float(solver.velocities()[0, 2])) < 1e-6
 
 
+@pytest.mark.parametrize("rigid", [False, True], ids=["deformable", "rigid"])
 @pytest.mark.parametrize("restitution", [None, 0.3], ids=["projection", "penalty"])
-def test_block_sliding_on_the_ground_stops_at_v2_over_2_mu_g(restitution, device):
+def test_block_sliding_on_the_ground_stops_at_v2_over_2_mu_g(restitution, rigid, device):
     """A 3 x 3 x 2 h PD block resting on the ground (gravity 9.81 m/s^2) and sliding at 1 m/s with Coulomb friction
     mu = 0.4 stops after v^2 / (2 mu g) = 12.7 cm within 5 %, with the ground's inelastic projection and with its
-    penalty form (restitution 0.3): Coulomb friction, mu times the normal force, decelerates it at mu g."""
+    penalty form (restitution 0.3): Coulomb friction, mu times the normal force, decelerates it at mu g. ``rigid``: a
+    4 x 3 x 2 h block cut in two halves, both handed off as rigid fragments before it slides (pdsim/peridynamics/
+    handoff.py: their particles' contact forces drive the rigid motion); measured 1.003 (projection) and 1.000
+    (penalty) of the distance, as the deformable block's 1.001 and 1.000."""
     mu, g, v = 0.4, 9.81, 1.0
-    solver = _ground_solver((3, 3, 2), H, (v, 0.0, 0.0), restitution=restitution, friction=mu,
-                            gravity=(0.0, 0.0, -g), device=device)  # fmt: skip
+    solver = _ground_solver((4 if rigid else 3, 3, 2), H, (v, 0.0, 0.0), restitution=restitution, friction=mu,
+                            gravity=(0.0, 0.0, -g), device=device, halves=rigid)  # fmt: skip
+    if rigid:
+        assert solver.handoff.update() == 2 and solver.handoff.rigid_particles().all()
     dt = 0.7 * solver.stable_time_step()
     x0 = solver.positions()[:, 0].mean()
     for _ in range(int(1.2 * v / (mu * g) / dt)):
