@@ -149,8 +149,9 @@ def test_pairs_are_bit_identical_on_one_two_and_three_threads():
 
 
 def test_which_form_a_scene_gets():
-    """CPU: pairs by default, also for a yielding material; a breakable yielding body with the rigid hand-off runs
-    the directed form and refuses pairs=True; a setting other than None, True or False is refused, naming the
+    """CPU: pairs by default, also for a yielding material (and beside a brittle body with the rigid hand-off:
+    test_plastic_pairs_beside_a_brittle_body_with_a_rigid_half); a breakable yielding body with the rigid hand-off
+    runs the directed form and refuses pairs=True; a setting other than None, True or False is refused, naming the
     field."""
     assert _block(None)._pairs is not None and _block(True)._pairs is not None
     yielding = pdsim.Material(density=1000.0, youngs_modulus=1.0e9, poisson_ratio=0.25, yield_stress=1.0e6)
@@ -241,6 +242,61 @@ def test_plastic_pairs_follow_the_directed_return_mapping(case):
     assert yielded > 0.5 and 0.01 < broken < 0.9, (yielded, broken)
     if mixed:
         assert paired.model.plastic_particle_count == paired.particle_count // 2
+
+
+def test_plastic_pairs_beside_a_brittle_body_with_a_rigid_half():
+    """A yielding, breaking block (no hand-off) pulled apart beside a notched brittle block with the rigid hand-off,
+    one of whose halves is handed off (rigid), in one solver: the default is the pair form (the yielding particles
+    stay outside rigid fragments). Against the directed form over 20 steps: the same live bonds after every step,
+    and at the end displacements, plastic state, dilatation and force density to 1e-5 of the largest value, with
+    most yielding particles yielding, no bond force on the rigid half and bond forces on the other. A live list
+    without the yielding particles is refused."""
+    out = []
+    for pairs in (False, None):
+        h = 1.0e-3
+        yielding = pdsim.Material(
+            density=1000.0, youngs_modulus=1.0e9, poisson_ratio=0.25, yield_stress=1.0e6, hardening_modulus=5.0e7,
+            critical_stretch=1.0e-3,
+        )  # fmt: skip
+        brittle = pdsim.Material(density=1000.0, youngs_modulus=1.0e9, poisson_ratio=0.25, critical_stretch=2.0e-3)
+        o = np.asarray(CENTER) + np.array([0.02, 0.0, 0.0])
+        notched = pdsim.PeridynamicBody(
+            pdsim.box((8 * h, 4 * h, 4 * h), center=tuple(o)), brittle, h, rigid_handoff=pdsim.RigidHandoff(5.0e-4, 1)
+        )
+        d = np.array([1.0e-4, 1.0, 1.0])
+        notched.add_notch(pdsim.BoxRegion(lo=tuple(o - d), hi=tuple(o + d)))
+        s = SolverPeridynamics([pdsim.PeridynamicBody(pdsim.box((7 * h,) * 3, center=CENTER), yielding, h), notched],
+                               threads=1, pairs=pairs)  # fmt: skip
+        assert s.bond_passes == ("directed" if pairs is False else "pairs")
+        x = s.positions()
+        v = np.zeros_like(x)
+        sl = s.body_slice(0)
+        v[sl] = 1500.0 * (x[sl] - x[sl].mean(0)) * np.array([1.0, -0.3, 0.2])
+        sl = s.body_slice(1)
+        right = x[sl][:, 0] > o[0]
+        v[sl] = np.cross([0.0, 5.0, 30.0], x[sl] - o) + right[:, None] * np.random.default_rng(2).standard_normal(
+            (right.size, 3)
+        )
+        s.set_velocities(v)
+        assert s.handoff.update() == 1  # the quiet left half
+        alive = []
+        dt = 0.5 * s.stable_time_step()
+        for _ in range(20):
+            s.step(dt)
+            alive.append(s.bond_alive())
+        out.append((alive, _plastic_state(s), s.handoff.rigid_particles()))
+    (aa, sa, ra), (ab, sb, rb) = out
+    assert all(np.array_equal(a, b) for a, b in zip(aa, ab, strict=True))
+    for x, y in zip(sa[2:6], sb[2:6], strict=True):
+        assert _close(x, y)
+    assert _close(sa[0], sb[0])
+    assert np.array_equal(ra, rb) and ra.sum() == 64
+    f = sb[5]
+    assert np.abs(f[ra]).max() == 0.0 and np.abs(f[~ra]).max() > 1e5
+    npp = s.model.plastic_particle_count
+    assert (sb[3][:npp] > 0).mean() > 0.5
+    with pytest.raises(ValueError, match="yielding"):
+        s._pairs.set_particles(np.arange(1, s.particle_count))
 
 
 def test_plastic_pairs_are_bit_identical_on_threads_and_through_resume():

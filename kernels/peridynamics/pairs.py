@@ -46,15 +46,14 @@ def make_pair_kernels(
     its sum, and with ``ductile`` the ductile breaking test) for the feature set, built once and cached. With
     ``handoff`` thread t of a launch computes particle live_particles[first + t] (as the directed kernels), else
     particle first + t; ``pair_slot`` is indexed like the particles of the launch (list entry or particle). The
-    plastic variants have no hand-off form (a yielding particle's plastic strain sums the bonds to rigid particles,
-    which the live list leaves out)."""
+    plastic passes (norm, its sum, ductile breaking) index particle first + t in both forms: with ``handoff`` and
+    ``plastic`` the yielding particles (a prefix) must all be in the live list, so that entry t is particle t there
+    (no yielding body is handed off; pdsim/peridynamics/pairs.py PairPasses.set_particles checks it)."""
     key = (
         bool(fracture), bool(handoff), bool(plastic), bool(ductile) and bool(plastic) and bool(fracture), bool(damped)
     )  # fmt: skip
     if key in _cache:
         return _cache[key]
-    if key[1] and key[2]:
-        raise ValueError("the pair kernels have no hand-off form with plasticity")
     FRACTURE = key[0]
     HANDOFF = key[1]
     PLASTIC = key[2]  # key[3], ductile failure: the launches add the ductile_break pass (it has no other variant)

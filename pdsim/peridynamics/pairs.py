@@ -111,8 +111,14 @@ class PairPasses:
         self._build()
 
     def set_particles(self, entries: np.ndarray | None) -> None:
-        """The particles the passes compute, ascending (the rigid hand-off's live list), or None for all."""
-        self._entries = None if entries is None else np.asarray(entries, dtype=np.int64)
+        """The particles the passes compute, ascending (the rigid hand-off's live list), or None for all. With
+        plasticity the list must start with every yielding particle (the plastic passes index particles, not list
+        entries: kernels/peridynamics/pairs.py make_pair_kernels); a list without them raises ValueError."""
+        entries = None if entries is None else np.asarray(entries, dtype=np.int64)
+        npp = self.model.plastic_particle_count if self.plastic else 0
+        if entries is not None and npp and not np.array_equal(entries[:npp], np.arange(npp)):
+            raise ValueError("the pair passes' live list leaves out yielding particles (a yielding body handed off)")
+        self._entries = entries
         self._build()
 
     def _build(self) -> None:

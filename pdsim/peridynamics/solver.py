@@ -77,8 +77,9 @@ class SolverPeridynamics(PointSolver):
             once (pdsim/peridynamics/pairs.py: the lower particle's thread scatters the other's share into
             fixed-range buffers, summed in a fixed order; with plasticity the return mapping in pair passes too),
             else the directed form (every bond k -> j gathered by k: the GPU, where the scatter would need atomics,
-            and a scene with a yielding body and a breakable body with the rigid hand-off, since the plastic strain
-            sums bonds to the rigid particles the pair passes leave out). ``True`` asks for the pair form (a
+            and a breakable yielding body with the rigid hand-off, since the pair passes' plastic passes need every
+            yielding particle outside rigid fragments; a yielding body beside brittle bodies with the hand-off runs
+            the pair form). ``True`` asks for the pair form (a
             ParameterError where it is not available), ``False`` for the directed one. Both give the same forces
             and dilatation to float32 round-off (the sums run in another order) and the same broken bonds (with
             plasticity also the same plastic extensions and equivalent plastic strain to round-off); each is
@@ -236,10 +237,12 @@ class SolverPeridynamics(PointSolver):
         why = None
         if self.device.is_cuda:
             why = f"the CUDA device {self.device} (the scatter would need atomics)"
-        elif self.model.plastic and handoff:
+        elif handoff and any(
+            b.rigid_handoff is not None and b.material.breaks and b.material.yields for b in self.bodies
+        ):
             why = (
-                "a yielding material with rigid_handoff (a yielding particle's plastic strain sums its bonds to rigid"
-                " particles, which the pair passes leave out)"
+                "a yielding material with rigid_handoff (the pair passes' plastic passes need every yielding particle"
+                " outside rigid fragments)"
             )
         if why is not None:
             if pairs:
