@@ -112,9 +112,8 @@ def test_pairs_with_a_rigid_half():
     for pairs in (False, None):
         mat = pdsim.Material(density=2500.0, youngs_modulus=5.0e9, poisson_ratio=0.25, critical_stretch=2.0e-3)
         o = np.array([1000.0, 0.0, 0.0])
-        body = pdsim.PeridynamicBody(
-            pdsim.box((0.08, 0.04, 0.04), center=tuple(o)), mat, 0.01, rigid_handoff=pdsim.RigidHandoff(5.0e-4, 1)
-        )
+        handoff = pdsim.RigidHandoff(5.0e-4, 1, in_flight=True)  # the spinning half
+        body = pdsim.PeridynamicBody(pdsim.box((0.08, 0.04, 0.04), center=tuple(o)), mat, 0.01, rigid_handoff=handoff)
         d = np.array([0.001, 1.0, 1.0])
         body.add_notch(pdsim.BoxRegion(lo=tuple(o - d), hi=tuple(o + d)))
         s = SolverPeridynamics([body], threads=1, pairs=pairs)

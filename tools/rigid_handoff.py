@@ -1,13 +1,14 @@
 """Measures the rigid hand-off (pdsim/peridynamics/handoff.py) on the teaser's brittle walls (scenes/four_walls.py)
 and the glass pane (scenes/glass_pane.py) at their preview settings: each scene runs twice, with the hand-off off
-and on (``RigidHandoff(fixed=True)``: the defaults with static fragments, on every peridynamic body whose material
+and on (``RigidHandoff(fixed=True)``, with ``--in-flight`` also ``in_flight=True``: the defaults with static
+fragments, on every peridynamic body whose material
 breaks and does not yield), on one CPU thread. It reports the share of broken-out particles (those outside their
 body's largest fragment) that are in rigid fragments at the last frame, the process CPU time per frame over the last
 third of the run (``advance_frame`` alone, then the whole frame with the hand-off's frame-end test and the output;
 CPU time rather than wall time, as the machine is shared), and renders ``pdsim preview`` stills of the last frame
 of both runs side by side. Writes docs/rigid_handoff.md and docs/rigid_handoff/*.png.
 
-Run:  python tools/rigid_handoff.py [--scenes four_walls glass_pane] [--frames N] [--page NAME.md]
+Run:  python tools/rigid_handoff.py [--scenes four_walls glass_pane] [--frames N] [--page NAME.md] [--in-flight]
           [--options KEY=VALUE ...]   (build_scene keywords over the preview's, e.g. frames=64 duration=0.016)
 """
 
@@ -42,6 +43,15 @@ VIEWS = {
 
 
 SCENE_OPTIONS = {}  # build_scene keywords over each scene's PREVIEW (--options)
+HANDOFF = {"fixed": True}  # the RigidHandoff of the runs with the hand-off on (--in-flight adds in_flight=True)
+
+
+def set_handoff(scene, on: bool) -> None:
+    """The brittle bodies of ``scene`` with the hand-off on (RigidHandoff(**HANDOFF)) or off, whatever their
+    material's default (the presets' is on)."""
+    for b in scene.bodies:
+        if brittle(b):
+            b.rigid_handoff = RigidHandoff(**HANDOFF) if on else None
 
 
 def preview_settings(module) -> dict:
@@ -112,10 +122,7 @@ def run(name: str, handoff: bool, cache: str, frames: int | None) -> dict:
     the pieces at the last frame (:func:`pieces`)."""
     module = load_scene_module(name)
     scene = module.build_scene(**preview_settings(module))
-    if handoff:
-        for b in scene.bodies:
-            if brittle(b):
-                b.rigid_handoff = RigidHandoff(fixed=True)
+    set_handoff(scene, handoff)
     steps, frame_ends, rows, last = [], [], [], []
     original = pdrun.advance_frame
 
@@ -163,12 +170,12 @@ def interleaved(name: str, cache: str, frames: int | None, rounds: int = 7, step
     module = load_scene_module(name)
     preview = preview_settings(module)
     scene = module.build_scene(**preview)
-    for b in scene.bodies:
-        if brittle(b):
-            b.rigid_handoff = RigidHandoff(fixed=True)
+    set_handoff(scene, True)
     report = scene.run(cache, device="cpu", progress=False, frames=frames, on_frame=keep)
     on = next(s for s in held["solvers"] if isinstance(s, SolverPeridynamics))
-    plain = module.build_scene(**preview).build_solvers(device="cpu", check=False)
+    plain = module.build_scene(**preview)
+    set_handoff(plain, False)
+    plain = plain.build_solvers(device="cpu", check=False)
     off = next(s for s in plain if isinstance(s, SolverPeridynamics))
     off.threads = on.threads = 1
     off.restore(on.checkpoint())
@@ -192,9 +199,7 @@ def strains(name: str, cache: str, frames: int | None) -> list[str]:
     the table's rows."""
     module = load_scene_module(name)
     scene = module.build_scene(**preview_settings(module))
-    for b in scene.bodies:
-        if brittle(b):
-            b.rigid_handoff = RigidHandoff(fixed=True)
+    set_handoff(scene, True)
     rows = []
 
     def on_frame(frame, solvers):
@@ -232,6 +237,7 @@ def strains(name: str, cache: str, frames: int | None) -> list[str]:
                 strained = out[
                     (f["eps"][out] < f["threshold"][out]) & (f["elastic_strain"][out] >= f["threshold"][out])
                 ]
+                moving = out[(f["eps"][out] < f["threshold"][out]) & (f["impact_strain"][out] >= f["threshold"][out])]
                 rows.append(
                     f"| {name} | {frame} | {b.name} | {remainder} | {len(out)} | {int(f['size'][out].sum())} |"
                     f" {int((f['size'][out] == 1).sum())} | {len(loud)} ({int(f['size'][loud].sum())} particles) |"
@@ -240,6 +246,7 @@ def strains(name: str, cache: str, frames: int | None) -> list[str]:
                     f" {int(rigid[s.body_slice(i)].sum())} |"
                     f" {len(strained)} ({int(f['size'][strained].sum())} particles) |"
                     f" {f['elastic_strain'][strained].max(initial=0.0):.2e} |"
+                    f" {len(moving)} ({int(f['size'][moving].sum())} particles) |"
                 )
                 print(rows[-1], flush=True)
 
@@ -254,7 +261,7 @@ TILES = 4  # the scaling slab is cut into TILES x TILES tiles
 def tiled_slab(handoff: bool, spacing: float = 0.01) -> pdsim.Scene:
     """The scaling case: a free glass slab (0.24 m x 0.24 m x 0.03 m, the glass pane's material and break pattern,
     particle contact on as for any breakable body) cut by notches into TILES x TILES tiles, in space (no gravity, no
-    ground); with ``handoff``, ``RigidHandoff(strain=1e-5, frames=1)``."""
+    ground); with ``handoff``, ``RigidHandoff(strain=1e-5, frames=1, in_flight=True)`` (the tiles drift)."""
     size, thick = 0.24, 0.03
     scene = pdsim.Scene(fps=24, frames=1, frame_time=1.0e-4, gravity=(0.0, 0.0, 0.0), name="tiled_slab")
     glass = pdsim.Material(
@@ -263,7 +270,7 @@ def tiled_slab(handoff: bool, spacing: float = 0.01) -> pdsim.Scene:
     )  # fmt: skip
     body = scene.add_peridynamic_body(
         pdsim.box((size, size, thick), center=(0.0, 0.0, 0.0), name="slab"), glass, spacing,
-        rigid_handoff=RigidHandoff(strain=1.0e-5, frames=1) if handoff else None,
+        rigid_handoff=RigidHandoff(strain=1.0e-5, frames=1, in_flight=True) if handoff else False,
     )  # fmt: skip
     for i in range(1, TILES):
         c = -0.5 * size + i * size / TILES
@@ -377,6 +384,9 @@ def main(argv=None) -> None:
     parser.add_argument(
         "--options", nargs="+", default=[], help="build_scene keywords over the preview's, as KEY=VALUE (numbers)"
     )
+    parser.add_argument(
+        "--in-flight", action="store_true", help="hand off pieces in flight too (RigidHandoff(in_flight=True))"
+    )
     args = parser.parse_args(argv)
     shown = " ".join(args.scenes)  # as given, for the pages' commands
     for k, scene in enumerate(args.scenes):  # a script's path: its file name stands for it in the pages and stills
@@ -387,6 +397,10 @@ def main(argv=None) -> None:
         key, _, value = item.partition("=")
         SCENE_OPTIONS[key] = int(value) if value.lstrip("-").isdigit() else float(value)
     options = f" --options {' '.join(args.options)}" if args.options else ""
+    if args.in_flight:
+        HANDOFF["in_flight"] = True
+        options += " --in-flight"
+    setting = "RigidHandoff(fixed=True" + (", in_flight=True)" if args.in_flight else ")")
     if args.strains:
         wp.config.quiet = True
         when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
@@ -398,7 +412,7 @@ def main(argv=None) -> None:
             + f"{options}` on {when}"
             f" ({platform.machine()}, Warp {wp.__version__} CPU): each scene at its preview settings (with the"
             " options) and the hand-off"
-            " on (`RigidHandoff(fixed=True)` on its brittle bodies); at the end of each frame, for each brittle body,"
+            f" on (`{setting}` on its brittle bodies); at the end of each frame, for each brittle body,"
             " the equivalent strain eps = sqrt(4 K_int / (M c_p^2)) of its deformable fragments' vibration"
             " (pdsim/peridynamics/handoff.py) against the threshold (DEFAULT_STRAIN_FRACTION x s_c). Remainder: the"
             " body's deformable fragment that holds the clamped rim (its eps counts its whole kinetic energy; asleep: a"
@@ -409,12 +423,15 @@ def main(argv=None) -> None:
             " another fragment's); constrained: those holding particles under a"
             " boundary condition; rigid: the body's particles in rigid fragments; quiet but strained: broken-out"
             " fragments below the threshold whose elastic energy alone, as sqrt(2 E_el / (M c_p^2)), is at or above it"
-            " (the test counted it before 2026-12-05 and kept them deformable), and the largest such strain.",
+            " (the test counted it before 2026-12-05 and kept them deformable), and the largest such strain;"
+            " quiet but moving: broken-out fragments below the threshold whose fastest point moves at or above"
+            " threshold x c_p (the settling test keeps them deformable; 0 with --in-flight).",
             "",
             "| scene | frame | body | remainder particles | remainder eps | threshold | eps / threshold | kinetic |"
             " broken-out fragments | their particles | single particles | loud | loud: kinetic | loud touching |"
-            " largest eps | constrained | rigid particles | quiet but strained | their largest elastic strain |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+            " largest eps | constrained | rigid particles | quiet but strained | their largest elastic strain |"
+            " quiet but moving |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         with tempfile.TemporaryDirectory() as tmp:
             for name in args.scenes:
@@ -507,8 +524,9 @@ def main(argv=None) -> None:
             + f"{options}`"
             + f" on {when} ({machine}, one bond thread, load average {load} at the end; the machine is shared, so"
             " the times are the process's CPU time, not wall time). Each scene at its preview settings (with the"
-            " options), with the hand-off off and on (`RigidHandoff(fixed=True)`: the defaults with static fragments,"
-            " on the bodies whose material breaks and does not yield). Broken-out: particles of those bodies outside"
+            f" options), with the hand-off off and on (`{setting}`: the defaults with static fragments"
+            + (" and pieces handed off in flight" if args.in_flight else "")
+            + ", on the bodies whose material breaks and does not yield). Broken-out: particles of those bodies outside"
             " their body's largest fragment. Step: CPU time of a frame's steps (`advance_frame`); frame: with the"
             " frame-end hand-off test and the output. Times are means over the last third of the frames.",
             "",

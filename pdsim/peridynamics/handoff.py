@@ -12,7 +12,11 @@ density of 1/2 rho c_p^2 eps^2 each, so a vibration of root-mean-square strain e
 kinetic energy 1/4 M c_p^2 eps^2. The test reads the motion only: a fragment at rest that holds a static strain (its
 own weight on a few contact points, a crack jammed shut inside it) is quiet, and one that vibrates shows it at every
 frame end but at the turning points, which ``frames`` consecutive frames do not all meet. Its elastic energy E_el
-[J] is measured for the books (``released``). Only fragments of a body with the setting on, in a body that has
+[J] is measured for the books (``released``). A free fragment must also have settled: the fastest point of its rigid
+motion, v_max = max |v + w x (x_i - c)| [m/s], stays below ``strain`` c_p, so that no impact at its own speed (whose
+strain is about v / c_p) could strain it past the same threshold. A piece in flight, which would break again where it
+lands, therefore stays deformable until it rests (``RigidHandoff(in_flight=True)`` drops this test: pieces flying
+through empty space go rigid too). Only fragments of a body with the setting on, in a body that has
 broken into more than one fragment, are handed off: fragments of free particles only (no boundary condition) as
 rigid fragments, and (with ``RigidHandoff(fixed=True)``; off by default) fragments held by fixed boundary conditions
 as static fragments.
@@ -83,11 +87,15 @@ class RigidHandoff:
         fixed: also hand off the fragments held by fixed boundary conditions, as static fragments (module
             docstring); False (default): only fragments of free particles. Off by default because a static fragment
             no longer responds to hits (module docstring) and nothing wakes it.
+        in_flight: also hand off free fragments that move: True drops the test that the fastest point of the
+            fragment's rigid motion stays below ``strain`` times its P-wave speed (module docstring); False
+            (default): only fragments that have settled, which no impact at their own speed could break.
     """
 
     strain: float | None = None
     frames: int = 3
     fixed: bool = False
+    in_flight: bool = False
 
     def __post_init__(self):
         if self.strain is not None:
@@ -96,6 +104,8 @@ class RigidHandoff:
             raise ParameterError("frames", self.frames, "an integer >= 1 (consecutive frames below the threshold)")
         if not isinstance(self.fixed, bool):
             raise ParameterError("fixed", self.fixed, "True or False (static hand-off of fragments held by fix)")
+        if not isinstance(self.in_flight, bool):
+            raise ParameterError("in_flight", self.in_flight, "True or False (hand-off of fragments that move)")
 
 
 def handoff_setting(value) -> RigidHandoff | None:
@@ -132,6 +142,7 @@ class FragmentHandoff:
             speed.append(b.material.p_wave_speed)
         self.frames_needed = np.array([b.rigid_handoff.frames if b.rigid_handoff else 0 for b in solver.bodies])
         self.fixed = np.array([bool(b.rigid_handoff and b.rigid_handoff.fixed) for b in solver.bodies])[body_of]
+        self.in_flight = np.array([bool(b.rigid_handoff and b.rigid_handoff.in_flight) for b in solver.bodies])[body_of]
         # per boundary condition (in the kinematics' order): a fix on all three axes never released; its window [s]
         anchor, window = [], []
         for b in solver.bodies:
@@ -292,7 +303,7 @@ class FragmentHandoff:
             return 0
         idx, inverse, props, e_el, eps, limit, x = self._strains(eligible, labels, anchor)
         count = len(eps)
-        quiet_fragment = eps < limit
+        quiet_fragment = (eps < limit) & (props["impact_strain"] < limit)
         quiet = np.zeros(n, dtype=np.int64)
         quiet[idx] = np.where(quiet_fragment[inverse], self.quiet[idx] + 1, 0)
         self.quiet = quiet
@@ -357,6 +368,16 @@ class FragmentHandoff:
         np.logical_or.at(anchored, inverse, anchor[idx])
         props["counted_kinetic"] = np.where(anchored, props["kinetic"], props["internal_kinetic"])  # the K in eps
         eps = np.sqrt(4.0 * np.maximum(props["counted_kinetic"], 0.0) / (props["mass"] * c2))
+        # the settling test: the fastest point of the rigid motion over c_p (0 for static and in-flight fragments)
+        arm = x[idx] - props["centre"][inverse]
+        point_speed = np.linalg.norm(
+            props["velocity"][inverse] + np.cross(props["angular_velocity"][inverse], arm), axis=1
+        )
+        speed = np.zeros(len(ids))
+        np.maximum.at(speed, inverse, point_speed)
+        exempt = anchored.copy()
+        np.logical_or.at(exempt, inverse, self.in_flight[idx])
+        props["impact_strain"] = np.where(exempt, 0.0, speed / np.sqrt(c2))
         return idx, inverse, props, e_el, eps, limit, x
 
     def fragment_strains(self) -> dict:
@@ -364,7 +385,7 @@ class FragmentHandoff:
         ``body`` (index in the solver), ``size`` (particles), ``eps`` [-] and ``threshold`` [-] (module docstring),
         ``constrained`` (particles under a boundary condition), the ``kinetic`` energy in eps and the ``elastic``
         energy [J], ``elastic_strain`` sqrt(2 E_el / (M c_p^2)) [-] (the strain of the elastic energy, which eps does
-        not count);
+        not count), ``impact_strain`` v_max / c_p [-] (the settling test; 0 where it does not apply);
         ``labels``: the global fragment id per particle
         (its body's fragment id plus the body's first particle), ``ids``: each fragment's."""
         s = self.solver
@@ -390,6 +411,7 @@ class FragmentHandoff:
             "kinetic": props["counted_kinetic"],
             "elastic": e_el,
             "elastic_strain": np.sqrt(2.0 * np.maximum(e_el, 0.0) / (props["mass"] * c2)),
+            "impact_strain": props["impact_strain"],
         }
 
     def _hand_off(self, idx, inverse, ready, static, props, x) -> None:
