@@ -133,6 +133,10 @@ class Material:
             sqrt(mu_a mu_b) of its two sides (pdsim.contact.combine_friction); None (default): as for
             ``contact_restitution``, the other side's value or the scene's. Taken by every contact of peridynamic
             particles and FEM vertices (with each other, the ground plane, colliders and rigid bodies).
+        rigid_handoff: the rigid hand-off of peridynamic bodies of this material that do not set their own
+            (``PeridynamicBody(rigid_handoff=None)``): True turns it on with the defaults (pdsim.RigidHandoff():
+            a fragment that has stopped deforming and settled becomes a rigid body); False (default) off. The
+            brittle presets set True. It acts only where the material breaks; FEM bodies refuse it.
 
     Features a material does not use cost nothing: the solver allocates and launches plasticity only for materials
     with a yield stress and fracture only for materials that can break.
@@ -162,6 +166,7 @@ class Material:
     sampling_jitter: float | None = None
     contact_restitution: float | None = None
     contact_friction: float | None = None
+    rigid_handoff: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "density", check_range("density", self.density, 0.0, None))
@@ -221,6 +226,8 @@ class Material:
         object.__setattr__(
             self, "debris_damping", check_range("debris_damping", self.debris_damping, 0.0, None, lo_open=False)
         )
+        if not isinstance(self.rigid_handoff, bool):
+            raise ParameterError("rigid_handoff", self.rigid_handoff, "True or False (the bodies' rigid hand-off)")
         tau = check_range("retardation_time", self.retardation_time, 0.0, None, lo_open=False)
         object.__setattr__(self, "retardation_time", tau)
         object.__setattr__(self, "debris_damage", check_range("debris_damage", self.debris_damage, 0.0, 1.0))

@@ -36,6 +36,13 @@ clay, steel and aluminium tear by plasticity; rubber never breaks), so ``pattern
 Contact. Every preset carries a ``contact_restitution`` and a ``contact_friction`` (:data:`CONTACT`), the values its
 contacts bring to a pair (combined with the other side's, pdsim/contact.py combine_restitution, combine_friction).
 
+Rigid hand-off. The brittle presets carry ``rigid_handoff=True`` (with and without ``pattern``): a peridynamic body of
+them that sets no ``rigid_handoff`` of its own hands its settled pieces to the rigid solver (pdsim.RigidHandoff's
+defaults: a piece that has stopped vibrating and moves too slowly for any impact at its own speed to break it). The
+pieces are then written as transforms of static meshes and no longer cost their bonds, but a settled piece that a
+later projectile hits bounces off whole (docs/fracture.md, "Rigid hand-off"); ``PeridynamicBody(rigid_handoff=False)``
+or ``dataclasses.replace(material, rigid_handoff=False)`` turns it off.
+
 Spacing. The particles across the thinnest part of a body set the accuracy of its stiffness (docs/accuracy.md: 10 %
 at about 5 across, 5 % at 10) and its cost. Every brittle preset gives its strength as a ``fracture_energy`` G, the
 energy per unit area of crack, which the spacing does not change: the critical stretch follows from the horizon delta
@@ -189,7 +196,8 @@ def _brittle(
     (:func:`energy_for_stretch`). With ``pattern`` the break-pattern settings (module docstring): a strength field of
     Weibull modulus ``weibull_modulus`` and ``correlation_length`` [m], jitter, ``debris_damping`` [1/s] (of the
     animation values), the full bonus capped at ``bonus_cap`` s_c; without, the COMPRESSIVE_BONUS alone. Either way the
-    internal damping RETARDATION_TIME (a property of the material, not of the break pattern)."""
+    internal damping RETARDATION_TIME (a property of the material, not of the break pattern) and the rigid hand-off
+    (module docstring)."""
     if real:
         energy = fracture_energy
     else:
@@ -216,6 +224,7 @@ def _brittle(
         poisson_ratio=poisson_ratio,
         name=name,
         fracture_energy=energy,
+        rigid_handoff=True,
         **damping,
         **extra,
     )

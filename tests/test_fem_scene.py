@@ -175,11 +175,12 @@ def test_plastic_body_views_carry_plastic_strain():
         (pdsim.Material(1000.0, 1.0e6, 0.3, hardening_modulus=1.0e5), "hardening_modulus", "FemPlasticity"),
         (pdsim.Material(1000.0, 1.0e6, 0.3, compressive_bonus=1.0), "compressive_bonus", "tensile_strength"),
         (pdsim.Material(1000.0, 1.0e6, 0.3, retardation_time=1.0e-5), "retardation_time", r"FemBody\(\.\.\., damping"),
+        (pdsim.Material(1000.0, 1.0e6, 0.3, rigid_handoff=True), "rigid_handoff", "rigid_handoff=False"),
     ],
 )
 def test_peridynamic_material_fields_are_refused(material, field, instead):
-    """Material fields the FEM does not read (peridynamic plasticity, fracture, anisotropy and internal damping) raise
-    FeatureNotAvailableError naming the body, the field and the FEM setting to use instead."""
+    """Material fields the FEM does not read (peridynamic plasticity, fracture, anisotropy, internal damping and the
+    rigid hand-off) raise FeatureNotAvailableError naming the body, the field and the FEM setting to use instead."""
     body = FemBody(box_tet_mesh((0.2, 0.1, 0.1), (2, 1, 1)), material, name="slab")
     with pytest.raises(pdsim.FeatureNotAvailableError, match=rf"'slab'.*{field}.*{instead}"):
         SolverFem([body])

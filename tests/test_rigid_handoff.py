@@ -11,6 +11,8 @@ for bit.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from test_resume_cache import _assert_resume_is_bit_identical
@@ -105,14 +107,14 @@ def test_rigid_fragments_skip_their_bonds():
 
 def _pieces(frames=16, shift=(0.0, 0.0, 0.0)):
     """The notched block (softened: E 50 MPa) thrown spinning at the ground from 8 cm: its halves go rigid in
-    flight (2 quiet frames), then land and come to rest."""
+    flight (2 quiet frames; ``in_flight``: the settling test off), then land and come to rest."""
     o = np.asarray(shift, dtype=np.float64)
     scene = pdsim.Scene(fps=24, frames=frames, frame_time=5.0e-3, name="pieces")
     soft = pdsim.Material(density=2500.0, youngs_modulus=5.0e7, poisson_ratio=0.25, critical_stretch=2.0e-3)
     centre = o + np.array([0.0, 0.0, 0.1])
     body = pdsim.PeridynamicBody(
         pdsim.box((0.08, 0.04, 0.04), center=tuple(centre)), soft, SPACING, name="block",
-        rigid_handoff=pdsim.RigidHandoff(strain=1.0e-4, frames=2),
+        rigid_handoff=pdsim.RigidHandoff(strain=1.0e-4, frames=2, in_flight=True),
     )  # fmt: skip
     cut = np.array([0.001, 1.0, 1.0])
     body.add_notch(pdsim.BoxRegion(lo=tuple(centre - cut), hi=tuple(centre + cut)))
@@ -145,6 +147,58 @@ def test_pieces_go_rigid_and_rest_on_the_ground(tmp_path, device):
         assert np.abs(d1 - d0).max() < 1e-6
 
 
+def _falling_halves(in_flight, shift):
+    """The notched block (E 50 MPa, c_p 155 m/s, retardation time 5e-5 s so that it settles) let fall from 2.5 cm
+    onto the ground (inelastic projection), 56 frames of 5 ms, the hand-off at strain 1e-4 over 2 frames."""
+    o = np.asarray(shift, dtype=np.float64)
+    scene = pdsim.Scene(fps=24, frames=56, frame_time=5.0e-3, name="fall")
+    soft = pdsim.Material(
+        density=2500.0, youngs_modulus=5.0e7, poisson_ratio=0.25, critical_stretch=2.0e-3, retardation_time=5.0e-5
+    )
+    centre = o + np.array([0.0, 0.0, 0.045])
+    body = pdsim.PeridynamicBody(
+        pdsim.box((0.08, 0.04, 0.04), center=tuple(centre)), soft, SPACING, name="block",
+        rigid_handoff=pdsim.RigidHandoff(strain=1.0e-4, frames=2, in_flight=in_flight),
+    )  # fmt: skip
+    cut = np.array([0.001, 1.0, 1.0])
+    body.add_notch(pdsim.BoxRegion(lo=tuple(centre - cut), hi=tuple(centre + cut)))
+    scene.add_body(body)
+    scene.add_ground_plane(height=float(o[2]))
+    return scene, soft.p_wave_speed
+
+
+@pytest.mark.parametrize(("in_flight", "shift"), [(False, (1000.0, -700.0, 300.0)), (True, (0.0, 0.0, 0.0))])
+def test_a_falling_piece_is_handed_off_once_it_has_settled(tmp_path, in_flight, shift):
+    """The settling test (pdsim/peridynamics/handoff.py): two quiet halves falling onto the ground are not handed off
+    while they fall, land or bounce (no rigid particle at a frame end where a particle moves faster than 0.1 m/s,
+    6.5 times the settling speed strain c_p = 1.55 cm/s), only once they rest: both rigid by the last frame (measured:
+    from frame 42; they bounce faster than 0.1 m/s until frame 32), the frame end before the hand-off below twice the
+    settling speed, and resting on the ground (none below -h/4); 1 km away.
+    With ``in_flight=True`` they go rigid while still falling (measured: at frame 2, 2.5 cm up at 9.8 cm/s; they land
+    rigid at frame 15)."""
+    scene, c_p = _falling_halves(in_flight, shift)
+    settle = 1.0e-4 * c_p
+    seen = {}
+
+    def on_frame(frame, solvers):
+        s = solvers[0]
+        z = s.positions()[:, 2] - shift[2]
+        seen[frame] = (s.handoff.rigid_particles().mean(), np.linalg.norm(s.velocities(), axis=1).max(), z.min())
+
+    scene.run(tmp_path / "fall.usdc", progress=False, on_frame=on_frame)
+    frames = sorted(seen)
+    first = min(f for f in frames if seen[f][0] == 1.0)
+    fast = [f for f in frames if seen[f][1] > 0.1]
+    print(f"first rigid at frame {first};", "rigid share, fastest particle [m/s], lowest z [m] by frame:",
+          [tuple(round(float(v), 4) for v in seen[f]) for f in frames])  # fmt: skip
+    assert seen[frames[-1]][0] == 1.0 and seen[frames[-1]][2] > -0.25 * SPACING
+    if in_flight:
+        assert seen[first][1] > 0.05 and seen[first][2] > 0.02  # still falling, 2 cm up
+    else:
+        assert all(seen[f][0] == 0.0 for f in fast) and max(fast) > 20  # it bounces
+        assert seen[first - 1][1] < 2.0 * settle
+
+
 def test_handoff_on_with_nothing_handed_off_is_bit_identical_to_off():
     """The setting on changes nothing until a fragment is handed off (the skip test is the only change)."""
     out = []
@@ -167,7 +221,8 @@ def test_one_rigid_half_is_bit_identical_on_one_and_three_threads():
     rebalanced on the bonds still visited) give the same state bit for bit."""
     out = []
     for threads in (1, 3):
-        s = SolverPeridynamics([_notched_block((0.0, 0.0, 0.0), pdsim.RigidHandoff(strain=5.0e-4, frames=1))])
+        handoff = pdsim.RigidHandoff(strain=5.0e-4, frames=1, in_flight=True)  # the spinning half
+        s = SolverPeridynamics([_notched_block((0.0, 0.0, 0.0), handoff)])
         s.threads = threads
         x = s.positions()
         rng = np.random.default_rng(2)
@@ -260,3 +315,24 @@ def test_a_strained_fragment_at_rest_is_quiet_and_a_ringing_one_is_not():
         assert not s.handoff.rigid_particles()[half].any()
         assert eps.max() > 5.0e-4
         assert s.handoff.rigid_particles()[~half].all() == (frame >= 2) and handed == (frame == 2)
+
+
+def test_the_brittle_presets_hand_off_by_default():
+    """Material.rigid_handoff: a peridynamic body that sets no rigid_handoff takes its material's, which the brittle
+    presets set (with and without their break pattern; the defaults of pdsim.RigidHandoff); False on the body turns
+    it off, True on a plain material turns it on; the ductile and soft presets carry none; a value other than True or
+    False is refused, naming the field."""
+    box = pdsim.box((0.06, 0.06, 0.06))
+    for name in ("glass", "porcelain", "ceramic", "stone", "concrete", "plaster"):
+        for pattern in (True, False):
+            material = pdsim.presets.preset(name, pattern=pattern)
+            assert pdsim.PeridynamicBody(box, material, 0.02).rigid_handoff == pdsim.RigidHandoff()
+            assert pdsim.PeridynamicBody(box, material, 0.02, rigid_handoff=False).rigid_handoff is None
+    for name in ("wood", "clay", "steel", "aluminium", "rubber"):
+        assert pdsim.PeridynamicBody(box, pdsim.presets.preset(name), 0.02).rigid_handoff is None
+    assert pdsim.PeridynamicBody(box, MATERIAL, 0.02).rigid_handoff is None
+    on = dataclasses.replace(MATERIAL, rigid_handoff=True)
+    assert pdsim.PeridynamicBody(box, on, 0.02, rigid_handoff=pdsim.RigidHandoff(frames=5)).rigid_handoff.frames == 5
+    assert pdsim.PeridynamicBody(box, on, 0.02).rigid_handoff == pdsim.RigidHandoff()
+    with pytest.raises(pdsim.ParameterError, match="rigid_handoff"):
+        dataclasses.replace(MATERIAL, rigid_handoff="yes")

@@ -232,7 +232,7 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
         """The scene-level requests, plus per body: plasticity (FemPlasticity), fracture (tensile_strength), loads,
         and the Material fields the FEM does not read (yield_stress, hardening_modulus, failure_plastic_strain,
         fracture_energy, critical_stretch, compressive_bonus, compressive_bonus_cap, strength_weibull_modulus,
-        debris_damping, anisotropy, retardation_time:
+        debris_damping, anisotropy, retardation_time, rigid_handoff:
         peridynamic settings with FEM counterparts named by :meth:`instead`)."""
         asked = super().requested_features(bodies, context)
         for b in bodies:
@@ -260,6 +260,8 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
                 asked.setdefault(
                     "material_damping", f"body '{b.name}': Material.retardation_time={m.retardation_time!r}"
                 )
+            if getattr(m, "rigid_handoff", False):
+                asked.setdefault("rigid_handoff", f"body '{b.name}': Material.rigid_handoff=True")
         if getattr(context.ground, "restitution", None) is not None:
             asked["ground_restitution"] = f"the ground plane's restitution={context.ground.restitution!r}"
         return asked
@@ -283,6 +285,9 @@ class SolverFem(FemStep, FemFractureEvents, FemViews, FemCheckpoint, PointSolver
             "anisotropy": "the FEM material is isotropic; remove Material.anisotropy or use a PeridynamicBody",
             "material_damping": "the FEM's damping is set on the body, FemBody(..., damping=... [1/s], "
             "mass-proportional); remove Material.retardation_time or use a PeridynamicBody",
+            "rigid_handoff": "FEM pieces stay deformable (the rigid hand-off is peridynamic): set "
+            "Material.rigid_handoff=False (dataclasses.replace(material, rigid_handoff=False)) or use a "
+            "PeridynamicBody",
             "ground_restitution": "FEM vertices meet the ground by inelastic projection (they have no radius for the "
             "ground's penalty contact): add the ground plane without restitution, or use a PeridynamicBody",
         }.get(feature, super().instead(feature))

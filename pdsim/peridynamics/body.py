@@ -47,9 +47,10 @@ class PeridynamicBody(PointBody):
             0.5. Only with sampling="jittered".
         sampling_seed: seed of the jitter, an integer in [0, 2^31 - 1] (default 0): the same seed gives the same
             particles, wherever the body sits.
-        rigid_handoff: None or False (off, default), True (the defaults) or a pdsim.RigidHandoff: fragments of the
-            body that stop deforming become rigid bodies, and those held by a fixed rim static ones
-            (pdsim/peridynamics/handoff.py; only for a material that breaks).
+        rigid_handoff: False (off), True (the defaults) or a pdsim.RigidHandoff: fragments of the body that stop
+            deforming and settle become rigid bodies, and (``RigidHandoff(fixed=True)``) those held by a fixed rim
+            static ones (pdsim/peridynamics/handoff.py; only for a material that breaks). None (default): the
+            material's ``rigid_handoff`` (on for the brittle presets, else off).
 
     Particles are sorted along a Morton curve so that neighbours are close in memory.
     """
@@ -99,7 +100,7 @@ class PeridynamicBody(PointBody):
         self.surface_correction = surface_correction
         self.partial_volumes = bool(partial_volumes)
         self.damping = check_range("damping", damping, 0.0, None, lo_open=False)
-        self.rigid_handoff = handoff_setting(rigid_handoff)
+        self.rigid_handoff = handoff_setting(material.rigid_handoff if rigid_handoff is None else rigid_handoff)
         self.material_rotation = _rotation_matrix(material_rotation)
         self.notches: list = []  # BoxRegion or SolidShape: bonds crossing them start broken
         positions, volumes = fill_solid(shape, self.spacing, device=device)
