@@ -12,6 +12,8 @@ finer spacing (run with spacing=0.005 on a GPU) should resolve the bending crack
 Run:  python scenes/four_walls.py --out four_walls.usdc   or   pdsim run scenes/four_walls.py --out four_walls.usdc
 """
 
+import dataclasses
+
 import numpy as np
 
 import pdsim
@@ -75,13 +77,21 @@ def add_walls(scene, materials, *, spacing=0.01, body_options=None):
 PREVIEW = {"spacing": 0.015}  # tools/make_gallery.py and tests/test_gallery.py: a coarser, quicker run
 
 
-def build_scene(*, spacing=0.01, materials=None, frames=40, speed=3.0, body_options=None) -> pdsim.Scene:
+def build_scene(
+    *, spacing=0.01, materials=None, frames=40, speed=3.0, body_options=None, retardation_time=0.0
+) -> pdsim.Scene:
     """The four walls and a rigid ball of radius 5 cm flying along +x at ``speed`` [m/s] (10 % of the walls' wave
     speed: a hard hit); ``materials`` replaces the walls (any number), ``spacing`` is the particle spacing [m],
-    ``body_options`` replaces the walls' PeridynamicBody keywords (see add_walls)."""
+    ``body_options`` replaces the walls' PeridynamicBody keywords (see add_walls); ``retardation_time`` [s]: the
+    brittle walls' internal damping (Material.retardation_time; none by default)."""
     # 5x slow motion: 1/120 s of simulated time per frame, played at 24 frames per second
     scene = pdsim.Scene(fps=24, time_scale=0.2, frames=frames, gravity=(0.0, 0.0, 0.0), name="four_walls")
-    add_walls(scene, materials or wall_materials(), spacing=spacing, body_options=body_options)
+    materials = materials or wall_materials()
+    if retardation_time:
+        materials = [
+            m if m.yields else dataclasses.replace(m, retardation_time=retardation_time) for m in materials
+        ]  # fmt: skip
+    add_walls(scene, materials, spacing=spacing, body_options=body_options)
     scene.add_collider(pdsim.SphereProjectile(0.05, center=(-0.15, 0.0, 0.0), velocity=(speed, 0.0, 0.0)))
     return scene
 

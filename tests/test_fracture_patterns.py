@@ -313,3 +313,17 @@ def test_cubic_lattice_test_finds_lattice_directions_in_any_plane():
     a4 = fp.lattice_test(phi)[0]
     k4 = np.mean(np.sum(wall**4, axis=1))
     assert k4 == pytest.approx(0.75 + 0.25 * a4, abs=1.0e-12)
+
+
+def test_teaser_internal_damping_option_reaches_only_the_brittle_walls():
+    """scenes/four_walls.py build_scene(retardation_time=...): the brittle walls' materials take it, the ductile
+    walls' keep none (they yield), and none is the default."""
+    import importlib.util
+
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes", "four_walls.py")
+    spec = importlib.util.spec_from_file_location("four_walls_scene", path)
+    four_walls = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(four_walls)
+    walls = four_walls.build_scene(spacing=0.03, retardation_time=6.0e-4).bodies
+    assert [b.material.retardation_time for b in walls] == [6.0e-4, 6.0e-4, 0.0, 0.0]
+    assert all(b.material.retardation_time == 0.0 for b in four_walls.build_scene(spacing=0.03).bodies)

@@ -432,6 +432,18 @@ def _(ws):
     pdsim.RigidHandoff(fixed="yes")
 
 
+@case("rigid_handoff_in_flight", A_BODY, "pdsim.RigidHandoff(in_flight='yes')", "True or False",
+      pdsim.ParameterError, "in_flight='yes'", "True or False")  # fmt: skip
+def _(ws):
+    pdsim.RigidHandoff(in_flight="yes")
+
+
+@case("material_rigid_handoff", A_BODY, "pdsim.Material(..., rigid_handoff='yes')", "True or False",
+      pdsim.ParameterError, "rigid_handoff='yes'", "True or False")  # fmt: skip
+def _(ws):
+    pdsim.Material(density=1000.0, youngs_modulus=1.0e6, poisson_ratio=0.25, rigid_handoff="yes")
+
+
 # -- boundary conditions and loads ------------------------------------------------------------------------------
 A_BC = "boundary conditions and loads"
 
