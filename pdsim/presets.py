@@ -114,14 +114,14 @@ CHIP_DAMAGE = 0.8
 IMPACT_STRAIN_RATIO = 23.0
 # The brittle presets' internal damping (Material.retardation_time) [s] of the animation values; times
 # sqrt(STIFFNESS_SCALE) for the real values (the same damping ratio at the frequencies 100 times higher). At the
-# animation stiffness a 10 cm piece rings at about 280 Hz, 100 times below real glass, and without damping it rang
-# for the whole of a 2 s shot: tau = 5e-6 s gives it the damping ratio pi f tau = 0.0044 and brings its ringing
-# tenfold down in 0.3 s, so the rigid hand-off takes the pieces of a dropped glass sphere within the shot (81 % of what
-# broke out, docs/fracture.md, "Rigid hand-off"). It is tuned, not a measured loss factor: real glass has about 1e-3
-# at its own (100 times higher) frequencies, which would leave the animation's pieces ringing for seconds. Its damping
-# ratio at the spacing's highest frequencies is tau / dt0 (dt0: the undamped stable step): 0.016 for glass at 2 cm,
-# 0.032 at 1 cm, and the stable step shrinks by about as much; the shard figures over strength seeds 0-4 stay within
-# their scatter (docs/fracture.md, "Presets at preview and final spacing").
+# animation stiffness a 10 cm piece rings at about 280 Hz, 100 times below real glass, and without damping it rang for
+# the whole of a 2 s shot: tau = 5e-6 s gives it the damping ratio pi f tau = 0.0044 and brings its ringing tenfold down
+# in 0.3 s, so the rigid hand-off takes the pieces of a dropped glass sphere once they settle (all of what broke out by
+# 3 s; docs/fracture.md, "Rigid hand-off"). It is tuned, not a measured loss factor: real glass has about 1e-3 at its
+# own (100 times higher) frequencies, which would leave the animation's pieces ringing for seconds. Its damping ratio at
+# the spacing's highest frequencies is tau / dt0 (dt0: the undamped stable step): 0.016 for glass at 2 cm, 0.032 at 1
+# cm, and the stable step shrinks by about as much; the shard figures over strength seeds 0-4 stay within their scatter
+# (docs/fracture.md, "Presets at preview and final spacing").
 RETARDATION_TIME = 5.0e-6
 
 # The presets' contact values (restitution e, Coulomb friction mu), the material's side of a contact pair: measured
