@@ -105,22 +105,33 @@ def test_rigid_fragments_skip_their_bonds():
     assert stretched[True] == (0.0, 0.0)
 
 
-def _pieces(frames=16, shift=(0.0, 0.0, 0.0)):
-    """The notched block (softened: E 50 MPa) thrown spinning at the ground from 8 cm: its halves go rigid in
-    flight (2 quiet frames; ``in_flight``: the settling test off), then land and come to rest."""
+def _halves_over_ground(name, frames, height, shift, *, in_flight, retardation_time=0.0):
+    """A scene ``name`` of ``frames`` frames of 5 ms: the notched block (softened: E 50 MPa, c_p 155 m/s; its
+    ``retardation_time`` [s]) with its centre ``height`` [m] above a ground plane, all moved by ``shift``, the
+    hand-off at strain 1e-4 over 2 frames (``in_flight``: the settling test off). Returns (scene, block, its centre)."""
     o = np.asarray(shift, dtype=np.float64)
-    scene = pdsim.Scene(fps=24, frames=frames, frame_time=5.0e-3, name="pieces")
-    soft = pdsim.Material(density=2500.0, youngs_modulus=5.0e7, poisson_ratio=0.25, critical_stretch=2.0e-3)
-    centre = o + np.array([0.0, 0.0, 0.1])
+    scene = pdsim.Scene(fps=24, frames=frames, frame_time=5.0e-3, name=name)
+    soft = pdsim.Material(
+        density=2500.0, youngs_modulus=5.0e7, poisson_ratio=0.25, critical_stretch=2.0e-3,
+        retardation_time=retardation_time,
+    )  # fmt: skip
+    centre = o + np.array([0.0, 0.0, height])
     body = pdsim.PeridynamicBody(
         pdsim.box((0.08, 0.04, 0.04), center=tuple(centre)), soft, SPACING, name="block",
-        rigid_handoff=pdsim.RigidHandoff(strain=1.0e-4, frames=2, in_flight=True),
+        rigid_handoff=pdsim.RigidHandoff(strain=1.0e-4, frames=2, in_flight=in_flight),
     )  # fmt: skip
     cut = np.array([0.001, 1.0, 1.0])
     body.add_notch(pdsim.BoxRegion(lo=tuple(centre - cut), hi=tuple(centre + cut)))
-    body.set_initial_velocity(np.array([0.5, 0.0, -1.5]) + np.cross([0.0, 4.0, 0.0], body.rest_positions - centre))
     scene.add_body(body)
     scene.add_ground_plane(height=float(o[2]))
+    return scene, body, centre
+
+
+def _pieces(frames=16, shift=(0.0, 0.0, 0.0)):
+    """The notched block thrown spinning at the ground from 8 cm (_halves_over_ground): its halves go rigid in
+    flight, then land and come to rest."""
+    scene, body, centre = _halves_over_ground("pieces", frames, 0.1, shift, in_flight=True)
+    body.set_initial_velocity(np.array([0.5, 0.0, -1.5]) + np.cross([0.0, 4.0, 0.0], body.rest_positions - centre))
     return scene
 
 
@@ -148,23 +159,10 @@ def test_pieces_go_rigid_and_rest_on_the_ground(tmp_path, device):
 
 
 def _falling_halves(in_flight, shift):
-    """The notched block (E 50 MPa, c_p 155 m/s, retardation time 5e-5 s so that it settles) let fall from 2.5 cm
-    onto the ground (inelastic projection), 56 frames of 5 ms, the hand-off at strain 1e-4 over 2 frames."""
-    o = np.asarray(shift, dtype=np.float64)
-    scene = pdsim.Scene(fps=24, frames=56, frame_time=5.0e-3, name="fall")
-    soft = pdsim.Material(
-        density=2500.0, youngs_modulus=5.0e7, poisson_ratio=0.25, critical_stretch=2.0e-3, retardation_time=5.0e-5
-    )
-    centre = o + np.array([0.0, 0.0, 0.045])
-    body = pdsim.PeridynamicBody(
-        pdsim.box((0.08, 0.04, 0.04), center=tuple(centre)), soft, SPACING, name="block",
-        rigid_handoff=pdsim.RigidHandoff(strain=1.0e-4, frames=2, in_flight=in_flight),
-    )  # fmt: skip
-    cut = np.array([0.001, 1.0, 1.0])
-    body.add_notch(pdsim.BoxRegion(lo=tuple(centre - cut), hi=tuple(centre + cut)))
-    scene.add_body(body)
-    scene.add_ground_plane(height=float(o[2]))
-    return scene, soft.p_wave_speed
+    """The notched block (_halves_over_ground, retardation time 5e-5 s so that it settles) let fall from 2.5 cm onto
+    the ground (inelastic projection), 56 frames; returns the scene and the block's P-wave speed [m/s]."""
+    scene, body, _ = _halves_over_ground("fall", 56, 0.045, shift, in_flight=in_flight, retardation_time=5.0e-5)
+    return scene, body.material.p_wave_speed
 
 
 @pytest.mark.parametrize(("in_flight", "shift"), [(False, (1000.0, -700.0, 300.0)), (True, (0.0, 0.0, 0.0))])
