@@ -48,7 +48,8 @@ def make_pair_kernels(
     particle first + t; ``pair_slot`` is indexed like the particles of the launch (list entry or particle). The
     plastic passes (norm, its sum, ductile breaking) index particle first + t in both forms: with ``handoff`` and
     ``plastic`` the yielding particles (a prefix) must all be in the live list, so that entry t is particle t there
-    (no yielding body is handed off; pdsim/peridynamics/pairs.py PairPasses.set_particles checks it)."""
+    (no yielding body is handed off: bonds never cross bodies, so no yielding particle then has a bond, live or
+    broken, to a rigid one; pdsim/peridynamics/pairs.py PairPasses.set_particles checks it)."""
     key = (
         bool(fracture), bool(handoff), bool(plastic), bool(ductile) and bool(plastic) and bool(fracture), bool(damped)
     )  # fmt: skip
