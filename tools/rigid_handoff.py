@@ -335,23 +335,30 @@ def pixel_difference(path_a: str, path_b: str, level: int = 25) -> float:
     return float((np.abs(a - b).max(axis=2) > level).mean())
 
 
-def stills(name: str, caches: dict, frame: int, folder: str) -> str:
-    """Preview stills of ``frame`` of both runs, side by side (left: off, right: on), ``name``_off.png,
-    ``name``_on.png and ``name``_off_on.png; returns the last one's name."""
+def stills(name: str, stem: str, caches: dict, frame: int, folder: str) -> str:
+    """Preview stills of ``frame`` of both runs of scene ``name``, side by side (left: off, right: on),
+    ``stem``_off.png, ``stem``_on.png and ``stem``_off_on.png; returns the last one's name. Both take the camera of
+    the first (the scene's VIEWS, fitted to the run with the hand-off off), so that the runs' own extents do not move
+    the picture."""
     from PIL import Image
 
     from pdsim.preview import write_preview
 
-    paths = []
+    paths, view = [], dict(VIEWS.get(name, {}))
     for mode, cache in caches.items():
-        path = os.path.join(folder, f"{name}_{mode}.png")
-        write_preview(cache, path, str(frame), size=(480, 360), supersample=2, **VIEWS.get(name, {}))
+        path = os.path.join(folder, f"{stem}_{mode}.png")
+        camera = write_preview(cache, path, str(frame), size=(480, 360), supersample=2, **view).camera
+        view = {
+            "camera": "eye={}:target={}".format(
+                *(",".join(repr(float(x)) for x in v) for v in (camera.eye, camera.target))
+            )
+        }
         paths.append(path)
     a, b = (Image.open(p).convert("RGB") for p in paths)
     both = Image.new("RGB", (a.width + b.width, max(a.height, b.height)), "white")
     both.paste(a, (0, 0))
     both.paste(b, (a.width, 0))
-    out = f"{name}_off_on.png"
+    out = f"{stem}_off_on.png"
     both.save(os.path.join(folder, out))
     return out
 
@@ -576,7 +583,7 @@ def main(argv=None) -> None:
             f_off, f_on = last_third(off["frames"]), last_third(on["frames"])
             frames = on["report"].frames_written - 1
             stem = name if args.page is None else f"{name}_{os.path.splitext(os.path.basename(args.page))[0]}"
-            png = stills(stem, caches, frames, folder)
+            png = stills(name, stem, caches, frames, folder)
             diff = pixel_difference(*(os.path.join(folder, f"{stem}_{m}.png") for m in ("off", "on")))
             rows.append(
                 f"| {name} | {frames} | {last[5]} | {off['rows'][-1][1]} / {last[1]} | {last[2]} ({100 * share:.0f} %)"
