@@ -73,8 +73,9 @@ STIFFNESS_SCALE = 1.0e-4  # Young's modulus (and stresses) of the animation pres
 # Plaster's: 2 MPa for its real 12 GPa, the wave speed of ceramic (43 m/s) instead of 33 m/s at 1e-4. At 33 m/s the
 # presets' hit (a 4.1 kg steel ball at 22 m/s, tools/preview_final.py) came at two thirds of the wave speed, where a
 # real plaster body meets such a ball at 1/150 of it: the sphere was crushed into a bowl under the ball at the preview
-# spacing and broke through at the final one (broken out 17 % against 48 % over strength seeds 0-4); at 43 m/s it
-# breaks alike at both (docs/fracture.md, "Presets at preview and final spacing").
+# spacing and broke through at the final one (broken out 17 % against 48 % over strength seeds 0-4); at 43 m/s the
+# means over seeds 0-9 agree within 30 % (51 % against 66 %; docs/fracture.md, "Presets at preview and final
+# spacing").
 PLASTER_STIFFNESS_SCALE = 2.0e6 / 12.0e9
 # The brittle animation presets' strength is a fracture energy, stated as the critical stretch it gives at this
 # spacing [m] with the default horizon (PeridynamicBody's horizon_factor): the preview spacing of a 30 cm object.
@@ -425,7 +426,7 @@ def plaster(*, real: bool = False, pattern: bool = True) -> Material:
     fracture energy 5 J/m^2 (2-10); tensile strength 1-3 MPa (Weibull modulus 3-8); compressive strength 5-20 MPa.
 
     Animation values: E = 2 MPa (:data:`PLASTER_STIFFNESS_SCALE`, 1/6000 of the real modulus where the other presets
-    take 1e-4: 43 m/s wave speed, ceramic's; about 340 steps per frame at 24 fps and h = 1 cm); fracture energy 5.2
+    take 1e-4: 43 m/s wave speed, ceramic's; about 345 steps per frame at 24 fps and h = 1 cm); fracture energy 5.2
     J/m^2, the critical stretch 0.006 at the 2 cm reference spacing (:data:`IMPACT_STRAIN_RATIO`: glass's impact
     strain over breaking strain at 6 m/s; the breaking stress, 12 kPa, is the lowest of the presets, as the real 1-3
     MPa is) and 0.0085 at 1 cm. Break pattern, tuned as :func:`ceramic`'s: Weibull modulus 8 (the
